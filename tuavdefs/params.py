@@ -1,0 +1,168 @@
+"""The system's parameter groups, with the paper's vehicle as the defaults.
+
+Values that the paper (Folorunsho, Ni, Norris) gives are marked "paper"; the others are
+chosen here and the reason is stated in ``docs/model.md``. All units are SI.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from tuavdefs.paramspec import Params, quantity
+
+__all__ = [
+    "EnvironmentParams", "VehicleParams", "TetherParams", "WinderParams", "GustParams",
+    "WindParams", "SystemParams",
+]
+
+
+@dataclass(frozen=True)
+class EnvironmentParams(Params):
+    """Gravity and air."""
+
+    gravity_m_s2: float = quantity(9.81, "m/s^2", "gravitational acceleration (paper)", gt=0)
+    air_density_kg_m3: float = quantity(1.225, "kg/m^3", "air density (ISA sea level)", gt=0)
+
+
+@dataclass(frozen=True)
+class VehicleParams(Params):
+    """The quadrotor: rigid body, X-configuration rotors, drag, landing gear."""
+
+    mass_kg: float = quantity(2.84, "kg", "mass (paper)", gt=0)
+    ixx_kg_m2: float = quantity(0.5192, "kg*m^2", "roll moment of inertia (paper)", gt=0)
+    iyy_kg_m2: float = quantity(0.4929, "kg*m^2", "pitch moment of inertia (paper)", gt=0)
+    izz_kg_m2: float = quantity(0.0947, "kg*m^2", "yaw moment of inertia (paper)", gt=0)
+    arm_length_m: float = quantity(0.405, "m", "centre to rotor axis (paper)", gt=0)
+    rotor_thrust_coeff: float = quantity(
+        2.0e-5, "N/(rad/s)^2", "rotor thrust = coeff * speed^2", gt=0)
+    rotor_torque_coeff: float = quantity(
+        3.2e-7, "N*m/(rad/s)^2", "rotor drag torque = coeff * speed^2", gt=0)
+    rotor_speed_min_rad_s: float = quantity(
+        80.0, "rad/s", "idle rotor speed when armed", ge=0)
+    rotor_speed_max_rad_s: float = quantity(1000.0, "rad/s", "maximum rotor speed", gt=0)
+    motor_time_constant_s: float = quantity(
+        0.03, "s", "first-order lag of rotor speed behind its command", gt=0)
+    drag_coeff_n_s_m: tuple[float, ...] = quantity(
+        (0.25, 0.25, 0.5), "N*s/m", "linear drag per body axis (x forward, y left, z up) "
+        "against air-relative velocity", ge=0, length=3)
+    rotational_damping_n_m_s_rad: float = quantity(
+        0.01, "N*m*s/rad", "aerodynamic damping of body rates", ge=0)
+    gear_height_m: float = quantity(
+        0.2, "m", "height of the centre of mass above flat ground when resting", gt=0)
+    ground_friction_coeff: float = quantity(
+        0.6, "1", "Coulomb friction of the landing gear on the ground", ge=0)
+
+    def check(self) -> None:
+        if self.rotor_speed_min_rad_s >= self.rotor_speed_max_rad_s:
+            raise ValueError("rotor_speed_min_rad_s: must be below rotor_speed_max_rad_s")
+
+    @property
+    def inertia_diag(self) -> tuple[float, float, float]:
+        """(Ixx, Iyy, Izz) [kg m^2]."""
+        return (self.ixx_kg_m2, self.iyy_kg_m2, self.izz_kg_m2)
+
+    @property
+    def max_rotor_thrust_n(self) -> float:
+        """Thrust of one rotor at maximum speed [N]."""
+        return self.rotor_thrust_coeff * self.rotor_speed_max_rad_s ** 2
+
+    @property
+    def max_total_thrust_n(self) -> float:
+        """Thrust of all four rotors at maximum speed [N]."""
+        return 4.0 * self.max_rotor_thrust_n
+
+
+@dataclass(frozen=True)
+class TetherParams(Params):
+    """The tether: weight, stiffness and how much of it the drum holds."""
+
+    linear_density_kg_m: float = quantity(0.034, "kg/m", "mass per unit length (paper)", gt=0)
+    section_area_m2: float = quantity(1.1e-4, "m^2", "cross-section area (paper)", gt=0)
+    youngs_modulus_pa: float = quantity(
+        1.0e9, "Pa", "effective axial modulus (not in the paper; a braided power tether)", gt=0)
+    total_length_m: float = quantity(50.0, "m", "length wound on the full drum, L_T", gt=0)
+
+    @property
+    def axial_stiffness_n(self) -> float:
+        """EA [N]."""
+        return self.youngs_modulus_pa * self.section_area_m2
+
+    def weight_per_length_n_m(self, gravity_m_s2: float) -> float:
+        """w = rho * g [N/m]."""
+        return self.linear_density_kg_m * gravity_m_s2
+
+
+@dataclass(frozen=True)
+class WinderParams(Params):
+    """The ground winder: drum, motor, friction, brake."""
+
+    drum_radius_m: float = quantity(0.10, "m", "effective radius r_w at which tether leaves", gt=0)
+    drum_inner_radius_m: float = quantity(0.06, "m", "inner radius r_i of the hollow drum", gt=0)
+    drum_mass_kg: float = quantity(1.5, "kg", "drum mass without tether, m_w bar", gt=0)
+    rotor_inertia_kg_m2: float = quantity(
+        2.0e-4, "kg*m^2", "motor rotor inertia, added to the drum's", ge=0)
+    viscous_friction_n_m_s_rad: float = quantity(
+        0.02, "N*m*s/rad", "viscous friction beta_w", ge=0)
+    motor_torque_limit_n_m: float = quantity(4.0, "N*m", "motor torque limit", gt=0)
+    motor_speed_limit_rad_s: float = quantity(
+        60.0, "rad/s", "drum speed limit (6 m/s of tether at the default radius)", gt=0)
+    speed_limit_gain_n_m_s_rad: float = quantity(
+        2.0, "N*m*s/rad", "torque cut-back slope near the speed limit (motor-controller style)",
+        gt=0)
+    brake_torque_n_m: float = quantity(
+        15.0, "N*m", "holding torque of the brake engaged when the motor is unpowered", ge=0)
+
+    def check(self) -> None:
+        if self.drum_inner_radius_m >= self.drum_radius_m:
+            raise ValueError("drum_inner_radius_m: must be below drum_radius_m")
+
+
+@dataclass(frozen=True)
+class GustParams(Params):
+    """One discrete (1 - cos) gust, MIL-F-8785C shape."""
+
+    start_s: float = quantity(10.0, "s", "time the gust begins", ge=0)
+    duration_s: float = quantity(2.0, "s", "time from start to end of the gust", gt=0)
+    amplitude_m_s: tuple[float, ...] = quantity(
+        (3.0, 0.0, 0.0), "m/s", "peak gust velocity (x east, y north, z up)", length=3)
+
+
+@dataclass(frozen=True)
+class WindParams(Params):
+    """Steady wind, Dryden turbulence (MIL-F-8785C, low altitude) and discrete gusts."""
+
+    steady_m_s: tuple[float, ...] = quantity(
+        (0.0, 0.0, 0.0), "m/s", "mean wind velocity the air moves with (x east, y north, z up)",
+        length=3)
+    turbulence: str = quantity(
+        "none", "1", "Dryden intensity", choices=("none", "light", "moderate", "severe"))
+    wind_speed_at_6m_m_s: float = quantity(
+        0.0, "m/s", "W20, the mean wind at 20 ft that scales low-altitude turbulence; "
+        "0 takes the MIL-F-8785C value for the intensity", ge=0)
+    seed: int = quantity(0, "1", "seed of the turbulence noise", ge=0)
+    gusts: tuple[GustParams, ...] = quantity((), "", "discrete gusts")
+
+
+@dataclass(frozen=True)
+class SystemParams(Params):
+    """Everything the plant needs, grouped as the TOML files are."""
+
+    environment: EnvironmentParams = quantity(EnvironmentParams(), "", "gravity and air")
+    vehicle: VehicleParams = quantity(VehicleParams(), "", "the quadrotor")
+    tether: TetherParams = quantity(TetherParams(), "", "the tether")
+    winder: WinderParams = quantity(WinderParams(), "", "the ground winder")
+    wind: WindParams = quantity(WindParams(), "", "the wind")
+
+    def hover_thrust_fraction_full_tether(self) -> float:
+        """Collective thrust needed to hover with the whole tether hanging vertically,
+        as a fraction of the maximum: the sizing rule of the rotor limits."""
+        g = self.environment.gravity_m_s2
+        need = (self.vehicle.mass_kg + self.tether.linear_density_kg_m
+                * self.tether.total_length_m) * g
+        return need / self.vehicle.max_total_thrust_n
+
+
+def hover_rotor_speed_rad_s(vehicle: VehicleParams, thrust_n: float) -> float:
+    """Rotor speed at which four equal rotors give ``thrust_n`` in total [rad/s]."""
+    return math.sqrt(max(thrust_n, 0.0) / (4.0 * vehicle.rotor_thrust_coeff))

@@ -1,0 +1,210 @@
+"""Typed, frozen parameter dataclasses with units, bounds and TOML loading.
+
+Every parameter group in the project derives from :class:`Params`. Each field is declared
+with :func:`quantity`, which records its SI unit, its bounds and a one-line description.
+Values are checked when the dataclass is built, so an invalid parameter fails at load time
+with a :class:`ParameterError` whose message names the offending field (dotted path from
+the TOML file's top level, e.g. ``vehicle.mass_kg``).
+
+Supported field types: ``float``, ``int``, ``bool``, ``str`` (optionally with ``choices``),
+fixed-length ``tuple[float, ...]`` (declare ``length``), nested :class:`Params`, and
+``tuple[SomeParams, ...]`` for TOML arrays of tables.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import typing
+from pathlib import Path
+from typing import Any, Self
+
+__all__ = ["ParameterError", "Params", "quantity", "load_toml", "to_dict", "describe"]
+
+
+class ParameterError(ValueError):
+    """A parameter is missing, unknown, of the wrong type or out of bounds.
+
+    ``field`` holds the dotted name of the offending field.
+    """
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+
+
+def quantity(
+    default: Any,
+    unit: str,
+    doc: str,
+    *,
+    gt: float | None = None,
+    ge: float | None = None,
+    lt: float | None = None,
+    le: float | None = None,
+    length: int | None = None,
+    choices: tuple[str, ...] | None = None,
+) -> Any:
+    """Declare a parameter field with its default, SI unit, description and bounds.
+
+    Bounds apply to scalars and to every element of a tuple. ``length`` fixes a tuple's
+    length; ``choices`` restricts a string.
+    """
+    meta = {"unit": unit, "doc": doc, "gt": gt, "ge": ge, "lt": lt, "le": le,
+            "length": length, "choices": choices}
+    if isinstance(default, (list, tuple)):
+        frozen = tuple(default)
+        return dataclasses.field(default_factory=lambda: frozen, metadata=meta)
+    if isinstance(default, Params):
+        return dataclasses.field(default_factory=lambda: default, metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def _check_number(name: str, value: Any, meta: dict[str, Any], want: type) -> float | int:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(name, f"expected a number, got {value!r}")
+    if want is int:
+        if isinstance(value, float) and not value.is_integer():
+            raise ParameterError(name, f"expected an integer, got {value!r}")
+        value = int(value)
+    else:
+        value = float(value)
+        if not math.isfinite(value):
+            raise ParameterError(name, f"must be finite, got {value!r}")
+    unit = meta.get("unit") or ""
+    suffix = f" {unit}" if unit and unit != "1" else ""
+    if meta.get("gt") is not None and not value > meta["gt"]:
+        raise ParameterError(name, f"must be > {meta['gt']}{suffix}, got {value!r}")
+    if meta.get("ge") is not None and not value >= meta["ge"]:
+        raise ParameterError(name, f"must be >= {meta['ge']}{suffix}, got {value!r}")
+    if meta.get("lt") is not None and not value < meta["lt"]:
+        raise ParameterError(name, f"must be < {meta['lt']}{suffix}, got {value!r}")
+    if meta.get("le") is not None and not value <= meta["le"]:
+        raise ParameterError(name, f"must be <= {meta['le']}{suffix}, got {value!r}")
+    return value
+
+
+def _coerce(name: str, tp: Any, value: Any, meta: dict[str, Any]) -> Any:
+    origin = typing.get_origin(tp)
+    if isinstance(tp, type) and issubclass(tp, Params):
+        if isinstance(value, tp):
+            return value
+        if not isinstance(value, dict):
+            raise ParameterError(name, f"expected a table, got {value!r}")
+        return tp.from_dict(value, prefix=name)
+    if origin is tuple:
+        args = typing.get_args(tp)
+        elem = args[0]
+        if not isinstance(value, (list, tuple)):
+            raise ParameterError(name, f"expected an array, got {value!r}")
+        if meta.get("length") is not None and len(value) != meta["length"]:
+            raise ParameterError(
+                name, f"expected {meta['length']} elements, got {len(value)}")
+        return tuple(_coerce(f"{name}[{i}]", elem, v, meta) for i, v in enumerate(value))
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ParameterError(name, f"expected true or false, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ParameterError(name, f"expected a string, got {value!r}")
+        choices = meta.get("choices")
+        if choices and value not in choices:
+            raise ParameterError(name, f"must be one of {', '.join(choices)}; got {value!r}")
+        return value
+    if tp in (int, float):
+        return _check_number(name, value, meta, tp)
+    raise TypeError(f"{name}: unsupported parameter type {tp!r}")  # a bug, not bad input
+
+
+@dataclasses.dataclass(frozen=True)
+class Params:
+    """Base class of every parameter group: validates itself on construction."""
+
+    def __post_init__(self) -> None:
+        hints = typing.get_type_hints(type(self))
+        prefix = getattr(self, "_prefix", None) or type(self).__name__
+        for f in dataclasses.fields(self):
+            value = _coerce(f"{prefix}.{f.name}", hints[f.name], getattr(self, f.name),
+                            dict(f.metadata))
+            object.__setattr__(self, f.name, value)
+        try:
+            self.check()
+        except ParameterError:
+            raise
+        except ValueError as exc:  # cross-field checks raise ValueError("field: reason")
+            field_name, _, reason = str(exc).partition(": ")
+            raise ParameterError(f"{prefix}.{field_name}", reason) from None
+
+    def check(self) -> None:
+        """Cross-field consistency checks; raise ``ValueError("field: reason")``."""
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], prefix: str | None = None) -> Self:
+        """Build from a mapping (a TOML table), rejecting unknown keys by name."""
+        prefix = prefix or cls.__name__
+        names = {f.name for f in dataclasses.fields(cls)}
+        for key in data:
+            if key not in names:
+                raise ParameterError(f"{prefix}.{key}", f"unknown parameter (known: "
+                                     f"{', '.join(sorted(names))})")
+        hints = typing.get_type_hints(cls)
+        kwargs = {}
+        for f in dataclasses.fields(cls):
+            if f.name in data:
+                kwargs[f.name] = _coerce(f"{prefix}.{f.name}", hints[f.name], data[f.name],
+                                         dict(f.metadata))
+        obj = cls.__new__(cls)
+        object.__setattr__(obj, "_prefix", prefix)
+        try:
+            cls.__init__(obj, **kwargs)
+        finally:
+            object.__delattr__(obj, "_prefix")
+        return obj
+
+    def replace(self, **changes: Any) -> Self:
+        """A copy with some fields changed, validated like any other."""
+        return dataclasses.replace(self, **changes)
+
+
+def load_toml(cls: type[Params], path: str | Path, table: str | None = None) -> Params:
+    """Load ``cls`` from a TOML file (optionally from one of its tables).
+
+    Raises :class:`ParameterError` naming the field for any bad value, and for a file that
+    is not valid TOML.
+    """
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError(str(path), f"not valid TOML: {exc}") from None
+    prefix = table or path.stem
+    if table is not None:
+        if table not in data:
+            raise ParameterError(table, f"table missing from {path}")
+        data = data[table]
+    return cls.from_dict(data, prefix=prefix)
+
+
+def to_dict(params: Params) -> dict[str, Any]:
+    """The parameters as plain TOML-ready values (tuples become lists)."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(params):
+        v = getattr(params, f.name)
+        if isinstance(v, Params):
+            out[f.name] = to_dict(v)
+        elif isinstance(v, tuple):
+            out[f.name] = [to_dict(e) if isinstance(e, Params) else e for e in v]
+        else:
+            out[f.name] = v
+    return out
+
+
+def describe(cls: type[Params]) -> list[tuple[str, str, str, Any]]:
+    """(name, unit, description, default) for each field: the parameter table in docs."""
+    rows = []
+    for f in dataclasses.fields(cls):
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        rows.append((f.name, f.metadata.get("unit", ""), f.metadata.get("doc", ""), default))
+    return rows
