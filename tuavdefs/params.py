@@ -110,6 +110,8 @@ class WinderParams(Params):
     speed_limit_gain_n_m_s_rad: float = quantity(
         2.0, "N*m*s/rad", "torque cut-back slope near the speed limit (motor-controller style)",
         gt=0)
+    min_paid_out_m: float = quantity(
+        0.3, "m", "hard stop of a full drum: tether that always stays out of the exit", gt=0)
     brake_torque_n_m: float = quantity(
         15.0, "N*m", "holding torque of the brake engaged when the motor is unpowered", ge=0)
 

@@ -1,0 +1,69 @@
+"""Hover trim: the state and rotor commands that hold the UAV still at a point.
+
+Used to start open-loop demonstrations and simulations from equilibrium. It reads the
+plant's own tether model (this is the truth side), and the airframe's mixer only to express
+the trim thrust as rotor commands.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from sitl.plant import QUAT, ROTORS, PlantInputs, PlantModel, initial_state
+from tuavdefs.airframe import Mixer
+from tuavdefs.params import SystemParams
+
+
+def thrust_aligned_quaternion(direction: Sequence[float], yaw_rad: float = 0.0
+                              ) -> tuple[float, float, float, float]:
+    """Unit quaternion (w, x, y, z) whose body +z points along ``direction`` and whose body
+    x axis is as close as possible to the heading ``yaw_rad`` (z-up convention)."""
+    z_b = np.asarray(direction, float)
+    z_b = z_b / np.linalg.norm(z_b)
+    heading = np.array([math.cos(yaw_rad), math.sin(yaw_rad), 0.0])
+    y_b = np.cross(z_b, heading)
+    y_b /= np.linalg.norm(y_b)
+    x_b = np.cross(y_b, z_b)
+    r = np.column_stack([x_b, y_b, z_b])
+    return _matrix_to_quat(r)
+
+
+def _matrix_to_quat(r: np.ndarray) -> tuple[float, float, float, float]:
+    tr = float(np.trace(r))
+    if tr > 0.0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = (0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s)
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(1.0 + r[i, i] - r[j, j] - r[k, k])
+        v = [0.0, 0.0, 0.0]
+        v[i] = 0.25 * s
+        v[j] = (r[j, i] + r[i, j]) / s
+        v[k] = (r[k, i] + r[i, k]) / s
+        q = ((r[k, j] - r[j, k]) / s, *v)
+    n = math.sqrt(sum(c * c for c in q))
+    sign = 1.0 if q[0] >= 0 else -1.0
+    return tuple(sign * c / n for c in q)  # type: ignore[return-value]
+
+
+def hover_trim(params: SystemParams, position_m: Sequence[float], tether_length_m: float,
+               yaw_rad: float = 0.0) -> tuple[np.ndarray, PlantInputs]:
+    """State and inputs that hold the UAV at ``position_m`` with ``tether_length_m`` paid
+    out (drum braked): thrust balances weight and the tether's pull, rotors at speed."""
+    model = PlantModel(params)
+    tf = model.tether.forces(*position_m, tether_length_m)
+    need = np.array([0.0, 0.0, params.vehicle.mass_kg * params.environment.gravity_m_s2])
+    need -= np.asarray(tf.on_uav_n)
+    mix = Mixer(params.vehicle).mix(float(np.linalg.norm(need)), (0.0, 0.0, 0.0))
+    if mix.saturated:
+        raise ValueError("the rotors cannot hold the UAV there: thrust needed "
+                         f"{np.linalg.norm(need):.1f} N")
+    u = PlantInputs(rotor_commands=mix.commands, armed=True)
+    x = initial_state(model, position_m=position_m, tether_length_m=tether_length_m)
+    x[QUAT] = thrust_aligned_quaternion(need, yaw_rad)
+    x[ROTORS] = model.rotor_setpoints(u)
+    return x, u
