@@ -1,0 +1,122 @@
+"""The companion's own model of the tether's pull, from what the vehicle knows.
+
+Inputs are what a real vehicle has: its own position, the paid-out length the winder
+reports, and (optionally) the tension the winder's load cell measures at the drum. The
+model is deliberately simpler than the plant's: an **inextensible** catenary over a
+frictionless flat ground (the plant's is elastic, and its solver is not shared).
+
+For an inextensible line over a frictionless ground, the tension grows by exactly ``w``
+per metre of height whatever the regime (suspended, touching down, slack), so the
+measured drum tension gives the top tension magnitude directly: ``T_top = T_drum + w z``.
+The length-based shape gives the direction of the pull. Without a measurement the
+magnitude comes from the shape as well.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+
+class TetherEstimate(NamedTuple):
+    """The modelled pull of the tether on the UAV (inertial z-up frame)."""
+
+    force_n: tuple[float, float, float]
+    horizontal_tension_n: float
+    top_vertical_tension_n: float
+    regime: str  # "suspended", "touchdown", "slack", "vertical", "taut"
+
+
+_ZERO = (0.0, 0.0, 0.0)
+
+
+class TetherModel:
+    """Inextensible catenary of weight ``w_n_m`` [N/m] between the winder exit (origin) and
+    the UAV, with a frictionless ground at the exit's level."""
+
+    def __init__(self, w_n_m: float, taut_stiffness_n: float = 1.0e5) -> None:
+        if not w_n_m > 0:
+            raise ValueError("w_n_m: must be > 0")
+        self.w = w_n_m
+        self.taut_stiffness_n = taut_stiffness_n  # EA used only if the line is taut
+
+    def estimate(self, pos_m: tuple[float, float, float], length_m: float,
+                 drum_tension_n: float | None = None) -> TetherEstimate:
+        """The pull on the UAV at ``pos_m`` with ``length_m`` paid out [N]."""
+        x, y, z = pos_m
+        z = max(z, 0.0)
+        h = math.hypot(x, y)
+        w = self.w
+        if not (length_m > 0 and math.isfinite(length_m)):
+            return TetherEstimate(_ZERO, 0.0, 0.0, "slack")
+        chord = math.hypot(h, z)
+        if length_m <= chord:
+            # taut: a straight spring along the chord
+            t = self.taut_stiffness_n * (chord - length_m) / length_m + w * z
+            if drum_tension_n is not None:
+                t = drum_tension_n + w * z
+            if chord == 0.0:
+                return TetherEstimate(_ZERO, 0.0, 0.0, "taut")
+            return TetherEstimate((-t * x / chord, -t * y / chord, -t * z / chord),
+                                  t * h / chord, t * z / chord, "taut")
+        if length_m >= h + z or h < 1e-9:
+            # slack (or vertical): hangs straight down from the UAV, the rest lies flat
+            v_top = w * min(z, length_m)
+            regime = "vertical" if h < 1e-9 else "slack"
+            return TetherEstimate((0.0, 0.0, -v_top), 0.0, v_top, regime)
+        a = _suspended_parameter(h, z, length_m)
+        v_top = 0.5 * w * (length_m + z / math.tanh(h / (2.0 * a)))
+        regime = "suspended"
+        if v_top - w * length_m < 0.0:
+            a = _touchdown_parameter(h, z, length_m)
+            v_top = w * math.sqrt(z * z + 2.0 * a * z)
+            regime = "touchdown"
+        hz = w * a
+        if drum_tension_n is not None and drum_tension_n >= 0.0:
+            t_model = math.hypot(hz, v_top)
+            scale = (drum_tension_n + w * z) / t_model
+            hz, v_top = hz * scale, v_top * scale
+        return TetherEstimate((-hz * x / h, -hz * y / h, -v_top), hz, v_top, regime)
+
+
+def _suspended_parameter(h: float, v: float, length: float) -> float:
+    """Catenary parameter a [m] with sqrt(v^2 + (2 a sinh(h/2a))^2) = length (Newton on
+    u = h/(2a), solving sinh(u)/u = sqrt(length^2 - v^2)/h)."""
+    r = math.sqrt(length * length - v * v) / h
+    # initial guess from sinh(u)/u ~ 1 + u^2/6 for small u, log for large
+    u = math.sqrt(6.0 * (r - 1.0)) if r < 3.0 else math.log(2.0 * r * math.log(2.0 * r) + 1.0)
+    u = max(u, 1e-6)
+    for _ in range(50):
+        s, c = math.sinh(u), math.cosh(u)
+        f = s / u - r
+        df = (c * u - s) / (u * u)
+        step = f / df
+        u_new = u - step
+        if u_new <= 0.0:
+            u_new = 0.5 * u
+        if abs(u_new - u) <= 1e-13 * u:
+            u = u_new
+            break
+        u = u_new
+    return h / (2.0 * u)
+
+
+def _touchdown_parameter(h: float, v: float, length: float) -> float:
+    """Catenary parameter a [m] of a line lying on a frictionless ground from the exit and
+    rising to the UAV: h = length - sqrt(v^2 + 2 a v) + a acosh(1 + v/a) (bisection)."""
+
+    def f(a: float) -> float:
+        return length - math.sqrt(v * v + 2.0 * a * v) + a * math.acosh(1.0 + v / a) - h
+
+    lo, hi = 1e-9, 1.0
+    while f(hi) < 0.0 and hi < 1e9:  # f grows from (length - v) - h < 0 ... as a rises
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if f(mid) < 0.0:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-12 * hi:
+            break
+    return 0.5 * (lo + hi)
