@@ -63,14 +63,16 @@ class CommandFilter:
         self.initialised = True
 
     def update(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Advance one step with input ``u``; (x, dx/dt, d2x/dt2) after the step."""
+        """(x, dx/dt, d2x/dt2) now, for input ``u`` held over the coming step; then advance
+        the state by one step. The reference handed out is the filter's value at the time
+        of the measurement it will be compared with, not one step ahead."""
         if not self.initialised:
             self.reset(u)
         s = self.state
-        self.state = s @ self._ad.T + np.outer(u, self._bd)
-        x, xd = self.state[:, 0], self.state[:, 1]
+        x, xd = s[:, 0].copy(), s[:, 1].copy()
         xdd = self._wn2 * (u - x) - self._2zw * xd
-        return x.copy(), xd.copy(), xdd
+        self.state = s @ self._ad.T + np.outer(u, self._bd)
+        return x, xd, xdd
 
 
 def euler_rate_matrices(roll: float, pitch: float) -> tuple[np.ndarray, np.ndarray]:
