@@ -12,7 +12,7 @@ from companion.gains import FlightControlParams
 from companion.position import PositionController, attitude_from_thrust_vector
 from companion.tether_model import TetherModel
 from groundstation.lbar import LBarEstimator, LBarParams, catenary_length_m
-from groundstation.winder_control import WinderControlParams, WinderController
+from groundstation.winder_control import WinderController, WinderControlParams
 from sitl.catenary import CatenaryRegime, catenary_end_forces
 from sitl.winder import WinderModel
 from tuavdefs.frames import euler_to_quat, quat_to_matrix
