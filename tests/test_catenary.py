@@ -23,7 +23,11 @@ from sitl.catenary import (
     hanging_length_m,
 )
 
-moorpy_catenary = pytest.importorskip("moorpy.Catenary").catenary
+try:  # MoorPy is the reference of the comparison tests only
+    from moorpy.Catenary import catenary as moorpy_catenary
+except ImportError:  # pragma: no cover
+    moorpy_catenary = None
+needs_moorpy = pytest.mark.skipif(moorpy_catenary is None, reason="MoorPy is not installed")
 
 G = 9.81
 W_DEFAULT = 0.034 * G  # the project's default tether
@@ -190,6 +194,7 @@ def test_moorpy_documented_example():
     assert isinstance(info, CatenaryInfo)
 
 
+@needs_moorpy
 def test_agrees_with_moorpy_on_random_cases(comparison):
     compared, skipped, _ = comparison
     n_total = len(compared) + sum(skipped.values())
@@ -236,6 +241,7 @@ def test_agrees_with_moorpy_on_random_cases(comparison):
     assert skipped["moorpy failed"] <= 0.005 * n_total, summary
 
 
+@needs_moorpy
 def test_cases_moorpy_puts_below_ground_are_touchdowns(comparison):
     """Where MoorPy's heuristic lets the line dip below the ground, ours lies on it instead and
     still reaches B."""
@@ -446,18 +452,22 @@ def test_continuous_between_suspended_and_touchdown(L, EA, w, h_ratio):
 
 
 @settings(max_examples=200, deadline=None)
-@given(stiffnesses, weights, st.floats(1.0, 50.0), st.floats(0.7, 1.3))
+@given(stiffnesses, weights, st.floats(1.0, 50.0),
+       st.one_of(st.floats(0.7, 1.3), st.floats(0.999, 1.0)))
 def test_continuous_at_vertical_threshold(EA, w, h, l_ratio):
-    """Across span = 1e-4 height (MoorPy's vertical threshold) H jumps from at most 1e-4 T
-    (T <= the top tension, its angle from the vertical being below the chord's) to 0, and near
-    slack V changes by about as much (V = w lh + H); nothing jumps by more."""
+    """Across span = 1e-4 height (MoorPy's vertical threshold) the forces jump, as MoorPy's do:
+    H from at most 1e-4 T (the top tangent is steeper than the chord) to 0, and the vertical
+    formula misses the path the line needs to reach 1e-4 h sideways, a stretch worth at most
+    about 17 EA (h/L) 1e-8 (the supremum of a random search, reached when the bottom tension
+    is zero). Nothing jumps by more."""
     L = l_ratio * h
     x0 = VERTICAL_SPAN_RATIO * h
     inside = catenary_end_forces(x0 * (1 - 1e-9), h, L, EA, w)
     outside = catenary_end_forces(x0 * (1 + 1e-9), h, L, EA, w)
     assert inside[4].regime in (R.VERTICAL, R.SLACK)
     T = math.hypot(outside[2], outside[3])
-    assert max_force_change(inside, outside) <= 1.01 * VERTICAL_SPAN_RATIO * T + 1e-12
+    bound = 1.01 * VERTICAL_SPAN_RATIO * T + 20 * EA * h / L * VERTICAL_SPAN_RATIO ** 2
+    assert max_force_change(inside, outside) <= bound
 
 
 @settings(max_examples=200, deadline=None)
