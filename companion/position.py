@@ -2,13 +2,15 @@
 
 Model the controller uses (inertial z-up frame, derivation in docs/control.md §1):
 
-    m dv/dt = f + F_t - m g e3 + m d,     f = U R e3 (the thrust vector)
+    m dv/dt = f + F_t - m g e3 - R D R' v + m d,     f = U R e3 (the thrust vector)
 
-with ``F_t`` the tether's pull from :class:`companion.tether_model.TetherModel` and ``d`` a
-slowly varying disturbance acceleration (drag, wind, model error) that is estimated.
+with ``F_t`` the tether's pull from :class:`companion.tether_model.TetherModel`, ``D`` the
+vehicle's linear drag per body axis (still air), and ``d`` a slowly varying disturbance
+acceleration (wind, model error) that is estimated.
 
 Errors and virtual control:  e1 = p - p_r,  alpha1 = v_r - K1 e1,  e2 = v - alpha1.
 Desired thrust vector:        f_d = m (a_r - K1 (v - v_r) - e1 - K2 e2 + g e3 - d_hat) - F_t
+                                    + R D R' v
 Disturbance adaptation:       d(d_hat)/dt = Gamma e2   (projected onto |d_hat| <= d_max)
 Lyapunov function:            V = 1/2 |e1|^2 + 1/2 |e2|^2 + 1/2 d_tilde' Gamma^-1 d_tilde
                               dV/dt = -e1' K1 e1 - e2' K2 e2 <= 0 when f = f_d.
@@ -45,8 +47,10 @@ class PositionController:
     """Backstepping position controller with an adaptive disturbance estimate."""
 
     def __init__(self, gains: FlightControlParams, mass_kg: float, gravity_m_s2: float,
-                 max_total_thrust_n: float, min_total_thrust_n: float = 0.0) -> None:
+                 max_total_thrust_n: float, min_total_thrust_n: float = 0.0,
+                 drag_coeff_n_s_m: Vec3 = (0.0, 0.0, 0.0)) -> None:
         self.gains = gains
+        self.drag = drag_coeff_n_s_m
         self.m = mass_kg
         self.g = gravity_m_s2
         self.u_max = gains.max_thrust_fraction * max_total_thrust_n
@@ -58,13 +62,17 @@ class PositionController:
         self.d_hat = list(disturbance_m_s2)
 
     def update(self, dt_s: float, pos: Vec3, vel: Vec3, ref_pos: Vec3, ref_vel: Vec3,
-               ref_acc: Vec3, ref_yaw_rad: float, body_z: Vec3,
+               ref_acc: Vec3, ref_yaw_rad: float,
+               rotation: tuple[Vec3, Vec3, Vec3] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
+                                                    (0.0, 0.0, 1.0)),
                tether_force_n: Vec3 = (0.0, 0.0, 0.0)) -> PositionOutput:
         """One control step of ``dt_s`` [s].
 
-        ``body_z`` is the current body z axis in the inertial frame (third column of R);
+        ``rotation`` is the attitude's rotation matrix (rows; body -> inertial);
         ``tether_force_n`` the modelled pull of the tether on the UAV.
         """
+        r = rotation
+        body_z = (r[0][2], r[1][2], r[2][2])
         gn = self.gains
         k1, k2, gam = gn.pos_k1_1_s, gn.pos_k2_1_s, gn.disturbance_gain_1_s2
         e1 = [pos[i] - ref_pos[i] for i in range(3)]
@@ -73,7 +81,8 @@ class PositionController:
         a_d = [ref_acc[i] - k1[i] * ev[i] - e1[i] - k2[i] * e2[i] - self.d_hat[i]
                for i in range(3)]
         a_d[2] += self.g
-        f = [self.m * a_d[i] - tether_force_n[i] for i in range(3)]
+        drag = _drag_force(r, self.drag, vel)
+        f = [self.m * a_d[i] - tether_force_n[i] - drag[i] for i in range(3)]
         f, saturated = self._limit(f)
         thrust = f[0] * body_z[0] + f[1] * body_z[1] + f[2] * body_z[2]
         thrust = min(max(thrust, self.u_min), self.u_max)
@@ -111,6 +120,13 @@ class PositionController:
             s = fh_max / fh
             fx, fy, sat = fx * s, fy * s, True
         return [fx, fy, fz], sat
+
+
+def _drag_force(r: tuple[Vec3, Vec3, Vec3], d: Vec3, v: Vec3) -> Vec3:
+    """Linear drag in still air, R diag(d) R' v, as the inertial force on the UAV [N]."""
+    b = [-(r[0][i] * v[0] + r[1][i] * v[1] + r[2][i] * v[2]) * d[i] for i in range(3)]
+    return tuple(r[j][0] * b[0] + r[j][1] * b[1] + r[j][2] * b[2]  # type: ignore[return-value]
+                 for j in range(3))
 
 
 def attitude_from_thrust_vector(f: list[float] | Vec3, yaw_rad: float) -> Vec3:

@@ -30,6 +30,32 @@ class TetherEstimate(NamedTuple):
 _ZERO = (0.0, 0.0, 0.0)
 
 
+class WinchReport:
+    """The latest report of the winch (length, line speed, tension), extrapolated to the
+    control loop's time: reports arrive slower than the loop runs, and a stale length
+    beside a fresh position makes the catenary estimate jump at every report."""
+
+    def __init__(self) -> None:
+        self.t_s: float | None = None
+        self.length_m = 0.0
+        self.speed_m_s = 0.0
+        self.tension_n: float | None = None
+
+    def update(self, t_s: float, length_m: float, speed_m_s: float,
+               tension_n: float | None) -> None:
+        """A new report at ``t_s`` [s]: length [m], speed [m/s, + paying out], tension [N]."""
+        self.t_s, self.length_m, self.speed_m_s, self.tension_n = (
+            t_s, length_m, speed_m_s, tension_n)
+
+    def length_at(self, t_s: float, max_age_s: float = 0.5) -> float:
+        """Paid-out length at ``t_s`` [m], extrapolated at the reported speed (for at most
+        ``max_age_s``: an old report is not extrapolated further)."""
+        if self.t_s is None:
+            return self.length_m
+        age = min(max(t_s - self.t_s, 0.0), max_age_s)
+        return self.length_m + self.speed_m_s * age
+
+
 class TetherModel:
     """Inextensible catenary of weight ``w_n_m`` [N/m] between the winder exit (origin) and
     the UAV, with a frictionless ground at the exit's level."""

@@ -117,8 +117,8 @@ def test_position_lyapunov_decreases_on_its_design_model():
     k1, k2 = np.array(gains.pos_k1_1_s), np.array(gains.pos_k2_1_s)
     values, rates = [], []
     for _ in range(20000):
-        out = pc.update(dt, tuple(p), tuple(v), ref, (0, 0, 0), (0, 0, 0), 0.0, (0, 0, 1.0),
-                        tuple(ft))
+        out = pc.update(dt, tuple(p), tuple(v), ref, (0, 0, 0), (0, 0, 0), 0.0,
+                        tether_force_n=tuple(ft))
         assert not out.saturated
         dt_ = d - np.array(out.disturbance_m_s2)
         values.append(out.lyapunov + 0.5 * float(dt_ @ (dt_ / gam)))
@@ -141,8 +141,7 @@ def test_position_lyapunov_decreases_on_its_design_model():
 def test_position_loop_limits_tilt_and_thrust():
     gains = FlightControlParams()
     pc = PositionController(gains, 2.84, 9.81, max_total_thrust_n=80.0)
-    out = pc.update(0.004, (0, 0, 10), (0, 0, 0), (100.0, 0, 10), (0, 0, 0), (0, 0, 0), 0.0,
-                    (0, 0, 1.0))
+    out = pc.update(0.004, (0, 0, 10), (0, 0, 0), (100.0, 0, 10), (0, 0, 0), (0, 0, 0), 0.0)
     f = np.array(out.thrust_vector_n)
     assert out.saturated
     assert math.atan2(math.hypot(f[0], f[1]), f[2]) <= gains.max_tilt_rad + 1e-12

@@ -23,7 +23,7 @@ import numpy as np
 
 from companion.attitude import AttitudeController
 from companion.position import PositionController
-from companion.tether_model import TetherModel
+from companion.tether_model import TetherModel, WinchReport
 from companion.trajectory import (
     GotoItem,
     Hold,
@@ -165,7 +165,7 @@ class OfflineRunner:
         dt_c = 1.0 / sc.control.rate_hz
         t_idle = 4 * veh.rotor_thrust_coeff * veh.rotor_speed_min_rad_s ** 2
         self.pos_ctl = PositionController(sc.control, veh.mass_kg, g, veh.max_total_thrust_n,
-                                          t_idle)
+                                          t_idle, veh.drag_coeff_n_s_m)
         self.att_ctl = AttitudeController(sc.control, veh.inertia_diag,
                                           veh.rotational_damping_n_m_s_rad, dt_c)
         self.att_ctl.reset(self.plant.euler_rad)
@@ -186,7 +186,8 @@ class OfflineRunner:
         bar = ProgressBar(sc.duration_s, progress)
         inputs = PlantInputs()
         winder_torque, winder_lyap, lbar = 0.0, 0.0, (0.0, 0.0)
-        reported_len, reported_tension = plant.tether_length_m, 0.0
+        winch = WinchReport()
+        winch.update(0.0, plant.tether_length_m, 0.0, plant.tether_forces().drum_tension_n)
         events: list[tuple[str, int, float]] = []
         wall0 = time.perf_counter()
         for k in range(n_steps + 1):
@@ -200,23 +201,23 @@ class OfflineRunner:
                                              truth_tether.drum_tension_n, lb.length_m,
                                              lb.rate_m_s)
                 winder_torque, winder_lyap, lbar = cmd.torque_n_m, cmd.lyapunov, lb[:2]
-                reported_len, reported_tension = (plant.tether_length_m,
-                                                  truth_tether.drum_tension_n)
+                winch.update(t, plant.tether_length_m,
+                             plant.drum_rate_rad_s * self.params.winder.drum_radius_m,
+                             truth_tether.drum_tension_n)
             if k % self.n_ctrl == 0:
                 pos = tuple(plant.position_m)
                 vel = tuple(plant.velocity_m_s)
                 euler = plant.euler_rad
                 rates = tuple(plant.body_rates_rad_s)
                 r = quat_to_matrix(plant.quaternion)
-                body_z = (r[0][2], r[1][2], r[2][2])
                 ref = self.reference.sample(t, pos, vel)
                 events.extend(self.reference.events())
                 est = self.tether_model.estimate(
-                    pos, reported_len,
-                    reported_tension if sc.control.use_measured_tension else None)
+                    pos, winch.length_at(t),
+                    winch.tension_n if sc.control.use_measured_tension else None)
                 f_t = est.force_n if sc.control.use_tether_model else (0.0, 0.0, 0.0)
                 po = self.pos_ctl.update(dt_c, pos, vel, ref.pos_m, ref.vel_m_s, ref.acc_m_s2,
-                                         ref.yaw_rad, body_z, f_t)
+                                         ref.yaw_rad, r, f_t)
                 ao = self.att_ctl.update(euler, rates, po.attitude_rad)
                 mix = self.mixer.mix(po.thrust_n, ao.torque_n_m)
                 inputs = PlantInputs(mix.commands, True, winder_torque, True)
@@ -318,6 +319,7 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray], reference: Ref
             m["settling_time_s"] = 0.0
         elif outside[-1] + 1 < len(t):
             m["settling_time_s"] = float(t[outside[-1] + 1] - sc.trajectory.start_s)
+        m["lyapunov"] = lyapunov_report(s, reference.traj.end_s)
         span = np.linalg.norm(goal - start)
         if span > 0:
             along = (s["pos"] - goal) @ ((goal - start) / span)
@@ -388,14 +390,62 @@ def run_scenario(scenario: ScenarioParams, out_dir: Path | None = None,
     return result
 
 
-def lyapunov_increases(t: np.ndarray, v: np.ndarray, from_s: float, rel_tol: float = 1e-6,
-                       floor: float = 1e-10) -> int:
-    """How many times ``v`` rises (by more than ``rel_tol`` of itself, above ``floor``) after
-    ``from_s``: zero for a Lyapunov function once its reference is constant."""
+#: A subsystem's reference counts as constant once its rate stays below these.
+ATTITUDE_REF_STILL_RAD_S = 1e-3
+LENGTH_REF_STILL_M_S = 1e-3
+
+
+def still_from(t: np.ndarray, x: np.ndarray, tol: float) -> float | None:
+    """First time after which ``x``'s rate stays at or below ``tol`` (None if never)."""
+    rate = np.abs(np.gradient(x, t, axis=0))
+    if rate.ndim > 1:
+        rate = rate.max(axis=1)
+    moving = np.nonzero(rate > tol)[0]
+    if len(moving) == 0:
+        return float(t[0])
+    if moving[-1] + 1 >= len(t):
+        return None
+    return float(t[moving[-1] + 1])
+
+
+def lyapunov_increases(t: np.ndarray, v: np.ndarray, from_s: float,
+                       floor_fraction: float = 1e-9) -> int:
+    """How many times ``v`` rises after ``from_s``, ignoring values below the numerical
+    floor ``floor_fraction * max(v)``: zero for a Lyapunov function once its reference is
+    constant."""
     sel = t >= from_s
     vv = v[sel]
     d = np.diff(vv)
-    return int(np.sum((d > rel_tol * vv[:-1]) & (vv[:-1] > floor)))
+    floor = floor_fraction * float(np.max(v))
+    return int(np.sum((d > 0.0) & (vv[:-1] > floor)))
+
+
+def lyapunov_report(s: dict[str, np.ndarray], position_ref_still_s: float
+                    ) -> dict[str, dict[str, float | int | None]]:
+    """For each subsystem: from when its reference is constant, and how often its Lyapunov
+    function rose after that (docs/control.md §5 gives the definitions).
+
+    Position: the set-point reached its goal and the attitude loop's filtered command is
+    still (the position loop's input is then the thrust it asked for). Attitude: the
+    filtered command is still. Winder: L-bar is still.
+    """
+    t = s["t"]
+    att_still = still_from(t, s["att_cmd"], ATTITUDE_REF_STILL_RAD_S)
+    len_still = still_from(t, s["lbar"], LENGTH_REF_STILL_M_S)
+    starts = {
+        "v_pos": None if att_still is None else max(position_ref_still_s, att_still),
+        "v_att": att_still,
+        "v_win": len_still,
+    }
+    out: dict[str, dict[str, float | int | None]] = {}
+    for name, t0 in starts.items():
+        if t0 is None:
+            out[name] = {"from_s": None, "increases": None, "window_s": 0.0}
+            continue
+        out[name] = {"from_s": round(t0, 3),
+                     "increases": lyapunov_increases(t, s[name], t0),
+                     "window_s": round(float(t[-1] - t0), 3)}
+    return out
 
 
 def yaw_error(a: float, b: float) -> float:
