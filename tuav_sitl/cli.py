@@ -28,6 +28,54 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_run(args: argparse.Namespace) -> int:
+    from tuav_sitl.scenario import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    if args.duration is not None:
+        scenario = scenario.replace(duration_s=args.duration)
+    from tuav_sitl.offline import run_scenario
+
+    out = Path(args.out) if args.out else Path("runs") / scenario.name
+    print(f"tuav-sitl run {scenario.name}: {scenario.description}")
+    result = run_scenario(scenario, out, progress=None if args.quiet else sys.stderr)
+    m = result.metrics
+    print(f"wrote {out}/timeseries.npz, metrics.json, scenario.toml")
+    if not args.no_figures:
+        from tuav_sitl.animation import make_animation
+        from tuav_sitl.figures import make_figures
+
+        figs = make_figures(out)
+        print(f"wrote {len(figs)} figures in {out}/figures")
+        if not args.no_animation:
+            anim = make_animation(out)
+            print("wrote " + ", ".join(str(a) for a in anim))
+    keys = ["position_rmse_m", "position_max_error_m", "attitude_rmse_rad",
+            "tether_length_rmse_m", "min_tether_slack_m", "max_tension_n",
+            "motor_saturation_fraction", "settling_time_s", "overshoot_percent",
+            "sim_time_s", "wall_time_s", "realtime_factor"]
+    for k in keys:
+        v = m.get(k)
+        print(f"  {k:28s} {v:.6g}" if isinstance(v, float) else f"  {k:28s} {v}")
+    return 0
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from tuav_sitl.animation import make_animation
+    from tuav_sitl.figures import make_figures
+
+    run_dir = Path(args.run_dir)
+    if not (run_dir / "timeseries.npz").is_file():
+        print(f"tuav-sitl plot: {run_dir} has no timeseries.npz", file=sys.stderr)
+        return 2
+    figs = make_figures(run_dir)
+    print(f"wrote {len(figs)} figures in {run_dir}/figures")
+    if not args.no_animation:
+        for a in make_animation(run_dir):
+            print(f"wrote {a}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``tuav-sitl``."""
     parser = argparse.ArgumentParser(
@@ -47,6 +95,28 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--params", default=None,
                       help="TOML file with [environment] [vehicle] [tether] [winder] [wind]")
     demo.set_defaults(func=_cmd_demo)
+
+    from tuav_sitl.scenario import shipped_scenarios
+
+    run = sub.add_parser(
+        "run", help="run an experiment offline (plant and controllers in one process)",
+        description="Run a scenario with the plant, the onboard controllers and the winder "
+                    "controller in one process, as fast as the machine allows; write the time "
+                    "series, metrics.json, the figures and an animation. Shipped scenarios: "
+                    + ", ".join(sorted(shipped_scenarios())) + ".")
+    run.add_argument("scenario", help="a shipped scenario name or a scenario TOML file")
+    run.add_argument("--out", default=None, help="output folder (default runs/NAME)")
+    run.add_argument("--duration", type=float, default=None,
+                     help="override the scenario's simulated time [s]")
+    run.add_argument("--no-figures", action="store_true", help="skip figures and animation")
+    run.add_argument("--no-animation", action="store_true", help="skip the animation")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.set_defaults(func=_cmd_run)
+
+    plot = sub.add_parser("plot", help="draw the figures and animation of a run folder")
+    plot.add_argument("run_dir", help="a folder written by 'tuav-sitl run'")
+    plot.add_argument("--no-animation", action="store_true", help="skip the animation")
+    plot.set_defaults(func=_cmd_plot)
     return parser
 
 

@@ -1,0 +1,112 @@
+"""The paper's experiments, run in full by the offline runner, against the project's
+targets (issue: controllers and offline runner)."""
+
+import math
+from multiprocessing import get_context
+
+import numpy as np
+import pytest
+
+from tuav_sitl.offline import RunResult, run_scenario, write_outputs
+from tuav_sitl.scenario import ScenarioParams, load_scenario, shipped_scenarios
+from tuavdefs.paramspec import ParameterError, load_toml
+
+NAMES = sorted(shipped_scenarios())
+
+
+def _run(name: str) -> RunResult:
+    return run_scenario(load_scenario(name), None, progress=None)
+
+
+@pytest.fixture(scope="module")
+def results() -> dict[str, RunResult]:
+    with get_context("fork").Pool(2) as pool:
+        return dict(zip(NAMES, pool.map(_run, NAMES), strict=True))
+
+
+def test_the_paper_experiments_are_shipped():
+    assert {"setpoint", "linear", "circle", "tether-length", "single-position",
+            "multi-position", "circle-windy", "multi-position-windy"} <= set(NAMES)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_tether_never_taut_never_on_the_ground_rotors_rarely_saturate(results, name):
+    m = results[name].metrics
+    assert m["min_tether_slack_m"] > 0.0
+    assert m["tether_ground_contact_fraction"] == 0.0
+    assert m["motor_saturation_fraction"] < 0.01
+    s = results[name].series
+    # independent check of the slack metric from the raw series
+    slack = s["length"] - np.linalg.norm(s["pos"], axis=1)
+    assert slack.min() == pytest.approx(m["min_tether_slack_m"])
+
+
+def test_circle_calm(results):
+    m = results["circle"].metrics
+    assert m["position_rmse_m"] <= 0.05
+    assert m["tether_length_rmse_m"] <= 0.02
+    # it really flew the circle: radius and height over the measured window
+    s = results["circle"].series
+    sc = results["circle"].scenario
+    win = s["t"] >= 10.0
+    r = np.hypot(s["pos"][win, 0] - sc.trajectory.centre_m[0],
+                 s["pos"][win, 1] - sc.trajectory.centre_m[1])
+    assert np.allclose(r, 10.0, atol=0.1)
+    assert np.allclose(s["pos"][win, 2], 20.0, atol=0.1)
+    speed = np.linalg.norm(s["vel"][(s["t"] > 10) & (s["t"] < 40)], axis=1)
+    assert np.allclose(speed, 2.0, atol=0.05)
+
+
+def test_circle_windy(results):
+    m = results["circle-windy"].metrics
+    assert m["position_rmse_m"] <= 0.25
+    wind = results["circle-windy"].series["wind"]
+    assert np.mean(wind[:, 0]) > 2.0 and np.std(wind[:, 0]) > 0.2   # the wind blew
+
+
+def test_setpoint_settles_without_overshoot(results):
+    m = results["setpoint"].metrics
+    assert m["settling_time_s"] is not None and m["settling_time_s"] <= 10.0
+    assert m["overshoot_percent"] <= 5.0
+    s = results["setpoint"].series
+    assert np.linalg.norm(s["pos"][-1] - np.array([5.0, 5.0, 20.0])) < 0.05
+
+
+@pytest.mark.parametrize("name", ["multi-position", "multi-position-windy"])
+def test_every_waypoint_is_reached_in_order(results, name):
+    reached = results[name].metrics["waypoints_reached"]
+    sc = results[name].scenario
+    assert [w["index"] for w in reached] == list(range(len(sc.trajectory.waypoints)))
+    s = results[name].series
+    for w in reached:
+        i = int(np.searchsorted(s["t"], w["t_s"]))
+        goal = np.array(sc.trajectory.waypoints[w["index"]].position_m)
+        assert np.linalg.norm(s["pos"][i] - goal) <= sc.trajectory.acceptance_radius_m
+
+
+def test_tether_length_follows_lbar_and_exceeds_altitude(results):
+    s = results["tether-length"].series
+    assert results["tether-length"].metrics["tether_length_rmse_m"] <= 0.02
+    assert np.all(s["length"] > s["pos"][:, 2])
+    assert s["length"][-1] - s["length"][0] > 20.0      # it paid out as the UAV climbed
+
+
+def test_outputs_round_trip(results, tmp_path):
+    res = results["setpoint"]
+    write_outputs(res, tmp_path)
+    assert load_toml(ScenarioParams, tmp_path / "scenario.toml") == res.scenario
+    data = np.load(tmp_path / "timeseries.npz")
+    assert np.array_equal(data["pos"], res.series["pos"])
+    import json
+
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert math.isclose(metrics["position_rmse_m"], res.metrics["position_rmse_m"])
+
+
+def test_bad_scenario_names_the_field(tmp_path):
+    f = tmp_path / "bad.toml"
+    f.write_text('name = "bad"\n[trajectory]\nkind = "spiral"\n')
+    with pytest.raises(ParameterError, match="bad.trajectory.kind"):
+        load_scenario(str(f))
+    with pytest.raises(ParameterError, match="no such scenario"):
+        load_scenario("no-such-scenario")
