@@ -11,8 +11,12 @@ reference derivatives come from the filter, not from differentiating the positio
     e_eta = eta - eta_c                         (yaw wrapped)
     alpha = W(eta) (d(eta_c)/dt - K3 e_eta)     desired body rate
     e_w   = omega - alpha
-    tau   = omega x J omega + c omega + J d(alpha)/dt - T(eta)' e_eta - K4 e_w
-    V     = 1/2 e_eta' e_eta + 1/2 e_w' J e_w,    dV/dt = -e_eta' K3 e_eta - e_w' K4 e_w
+    compensation, tau_a the torque achieved:
+        d(xi_eta)/dt = -K3 xi_eta + T(eta) xi_w,   J d(xi_w)/dt = -K4 xi_w + (tau_a - tau)
+    e_eta_bar = e_eta - xi_eta,  e_w_bar = e_w - xi_w
+    tau   = omega x J omega + c omega + J d(alpha)/dt - T(eta)' e_eta_bar - K4 e_w
+    V     = 1/2 e_eta_bar' e_eta_bar + 1/2 e_w_bar' J e_w_bar,
+    dV/dt = -e_eta_bar' K3 e_eta_bar - e_w_bar' K4 e_w_bar
 """
 
 from __future__ import annotations
@@ -35,9 +39,10 @@ class AttitudeOutput(NamedTuple):
     torque_n_m: Vec3
     attitude_cmd_rad: Vec3       # filtered command eta_c
     rate_cmd_rad_s: Vec3         # alpha, the desired body rate
-    e_eta_rad: Vec3
+    e_eta_rad: Vec3              # compensated errors e_eta_bar, e_w_bar
     e_omega_rad_s: Vec3
-    lyapunov: float              # 1/2 |e_eta|^2 + 1/2 e_w' J e_w
+    lyapunov: float              # 1/2 |e_eta_bar|^2 + 1/2 e_w_bar' J e_w_bar
+    lyapunov_raw: float          # the same with the uncompensated errors
 
 
 class CommandFilter:
@@ -97,14 +102,24 @@ class AttitudeController:
         self.k3 = np.array(gains.att_k3_1_s)
         self.k4 = np.array(gains.att_k4_n_m_s)
         self.filter = CommandFilter(gains.command_filter_hz, gains.command_filter_damping, dt_s)
+        self.xi_eta = np.zeros(3)
+        self.xi_w = np.zeros(3)
+        self._decay_w = np.exp(-self.k4 / self.j * dt_s)
 
     def reset(self, attitude_rad: Vec3) -> None:
-        """Start the command filter at rest at ``attitude_rad``."""
+        """Start the command filter at rest at ``attitude_rad``; clear the compensation."""
         self.filter.reset(np.array(attitude_rad))
+        self.xi_eta = np.zeros(3)
+        self.xi_w = np.zeros(3)
 
-    def update(self, attitude_rad: Vec3, body_rates_rad_s: Vec3, desired_rad: Vec3
-               ) -> AttitudeOutput:
-        """Torques [N m] for the measured attitude and rates and the desired attitude."""
+    def update(self, attitude_rad: Vec3, body_rates_rad_s: Vec3, desired_rad: Vec3,
+               achieved_torque_n_m: Vec3 | None = None) -> AttitudeOutput:
+        """Torques [N m] for the measured attitude and rates and the desired attitude.
+
+        ``achieved_torque_n_m`` is what the rotors produce now (from
+        :class:`companion.actuators.ActuatorModel`); without it the command is taken as
+        achieved and the compensation stays zero.
+        """
         eta = np.array(attitude_rad)
         om = np.array(body_rates_rad_s)
         des = np.array(desired_rad, dtype=float)
@@ -121,11 +136,23 @@ class AttitudeController:
         w_dot = _w_dot(eta[0], eta[1], eta_d[0], eta_d[1])
         alpha_dot = w_dot @ v + w @ (eta_c_dd - self.k3 * (eta_d - eta_c_d))
         e_w = om - alpha
+        e_eta_b = e_eta - self.xi_eta
+        e_w_b = e_w - self.xi_w
         jw = self.j * om
-        tau = np.cross(om, jw) + self.c * om + self.j * alpha_dot - t.T @ e_eta - self.k4 * e_w
-        lyap = 0.5 * float(e_eta @ e_eta) + 0.5 * float(e_w @ (self.j * e_w))
-        return AttitudeOutput(tuple(tau), tuple(eta_c), tuple(alpha), tuple(e_eta),
-                              tuple(e_w), lyap)
+        tau = (np.cross(om, jw) + self.c * om + self.j * alpha_dot - t.T @ e_eta_b
+               - self.k4 * e_w)
+        lyap = 0.5 * float(e_eta_b @ e_eta_b) + 0.5 * float(e_w_b @ (self.j * e_w_b))
+        lyap_raw = 0.5 * float(e_eta @ e_eta) + 0.5 * float(e_w @ (self.j * e_w))
+        if achieved_torque_n_m is not None:
+            drive = (np.array(achieved_torque_n_m) - tau) / self.k4
+            xi_w_new = drive + (self.xi_w - drive) * self._decay_w
+            # xi_eta driven by T xi_w (trapezoid over the step), decaying at K3
+            d3 = np.exp(-self.k3 * self.dt_s)
+            u = 0.5 * (t @ self.xi_w + t @ xi_w_new)
+            self.xi_eta = u / self.k3 + (self.xi_eta - u / self.k3) * d3
+            self.xi_w = xi_w_new
+        return AttitudeOutput(tuple(tau), tuple(eta_c), tuple(alpha), tuple(e_eta_b),
+                              tuple(e_w_b), lyap, lyap_raw)
 
 
 def _w_dot(roll: float, pitch: float, roll_d: float, pitch_d: float) -> np.ndarray:

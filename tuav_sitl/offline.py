@@ -21,6 +21,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from companion.actuators import ActuatorModel
 from companion.attitude import AttitudeController
 from companion.position import PositionController
 from companion.tether_model import TetherModel, WinchReport
@@ -109,6 +110,10 @@ class Reference:
         if tr.kind == "hold":
             self.traj = Hold(start, yaw, 0.0)
             return
+        if tr.kind == "step":
+            self.traj = Hold(tuple(tr.goal_m), yaw, 0.0)
+            self.goal = tuple(tr.goal_m)
+            return
         if tr.kind == "setpoint":
             b.goto(tr.goal_m)
             self.goal = tuple(tr.goal_m)
@@ -169,6 +174,8 @@ class OfflineRunner:
         self.att_ctl = AttitudeController(sc.control, veh.inertia_diag,
                                           veh.rotational_damping_n_m_s_rad, dt_c)
         self.att_ctl.reset(self.plant.euler_rad)
+        self.actuators = ActuatorModel(veh, dt_c)
+        self.actuators.reset(tuple(self.plant.rotor_speeds_rad_s))
         self.mixer = Mixer(veh)
         self.tether_model = TetherModel(w, params.tether.axial_stiffness_n)
         self.winder_ctl = WinderController(sc.winder_control, params.winder, params.tether)
@@ -216,10 +223,13 @@ class OfflineRunner:
                     pos, winch.length_at(t),
                     winch.tension_n if sc.control.use_measured_tension else None)
                 f_t = est.force_n if sc.control.use_tether_model else (0.0, 0.0, 0.0)
+                u_ach, tau_ach = self.actuators.wrench()
                 po = self.pos_ctl.update(dt_c, pos, vel, ref.pos_m, ref.vel_m_s, ref.acc_m_s2,
-                                         ref.yaw_rad, r, f_t)
-                ao = self.att_ctl.update(euler, rates, po.attitude_rad)
+                                         ref.yaw_rad, r, f_t, u_ach)
+                ao = self.att_ctl.update(euler, rates, po.attitude_rad, tau_ach)
                 mix = self.mixer.mix(po.thrust_n, ao.torque_n_m)
+                self.actuators.command(mix.commands)
+                self.actuators.advance()
                 inputs = PlantInputs(mix.commands, True, winder_torque, True)
                 truth_tether = plant.tether_forces()
                 log.add(t=t, pos=pos, vel=vel, ref_pos=ref.pos_m, ref_vel=ref.vel_m_s,
@@ -228,6 +238,7 @@ class OfflineRunner:
                         rotor_cmd=mix.commands, mixer_sat=mix.saturated,
                         pos_sat=po.saturated, d_hat=po.disturbance_m_s2,
                         v_pos=po.lyapunov, v_att=ao.lyapunov, v_win=winder_lyap,
+                        v_pos_raw=po.lyapunov_raw, v_att_raw=ao.lyapunov_raw,
                         length=plant.tether_length_m, lbar=lbar[0], lbar_rate=lbar[1],
                         drum_rate=plant.drum_rate_rad_s, winder_torque=winder_torque,
                         drum_tension=truth_tether.drum_tension_n,
@@ -310,7 +321,7 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray], reference: Ref
         "wall_time_s": round(wall_s, 3),
         "realtime_factor": round(float(t[-1]) / wall_s, 2) if wall_s > 0 else None,
     }
-    if sc.trajectory.kind == "setpoint" and reference.goal is not None:
+    if sc.trajectory.kind in ("setpoint", "step") and reference.goal is not None:
         goal = np.array(reference.goal)
         start = np.array(sc.initial.position_m)
         dist_goal = np.linalg.norm(s["pos"] - goal, axis=1)

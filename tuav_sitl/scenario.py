@@ -28,7 +28,7 @@ from tuavdefs.params import (
 )
 from tuavdefs.paramspec import ParameterError, Params, load_toml, quantity
 
-TRAJECTORY_KINDS = ("hold", "setpoint", "line", "circle", "waypoints")
+TRAJECTORY_KINDS = ("hold", "step", "setpoint", "line", "circle", "waypoints")
 
 
 @dataclass(frozen=True)
@@ -51,11 +51,12 @@ class WaypointParams(Params):
 class TrajectoryParams(Params):
     """The reference the UAV flies. Fields apply to the kinds named in their description."""
 
-    kind: str = quantity("hold", "", "hold, setpoint, line, circle or waypoints",
+    kind: str = quantity("hold", "", "hold, step (the goal held from t = 0: regulation from "
+                         "an offset), setpoint, line, circle or waypoints",
                          choices=TRAJECTORY_KINDS)
     start_s: float = quantity(1.0, "s", "time the reference starts to move", ge=0)
     goal_m: tuple[float, ...] = quantity(
-        (5.0, 5.0, 20.0), "m", "setpoint and line: where to go", length=3)
+        (5.0, 5.0, 20.0), "m", "step, setpoint and line: where to go", length=3)
     max_speed_m_s: float = quantity(4.0, "m/s", "speed limit of moves", gt=0)
     max_acc_m_s2: float = quantity(2.0, "m/s^2", "acceleration limit of moves", gt=0)
     speed_m_s: float = quantity(2.0, "m/s", "line and circle: cruise speed", gt=0)
