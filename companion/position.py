@@ -105,10 +105,8 @@ class PositionController:
         thrust = f[0] * body_z[0] + f[1] * body_z[1] + f[2] * body_z[2]
         thrust = min(max(thrust, self.u_min), self.u_max)
         attitude = attitude_from_thrust_vector(f, ref_yaw_rad)
-        if achieved_thrust_n is None:
-            f_a = f  # no actuator information: take the limited command as achieved
-        else:
-            f_a = [achieved_thrust_n * body_z[i] for i in range(3)]
+        # without actuator information the limited command is taken as achieved
+        f_a = f if achieved_thrust_n is None else [achieved_thrust_n * b for b in body_z]
         lyap = 0.5 * sum(e * e for e in e1b) + 0.5 * sum(e * e for e in e2b)
         lyap_raw = 0.5 * sum(e * e for e in e1) + 0.5 * sum(e * e for e in e2)
         # no conditional integration: the compensated error already leaves out what the
