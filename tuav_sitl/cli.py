@@ -76,6 +76,15 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_results(args: argparse.Namespace) -> int:
+    from tuav_sitl.results import write_results
+
+    out = Path(args.out)
+    metrics = write_results(out, Path(args.runs), figures=not args.no_figures)
+    print(f"wrote {out} from {len(metrics)} runs in {args.runs}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``tuav-sitl``."""
     parser = argparse.ArgumentParser(
@@ -117,6 +126,16 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_argument("run_dir", help="a folder written by 'tuav-sitl run'")
     plot.add_argument("--no-animation", action="store_true", help="skip the animation")
     plot.set_defaults(func=_cmd_plot)
+
+    res = sub.add_parser(
+        "results", help="run every shipped experiment and write docs/results.md",
+        description="Run all shipped scenarios in parallel, write their run folders, copy "
+                    "the main figures next to the results file and write the metrics table "
+                    "against the targets.")
+    res.add_argument("--out", default="docs/results.md", help="the Markdown file to write")
+    res.add_argument("--runs", default="runs", help="folder for the run folders")
+    res.add_argument("--no-figures", action="store_true", help="metrics only")
+    res.set_defaults(func=_cmd_results)
     return parser
 
 

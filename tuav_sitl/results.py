@@ -1,0 +1,149 @@
+"""``tuav-sitl results``: run every shipped experiment and write docs/results.md.
+
+Runs the scenarios in parallel (one process per core), writes each run folder (time series,
+metrics, figures, animation) under ``--runs``, copies a selection of figures next to the
+results file, and writes the table of metrics against the project's targets.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import shutil
+import time
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+from tuav_sitl.offline import run_scenario
+from tuav_sitl.scenario import load_scenario, shipped_scenarios
+
+#: (scenario, metric, comparison, limit, description) — the targets of the issue.
+TARGETS: list[tuple[str, str, str, float, str]] = [
+    ("circle", "position_rmse_m", "<=", 0.05, "calm circle: position RMSE after the lead-in"),
+    ("circle", "tether_length_rmse_m", "<=", 0.02, "calm circle: tether-length RMSE"),
+    ("circle-windy", "position_rmse_m", "<=", 0.25, "windy circle: position RMSE"),
+    ("setpoint", "settling_time_s", "<=", 10.0, "set-point: within 5 cm in"),
+    ("setpoint", "overshoot_percent", "<=", 5.0, "set-point: overshoot"),
+]
+FIGURES_FOR_DOCS = {
+    "setpoint": ["states.png", "errors.png", "lyapunov.png"],
+    "linear": ["position_tracking.png", "attitude_tracking.png"],
+    "circle": ["path_3d.png"],
+    "tether-length": ["tether_length.png"],
+    "single-position": ["snapshots.png"],
+    "multi-position": ["snapshots.png"],
+}
+
+
+def _one(args: tuple[str, str, bool]) -> tuple[str, dict[str, Any]]:
+    name, runs, figures = args
+    out = Path(runs) / name
+    result = run_scenario(load_scenario(name), out, progress=None)
+    if figures:
+        from tuav_sitl.animation import make_animation
+        from tuav_sitl.figures import make_figures
+
+        make_figures(out)
+        make_animation(out)
+    return name, result.metrics
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+def _check(value: Any, op: str, limit: float) -> bool:
+    return value is not None and (value <= limit if op == "<=" else value >= limit)
+
+
+def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
+                  processes: int | None = None) -> dict[str, dict[str, Any]]:
+    """Run all shipped scenarios and write ``out_md``; returns the metrics by scenario."""
+    names = sorted(shipped_scenarios())
+    wall = time.perf_counter()
+    with get_context("fork").Pool(processes or min(len(names), os.cpu_count() or 1)) as pool:
+        metrics = dict(pool.map(_one, [(n, str(runs_dir), figures) for n in names]))
+    wall = time.perf_counter() - wall
+    fig_dir = out_md.parent / "figures"
+    if figures:
+        fig_dir.mkdir(parents=True, exist_ok=True)
+        for name, files in FIGURES_FOR_DOCS.items():
+            for f in files:
+                src = runs_dir / name / "figures" / f
+                if src.is_file():
+                    shutil.copyfile(src, fig_dir / f"{name}-{f}")
+    lines = [
+        "# Results",
+        "",
+        "Produced by `tuav-sitl results` (runs every shipped scenario with `tuav-sitl run`",
+        f"and writes this file); {len(names)} runs took {wall:.0f} s of wall time on "
+        f"{os.cpu_count()} cores ({platform.python_implementation()} "
+        f"{platform.python_version()}, {platform.machine()}).",
+        "Metric definitions: `docs/usage.md` and `tuav_sitl/offline.py: compute_metrics`.",
+        "",
+        "## Targets",
+        "",
+        "| scenario | target | value | limit | met |",
+        "|---|---|---|---|---|",
+    ]
+    for sc, key, op, limit, text in TARGETS:
+        v = metrics[sc].get(key)
+        lines.append(f"| {sc} | {text} (`{key}`) | {_fmt(v)} | {op} {limit:g} | "
+                     f"{'yes' if _check(v, op, limit) else '**no**'} |")
+    lines += [
+        "",
+        "In every scenario: the tether is never taut (`min_tether_slack_m` > 0), never lies "
+        "on the ground (`tether_ground_contact_fraction` = 0), and the rotors saturate less "
+        "than 1 % of the time:",
+        "",
+        "| scenario | position RMSE [m] | max error [m] | attitude RMSE [rad] | "
+        "tether-length RMSE [m] | min slack [m] | on ground | max tension [N] | "
+        "rotor saturation | settling [s] | overshoot [%] | sim [s] | wall [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for n in names:
+        m = metrics[n]
+        lines.append("| " + " | ".join([
+            n, _fmt(m["position_rmse_m"]), _fmt(m["position_max_error_m"]),
+            _fmt(m["attitude_rmse_rad"]), _fmt(m["tether_length_rmse_m"]),
+            _fmt(m["min_tether_slack_m"]), _fmt(m["tether_ground_contact_fraction"]),
+            _fmt(m["max_tension_n"]), _fmt(m["motor_saturation_fraction"]),
+            _fmt(m["settling_time_s"]), _fmt(m["overshoot_percent"]),
+            _fmt(m["sim_time_s"]), _fmt(m["wall_time_s"])]) + " |")
+    lines += ["", "## Lyapunov functions once the reference is constant", "",
+              "From docs/control.md §5: times each function rose (above its resolution "
+              "floor) after its subsystem's reference became constant.", "",
+              "| scenario | position (from, rises) | attitude (from, rises) | "
+              "winder (from, rises) |", "|---|---|---|---|"]
+    for n in names:
+        ly = metrics[n].get("lyapunov")
+        if not ly:
+            continue
+        cells = [f"{_fmt(ly[k]['from_s'])} s, {_fmt(ly[k]['increases'])}"
+                 for k in ("v_pos", "v_att", "v_win")]
+        lines.append(f"| {n} | " + " | ".join(cells) + " |")
+    wp = {n: metrics[n].get("waypoints_reached") for n in names
+          if metrics[n].get("waypoints_reached")}
+    if wp:
+        lines += ["", "## Waypoints reached", ""]
+        for n, items in wp.items():
+            lines.append(f"- {n}: " + ", ".join(f"#{w['index']} at {w['t_s']:.1f} s"
+                                                for w in items))
+    if figures:
+        lines += ["", "## Figures", ""]
+        from tuav_sitl.figures import FIGURE_CAPTIONS
+
+        for name, files in FIGURES_FOR_DOCS.items():
+            for f in files:
+                if (fig_dir / f"{name}-{f}").is_file():
+                    cap = FIGURE_CAPTIONS.get(f.removesuffix(".png"), f)
+                    lines += [f"**{name}** — {cap}", "",
+                              f"![{name} {f}](figures/{name}-{f})", ""]
+    out_md.parent.mkdir(parents=True, exist_ok=True)
+    out_md.write_text("\n".join(lines) + "\n")
+    return metrics
