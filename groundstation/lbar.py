@@ -40,6 +40,17 @@ class LBarParams(Params):
         0.05, "m", "least length above the straight-line distance, always", gt=0)
 
 
+#: Width of the smooth maxima [m]: over this range the larger argument takes over.
+SMOOTHING_A_M = 1.0
+SMOOTHING_L_M = 0.02
+
+
+def smooth_max(x: float, y: float, width: float) -> float:
+    """A smooth maximum of ``x`` and ``y``: at least ``max(x, y)``, at most
+    ``max(x, y) + width/2``, infinitely differentiable."""
+    return 0.5 * (x + y + math.sqrt((x - y) ** 2 + width * width))
+
+
 class LBar(NamedTuple):
     """Desired length, its rate and the catenary parameter used."""
 
@@ -86,8 +97,12 @@ class LBarEstimator:
         a = self.a_target
         if exit_slope(a, h, v) < self._tan_min:
             a = self._a_for_exit_slope(h, v)
+        # smooth maximum of the target and the exit-angle bound: never below either, and
+        # no kink in L-bar where one takes over from the other (a kink is a step in
+        # dL-bar/dt, i.e. a torque spike at the winder)
+        a = smooth_max(a, self.a_target, SMOOTHING_A_M)
         length = catenary_length_m(a, h, v)
-        return max(length, chord + self.p.min_slack_m), a
+        return smooth_max(length, chord + self.p.min_slack_m, SMOOTHING_L_M), a
 
     def _a_for_exit_slope(self, h: float, v: float) -> float:
         lo = self.a_target

@@ -8,7 +8,7 @@ global state and no backend switch: a bare Figure renders with Agg when saved).
 :data:`FIGURE_CAPTIONS` gives each figure's caption for the documentation.
 
 The 3-D helpers (:func:`reference_geometry`, :func:`scene_bounds`, :func:`quad_outline`,
-:func:`TetherDrawer`, ...) are shared with :mod:`tuav_sitl.animation`.
+:class:`TetherDrawer`, ...) are shared with :mod:`tuav_sitl.animation`.
 
 Frame: z up, x east, y north, origin at the winder's tether exit point on the ground.
 Angles are stored in radians and shown in degrees.
@@ -43,12 +43,16 @@ __all__ = [
     "RunData",
     "TetherDrawer",
     "build_figures",
+    "length_error",
     "load_run",
     "make_figures",
     "quad_outline",
+    "reached_indices",
     "reference_geometry",
+    "save_figures",
     "scene_bounds",
     "snapshot_indices",
+    "spread_instants",
 ]
 
 #: Size [in] and resolution [dots per inch] of the time-series figures.
@@ -87,10 +91,12 @@ FIGURE_CAPTIONS: dict[str, str] = {
         "so far (trail), and the goal, waypoints (filled once reached) or circle to track."),
     "lyapunov": (
         "Lyapunov functions of the position loop, the attitude loop and the winder loop on a "
-        "logarithmic scale over time; each decays while its reference is constant."),
+        "logarithmic scale over time; the stability analysis has each decay while its "
+        "reference is constant."),
     "tension_and_winder": (
         "Tether tension at the UAV (top) and at the winder drum, the winder motor torque "
-        "(dotted lines: its limits) and the drum rate over time; shaded spans, if any, are "
+        "(dotted lines: its limits, when approached) and the drum rate over time; shaded "
+        "spans, if any, are "
         "times when part of the tether lies on the ground."),
 }
 #: The figures :func:`build_figures` draws, in order.

@@ -199,7 +199,8 @@ class OfflineRunner:
         wall0 = time.perf_counter()
         for k in range(n_steps + 1):
             t = k * self.dt
-            if k % self.n_wind == 0:
+            fresh = k % self.n_wind == 0
+            if fresh:
                 # ground station: encoder, load cell and the UAV's telemetry
                 pos, vel = plant.position_m, plant.velocity_m_s
                 truth_tether = plant.tether_forces()
@@ -240,6 +241,7 @@ class OfflineRunner:
                         v_pos=po.lyapunov, v_att=ao.lyapunov, v_win=winder_lyap,
                         v_pos_raw=po.lyapunov_raw, v_att_raw=ao.lyapunov_raw,
                         length=plant.tether_length_m, lbar=lbar[0], lbar_rate=lbar[1],
+                        lbar_fresh=fresh,
                         drum_rate=plant.drum_rate_rad_s, winder_torque=winder_torque,
                         drum_tension=truth_tether.drum_tension_n,
                         top_tension=truth_tether.top_tension_n,
@@ -296,7 +298,11 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray], reference: Ref
     e_att = s["euler"] - s["att_cmd"]
     e_att[:, 2] = (e_att[:, 2] + np.pi) % (2 * np.pi) - np.pi
     att_err = np.linalg.norm(e_att, axis=1)
-    len_err = s["length"] - s["lbar"]
+    # L-bar is computed at the winder's rate and held between updates: compare the length
+    # with it only at the instants it was computed
+    fresh = s["lbar_fresh"].astype(bool)
+    len_err = (s["length"] - s["lbar"])[fresh]
+    len_win = win[fresh]
     slack = s["length"] - np.linalg.norm(s["pos"], axis=1)
     rotor = s["rotor_cmd"]
     rotor_sat = (rotor <= 1e-9).any(axis=1) | (rotor >= 1 - 1e-9).any(axis=1)
@@ -306,8 +312,8 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray], reference: Ref
         "position_rmse_m": _rms(pos_err[win]),
         "position_max_error_m": float(pos_err[win].max()),
         "attitude_rmse_rad": _rms(att_err[win]),
-        "tether_length_rmse_m": _rms(len_err[win]),
-        "tether_length_max_error_m": float(np.abs(len_err[win]).max()),
+        "tether_length_rmse_m": _rms(len_err[len_win]),
+        "tether_length_max_error_m": float(np.abs(len_err[len_win]).max()),
         "min_tether_slack_m": float(slack.min()),
         "max_tension_n": float(s["top_tension"].max()),
         "max_drum_tension_n": float(s["drum_tension"].max()),
@@ -449,6 +455,8 @@ def lyapunov_report(s: dict[str, np.ndarray], position_ref_still_s: float
     }
     out: dict[str, dict[str, float | int | None]] = {}
     for name, t0 in starts.items():
+        if t0 is not None and t0 >= t[-1]:
+            t0 = None   # the run ended before the reference settled
         if t0 is None:
             out[name] = {"from_s": None, "value_then": None, "increases": None}
             continue
