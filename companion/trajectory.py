@@ -280,7 +280,7 @@ def _search_quintic(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, goal: np.nda
     best_r, best_T = math.inf, T
     for _ in range(_SCAN_STEPS):
         # At u*, |v| >= |a0| T h'(u*) - |v0| |g'(u*)| - D s'(u*) / T, which only grows with T:
-        # once above v_max no longer quintic can work.
+        # once it exceeds v_max, no longer duration can work either.
         if an * T * _H1 - vn * _G1 - dist * _S1 / T > v_max * (1.0 + _LIMIT_RTOL):
             break
         r = ratio(T)
@@ -948,6 +948,7 @@ class WaypointFollower:
 
     @property
     def items(self) -> tuple[MissionItem, ...]:
+        """The mission items (retargets replace or insert items)."""
         return tuple(self._items)
 
     @property
