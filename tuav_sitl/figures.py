@@ -90,9 +90,10 @@ FIGURE_CAPTIONS: dict[str, str] = {
         "attitude; red arms at the front), the catenary tether from the winder, the path flown "
         "so far (trail), and the goal, waypoints (filled once reached) or circle to track."),
     "lyapunov": (
-        "Lyapunov functions of the position loop, the attitude loop and the winder loop on a "
-        "logarithmic scale over time; the stability analysis has each decay while its "
-        "reference is constant."),
+        "Lyapunov functions of the position loop, the attitude loop (both in the compensated "
+        "errors of command-filtered backstepping) and the winder loop on a logarithmic scale "
+        "over time; docs/control.md proves each decays, and §5 says when its reference "
+        "counts as constant."),
     "tension_and_winder": (
         "Tether tension at the UAV (top) and at the winder drum, the winder motor torque "
         "(dotted lines: its limits, when approached) and the drum rate over time; shaded "
@@ -647,8 +648,10 @@ def fig_lyapunov(s: Mapping[str, np.ndarray], sc: ScenarioParams,
     _title(fig, sc, "Lyapunov functions")
     ax = fig.add_subplot()
     t = s["t"]
-    curves = (("v_pos", "V_pos = |e1|^2/2 + |e2|^2/2 (position loop)", "C0"),
-              ("v_att", "V_att = |e_eta|^2/2 + e_w' J e_w/2 (attitude loop)", "C1"),
+    curves = (("v_pos", "V_pos = |ē1|^2/2 + |ē2|^2/2 (position loop, compensated errors)",
+               "C0"),
+              ("v_att", "V_att = |ē_eta|^2/2 + ē_w' J ē_w/2 (attitude loop, compensated)",
+               "C1"),
               ("v_win", "V_win = c e_L^2/2 + I_w e_w^2/2 (winder loop)", "C2"))
     values = []
     for key, label, colour in curves:
