@@ -85,8 +85,6 @@ class ScenarioParams(Params):
     metrics_after_s: float = quantity(
         0.0, "s", "tracking metrics ignore the time before this (a lead-in)", ge=0)
     physics_rate_hz: float = quantity(1000.0, "Hz", "RK4 integration rate", gt=0, le=20000)
-    measurement_noise: bool = quantity(
-        False, "", "add sensor noise to what the controllers see (else they see the truth)")
     initial: InitialParams = quantity(InitialParams(), "", "initial state")
     trajectory: TrajectoryParams = quantity(TrajectoryParams(), "", "the reference")
     environment: EnvironmentParams = quantity(EnvironmentParams(), "", "gravity and air")
