@@ -45,6 +45,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from sitl._jit import njit
+
 __all__ = [
     "CatenaryConvergenceError", "CatenaryInfo", "CatenaryInputError", "CatenaryRegime",
     "VERTICAL_SPAN_RATIO", "catenary_end_forces", "catenary_profile", "hanging_length_m",
@@ -118,6 +120,7 @@ def hanging_length_m(height_m: float, ea_n: float, w_n_per_m: float) -> float:
     return 2.0 * height_m / (math.sqrt(1.0 + 2.0 * height_m * w_n_per_m / ea_n) + 1.0)
 
 
+@njit
 def _eval(H: float, V: float, span: float, height: float, L: float, WL: float, iw: float,
           iea: float):
     """Residuals and merit function for top tensions (H, V); WL = w L, iw = 1/w, iea = 1/EA.
@@ -169,6 +172,7 @@ def _eval(H: float, V: float, span: float, height: float, L: float, WL: float, i
     return ex, ez, j11, j12, j22, g - hs - vh, abs(g) + hs + vh
 
 
+@njit
 def _newton(span: float, height: float, L: float, EA: float, w: float,
             H: float, V: float, v_low: float, tol: float):
     """Damped Newton iteration on (H, V) from the guess H > 0, V > v_low, minimising the convex
@@ -222,6 +226,7 @@ def _newton(span: float, height: float, L: float, EA: float, w: float,
     return H, V, _MAX_ITER, False
 
 
+@njit
 def _cold_guess(span: float, height: float, L: float, EA: float, w: float):
     """Initial (H, V): Peyrot & Goulois' lambda guess, raised to the straight-spring tension
     when the line must stretch to reach B."""
@@ -242,6 +247,7 @@ def _cold_guess(span: float, height: float, L: float, EA: float, w: float):
     return max(H, 1e-12 * w * L), max(V, 1e-12 * w * L)
 
 
+@njit
 def _solve(span: float, height: float, L: float, EA: float, w: float,
            hf0: float, vf0: float, tol: float):
     """The scalar core. Returns (H, V, HA, VA, length_on_ground, regime, iterations, lowest,

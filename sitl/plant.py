@@ -23,23 +23,32 @@ Equations (derived in docs/model.md):
     dOmega_i/dt   = (Omega_cmd_i - Omega_i) / tau_m
     I_w domega_d/dt = tau_motor + r_w T_drum - beta_w omega_d (+ brake, stops)
 
-``rhs`` is the pure state derivative; :func:`rk4_step` is the fixed-step integrator;
-:class:`Plant` couples them with the wind, the constraint projections (ground, brake,
-drum stops, quaternion norm) and convenient read-outs.
+``rhs`` is the pure state derivative and :func:`sitl.kernel.rk4_kernel` the fixed-step
+integrator (both compiled, in ``sitl/kernel.py``); :class:`Plant` couples them with the
+wind, the constraint projections (ground, brake, drum stops, quaternion norm) and
+convenient read-outs.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 
+from sitl.kernel import (
+    GROUND_EPS_M,
+    STICK_SPEED_M_S,
+    pack_params,
+    rhs_kernel,
+    rk4_kernel,
+    tether_pull,
+)
 from sitl.tether import Tether, TetherForces
 from sitl.wind import WindModel
 from sitl.winder import WinderModel
-from tuavdefs.airframe import ROTOR_LAYOUT, command_to_rotor_speed
+from tuavdefs.airframe import command_to_rotor_speed
 from tuavdefs.frames import euler_to_quat, quat_to_euler
 from tuavdefs.params import SystemParams
 
@@ -47,12 +56,6 @@ N_STATES = 19
 POS, VEL, QUAT, RATES, ROTORS, DRUM_ANGLE, DRUM_RATE = (
     slice(0, 3), slice(3, 6), slice(6, 10), slice(10, 13), slice(13, 17), 17, 18)
 
-#: Heights within this of the gear height count as touching the ground [m].
-GROUND_EPS_M = 1e-6
-#: Horizontal speeds below this count as stopped for static friction [m/s].
-STICK_SPEED_M_S = 1e-3
-#: Time constant with which the landing gear kills body rates on the ground [s].
-GEAR_RATE_DAMPING_S = 0.02
 
 
 class PlantInputs(NamedTuple):
@@ -88,6 +91,8 @@ class PlantModel:
         self.mu = v.ground_friction_coeff
         self.tether = Tether(params.tether, self.g)
         self.winder = WinderModel(params.winder, params.tether)
+        self.p = pack_params(params)
+        self.warm = np.zeros(2)   # the kernel's tether warm start (H, V)
 
     def rotor_setpoints(self, u: PlantInputs) -> tuple[float, ...]:
         """Rotor-speed set-points [rad/s] for the commands in ``u``."""
@@ -97,115 +102,19 @@ class PlantModel:
 
 def rhs(t: float, x: Sequence[float], u: PlantInputs, model: PlantModel,
         wind_m_s: Sequence[float] = (0.0, 0.0, 0.0),
-        rotor_setpoints: Sequence[float] | None = None) -> list[float]:
+        rotor_setpoints: Sequence[float] | None = None) -> np.ndarray:
     """dx/dt of the whole plant at time ``t`` [s] for state ``x`` and inputs ``u``.
 
     ``wind_m_s`` is the air velocity at the UAV (held over a step). ``rotor_setpoints``
-    may pass the rotor-speed set-points precomputed from ``u`` (they do not change
-    within a step). Pure apart from the tether solver's warm start, which changes only
-    how fast it converges.
+    may pass the rotor-speed set-points precomputed from ``u``. The equations live in the
+    compiled kernel (:func:`sitl.kernel.rhs_kernel`); the time does not enter them (the
+    plant is autonomous given its inputs). Pure apart from the tether solver's warm start,
+    which changes only how fast it converges.
     """
-    m = model
-    (px, py, pz, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz,
-     o1, o2, o3, o4, theta, omega_d) = x
-    # --- rotors: thrusts and torques in the body frame
-    t1, t2, t3, t4 = m.kf * o1 * o1, m.kf * o2 * o2, m.kf * o3 * o3, m.kf * o4 * o4
-    thrust = t1 + t2 + t3 + t4
-    ts = (t1, t2, t3, t4)
-    tau_x = tau_y = tau_z = 0.0
-    ratio = m.km / m.kf
-    for (sx, sy, spin), ti in zip(ROTOR_LAYOUT, ts, strict=True):
-        tau_x += sy * m.d * ti
-        tau_y -= sx * m.d * ti
-        tau_z -= spin * ratio * ti
-    # --- attitude: rotation matrix body -> inertial
-    r00 = 1 - 2 * (qy * qy + qz * qz)
-    r01 = 2 * (qx * qy - qw * qz)
-    r02 = 2 * (qx * qz + qw * qy)
-    r10 = 2 * (qx * qy + qw * qz)
-    r11 = 1 - 2 * (qx * qx + qz * qz)
-    r12 = 2 * (qy * qz - qw * qx)
-    r20 = 2 * (qx * qz - qw * qy)
-    r21 = 2 * (qy * qz + qw * qx)
-    r22 = 1 - 2 * (qx * qx + qy * qy)
-    # --- aerodynamic drag against the air-relative velocity, in body axes
-    ax_, ay_, az_ = vx - wind_m_s[0], vy - wind_m_s[1], vz - wind_m_s[2]
-    bx = r00 * ax_ + r10 * ay_ + r20 * az_
-    by = r01 * ax_ + r11 * ay_ + r21 * az_
-    bz = r02 * ax_ + r12 * ay_ + r22 * az_
-    dbx, dby, dbz = -m.drag[0] * bx, -m.drag[1] * by, -m.drag[2] * bz
-    # --- tether
-    length = m.winder.length_m(theta)
-    tf = m.tether.forces(px, py, pz, length)
-    fu = tf.on_uav_n
-    # --- net force, inertial frame
-    fx = thrust * r02 + r00 * dbx + r01 * dby + r02 * dbz + fu[0]
-    fy = thrust * r12 + r10 * dbx + r11 * dby + r12 * dbz + fu[1]
-    fz = thrust * r22 + r20 * dbx + r21 * dby + r22 * dbz + fu[2] - m.m * m.g
-    # --- ground contact: a constraint force, and friction on the gear
-    landed = pz <= m.gear + GROUND_EPS_M and vz <= 0.0 and fz <= 0.0
-    if landed:
-        normal = -fz
-        fz = 0.0
-        fx, fy = _friction(fx, fy, vx, vy, m.mu * normal)
-    # --- rotational dynamics
-    if landed:
-        dwx, dwy = -wx / GEAR_RATE_DAMPING_S, -wy / GEAR_RATE_DAMPING_S
-        dwz = -wz / GEAR_RATE_DAMPING_S
-    else:
-        tx = tau_x - m.rot_damp * wx
-        ty = tau_y - m.rot_damp * wy
-        tz = tau_z - m.rot_damp * wz
-        # J domega = tau - omega x (J omega)
-        dwx = (tx - (wy * m.izz * wz - wz * m.iyy * wy)) / m.ixx
-        dwy = (ty - (wz * m.ixx * wx - wx * m.izz * wz)) / m.iyy
-        dwz = (tz - (wx * m.iyy * wy - wy * m.ixx * wx)) / m.izz
-    # --- quaternion kinematics: dq/dt = q * (0, omega) / 2
-    dqw = 0.5 * (-qx * wx - qy * wy - qz * wz)
-    dqx = 0.5 * (qw * wx + qy * wz - qz * wy)
-    dqy = 0.5 * (qw * wy + qz * wx - qx * wz)
-    dqz = 0.5 * (qw * wz + qx * wy - qy * wx)
-    # --- rotor lag
-    sp = rotor_setpoints if rotor_setpoints is not None else m.rotor_setpoints(u)
-    inv_tau = 1.0 / m.tau_m
-    # --- winder
-    wm = m.winder
-    tau_motor = wm.motor_torque_n_m(u.winder_torque_n_m, omega_d, u.winder_enabled)
-    domega_d = wm.acceleration(theta, omega_d, tau_motor, tf.drum_tension_n,
-                               braked=not u.winder_enabled)
-    dtheta = omega_d
-    if (theta <= wm.theta_min and omega_d < 0.0) or (theta >= wm.theta_max and omega_d > 0.0):
-        dtheta = 0.0
-    inv_m = 1.0 / m.m
-    return [vx, vy, vz, fx * inv_m, fy * inv_m, fz * inv_m,
-            dqw, dqx, dqy, dqz, dwx, dwy, dwz,
-            (sp[0] - o1) * inv_tau, (sp[1] - o2) * inv_tau,
-            (sp[2] - o3) * inv_tau, (sp[3] - o4) * inv_tau,
-            dtheta, domega_d]
-
-
-def _friction(fx: float, fy: float, vx: float, vy: float, limit_n: float
-              ) -> tuple[float, float]:
-    """Horizontal force left after Coulomb friction of at most ``limit_n`` [N]."""
-    speed = math.hypot(vx, vy)
-    if speed < STICK_SPEED_M_S:
-        f = math.hypot(fx, fy)
-        if f <= limit_n:
-            return 0.0, 0.0
-        k = (f - limit_n) / f
-        return fx * k, fy * k
-    return fx - limit_n * vx / speed, fy - limit_n * vy / speed
-
-
-def rk4_step(f: Callable[..., list[float]], t: float, x: np.ndarray, dt: float,
-             *args: object) -> np.ndarray:
-    """One classical Runge-Kutta step of dx/dt = f(t, x, *args) of size ``dt`` [s]."""
-    h2 = 0.5 * dt
-    k1 = np.asarray(f(t, x, *args))
-    k2 = np.asarray(f(t + h2, x + h2 * k1, *args))
-    k3 = np.asarray(f(t + h2, x + h2 * k2, *args))
-    k4 = np.asarray(f(t + dt, x + dt * k3, *args))
-    return x + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    sp = model.rotor_setpoints(u) if rotor_setpoints is None else rotor_setpoints
+    return rhs_kernel(np.asarray(x, dtype=float), model.p, np.asarray(sp, dtype=float),
+                      float(u.winder_torque_n_m), bool(u.winder_enabled),
+                      np.asarray(wind_m_s, dtype=float), model.warm)
 
 
 def initial_state(model: PlantModel, position_m: Sequence[float] | None = None,
@@ -252,10 +161,12 @@ class Plant:
     def step(self, u: PlantInputs) -> None:
         """Advance the plant by one step of ``dt_s`` with inputs ``u``."""
         x = self.x
-        self.wind_m_s = self.wind.sample(self.t_s, float(x[2]), tuple(x[VEL]))
-        setpoints = self.model.rotor_setpoints(u)
+        self.wind_m_s = self.wind.sample(self.t_s, float(x[2]), (x[3], x[4], x[5]))
+        m = self.model
+        setpoints = np.array(m.rotor_setpoints(u))
         omega_before = float(x[DRUM_RATE])
-        x = rk4_step(rhs, self.t_s, x, self.dt_s, u, self.model, self.wind_m_s, setpoints)
+        x = rk4_kernel(x, self.dt_s, m.p, setpoints, float(u.winder_torque_n_m),
+                       bool(u.winder_enabled), np.array(self.wind_m_s), m.warm)
         self._project(x, omega_before, braked=not u.winder_enabled)
         self.x = x
         self.t_s += self.dt_s
@@ -287,9 +198,9 @@ class Plant:
         thrust = m.kf * float(o @ o)
         qw, qx, qy, _ = x[QUAT]
         r22 = 1 - 2 * (qx * qx + qy * qy)
-        tf = m.tether.forces(float(x[0]), float(x[1]), float(x[2]),
-                             m.winder.length_m(float(x[DRUM_ANGLE])))
-        return thrust * r22 + tf.on_uav_n[2] - m.m * m.g
+        pull_z = tether_pull(m.p, float(x[0]), float(x[1]), float(x[2]),
+                             m.winder.length_m(float(x[DRUM_ANGLE])), m.warm)[2]
+        return thrust * r22 + pull_z - m.m * m.g
 
     # ----- read-outs
     @property

@@ -17,23 +17,30 @@ the drum's own surface speed, so it carries no net thrust and ``I_w * d(omega)/d
 
 from __future__ import annotations
 
-from tuavdefs.params import TetherParams, WinderParams
+from sitl.kernel import (
+    P_THETA_MAX,
+    P_THETA_MIN,
+    STOPPED_RAD_S,
+    drum_acceleration,
+    drum_inertia,
+    motor_torque,
+    pack_params,
+)
+from tuavdefs.params import SystemParams, TetherParams, WinderParams
 
-#: Drum rates below this [rad/s] count as stopped for the brake and the hard stops.
-STOPPED_RAD_S = 1e-6
+__all__ = ["WinderModel", "STOPPED_RAD_S"]
 
 
 class WinderModel:
-    """Drum dynamics, motor torque limiting, brake and hard stops."""
+    """Drum dynamics, motor torque limiting, brake and hard stops (the kernel's functions,
+    callable one at a time)."""
 
     def __init__(self, winder: WinderParams, tether: TetherParams) -> None:
         self.p = winder
         self.r_w = winder.drum_radius_m
-        self.theta_min = winder.min_paid_out_m / winder.drum_radius_m
-        self.theta_max = tether.total_length_m / winder.drum_radius_m
-        self._rho = tether.linear_density_kg_m
-        self._lt = tether.total_length_m
-        self._radii_sq = winder.drum_radius_m ** 2 + winder.drum_inner_radius_m ** 2
+        self._packed = pack_params(SystemParams(winder=winder, tether=tether))
+        self.theta_min = float(self._packed[P_THETA_MIN])
+        self.theta_max = float(self._packed[P_THETA_MAX])
 
     def length_m(self, theta_rad: float) -> float:
         """Paid-out unstretched tether length for a drum angle [m]."""
@@ -45,42 +52,21 @@ class WinderModel:
 
     def inertia_kg_m2(self, length_m: float) -> float:
         """Drum, spooled tether and motor rotor inertia for a paid-out length [kg m^2]."""
-        m_w = self.p.drum_mass_kg + max(self._lt - length_m, 0.0) * self._rho
-        return 0.5 * m_w * self._radii_sq + self.p.rotor_inertia_kg_m2
+        return float(drum_inertia(self._packed, float(length_m)))
 
     def motor_torque_n_m(self, command_n_m: float, omega_rad_s: float, enabled: bool) -> float:
         """Torque the motor actually applies [N m]: zero when disabled, clamped to the torque
         limit, and cut back near the speed limit as a torque-mode motor controller does
         (|tau| <= k_v (omega_max -+ omega) in each direction). NaN commands give zero."""
-        if not enabled or command_n_m != command_n_m:
-            return 0.0
-        lim = self.p.motor_torque_limit_n_m
-        tau = min(max(command_n_m, -lim), lim)
-        kv, wmax = self.p.speed_limit_gain_n_m_s_rad, self.p.motor_speed_limit_rad_s
-        tau = min(tau, kv * (wmax - omega_rad_s))
-        return max(tau, kv * (-wmax - omega_rad_s))
+        return float(motor_torque(self._packed, float(command_n_m), float(omega_rad_s),
+                                  bool(enabled)))
 
     def acceleration(self, theta: float, omega: float, motor_torque_n_m: float,
                      drum_tension_n: float, braked: bool) -> float:
         """d(omega)/dt [rad/s^2] for the drum state, applied motor torque and tension."""
-        inertia = self.inertia_kg_m2(self.r_w * theta)
-        driving = motor_torque_n_m + self.r_w * drum_tension_n
-        tau = driving - self.p.viscous_friction_n_m_s_rad * omega
-        if braked:
-            hold = self.p.brake_torque_n_m
-            if abs(omega) <= STOPPED_RAD_S:
-                if abs(driving) <= hold:
-                    return 0.0  # static friction of the brake holds the drum
-                tau -= hold if driving > 0 else -hold
-            else:
-                tau -= hold if omega > 0 else -hold
-        acc = tau / inertia
-        # hard stops: the drum cannot turn past a full or an empty drum
-        if theta <= self.theta_min and omega <= STOPPED_RAD_S and acc < 0.0:
-            return 0.0
-        if theta >= self.theta_max and omega >= -STOPPED_RAD_S and acc > 0.0:
-            return 0.0
-        return acc
+        return float(drum_acceleration(self._packed, float(theta), float(omega),
+                                       float(motor_torque_n_m), float(drum_tension_n),
+                                       bool(braked)))
 
     def project(self, theta: float, omega: float, omega_before: float, braked: bool
                 ) -> tuple[float, float]:
@@ -93,3 +79,5 @@ class WinderModel:
         elif theta > self.theta_max:
             theta, omega = self.theta_max, min(omega, 0.0)
         return theta, omega
+
+

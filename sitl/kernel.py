@@ -1,0 +1,242 @@
+"""The compiled core of the truth model: the state derivative and its RK4 step.
+
+Scalar Python that numba compiles (``sitl._jit.njit``); it *is* the model — ``sitl.plant.rhs``
+and ``sitl.winder.WinderModel`` call into it — so there is one implementation of the
+equations in docs/model.md. Parameters arrive packed in a float array (indices below,
+filled by :func:`pack_params`); the tether solver's warm start is a 2-element array the
+kernel updates in place.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sitl._jit import njit
+from sitl.catenary import _solve
+from tuavdefs.airframe import ROTOR_LAYOUT
+from tuavdefs.params import SystemParams
+
+# indices of the packed parameter array
+(P_G, P_M, P_IXX, P_IYY, P_IZZ, P_KF, P_KM, P_D, P_TAU_M, P_DRAG_X, P_DRAG_Y, P_DRAG_Z,
+ P_ROT_DAMP, P_GEAR, P_MU, P_W, P_EA, P_RW, P_THETA_MIN, P_THETA_MAX, P_M_BAR, P_RHO,
+ P_LT, P_RADII_SQ, P_I_ROTOR, P_BETA, P_TAU_MAX, P_OMEGA_MAX, P_KV, P_BRAKE) = range(30)
+N_PARAMS = 30
+
+#: Heights within this of the gear height count as touching the ground [m].
+GROUND_EPS_M = 1e-6
+#: Horizontal speeds below this count as stopped for static friction [m/s].
+STICK_SPEED_M_S = 1e-3
+#: Time constant with which the landing gear kills body rates on the ground [s].
+GEAR_RATE_DAMPING_S = 0.02
+#: Drum rates below this [rad/s] count as stopped for the brake and the hard stops.
+STOPPED_RAD_S = 1e-6
+#: Relative Newton step at which the tether solve stops inside the kernel.
+TETHER_TOL = 1e-8
+
+_SX = (ROTOR_LAYOUT[0][0], ROTOR_LAYOUT[1][0], ROTOR_LAYOUT[2][0], ROTOR_LAYOUT[3][0])
+_SY = (ROTOR_LAYOUT[0][1], ROTOR_LAYOUT[1][1], ROTOR_LAYOUT[2][1], ROTOR_LAYOUT[3][1])
+_SPIN = (ROTOR_LAYOUT[0][2], ROTOR_LAYOUT[1][2], ROTOR_LAYOUT[2][2], ROTOR_LAYOUT[3][2])
+
+
+def pack_params(params: SystemParams) -> np.ndarray:
+    """The parameters as the kernel reads them."""
+    v, t, w, env = params.vehicle, params.tether, params.winder, params.environment
+    p = np.zeros(N_PARAMS)
+    p[P_G] = env.gravity_m_s2
+    p[P_M] = v.mass_kg
+    p[P_IXX], p[P_IYY], p[P_IZZ] = v.inertia_diag
+    p[P_KF] = v.rotor_thrust_coeff
+    p[P_KM] = v.rotor_torque_coeff
+    p[P_D] = v.arm_length_m / math.sqrt(2.0)
+    p[P_TAU_M] = v.motor_time_constant_s
+    p[P_DRAG_X], p[P_DRAG_Y], p[P_DRAG_Z] = v.drag_coeff_n_s_m
+    p[P_ROT_DAMP] = v.rotational_damping_n_m_s_rad
+    p[P_GEAR] = v.gear_height_m
+    p[P_MU] = v.ground_friction_coeff
+    p[P_W] = t.weight_per_length_n_m(env.gravity_m_s2)
+    p[P_EA] = t.axial_stiffness_n
+    p[P_RW] = w.drum_radius_m
+    p[P_THETA_MIN] = w.min_paid_out_m / w.drum_radius_m
+    p[P_THETA_MAX] = t.total_length_m / w.drum_radius_m
+    p[P_M_BAR] = w.drum_mass_kg
+    p[P_RHO] = t.linear_density_kg_m
+    p[P_LT] = t.total_length_m
+    p[P_RADII_SQ] = w.drum_radius_m ** 2 + w.drum_inner_radius_m ** 2
+    p[P_I_ROTOR] = w.rotor_inertia_kg_m2
+    p[P_BETA] = w.viscous_friction_n_m_s_rad
+    p[P_TAU_MAX] = w.motor_torque_limit_n_m
+    p[P_OMEGA_MAX] = w.motor_speed_limit_rad_s
+    p[P_KV] = w.speed_limit_gain_n_m_s_rad
+    p[P_BRAKE] = w.brake_torque_n_m
+    return p
+
+
+@njit
+def drum_inertia(p: np.ndarray, length_m: float) -> float:
+    """Drum, spooled tether and motor rotor inertia for a paid-out length [kg m^2]."""
+    spooled = p[P_LT] - length_m
+    if spooled < 0.0:
+        spooled = 0.0
+    return 0.5 * (p[P_M_BAR] + spooled * p[P_RHO]) * p[P_RADII_SQ] + p[P_I_ROTOR]
+
+
+@njit
+def motor_torque(p: np.ndarray, command_n_m: float, omega_rad_s: float,
+                 enabled: bool) -> float:
+    """Torque the winder motor applies [N m]: zero when disabled or NaN, clamped to the
+    limit, cut back near the speed limit (|tau| <= k_v (omega_max -+ omega))."""
+    if not enabled or command_n_m != command_n_m:
+        return 0.0
+    lim = p[P_TAU_MAX]
+    tau = min(max(command_n_m, -lim), lim)
+    kv, wmax = p[P_KV], p[P_OMEGA_MAX]
+    tau = min(tau, kv * (wmax - omega_rad_s))
+    return max(tau, kv * (-wmax - omega_rad_s))
+
+
+@njit
+def drum_acceleration(p: np.ndarray, theta: float, omega: float, motor_torque_n_m: float,
+                      drum_tension_n: float, braked: bool) -> float:
+    """d(omega)/dt of the drum [rad/s^2] (brake, friction, hard stops)."""
+    inertia = drum_inertia(p, p[P_RW] * theta)
+    driving = motor_torque_n_m + p[P_RW] * drum_tension_n
+    tau = driving - p[P_BETA] * omega
+    if braked:
+        hold = p[P_BRAKE]
+        if abs(omega) <= STOPPED_RAD_S:
+            if abs(driving) <= hold:
+                return 0.0  # static friction of the brake holds the drum
+            tau -= hold if driving > 0 else -hold
+        else:
+            tau -= hold if omega > 0 else -hold
+    acc = tau / inertia
+    if theta <= p[P_THETA_MIN] and omega <= STOPPED_RAD_S and acc < 0.0:
+        return 0.0
+    if theta >= p[P_THETA_MAX] and omega >= -STOPPED_RAD_S and acc > 0.0:
+        return 0.0
+    return acc
+
+
+@njit
+def tether_pull(p: np.ndarray, px: float, py: float, pz: float, length: float,
+                warm: np.ndarray) -> tuple[float, float, float, float]:
+    """(force on the UAV x, y, z [N], drum tension [N]) of the elastic catenary; updates
+    the warm start ``warm`` = (H, V)."""
+    span = math.hypot(px, py)
+    height = pz if pz > 0.0 else 0.0
+    H, V, HA, VA, lbot, reg, it, low, was_warm, ok = _solve(
+        span, height, length, p[P_EA], p[P_W], warm[0], warm[1], TETHER_TOL)
+    if ok:
+        warm[0] = H
+        warm[1] = V
+    ux = px / span if span > 0.0 else 0.0
+    uy = py / span if span > 0.0 else 0.0
+    return -H * ux, -H * uy, -V, math.hypot(HA, VA)
+
+
+@njit
+def rhs_kernel(x: np.ndarray, p: np.ndarray, setpoints: np.ndarray, winder_cmd_n_m: float,
+               winder_enabled: bool, wind: np.ndarray, warm: np.ndarray) -> np.ndarray:
+    """dx/dt of the 19-state plant (layout in sitl/plant.py)."""
+    px, py, pz = x[0], x[1], x[2]
+    vx, vy, vz = x[3], x[4], x[5]
+    qw, qx, qy, qz = x[6], x[7], x[8], x[9]
+    wx, wy, wz = x[10], x[11], x[12]
+    theta, omega_d = x[17], x[18]
+    kf, d = p[P_KF], p[P_D]
+    ratio = p[P_KM] / kf
+    thrust = 0.0
+    tau_x = 0.0
+    tau_y = 0.0
+    tau_z = 0.0
+    for i in range(4):
+        ti = kf * x[13 + i] * x[13 + i]
+        thrust += ti
+        tau_x += _SY[i] * d * ti
+        tau_y -= _SX[i] * d * ti
+        tau_z -= _SPIN[i] * ratio * ti
+    # rotation matrix body -> inertial
+    r00 = 1 - 2 * (qy * qy + qz * qz)
+    r01 = 2 * (qx * qy - qw * qz)
+    r02 = 2 * (qx * qz + qw * qy)
+    r10 = 2 * (qx * qy + qw * qz)
+    r11 = 1 - 2 * (qx * qx + qz * qz)
+    r12 = 2 * (qy * qz - qw * qx)
+    r20 = 2 * (qx * qz - qw * qy)
+    r21 = 2 * (qy * qz + qw * qx)
+    r22 = 1 - 2 * (qx * qx + qy * qy)
+    # drag against the air-relative velocity, in body axes
+    ax_, ay_, az_ = vx - wind[0], vy - wind[1], vz - wind[2]
+    dbx = -p[P_DRAG_X] * (r00 * ax_ + r10 * ay_ + r20 * az_)
+    dby = -p[P_DRAG_Y] * (r01 * ax_ + r11 * ay_ + r21 * az_)
+    dbz = -p[P_DRAG_Z] * (r02 * ax_ + r12 * ay_ + r22 * az_)
+    # tether
+    fux, fuy, fuz, drum_tension = tether_pull(p, px, py, pz, p[P_RW] * theta, warm)
+    m = p[P_M]
+    fx = thrust * r02 + r00 * dbx + r01 * dby + r02 * dbz + fux
+    fy = thrust * r12 + r10 * dbx + r11 * dby + r12 * dbz + fuy
+    fz = thrust * r22 + r20 * dbx + r21 * dby + r22 * dbz + fuz - m * p[P_G]
+    # ground contact: a constraint force, and Coulomb friction on the gear
+    landed = pz <= p[P_GEAR] + GROUND_EPS_M and vz <= 0.0 and fz <= 0.0
+    if landed:
+        limit = p[P_MU] * (-fz)
+        fz = 0.0
+        speed = math.hypot(vx, vy)
+        if speed < STICK_SPEED_M_S:
+            f = math.hypot(fx, fy)
+            if f <= limit:
+                fx = 0.0
+                fy = 0.0
+            else:
+                k = (f - limit) / f
+                fx *= k
+                fy *= k
+        else:
+            fx -= limit * vx / speed
+            fy -= limit * vy / speed
+    dx = np.empty(19)
+    dx[0], dx[1], dx[2] = vx, vy, vz
+    dx[3], dx[4], dx[5] = fx / m, fy / m, fz / m
+    # rotational dynamics: J domega = tau - c omega - omega x J omega
+    ixx, iyy, izz = p[P_IXX], p[P_IYY], p[P_IZZ]
+    if landed:
+        dx[10] = -wx / GEAR_RATE_DAMPING_S
+        dx[11] = -wy / GEAR_RATE_DAMPING_S
+        dx[12] = -wz / GEAR_RATE_DAMPING_S
+    else:
+        c = p[P_ROT_DAMP]
+        dx[10] = (tau_x - c * wx - (wy * izz * wz - wz * iyy * wy)) / ixx
+        dx[11] = (tau_y - c * wy - (wz * ixx * wx - wx * izz * wz)) / iyy
+        dx[12] = (tau_z - c * wz - (wx * iyy * wy - wy * ixx * wx)) / izz
+    # quaternion kinematics dq/dt = q (0, omega) / 2
+    dx[6] = 0.5 * (-qx * wx - qy * wy - qz * wz)
+    dx[7] = 0.5 * (qw * wx + qy * wz - qz * wy)
+    dx[8] = 0.5 * (qw * wy + qz * wx - qx * wz)
+    dx[9] = 0.5 * (qw * wz + qx * wy - qy * wx)
+    # rotor lag
+    for i in range(4):
+        dx[13 + i] = (setpoints[i] - x[13 + i]) / p[P_TAU_M]
+    # winder
+    tau_m = motor_torque(p, winder_cmd_n_m, omega_d, winder_enabled)
+    dx[18] = drum_acceleration(p, theta, omega_d, tau_m, drum_tension, not winder_enabled)
+    dtheta = omega_d
+    if (theta <= p[P_THETA_MIN] and omega_d < 0.0) or (theta >= p[P_THETA_MAX]
+                                                        and omega_d > 0.0):
+        dtheta = 0.0
+    dx[17] = dtheta
+    return dx
+
+
+@njit
+def rk4_kernel(x: np.ndarray, dt: float, p: np.ndarray, setpoints: np.ndarray,
+               winder_cmd_n_m: float, winder_enabled: bool, wind: np.ndarray,
+               warm: np.ndarray) -> np.ndarray:
+    """One classical Runge-Kutta step of size ``dt`` [s], inputs and wind held."""
+    h2 = 0.5 * dt
+    k1 = rhs_kernel(x, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
+    k2 = rhs_kernel(x + h2 * k1, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
+    k3 = rhs_kernel(x + h2 * k2, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
+    k4 = rhs_kernel(x + dt * k3, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
+    return x + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
