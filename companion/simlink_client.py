@@ -1,0 +1,226 @@
+"""The companion's end of the simulator link (PX4 simulator MAVLink API over TCP).
+
+Pure I/O: :class:`SimLinkClient` connects to the plant (127.0.0.1:4560 by default),
+returns each step's sensor batch as a :class:`SimState` in the project frames (inertial ENU
+z-up, body FLU; conversions by :mod:`tuavdefs.simlink`) and sends the rotor commands that
+answer it. A step's batch is HIL_GPS (10 Hz), HIL_STATE_QUATERNION (truth) and HIL_SENSOR,
+which closes it; the answer must echo HIL_SENSOR's ``time_usec`` (:attr:`SimState.time_usec`)
+for the plant's lockstep to advance.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from tuavdefs import simlink as sl
+from tuavdefs.frames import Quat, Vec3
+
+#: Longest a send may block (the plant not reading) before the link counts as failed [s].
+_SEND_TIMEOUT_S = 5.0
+
+
+@dataclass(frozen=True)
+class TruthState:
+    """The plant's truth from HIL_STATE_QUATERNION, in project frames.
+
+    ``position_enu_m`` [m] (resolution ~1 cm horizontally, 1 mm vertically),
+    ``velocity_enu_m_s`` [m/s] (1 cm/s), ``quaternion`` (w, x, y, z) body FLU -> ENU,
+    ``body_rates_flu_rad_s`` [rad/s], ``specific_force_flu_m_s2`` [m/s^2] (1 mG),
+    ``true_airspeed_m_s``/``ind_airspeed_m_s`` [m/s] (1 cm/s).
+    """
+
+    time_usec: int
+    position_enu_m: Vec3
+    velocity_enu_m_s: Vec3
+    quaternion: Quat
+    body_rates_flu_rad_s: Vec3
+    specific_force_flu_m_s2: Vec3
+    true_airspeed_m_s: float
+    ind_airspeed_m_s: float
+
+
+@dataclass(frozen=True)
+class ImuSample:
+    """HIL_SENSOR in project frames: specific force [m/s^2], rates [rad/s], magnetic field
+    [gauss] in body FLU; static pressure [hPa]; pressure altitude [m AMSL]; temperature
+    [degC]; ``fields_updated`` bits as sent."""
+
+    time_usec: int
+    accel_flu_m_s2: Vec3
+    gyro_flu_rad_s: Vec3
+    mag_flu_gauss: Vec3
+    abs_pressure_hpa: float
+    pressure_alt_m: float
+    temperature_c: float
+    fields_updated: int
+
+
+@dataclass(frozen=True)
+class GpsFix:
+    """HIL_GPS in project frames: position [m] and velocity [m/s] in the inertial ENU frame
+    (from lat/lon/alt and the home), the raw latitude/longitude [deg] and altitude [m
+    AMSL], claimed accuracies eph/epv [m], fix type and satellites."""
+
+    time_usec: int
+    position_enu_m: Vec3
+    velocity_enu_m_s: Vec3
+    lat_deg: float
+    lon_deg: float
+    alt_amsl_m: float
+    eph_m: float
+    epv_m: float
+    fix_type: int
+    satellites_visible: int
+
+
+@dataclass(frozen=True)
+class SimState:
+    """One step's batch. ``time_usec`` is the HIL_SENSOR time to echo in the answer;
+    ``sim_time_s`` the same in seconds; ``truth`` the latest HIL_STATE_QUATERNION (None if
+    none came yet); ``imu`` this step's HIL_SENSOR; ``gps`` the latest HIL_GPS (None if none
+    came yet), ``gps_updated`` whether it arrived in this batch."""
+
+    time_usec: int
+    sim_time_s: float
+    truth: TruthState | None
+    imu: ImuSample
+    gps: GpsFix | None
+    gps_updated: bool
+
+
+class SimLinkClient:
+    """TCP client of the plant's simulator link.
+
+    ``home`` (lat deg, lon deg, alt m AMSL) is the inertial origin the plant uses, needed to
+    turn latitude/longitude back into positions. Connection problems raise
+    :class:`ConnectionError`; waiting too long raises :class:`TimeoutError`.
+    """
+
+    def __init__(self, host: str = sl.SIM_HOST_DEFAULT, port: int = sl.SIM_PORT_DEFAULT,
+                 home: tuple[float, float, float] = sl.HOME_DEFAULT) -> None:
+        self.host = host
+        self.port = port
+        self.home = tuple(float(v) for v in home)
+        self._sock: socket.socket | None = None
+        self._parser = sl.FrameParser()
+        self._encoder = sl.Encoder(sl.COMPANION_SYSID, sl.COMPANION_COMPID)
+        self._pending: deque = deque()
+        self._truth: TruthState | None = None
+        self._gps: GpsFix | None = None
+        self._gps_new = False
+
+    # ----- connection
+    def connect(self, timeout_s: float = 10.0) -> None:
+        """Connect, retrying until the plant listens or ``timeout_s`` [s] pass."""
+        end = time.monotonic() + timeout_s
+        while True:
+            try:
+                sock = socket.create_connection((self.host, self.port),
+                                                timeout=max(end - time.monotonic(), 0.01))
+                break
+            except OSError as e:
+                if time.monotonic() >= end:
+                    raise TimeoutError(f"no simulator at {self.host}:{self.port}") from e
+                time.sleep(0.02)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._sock = sock
+
+    @property
+    def connected(self) -> bool:
+        """Whether a connection is open."""
+        return self._sock is not None
+
+    @property
+    def bad_frames(self) -> int:
+        """Malformed frames dropped from the plant's stream."""
+        return self._parser.bad_frames
+
+    def close(self) -> None:
+        """Close the connection (the plant's serve() then ends)."""
+        if self._sock is not None:
+            try:
+                self._sock.close()
+            finally:
+                self._sock = None
+
+    def __enter__(self) -> SimLinkClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ----- receiving
+    def receive_state(self, timeout_s: float = 5.0) -> SimState:
+        """The next step's batch, waiting up to ``timeout_s`` [s] for its HIL_SENSOR."""
+        end = time.monotonic() + timeout_s
+        while True:
+            while self._pending:
+                state = self._absorb(self._pending.popleft())
+                if state is not None:
+                    return state
+            self._read(end)
+
+    def _read(self, end: float) -> None:
+        sock = self._require()
+        left = end - time.monotonic()
+        if left <= 0:
+            raise TimeoutError("no sensor message from the simulator")
+        sock.settimeout(left)
+        try:
+            data = sock.recv(65536)
+        except TimeoutError:
+            raise TimeoutError("no sensor message from the simulator") from None
+        except OSError as e:
+            raise ConnectionError(f"simulator link failed: {e}") from e
+        if not data:
+            raise ConnectionError("the simulator closed the link")
+        self._pending.extend(self._parser.feed(data))
+
+    def _absorb(self, msg: Any) -> SimState | None:
+        mid = msg.get_msgId()
+        if mid == sl.MSG_HIL_STATE_QUATERNION:
+            pos, vel, quat, rates = sl.state_from_hil_state_quaternion(msg, self.home)
+            ias, tas = sl.airspeeds_from_hil_state_quaternion(msg)
+            self._truth = TruthState(int(msg.time_usec), pos, vel, quat, rates,
+                                     sl.specific_force_from_hil_state_quaternion(msg), tas, ias)
+        elif mid == sl.MSG_HIL_GPS:
+            pos, vel, eph, epv = sl.gps_from_hil_gps(msg, self.home)
+            self._gps = GpsFix(int(msg.time_usec), pos, vel, msg.lat * 1e-7, msg.lon * 1e-7,
+                               msg.alt * 1e-3, eph, epv, int(msg.fix_type),
+                               int(msg.satellites_visible))
+            self._gps_new = True
+        elif mid == sl.MSG_HIL_SENSOR:
+            acc, gyro, mag, p, palt, temp = sl.imu_from_hil_sensor(msg)
+            t = int(msg.time_usec)
+            imu = ImuSample(t, acc, gyro, mag, p, palt, temp, int(msg.fields_updated))
+            state = SimState(t, t * 1e-6, self._truth, imu, self._gps, self._gps_new)
+            self._gps_new = False
+            return state
+        return None
+
+    # ----- sending
+    def send_actuators(self, time_usec: int, rotor_commands: Sequence[float], armed: bool,
+                       lockstep: bool = True) -> None:
+        """Answer the batch stamped ``time_usec`` [us] with four rotor commands in [0, 1]
+        (rotor order of :mod:`tuavdefs.airframe`) and the armed flag."""
+        fields = sl.actuator_controls_fields(rotor_commands, armed, lockstep)
+        self.send_raw(self._encoder.hil_actuator_controls(time_usec, fields))
+
+    def send_raw(self, data: bytes) -> None:
+        """Write bytes on the link as they are (diagnostics and tests)."""
+        sock = self._require()
+        try:
+            sock.settimeout(_SEND_TIMEOUT_S)
+            sock.sendall(data)
+        except OSError as e:
+            raise ConnectionError(f"simulator link failed: {e}") from e
+
+    def _require(self) -> socket.socket:
+        if self._sock is None:
+            raise ConnectionError("not connected to the simulator")
+        return self._sock

@@ -1,0 +1,389 @@
+"""The plant's end of the simulator link: PX4's simulator MAVLink API over TCP, lockstep.
+
+:class:`SimLinkServer` listens on 127.0.0.1 (port 4560 by default), accepts one companion
+and runs the loop (conventions in :mod:`tuavdefs.simlink`)::
+
+    k = 0, t = t0
+    repeat:
+        send HIL_GPS (when due, 10 Hz), HIL_STATE_QUATERNION, HIL_SENSOR, stamped t
+        wait for the HIL_ACTUATOR_CONTROLS with time_usec == t
+        hold its rotor commands and armed flag (and the caller's winder inputs) for
+        N = T / dt physics steps of the plant; t += T
+
+In **lockstep** (the default) the plant waits as long as it takes: the simulation runs as
+fast as the two processes allow and is deterministic. In **real-time** mode the batch for
+period k goes out at wall time ``w0 + k T`` and the answer must arrive before
+``w0 + (k + 1) T``; if it does not, the plant steps with the commands it holds and counts a
+missed deadline (a late answer still replaces the held commands when it arrives). If the
+plant itself falls more than a period behind the wall clock it re-anchors its schedule and
+counts an overrun.
+
+The winder's inputs are not carried by this link (the winder is driven over CAN by another
+process): the caller sets :attr:`SimLinkServer.winder_inputs` between steps, for instance
+from ``on_step``, which is called after every control period.
+
+Malformed, truncated and corrupted frames are counted and dropped; a disconnect of the
+companion, ``stop_event`` or ``max_sim_time_s`` ends :meth:`SimLinkServer.serve` with a
+:class:`ServeSummary`.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import math
+import select
+import socket
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+from sitl.plant import POS, RATES, VEL, Plant, PlantInputs
+from sitl.sensors import (
+    ISA_RHO0_KG_M3,
+    SensorNoise,
+    SensorSuite,
+    airspeed_m_s,
+    isa_density_kg_m3,
+    plant_specific_force_flu,
+)
+from tuavdefs import simlink as sl
+
+#: How often a waiting loop looks at ``stop_event`` [s].
+_POLL_S = 0.05
+
+
+class WinderInputs(NamedTuple):
+    """The winder's part of :class:`sitl.plant.PlantInputs`: motor torque request [N m]
+    (positive pays out) and whether the motor is powered (brake released)."""
+
+    torque_n_m: float = 0.0
+    enabled: bool = False
+
+
+#: The winder's motor off and its brake on.
+_WINDER_BRAKED = WinderInputs()
+
+
+@dataclass(frozen=True)
+class ServeSummary:
+    """What one :meth:`SimLinkServer.serve` did.
+
+    ``steps``: control periods advanced; ``sim_time_s``: simulated time advanced [s];
+    ``wall_time_s``: wall time from the companion's connection to the end [s];
+    ``missed_deadlines``: real-time periods stepped without their answer; ``overruns``:
+    times the plant fell a period behind the wall clock; ``bad_frames``/``bad_bytes``:
+    dropped malformed input; ``late_answers``: answers to an earlier period (real time);
+    ``ignored_messages``: other messages and answers that were not expected (lockstep);
+    ``pacing``: "lockstep" or "real-time"; ``end_reason``: "disconnected", "stopped",
+    "max_sim_time" or "no_client".
+    """
+
+    steps: int
+    sim_time_s: float
+    wall_time_s: float
+    missed_deadlines: int
+    overruns: int
+    bad_frames: int
+    bad_bytes: int
+    late_answers: int
+    ignored_messages: int
+    pacing: str
+    end_reason: str
+
+    @property
+    def steps_per_s(self) -> float:
+        """Control periods per wall-clock second."""
+        return self.steps / self.wall_time_s if self.wall_time_s > 0 else math.inf
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated seconds per wall-clock second."""
+        return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else math.inf
+
+
+class _DisconnectedError(Exception):
+    pass
+
+
+class _StoppedError(Exception):
+    pass
+
+
+def _check_loopback(host: str) -> None:
+    if host == "localhost":
+        return
+    try:
+        ok = ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        ok = False
+    if not ok:
+        raise ValueError(f"the simulator link stays on the loopback interface, not {host!r}")
+
+
+class SimLinkServer:
+    """The plant's simulator-link server (PX4 simulator MAVLink API, TCP, one companion).
+
+    ``plant`` is stepped in place; ``control_rate_hz`` [Hz] is the lockstep rate (its period
+    must be a whole number of the plant's steps); ``home`` (lat deg, lon deg, alt m AMSL)
+    places the inertial origin; ``port=0`` picks a free port (see :attr:`port`); the socket
+    is bound and listening when the constructor returns. ``sensor_noise`` configures the
+    sensor errors (None: :class:`sitl.sensors.SensorNoise` defaults; ``SensorNoise.off()``
+    for exact readings). ``gps_rate_hz`` [Hz] is the rate of HIL_GPS.
+    """
+
+    def __init__(self, plant: Plant, control_rate_hz: float = sl.CONTROL_RATE_HZ_DEFAULT,
+                 home: tuple[float, float, float] = sl.HOME_DEFAULT,
+                 host: str = sl.SIM_HOST_DEFAULT, port: int = sl.SIM_PORT_DEFAULT,
+                 real_time: bool = False, sensor_noise: SensorNoise | None = None,
+                 gps_rate_hz: float = sl.GPS_RATE_HZ_DEFAULT,
+                 winder_inputs: WinderInputs = _WINDER_BRAKED,
+                 earth_field_ned_gauss: tuple[float, float, float] | None = None,
+                 on_step: Callable[[SimLinkServer], None] | None = None) -> None:
+        _check_loopback(host)
+        self.plant = plant
+        self.control_rate_hz = float(control_rate_hz)
+        self.period_us = sl.control_period_us(control_rate_hz)
+        self.physics_steps = sl.physics_steps_per_period(control_rate_hz, plant.dt_s)
+        self.gps_period_us = sl.control_period_us(gps_rate_hz)
+        self.home = tuple(float(v) for v in home)
+        self.real_time = bool(real_time)
+        self.winder_inputs = winder_inputs
+        self.on_step = on_step
+        suite_kw = {} if earth_field_ned_gauss is None else {
+            "earth_field_ned_gauss": tuple(earth_field_ned_gauss)}
+        self.sensors = SensorSuite(noise=sensor_noise or SensorNoise(), home=self.home,
+                                   **suite_kw)
+        #: The commands held from the last answer: rotor commands in [0, 1] and armed.
+        self.rotor_commands: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+        self.armed = False
+        #: Whether the last answer announced lockstep (HIL_ACTUATOR_CONTROLS flags bit 0).
+        self.companion_lockstep = False
+        self.last_inputs = PlantInputs()
+        #: Control periods advanced by the running (or last) serve().
+        self.steps = 0
+        self._encoder = sl.Encoder(sl.PLANT_SYSID, sl.PLANT_COMPID)
+        self._parser = sl.FrameParser()
+        self._sock: socket.socket | None = None
+        self._last_gps_us: int | None = None
+        self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            self._listener.bind((host, port))
+            self._listener.listen(1)
+        except OSError:
+            self._listener.close()
+            raise
+        self.host, self.port = self._listener.getsockname()[:2]
+
+    # ----- lifecycle
+    @property
+    def pacing(self) -> str:
+        """"real-time" or "lockstep"."""
+        return "real-time" if self.real_time else "lockstep"
+
+    def close(self) -> None:
+        """Close the listening socket (and a connection, if any)."""
+        self._close_client()
+        self._listener.close()
+
+    def __enter__(self) -> SimLinkServer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _close_client(self) -> None:
+        if self._sock is not None:
+            try:
+                self._sock.close()
+            finally:
+                self._sock = None
+
+    # ----- the loop
+    def serve(self, max_sim_time_s: float | None = None,
+              stop_event: threading.Event | None = None,
+              accept_timeout_s: float | None = None) -> ServeSummary:
+        """Accept one companion and run the loop until it disconnects, ``stop_event`` is
+        set, or ``max_sim_time_s`` [s] of simulated time have passed in this call. Without a
+        connection within ``accept_timeout_s`` [s] (None: wait) returns at once."""
+        stop = stop_event or threading.Event()
+        self.steps = 0
+        self._parser = sl.FrameParser()
+        self._last_gps_us = None
+        ignored = late = missed = overruns = 0
+        if not self._accept(stop, accept_timeout_s):
+            return self._summary(0.0, 0, 0, 0, 0, "stopped" if stop.is_set() else "no_client")
+        wall0 = time.monotonic()
+        t0_us = sl.time_usec(self.plant.t_s)
+        max_steps = (None if max_sim_time_s is None
+                     else math.ceil(max_sim_time_s * 1e6 / self.period_us - 1e-9))
+        reason = "disconnected"
+        sched0 = wall0       # wall time of period 0's batch (real time)
+        try:
+            while True:
+                if stop.is_set():
+                    reason = "stopped"
+                    break
+                if max_steps is not None and self.steps >= max_steps:
+                    reason = "max_sim_time"
+                    break
+                t_us = t0_us + self.steps * self.period_us
+                if self.real_time:
+                    due = sched0 + self.steps * self.period_us * 1e-6
+                    now = time.monotonic()
+                    if now > due + self.period_us * 1e-6:
+                        overruns += 1
+                        sched0 = now - self.steps * self.period_us * 1e-6
+                        due = now
+                    elif now < due:
+                        self._sleep_until(due, stop)
+                    deadline: float | None = due + self.period_us * 1e-6
+                else:
+                    deadline = None
+                self._send_batch(t_us)
+                answered, n_late, n_ignored = self._wait_answer(t_us, deadline, stop)
+                late += n_late
+                ignored += n_ignored
+                if not answered:
+                    missed += 1
+                self._advance()
+                self.steps += 1
+                if self.on_step is not None:
+                    self.on_step(self)
+        except _DisconnectedError:
+            reason = "disconnected"
+        except _StoppedError:
+            reason = "stopped"
+        finally:
+            self._close_client()
+        return self._summary(time.monotonic() - wall0, missed, overruns, late, ignored, reason)
+
+    def _summary(self, wall: float, missed: int, overruns: int, late: int, ignored: int,
+                 reason: str) -> ServeSummary:
+        return ServeSummary(
+            steps=self.steps, sim_time_s=self.steps * self.period_us * 1e-6, wall_time_s=wall,
+            missed_deadlines=missed, overruns=overruns, bad_frames=self._parser.bad_frames,
+            bad_bytes=self._parser.bad_bytes, late_answers=late, ignored_messages=ignored,
+            pacing=self.pacing, end_reason=reason)
+
+    def _accept(self, stop: threading.Event, timeout_s: float | None) -> bool:
+        end = None if timeout_s is None else time.monotonic() + timeout_s
+        while not stop.is_set():
+            wait = _POLL_S if end is None else min(_POLL_S, end - time.monotonic())
+            if wait <= 0:
+                return False
+            ready, _, _ = select.select([self._listener], [], [], wait)
+            if ready:
+                sock, _ = self._listener.accept()
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                sock.setblocking(True)
+                self._sock = sock
+                return True
+        return False
+
+    @staticmethod
+    def _sleep_until(t: float, stop: threading.Event) -> None:
+        while True:
+            left = t - time.monotonic()
+            if left <= 0 or stop.is_set():
+                return
+            time.sleep(min(left, _POLL_S))
+
+    def _send_batch(self, t_us: int) -> None:
+        """HIL_GPS (when due), HIL_STATE_QUATERNION and HIL_SENSOR for the current state."""
+        p = self.plant
+        dt = self.period_us * 1e-6
+        pos = tuple(float(v) for v in p.x[POS])
+        vel = tuple(float(v) for v in p.x[VEL])
+        quat = p.quaternion
+        rates = tuple(float(v) for v in p.x[RATES])
+        f_flu = plant_specific_force_flu(p)
+        alt_amsl = self.home[2] + pos[2]
+        tas = airspeed_m_s(p)
+        ias = tas * math.sqrt(isa_density_kg_m3(alt_amsl) / ISA_RHO0_KG_M3)
+        s = self.sensors
+        chunks = []
+        if self._last_gps_us is None or t_us - self._last_gps_us >= self.gps_period_us:
+            gps_dt = (self.gps_period_us if self._last_gps_us is None
+                      else t_us - self._last_gps_us) * 1e-6
+            fix = s.gps(pos, vel, gps_dt)
+            self._last_gps_us = t_us
+            chunks.append(self._encoder.hil_gps(sl.hil_gps_fields(
+                t_us, fix.position_enu_m, fix.velocity_enu_m_s, self.home,
+                eph_m=fix.eph_m, epv_m=fix.epv_m)))
+        chunks.append(self._encoder.hil_state_quaternion(sl.hil_state_quaternion_fields(
+            t_us, pos, vel, quat, rates, f_flu, self.home, true_airspeed_m_s=tas,
+            ind_airspeed_m_s=ias)))
+        imu = s.imu(f_flu, rates, quat, dt)
+        baro = s.baro(alt_amsl, dt)
+        chunks.append(self._encoder.hil_sensor(sl.hil_sensor_fields(
+            t_us, imu.accel_flu_m_s2, imu.gyro_flu_rad_s, imu.mag_flu_gauss,
+            baro.pressure_hpa, baro.pressure_alt_m, baro.temperature_c)))
+        assert self._sock is not None
+        try:
+            self._sock.sendall(b"".join(chunks))
+        except OSError as e:
+            raise _DisconnectedError from e
+
+    def _wait_answer(self, t_us: int, deadline: float | None, stop: threading.Event
+                     ) -> tuple[bool, int, int]:
+        """Read until the answer to ``t_us`` arrives (True) or, in real time, the wall
+        ``deadline`` passes (False). Returns (answered, late answers, ignored messages)."""
+        sock = self._sock
+        assert sock is not None
+        late = ignored = 0
+        while True:
+            if stop.is_set():
+                raise _StoppedError
+            if deadline is None:
+                wait = _POLL_S
+            else:
+                wait = deadline - time.monotonic()
+                if wait <= 0:
+                    return False, late, ignored
+                wait = min(wait, _POLL_S)
+            ready, _, _ = select.select([sock], [], [], wait)
+            if not ready:
+                continue
+            try:
+                data = sock.recv(65536)
+            except OSError as e:
+                raise _DisconnectedError from e
+            if not data:
+                raise _DisconnectedError
+            answered = False
+            for msg in self._parser.feed(data):
+                if msg.get_msgId() != sl.MSG_HIL_ACTUATOR_CONTROLS:
+                    ignored += 1
+                    continue
+                ts = int(msg.time_usec)
+                if ts == t_us or (self.real_time and ts < t_us):
+                    self._hold(msg)
+                    if ts == t_us:
+                        answered = True
+                    else:
+                        late += 1
+                else:
+                    ignored += 1
+            if answered:
+                return True, late, ignored
+
+    def _hold(self, msg: Any) -> None:
+        try:
+            cmds, armed = sl.rotor_commands_from_controls(msg.controls, msg.mode)
+        except (ValueError, TypeError):
+            return
+        self.rotor_commands = cmds
+        self.armed = armed
+        self.companion_lockstep = sl.lockstep_flag(msg.flags)
+
+    def _advance(self) -> None:
+        """N physics steps with the held commands and the caller's winder inputs."""
+        w = self.winder_inputs
+        u = PlantInputs(rotor_commands=self.rotor_commands, armed=self.armed,
+                        winder_torque_n_m=float(w.torque_n_m), winder_enabled=bool(w.enabled))
+        self.last_inputs = u
+        for _ in range(self.physics_steps):
+            self.plant.step(u)

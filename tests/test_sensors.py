@@ -1,0 +1,247 @@
+"""The plant's sensor models: truth readings with the noise off, known attitudes, the ISA
+barometer, and noise statistics against the configured sigmas."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sitl.plant import Plant, initial_state
+from sitl.sensors import (
+    NoiseSpec,
+    SensorNoise,
+    SensorSuite,
+    isa_altitude_m,
+    isa_density_kg_m3,
+    isa_pressure_hpa,
+    isa_temperature_k,
+    plant_acceleration_enu,
+    plant_specific_force_flu,
+    specific_force_flu,
+)
+from sitl.trim import hover_trim
+from tuavdefs import frames as fr
+from tuavdefs import simlink as sl
+from tuavdefs.params import SystemParams, TetherParams
+
+G = 9.81
+OFF = SensorNoise.off()
+#: Every channel noisy, no bias walk (so the bias is constant while the statistics are taken).
+STEADY = SensorNoise(seed=3, accel=NoiseSpec(0.05, 0.04), gyro=NoiseSpec(0.003, 0.002),
+                     mag=NoiseSpec(0.004, 0.01), baro=NoiseSpec(0.02, 0.1),
+                     gps_horizontal=NoiseSpec(0.4), gps_vertical=NoiseSpec(0.7, 0.2),
+                     gps_velocity=NoiseSpec(0.06))
+angles = st.floats(-math.pi, math.pi, allow_nan=False)
+pitches = st.floats(-1.5, 1.5, allow_nan=False)
+
+
+# ----------------------------------------------------------------- barometer
+def test_isa():
+    assert isa_pressure_hpa(0.0) == pytest.approx(1013.25, abs=1e-9)
+    assert isa_pressure_hpa(1000.0) == pytest.approx(898.75, abs=0.01)
+    # altitudes are geopotential: 540.20 hPa at 5000 m (540.48 at 5000 m geometric)
+    assert isa_pressure_hpa(5000.0) == pytest.approx(540.20, abs=0.01)
+    assert isa_temperature_k(0.0) - 273.15 == pytest.approx(15.0)
+    assert isa_temperature_k(1000.0) - 273.15 == pytest.approx(8.5)
+    assert isa_density_kg_m3(0.0) == pytest.approx(1.225, abs=1e-3)
+    for h in (-200.0, 0.0, 488.0, 3000.0, 10000.0):
+        assert isa_altitude_m(isa_pressure_hpa(h)) == pytest.approx(h, abs=1e-6)
+
+
+def test_barometer_reads_the_isa_at_the_altitude():
+    suite = SensorSuite(OFF, home=(47.0, 8.0, 1000.0))
+    b = suite.baro(1000.0, 0.004)
+    assert b.pressure_hpa == pytest.approx(898.75, abs=0.01)
+    assert b.pressure_alt_m == pytest.approx(1000.0, abs=1e-6)
+    assert b.temperature_c == pytest.approx(8.5)
+    assert suite.barometric_altitude_amsl_m((3.0, 4.0, 20.0)) == 1020.0
+
+
+# ----------------------------------------------------------------- accelerometer
+def test_resting_level_reads_plus_g_up():
+    params = SystemParams()
+    plant = Plant(params)                 # on its gear, level, rotors stopped
+    a = plant_acceleration_enu(plant)
+    assert a == (0.0, 0.0, 0.0)
+    f = plant_specific_force_flu(plant)
+    assert f == pytest.approx((0.0, 0.0, G), abs=1e-12)
+    imu = SensorSuite(OFF).imu(f, (0.0, 0.0, 0.0), plant.quaternion, 0.004)
+    assert imu.accel_flu_m_s2 == f        # noise off: exactly the truth
+    fields = sl.hil_sensor_fields(0, imu.accel_flu_m_s2, imu.gyro_flu_rad_s,
+                                  imu.mag_flu_gauss, 1013.25, 0.0, 15.0)
+    assert fields["zacc"] == pytest.approx(-G, abs=1e-12)       # FRD: -g
+    assert fields["xacc"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_free_fall_reads_zero():
+    feather = TetherParams(linear_density_kg_m=1e-12, total_length_m=500.0)
+    params = SystemParams().replace(tether=feather)
+    x = initial_state(Plant(params).model, position_m=(0.0, 0.0, 50.0), tether_length_m=80.0,
+                      euler_rad=(0.3, -0.2, 1.0))
+    plant = Plant(params, state=x)
+    assert plant_acceleration_enu(plant)[2] == pytest.approx(-G, abs=1e-9)
+    assert plant_specific_force_flu(plant) == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+
+
+@given(angles, pitches, angles)
+def test_specific_force_at_rest_is_gravity_up_in_the_body(roll, pitch, yaw):
+    q = fr.euler_to_quat(roll, pitch, yaw)
+    f = specific_force_flu((0.0, 0.0, 0.0), q, G)
+    # the world's up axis seen in the body: third row of R
+    r = fr.quat_to_matrix(q)
+    assert f == pytest.approx((G * r[2][0], G * r[2][1], G * r[2][2]), abs=1e-9)
+
+
+def test_known_roll():
+    roll = 0.4
+    f = specific_force_flu((0.0, 0.0, 0.0), fr.euler_to_quat(roll, 0.0, 0.0), G)
+    assert f == pytest.approx((0.0, G * math.sin(roll), G * math.cos(roll)), abs=1e-12)
+    # accelerating 2 m/s^2 east while level and nose east: the accelerometer feels it forward
+    f = specific_force_flu((2.0, 0.0, 0.0), fr.euler_to_quat(0.0, 0.0, 0.0), G)
+    assert f == pytest.approx((2.0, 0.0, G), abs=1e-12)
+
+
+def test_hover_reading_and_no_side_effects():
+    params = SystemParams()
+    x, _ = hover_trim(params, (12.0, 5.0, 20.0), 30.0)
+    plant = Plant(params, state=x)
+    x_before, warm_before = plant.x.copy(), plant.model.warm.copy()
+    f = plant_specific_force_flu(plant)
+    r = fr.quat_to_matrix(plant.quaternion)
+    assert f == pytest.approx((G * r[2][0], G * r[2][1], G * r[2][2]), abs=1e-8)
+    assert r[2][2] < 0.99999                      # tilted against the tether's pull
+    assert np.array_equal(plant.x, x_before)
+    assert np.array_equal(plant.model.warm, warm_before)
+
+
+# ----------------------------------------------------------------- magnetometer
+@pytest.mark.parametrize("euler, expected_flu", [
+    ((0.0, 0.0, 0.0), (0.0, 0.2, -0.45)),             # nose east: north is to the left
+    ((0.0, 0.0, math.pi / 2), (0.2, 0.0, -0.45)),     # nose north
+    ((math.pi, 0.0, math.pi / 2), (0.2, 0.0, 0.45)),  # nose north, upside down
+    ((0.0, 0.0, -math.pi / 2), (-0.2, 0.0, -0.45)),   # nose south
+])
+def test_magnetometer_known_attitudes(euler, expected_flu):
+    suite = SensorSuite(OFF)
+    imu = suite.imu((0.0, 0.0, G), (0.0, 0.0, 0.0), fr.euler_to_quat(*euler), 0.004)
+    assert imu.mag_flu_gauss == pytest.approx(expected_flu, abs=1e-12)
+
+
+def test_magnetometer_level_nose_north_reads_ned_field_in_frd():
+    suite = SensorSuite(OFF, earth_field_ned_gauss=(0.21, 0.02, 0.43))
+    imu = suite.imu((0.0, 0.0, G), (0.0, 0.0, 0.0), fr.euler_to_quat(0, 0, math.pi / 2), 0.0)
+    f = sl.hil_sensor_fields(0, imu.accel_flu_m_s2, imu.gyro_flu_rad_s, imu.mag_flu_gauss,
+                             1013.25, 0.0, 15.0)
+    assert (f["xmag"], f["ymag"], f["zmag"]) == pytest.approx((0.21, 0.02, 0.43), abs=1e-6)
+
+
+@given(angles, pitches, angles)
+def test_magnetometer_any_attitude(roll, pitch, yaw):
+    q = fr.euler_to_quat(roll, pitch, yaw)
+    m = SensorSuite(OFF).magnetic_field_flu(q)
+    # rotating the body reading back into the world gives the ENU field
+    assert fr.quat_rotate(q, m) == pytest.approx((0.0, 0.2, -0.45), abs=1e-12)
+
+
+# ----------------------------------------------------------------- GPS
+def test_gps_without_noise_is_the_truth():
+    suite = SensorSuite(OFF)
+    fix = suite.gps((12.5, -3.25, 20.0), (0.5, 0.25, -0.125), 0.1)
+    assert fix.position_enu_m == (12.5, -3.25, 20.0)
+    assert fix.velocity_enu_m_s == (0.5, 0.25, -0.125)
+    assert (fix.eph_m, fix.epv_m) == (0.3, 0.5)
+
+
+# ----------------------------------------------------------------- noise
+def test_noise_off_is_exact_even_with_sigmas_configured():
+    noisy_specs = SensorNoise(enabled=False, accel=NoiseSpec(1.0, 1.0, 1.0))
+    suite = SensorSuite(noisy_specs)
+    for _ in range(3):
+        imu = suite.imu((0.1, 0.2, 9.7), (0.01, -0.02, 0.03), fr.euler_to_quat(0.1, 0, 0), 0.1)
+        assert imu.accel_flu_m_s2 == (0.1, 0.2, 9.7)
+        assert imu.gyro_flu_rad_s == (0.01, -0.02, 0.03)
+    assert np.array_equal(suite.accel.bias, np.zeros(3))
+
+
+def _samples(suite: SensorSuite, n: int):
+    q = fr.euler_to_quat(0.1, -0.05, 0.7)
+    truth_f, truth_w = (0.3, -0.2, 9.8), (0.02, 0.01, -0.03)
+    acc, gyr, mag, baro, gpos, gvel = [], [], [], [], [], []
+    for _ in range(n):
+        imu = suite.imu(truth_f, truth_w, q, 0.004)
+        acc.append(np.subtract(imu.accel_flu_m_s2, truth_f))
+        gyr.append(np.subtract(imu.gyro_flu_rad_s, truth_w))
+        mag.append(np.subtract(imu.mag_flu_gauss, suite.magnetic_field_flu(q)))
+        baro.append(suite.baro(600.0, 0.004).pressure_hpa - isa_pressure_hpa(600.0))
+        fix = suite.gps((10.0, 20.0, 30.0), (1.0, -1.0, 0.5), 0.1)
+        gpos.append(np.subtract(fix.position_enu_m, (10.0, 20.0, 30.0)))
+        gvel.append(np.subtract(fix.velocity_enu_m_s, (1.0, -1.0, 0.5)))
+    return [np.array(v) for v in (acc, gyr, mag, baro, gpos, gvel)]
+
+
+def _check(err: np.ndarray, bias: np.ndarray, sigma: float):
+    n = err.shape[0]
+    mean = err.mean(axis=0)
+    # the mean error is the bias, to within 5 standard errors
+    assert np.all(np.abs(mean - bias) < 5 * sigma / math.sqrt(n) + 1e-12), (mean, bias)
+    # the scatter is the white noise's sigma: 5 % (the estimate's own error is ~0.7 %)
+    std = err.std(axis=0, ddof=1)
+    assert np.all(np.abs(std / sigma - 1.0) < 0.05), (std, sigma)
+
+
+def test_noise_statistics_match_the_sigmas():
+    suite = SensorSuite(STEADY)
+    acc, gyr, mag, baro, gpos, gvel = _samples(suite, 10000)
+    _check(acc, suite.accel.bias, STEADY.accel.sigma)
+    _check(gyr, suite.gyro.bias, STEADY.gyro.sigma)
+    _check(mag, suite.mag.bias, STEADY.mag.sigma)
+    _check(baro[:, None], suite.baro_channel.bias, STEADY.baro.sigma)
+    _check(gpos[:, :2], suite.gps_horizontal.bias, STEADY.gps_horizontal.sigma)
+    _check(gpos[:, 2:], suite.gps_vertical.bias, STEADY.gps_vertical.sigma)
+    _check(gvel, suite.gps_velocity.bias, STEADY.gps_velocity.sigma)
+    # biases were drawn where configured, and are absent where not
+    assert np.all(suite.accel.bias != 0) and np.all(suite.gps_horizontal.bias == 0)
+
+
+def test_turn_on_biases_follow_their_sigma():
+    biases = np.array([SensorSuite(SensorNoise(seed=s, accel=NoiseSpec(0.05, 0.04)))
+                       .accel.bias for s in range(1500)]).ravel()
+    assert abs(biases.mean()) < 5 * 0.04 / math.sqrt(biases.size)
+    assert biases.std(ddof=1) / 0.04 == pytest.approx(1.0, abs=0.05)
+
+
+def test_bias_random_walk_increments():
+    walk, dt = 0.01, 0.004
+    suite = SensorSuite(SensorNoise(seed=1, gyro=NoiseSpec(0.0, 0.0, walk)))
+    b = []
+    for _ in range(8000):
+        suite.imu((0, 0, G), (0, 0, 0), (1.0, 0.0, 0.0, 0.0), dt)
+        b.append(suite.gyro.bias.copy())
+    steps = np.diff(np.array(b), axis=0)
+    assert steps.std(ddof=1) / (walk * math.sqrt(dt)) == pytest.approx(1.0, abs=0.05)
+    assert abs(steps.mean()) < 5 * walk * math.sqrt(dt) / math.sqrt(steps.size)
+
+
+def test_seeded_streams():
+    a, b = SensorSuite(SensorNoise(seed=5)), SensorSuite(SensorNoise(seed=5))
+    c = SensorSuite(SensorNoise(seed=6))
+    ra, rb, rc = (_samples(s, 20) for s in (a, b, c))
+    assert all(np.array_equal(x, y) for x, y in zip(ra, rb, strict=True))
+    assert not np.array_equal(ra[0], rc[0])
+    # each sensor has its own stream: sampling the GPS less often leaves the IMU unchanged
+    d = SensorSuite(SensorNoise(seed=5))
+    q = fr.euler_to_quat(0.1, -0.05, 0.7)
+    imu_d = [d.imu((0.3, -0.2, 9.8), (0.02, 0.01, -0.03), q, 0.004) for _ in range(20)]
+    assert np.allclose(np.subtract([i.accel_flu_m_s2 for i in imu_d], (0.3, -0.2, 9.8)), ra[0])
+
+
+def test_noise_spec_validation():
+    with pytest.raises(ValueError):
+        NoiseSpec(sigma=-1.0)
+    with pytest.raises(ValueError):
+        NoiseSpec(bias_walk=float("nan"))
+    assert NoiseSpec() == NoiseSpec(0.0, 0.0, 0.0)
