@@ -21,10 +21,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from companion.actuators import ActuatorModel
-from companion.attitude import AttitudeController
-from companion.position import PositionController
-from companion.tether_model import TetherModel, WinchReport
+from companion.flight_controller import FlightController, VehicleState
 from companion.trajectory import (
     GotoItem,
     Hold,
@@ -32,14 +29,12 @@ from companion.trajectory import (
     SequenceBuilder,
     WaypointFollower,
 )
-from groundstation.lbar import LBarEstimator
-from groundstation.winder_control import WinderController
+from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
 from sitl.plant import Plant, PlantInputs
 from sitl.trim import hover_trim
 from tuav_sitl.scenario import ScenarioParams
-from tuavdefs.airframe import Mixer
-from tuavdefs.frames import quat_to_matrix, wrap_pi
+from tuavdefs.frames import quat_to_euler, wrap_pi
 from tuavdefs.paramspec import to_dict
 
 #: Tether regimes in which part of the tether lies on the ground.
@@ -158,43 +153,38 @@ class OfflineRunner:
         params = self.params = sc.system()
         veh = params.vehicle
         g = params.environment.gravity_m_s2
-        w = params.tether.weight_per_length_n_m(g)
         self.dt = 1.0 / sc.physics_rate_hz
         self.n_ctrl = round(sc.physics_rate_hz / sc.control.rate_hz)
         self.n_wind = round(sc.physics_rate_hz / sc.winder_control.rate_hz)
-        self.lbar = LBarEstimator(sc.lbar, w)
+        self.winder_host = WinderHost(sc.winder_control, sc.lbar, params.winder,
+                                      params.tether, g)
         start = tuple(sc.initial.position_m)
-        length0, _ = self.lbar.length(start)
+        length0, _ = self.winder_host.lbar.length(start)
         x0, _ = hover_trim(params, start, length0, sc.initial.yaw_rad)
         self.plant = Plant(params, dt_s=self.dt, state=x0)
-        dt_c = 1.0 / sc.control.rate_hz
-        t_idle = 4 * veh.rotor_thrust_coeff * veh.rotor_speed_min_rad_s ** 2
-        self.pos_ctl = PositionController(sc.control, veh.mass_kg, g, veh.max_total_thrust_n,
-                                          t_idle, veh.drag_coeff_n_s_m)
-        self.att_ctl = AttitudeController(sc.control, veh.inertia_diag,
-                                          veh.rotational_damping_n_m_s_rad, dt_c)
-        self.att_ctl.reset(self.plant.euler_rad)
-        self.actuators = ActuatorModel(veh, dt_c)
-        self.actuators.reset(tuple(self.plant.rotor_speeds_rad_s))
-        self.mixer = Mixer(veh)
-        self.tether_model = TetherModel(w, params.tether.axial_stiffness_n)
-        self.winder_ctl = WinderController(sc.winder_control, params.winder, params.tether)
+        self.flight = FlightController(sc.control, veh, params.tether, g)
+        self.flight.reset(self._vehicle_state(), tuple(self.plant.rotor_speeds_rad_s))
         self.reference = Reference(sc)
+
+    def _vehicle_state(self) -> VehicleState:
+        """What the companion receives: the truth state (docs/architecture.md)."""
+        p = self.plant
+        return VehicleState(tuple(p.position_m), tuple(p.velocity_m_s), p.quaternion,
+                            tuple(p.body_rates_rad_s))
 
     def run(self, progress: TextIO | None = None,
             on_sample: Callable[[float], None] | None = None) -> RunResult:
         """Run the scenario; returns the time series and metrics."""
         sc, plant = self.sc, self.plant
-        dt_c = 1.0 / sc.control.rate_hz
-        dt_w = 1.0 / sc.winder_control.rate_hz
+        r_w = self.params.winder.drum_radius_m
         n_steps = round(sc.duration_s / self.dt)
         n_log = n_steps // self.n_ctrl + 1
         log = _Log(n_log)
         bar = ProgressBar(sc.duration_s, progress)
         inputs = PlantInputs()
         winder_torque, winder_lyap, lbar = 0.0, 0.0, (0.0, 0.0)
-        winch = WinchReport()
-        winch.update(0.0, plant.tether_length_m, 0.0, plant.tether_forces().drum_tension_n)
+        self.flight.winch_report(0.0, plant.tether_length_m, 0.0,
+                                 plant.tether_forces().drum_tension_n)
         events: list[tuple[str, int, float]] = []
         wall0 = time.perf_counter()
         for k in range(n_steps + 1):
@@ -202,41 +192,28 @@ class OfflineRunner:
             fresh = k % self.n_wind == 0
             if fresh:
                 # ground station: encoder, load cell and the UAV's telemetry
-                pos, vel = plant.position_m, plant.velocity_m_s
-                truth_tether = plant.tether_forces()
-                lb = self.lbar.estimate(tuple(pos), tuple(vel))
-                cmd = self.winder_ctl.update(dt_w, plant.tether_length_m, plant.drum_rate_rad_s,
-                                             truth_tether.drum_tension_n, lb.length_m,
-                                             lb.rate_m_s)
-                winder_torque, winder_lyap, lbar = cmd.torque_n_m, cmd.lyapunov, lb[:2]
-                winch.update(t, plant.tether_length_m,
-                             plant.drum_rate_rad_s * self.params.winder.drum_radius_m,
-                             truth_tether.drum_tension_n)
+                drum_tension = plant.tether_forces().drum_tension_n
+                ws = self.winder_host.update(plant.tether_length_m, plant.drum_rate_rad_s,
+                                             drum_tension, tuple(plant.position_m),
+                                             tuple(plant.velocity_m_s))
+                winder_torque, winder_lyap = ws.torque_n_m, ws.command.lyapunov
+                lbar = (ws.lbar_m, ws.lbar_rate_m_s)
+                # ... and the winch's report reaches the companion
+                self.flight.winch_report(t, plant.tether_length_m,
+                                         plant.drum_rate_rad_s * r_w, drum_tension)
             if k % self.n_ctrl == 0:
-                pos = tuple(plant.position_m)
-                vel = tuple(plant.velocity_m_s)
-                euler = plant.euler_rad
-                rates = tuple(plant.body_rates_rad_s)
-                r = quat_to_matrix(plant.quaternion)
-                ref = self.reference.sample(t, pos, vel)
+                state = self._vehicle_state()
+                ref = self.reference.sample(t, state.pos_m, state.vel_m_s)
                 events.extend(self.reference.events())
-                est = self.tether_model.estimate(
-                    pos, winch.length_at(t),
-                    winch.tension_n if sc.control.use_measured_tension else None)
-                f_t = est.force_n if sc.control.use_tether_model else (0.0, 0.0, 0.0)
-                u_ach, tau_ach = self.actuators.wrench()
-                po = self.pos_ctl.update(dt_c, pos, vel, ref.pos_m, ref.vel_m_s, ref.acc_m_s2,
-                                         ref.yaw_rad, r, f_t, u_ach)
-                ao = self.att_ctl.update(euler, rates, po.attitude_rad, tau_ach)
-                mix = self.mixer.mix(po.thrust_n, ao.torque_n_m)
-                self.actuators.command(mix.commands)
-                self.actuators.advance()
-                inputs = PlantInputs(mix.commands, True, winder_torque, True)
+                fs = self.flight.update(t, state, ref)
+                po, ao = fs.position, fs.attitude
+                inputs = PlantInputs(fs.rotor_commands, True, winder_torque, True)
                 truth_tether = plant.tether_forces()
-                log.add(t=t, pos=pos, vel=vel, ref_pos=ref.pos_m, ref_vel=ref.vel_m_s,
-                        euler=euler, att_cmd=ao.attitude_cmd_rad, att_des=po.attitude_rad,
-                        rates=rates, thrust=po.thrust_n, torque=ao.torque_n_m,
-                        rotor_cmd=mix.commands, mixer_sat=mix.saturated,
+                log.add(t=t, pos=state.pos_m, vel=state.vel_m_s, ref_pos=ref.pos_m,
+                        ref_vel=ref.vel_m_s, euler=quat_to_euler(state.quat),
+                        att_cmd=ao.attitude_cmd_rad, att_des=po.attitude_rad,
+                        rates=state.rates_rad_s, thrust=po.thrust_n, torque=ao.torque_n_m,
+                        rotor_cmd=fs.rotor_commands, mixer_sat=fs.mixer_saturated,
                         pos_sat=po.saturated, d_hat=po.disturbance_m_s2,
                         v_pos=po.lyapunov, v_att=ao.lyapunov, v_win=winder_lyap,
                         v_pos_raw=po.lyapunov_raw, v_att_raw=ao.lyapunov_raw,
@@ -248,11 +225,11 @@ class OfflineRunner:
                         regime=int(truth_tether.info.regime),
                         lowest=truth_tether.info.lowest_point_height_m,
                         wind=plant.wind_m_s, tether_force=truth_tether.on_uav_n,
-                        tether_force_est=f_t)
+                        tether_force_est=fs.tether_force_est_n)
                 bar.update(t)
                 if on_sample is not None:
                     on_sample(t)
-            elif k % self.n_wind == 0:
+            elif fresh:
                 inputs = inputs._replace(winder_torque_n_m=winder_torque)
             if k < n_steps:
                 plant.step(inputs)
