@@ -1,0 +1,128 @@
+"""``python -m sitl``: the plant process.
+
+Serves the PX4 simulator MAVLink API to one companion (lockstep by default, or paced by the
+wall clock with ``--real-time``) and writes the plant's truth time series. The winder stays
+braked until the ground-station process and its CAN bus drive it (docs/architecture.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TextIO
+
+from sitl.plant import Plant
+from sitl.sensors import SensorNoise
+from sitl.simlink_server import SimLinkServer
+from sitl.trim import hover_trim
+from tuavdefs import simlink as sl
+from tuavdefs.frames import quat_to_euler
+from tuavdefs.params import SystemParams
+from tuavdefs.paramspec import ParameterError, load_toml
+
+TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "roll_rad",
+                 "pitch_rad", "yaw_rad", "tether_length_m", "drum_rate_rad_s", "armed",
+                 "rotor1", "rotor2", "rotor3", "rotor4")
+
+
+class TruthLog:
+    """The plant's truth as CSV, flushed at least once a wall-clock second."""
+
+    def __init__(self, stream: TextIO, every_periods: int) -> None:
+        self.stream = stream
+        self.every = max(1, every_periods)
+        self._count = 0
+        self._flushed = time.monotonic()
+        stream.write(",".join(TRUTH_COLUMNS) + "\n")
+
+    def record(self, server: SimLinkServer) -> None:
+        """Called after each control period."""
+        self._count += 1
+        if (self._count - 1) % self.every:
+            return
+        p = server.plant
+        pos, vel = p.position_m, p.velocity_m_s
+        row = (p.t_s, *pos, *vel, *quat_to_euler(p.quaternion), p.tether_length_m,
+               p.drum_rate_rad_s, int(server.armed), *server.rotor_commands)
+        self.stream.write(",".join(repr(float(v)) for v in row) + "\n")
+        now = time.monotonic()
+        if now - self._flushed >= 1.0:
+            self.stream.flush()
+            self._flushed = now
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Arguments of the plant process."""
+    ap = argparse.ArgumentParser(prog="python -m sitl", description=__doc__)
+    ap.add_argument("--port", type=int, default=sl.SIM_PORT_DEFAULT,
+                    help="TCP port of the simulator link on 127.0.0.1")
+    ap.add_argument("--control-rate", type=float, default=sl.CONTROL_RATE_HZ_DEFAULT,
+                    help="control periods per simulated second [Hz]")
+    ap.add_argument("--real-time", action="store_true", help="pace by the wall clock")
+    ap.add_argument("--duration", type=float, default=None, help="stop after [s] of sim time")
+    ap.add_argument("--params", default=None, help="system parameters TOML")
+    ap.add_argument("--position", type=float, nargs=3, default=(2.0, 0.0, 10.0),
+                    metavar=("X", "Y", "Z"), help="start in hover trim here [m], z-up frame")
+    ap.add_argument("--tether-length", type=float, default=None,
+                    help="paid-out length at the start [m] (default 1.15 x the distance)")
+    ap.add_argument("--home", type=float, nargs=3, default=sl.HOME_DEFAULT,
+                    metavar=("LAT", "LON", "ALT"), help="the winder's global position")
+    ap.add_argument("--no-noise", action="store_true", help="exact sensor readings")
+    ap.add_argument("--truth-log", default=None, help="CSV of the plant's truth")
+    ap.add_argument("--log-every", type=int, default=5, help="log every N control periods")
+    ap.add_argument("--accept-timeout", type=float, default=60.0,
+                    help="give up if no companion connects within [s]")
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the plant process; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    try:
+        params = SystemParams() if args.params is None else load_toml(SystemParams,
+                                                                       Path(args.params))
+    except ParameterError as exc:
+        print(f"plant: bad parameter: {exc}", file=sys.stderr)
+        return 2
+    pos = tuple(args.position)
+    length = args.tether_length or 1.15 * math.dist(pos, (0.0, 0.0, 0.0))
+    x0, _ = hover_trim(params, pos, length)
+    plant = Plant(params, state=x0)
+    log_file = open(args.truth_log, "w") if args.truth_log else None  # noqa: SIM115
+    log = TruthLog(log_file, args.log_every) if log_file else None
+    try:
+        server = SimLinkServer(plant, control_rate_hz=args.control_rate,
+                               home=tuple(args.home), port=args.port,
+                               real_time=args.real_time,
+                               sensor_noise=SensorNoise.off() if args.no_noise else None,
+                               on_step=log.record if log else None)
+    except OSError as exc:
+        print(f"plant: cannot listen on 127.0.0.1:{args.port}: {exc.strerror}",
+              file=sys.stderr)
+        return 1
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    print(f"plant: listening on tcp:127.0.0.1:{server.port} "
+          f"({'real time' if args.real_time else 'lockstep'})", flush=True)
+    try:
+        summary = server.serve(max_sim_time_s=args.duration, stop_event=stop,
+                               accept_timeout_s=args.accept_timeout)
+    finally:
+        if log_file:
+            log_file.close()
+    print(f"plant: {summary.end_reason}: {summary.steps} periods, "
+          f"{summary.sim_time_s:.2f} s simulated in {summary.wall_time_s:.2f} s, "
+          f"{summary.bad_frames} bad frames, {summary.missed_deadlines} missed deadlines",
+          flush=True)
+    return 0 if summary.end_reason != "no_client" else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
