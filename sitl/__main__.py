@@ -1,8 +1,10 @@
 """``python -m sitl``: the plant process.
 
 Serves the PX4 simulator MAVLink API to one companion (lockstep by default, or paced by the
-wall clock with ``--real-time``) and writes the plant's truth time series. The winder stays
-braked until the ground-station process and its CAN bus drive it (docs/architecture.md).
+wall clock with ``--real-time``) and writes the plant's truth time series. With ``--can``
+the winder motor is a simulated ODrive axis (and the winch's sensors a second node) on that
+CAN bus, driven by whoever commands it there (the ground-station process); without it the
+winder stays braked.
 """
 
 from __future__ import annotations
@@ -19,9 +21,11 @@ from typing import TextIO
 
 from sitl.plant import Plant
 from sitl.sensors import SensorNoise
-from sitl.simlink_server import SimLinkServer
+from sitl.simlink_server import SimLinkServer, WinderInputs
 from sitl.trim import hover_trim
+from sitl.winder_node import WinderCanNode
 from tuavdefs import simlink as sl
+from tuavdefs.canbus import CanBusError, CanLink
 from tuavdefs.frames import quat_to_euler
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import ParameterError, load_toml
@@ -76,6 +80,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--no-noise", action="store_true", help="exact sensor readings")
     ap.add_argument("--truth-log", default=None, help="CSV of the plant's truth")
     ap.add_argument("--log-every", type=int, default=5, help="log every N control periods")
+    ap.add_argument("--can", default=None, metavar="SPEC",
+                    help="CAN bus of the winder: auto, socketcan:IFACE, udp_multicast[:GROUP] "
+                         "(default: none, the winder stays braked)")
     ap.add_argument("--accept-timeout", type=float, default=60.0,
                     help="give up if no companion connects within [s]")
     return ap
@@ -94,14 +101,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     length = args.tether_length or 1.15 * math.dist(pos, (0.0, 0.0, 0.0))
     x0, _ = hover_trim(params, pos, length)
     plant = Plant(params, state=x0)
+    node = None
+    if args.can:
+        try:
+            node = WinderCanNode(CanLink(args.can), plant)
+        except CanBusError as exc:
+            print(f"plant: {exc}", file=sys.stderr)
+            return 1
     log_file = open(args.truth_log, "w") if args.truth_log else None  # noqa: SIM115
     log = TruthLog(log_file, args.log_every) if log_file else None
+
+    def on_step(server: SimLinkServer) -> None:
+        if node is not None:
+            t = server.plant.t_s
+            node.service(t)
+            torque, enabled = node.tick(t)
+            server.winder_inputs = WinderInputs(torque, enabled)
+        if log is not None:
+            log.record(server)
+
     try:
         server = SimLinkServer(plant, control_rate_hz=args.control_rate,
                                home=tuple(args.home), port=args.port,
                                real_time=args.real_time,
                                sensor_noise=SensorNoise.off() if args.no_noise else None,
-                               on_step=log.record if log else None)
+                               on_step=on_step)
     except OSError as exc:
         print(f"plant: cannot listen on 127.0.0.1:{args.port}: {exc.strerror}",
               file=sys.stderr)
@@ -109,14 +133,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
+    can_text = f", winder on CAN {node.link.description}" if node else ", winder braked"
     print(f"plant: listening on tcp:127.0.0.1:{server.port} "
-          f"({'real time' if args.real_time else 'lockstep'})", flush=True)
+          f"({'real time' if args.real_time else 'lockstep'}{can_text})", flush=True)
     try:
         summary = server.serve(max_sim_time_s=args.duration, stop_event=stop,
                                accept_timeout_s=args.accept_timeout)
     finally:
         if log_file:
             log_file.close()
+        if node is not None:
+            node.link.close()
     print(f"plant: {summary.end_reason}: {summary.steps} periods, "
           f"{summary.sim_time_s:.2f} s simulated in {summary.wall_time_s:.2f} s, "
           f"{summary.bad_frames} bad frames, {summary.missed_deadlines} missed deadlines",

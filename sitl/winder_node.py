@@ -1,0 +1,72 @@
+"""The plant's end of the winder's CAN bus: the simulated ODrive axis and winch sensors.
+
+Every control period the plant process hands the node the frames the bus delivered
+(:meth:`WinderCanNode.service`), lets the axis and the sensors emit what is due for the
+current simulated time, and reads back the motor's state for the drum: powered or braked,
+and the torque it is asked for. The plant applies the torque limits' cut-back near the
+velocity limit itself (``sitl.kernel.motor_torque``).
+"""
+
+from __future__ import annotations
+
+import math
+
+from sitl.odrive_axis import OdriveAxis, WinchSensors
+from sitl.plant import Plant
+from tuavdefs.can_protocol import AXIS_NODE_ID_DEFAULT, WINCH_SENSOR_NODE_ID_DEFAULT
+from tuavdefs.canbus import CanLink
+
+#: DC bus voltage of the winder's drive [V] (a 48 V tether power supply's low side).
+BUS_VOLTAGE_V = 48.0
+
+
+class WinderCanNode:
+    """Axis + sensors on a bus, stepped with the plant's simulated time."""
+
+    def __init__(self, link: CanLink, plant: Plant, axis_node_id: int = AXIS_NODE_ID_DEFAULT,
+                 sensor_node_id: int = WINCH_SENSOR_NODE_ID_DEFAULT,
+                 watchdog_timeout_s: float = 0.1) -> None:
+        self.link = link
+        self.plant = plant
+        w = plant.params.winder
+        two_pi = 2.0 * math.pi
+        self.axis = OdriveAxis(axis_node_id, watchdog_timeout_s=watchdog_timeout_s,
+                               torque_limit_nm=w.motor_torque_limit_n_m,
+                               vel_limit_rev_s=w.motor_speed_limit_rad_s / two_pi)
+        self.sensors = WinchSensors(sensor_node_id)
+        self.frames_received = 0
+        self.frames_sent = 0
+
+    def service(self, t_s: float) -> None:
+        """Feed every frame the bus holds to the axis, and send its replies."""
+        while True:
+            rx = self.link.recv(timeout_s=0.0)
+            if rx is None:
+                break
+            self.frames_received += 1
+            self._send(self.axis.handle(t_s, rx.arbitration_id, rx.data, rx.is_remote,
+                                        rx.is_extended))
+
+    def tick(self, t_s: float) -> tuple[float, bool]:
+        """Emit the cyclic frames due at ``t_s`` [s]; returns (torque request [N m], motor
+        powered) for the plant's winder inputs."""
+        p = self.plant
+        two_pi = 2.0 * math.pi
+        theta = p.tether_length_m / p.params.winder.drum_radius_m
+        omega = p.drum_rate_rad_s
+        applied = p.model.winder.motor_torque_n_m(self.axis.torque_command_nm, omega,
+                                                  self.axis.enabled)
+        self._send(self.axis.tick(t_s, theta / two_pi, omega / two_pi, applied,
+                                  BUS_VOLTAGE_V))
+        tf = p.tether_forces()
+        wm = p.model.winder
+        self._send(self.sensors.tick(
+            t_s, p.tether_length_m, omega * p.params.winder.drum_radius_m,
+            tf.drum_tension_n, not self.axis.enabled,
+            theta <= wm.theta_min + 1e-9, theta >= wm.theta_max - 1e-9))
+        return self.axis.torque_command_nm, self.axis.enabled
+
+    def _send(self, frames: list) -> None:
+        for f in frames:
+            self.link.send(f.arbitration_id, f.data, f.is_remote, len(f.data))
+            self.frames_sent += 1

@@ -1,0 +1,1 @@
+"""Scripts the test suite runs inside a private network namespace (see tests/netns_util.py)."""
