@@ -4,8 +4,10 @@ Connects to the plant's simulator link, and at every control period runs the sha
 :class:`companion.flight_controller.FlightController` on the truth state it receives
 (HIL_STATE_QUATERNION) and answers with the rotor commands. For now it holds its starting
 position or flies to ``--goto``; the ArduCopter-compatible ground-station side comes next
-(docs/architecture.md). Without winch reports (no ground-station process yet) the tether's
-pull is left to the disturbance estimate.
+(docs/architecture.md). On its component link (TCP 5762) it sends the UAV's position to the
+winch component (the ground-station process) and takes its WINCH_STATUS as the winch's
+reports for the onboard tether model; without them the tether's pull is left to the
+disturbance estimate.
 """
 
 from __future__ import annotations
@@ -16,10 +18,12 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from companion.component_server import ComponentServer
 from companion.flight_controller import FlightController, VehicleState
 from companion.gains import FlightControlParams
 from companion.simlink_client import SimLinkClient
 from companion.trajectory import Hold, SequenceBuilder, Trajectory
+from tuavdefs import component_link as cl
 from tuavdefs import simlink as sl
 from tuavdefs.frames import quat_to_euler
 from tuavdefs.params import SystemParams
@@ -40,6 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--max-speed", type=float, default=2.0, help="[m/s]")
     ap.add_argument("--max-acc", type=float, default=1.5, help="[m/s^2]")
     ap.add_argument("--connect-timeout", type=float, default=30.0, help="[s]")
+    ap.add_argument("--component-port", type=int, default=cl.COMPONENT_PORT_DEFAULT,
+                    help="TCP port of the component link (0: none)")
     return ap
 
 
@@ -54,6 +60,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"companion: bad parameter: {exc}", file=sys.stderr)
         return 2
+    components = ComponentServer(args.component_port) if args.component_port else None
     host, _, port = args.sim.rpartition(":")
     client = SimLinkClient(host, int(port), tuple(args.home))
     client.connect(timeout_s=args.connect_timeout)
@@ -80,6 +87,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 else:
                     b = SequenceBuilder(state.pos_m, t, args.max_speed, args.max_acc, yaw=yaw)
                     ref = b.hold(0.5).goto(tuple(args.goto)).build()
+            if components is not None:
+                for msg in components.poll():
+                    if msg.get_type() == "WINCH_STATUS":
+                        flight.winch_report(t, msg.line_length, msg.speed, msg.tension * g)
+                components.send_position(t, state.pos_m, state.vel_m_s)
             step = flight.update(t, state, ref.sample(t))
             client.send_actuators(sim.time_usec, step.rotor_commands, armed=True)
             steps += 1
@@ -87,6 +99,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         pass
     finally:
         client.close()
+        if components is not None:
+            components.close()
     print(f"companion: link closed after {steps} control periods", flush=True)
     return 0
 

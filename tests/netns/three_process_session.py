@@ -1,0 +1,56 @@
+"""The plant, the companion and the ground station as three OS processes: MAVLink between
+plant and companion (simulator link) and between companion and winch (component link), CAN
+between plant and ground station. Run inside a private network namespace; prints one JSON
+line for tests/test_three_processes.py."""
+
+import csv
+import json
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def main() -> int:
+    out_dir = Path(sys.argv[1])
+    goal = [float(v) for v in sys.argv[2:5]]
+    duration = sys.argv[5]
+    sim_port, comp_port = free_port(), free_port()
+    log = out_dir / "truth.csv"
+    py = sys.executable
+    plant = subprocess.Popen(
+        [py, "-m", "sitl", "--port", str(sim_port), "--duration", duration, "--real-time",
+         "--can", "udp_multicast", "--no-noise", "--position", "4", "0", "10",
+         "--tether-length", "12.5", "--truth-log", str(log)],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    ready = plant.stdout.readline()
+    gs = subprocess.Popen([py, "-m", "groundstation", "--can", "udp_multicast", "--mavlink",
+                           f"127.0.0.1:{comp_port}"],
+                          cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    time.sleep(0.5)
+    comp = subprocess.Popen([py, "-m", "companion", "--sim", f"127.0.0.1:{sim_port}",
+                             "--component-port", str(comp_port), "--goto", *map(str, goal)],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+    plant_out = plant.communicate(timeout=300)[0]
+    comp_out = comp.communicate(timeout=60)[0]
+    gs.terminate()
+    gs_out = gs.communicate(timeout=30)[0]
+    with open(log) as f:
+        rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    print(json.dumps({"ready": ready.strip(), "plant": plant_out, "companion": comp_out,
+                      "groundstation": gs_out, "rows": rows}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

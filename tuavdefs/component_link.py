@@ -1,0 +1,36 @@
+"""The companion's component link: MAVLink between the flight computer and onboard-style
+components, here the ground station's winch.
+
+The companion listens on TCP 127.0.0.1:5762 (ArduPilot SITL's second serial port) and sends
+the UAV's ``LOCAL_POSITION_NED`` (50 Hz of simulated time); the winch component (system 1,
+component 169 ``MAV_COMP_ID_WINCH``) sends ``WINCH_STATUS`` and a ``HEARTBEAT`` with
+autopilot ``MAV_AUTOPILOT_INVALID`` and type ``MAV_TYPE_WINCH`` so that ground stations do
+not take it for a second vehicle. MAVLink 2.
+"""
+
+from __future__ import annotations
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+COMPONENT_PORT_DEFAULT = 5762
+SYSTEM_ID = 1
+AUTOPILOT_COMPONENT_ID = 1
+WINCH_COMPONENT_ID = mavlink2.MAV_COMP_ID_WINCH          # 169
+POSITION_RATE_HZ = 50.0
+
+
+def winch_status_flags(brake_engaged: bool, moving: bool, healthy: bool = True) -> int:
+    """``MAV_WINCH_STATUS_FLAG`` bits of the winch's state."""
+    flags = mavlink2.MAV_WINCH_STATUS_HEALTHY if healthy else 0
+    if moving:
+        flags |= mavlink2.MAV_WINCH_STATUS_MOVING
+    if brake_engaged:
+        flags |= mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED
+    return flags
+
+
+def new_mavlink(component_id: int) -> mavlink2.MAVLink:
+    """A MAVLink 2 packer/parser for system 1 and ``component_id``."""
+    mav = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=component_id)
+    mav.robust_parsing = True
+    return mav
