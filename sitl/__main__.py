@@ -104,7 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     node = None
     if args.can:
         try:
-            node = WinderCanNode(CanLink(args.can), plant)
+            node = WinderCanNode(CanLink(args.can), plant, lockstep=not args.real_time)
         except CanBusError as exc:
             print(f"plant: {exc}", file=sys.stderr)
             return 1
@@ -144,10 +144,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             log_file.close()
         if node is not None:
             node.link.close()
+    can_text = (f", CAN: {node.frames_received} frames in, {node.frames_sent} out, "
+                f"{node.late_answers} late answers" if node else "")
     print(f"plant: {summary.end_reason}: {summary.steps} periods, "
           f"{summary.sim_time_s:.2f} s simulated in {summary.wall_time_s:.2f} s, "
-          f"{summary.bad_frames} bad frames, {summary.missed_deadlines} missed deadlines",
-          flush=True)
+          f"{summary.bad_frames} bad frames, {summary.missed_deadlines} missed deadlines"
+          f"{can_text}", flush=True)
     return 0 if summary.end_reason != "no_client" else 1
 
 

@@ -10,11 +10,21 @@ velocity limit itself (``sitl.kernel.motor_torque``).
 from __future__ import annotations
 
 import math
+import time
 
 from sitl.odrive_axis import OdriveAxis, WinchSensors
 from sitl.plant import Plant
-from tuavdefs.can_protocol import AXIS_NODE_ID_DEFAULT, WINCH_SENSOR_NODE_ID_DEFAULT
-from tuavdefs.canbus import CanLink
+from tuavdefs.can_protocol import (
+    AXIS_NODE_ID_DEFAULT,
+    WINCH_SENSOR_NODE_ID_DEFAULT,
+    Cmd,
+    split_id,
+)
+from tuavdefs.canbus import CanLink, RxFrame
+
+#: Commands only a host sends: an answer to the encoder frame is one of these.
+_HOST_COMMANDS = frozenset({Cmd.SET_INPUT_TORQUE, Cmd.SET_AXIS_STATE, Cmd.SET_CONTROLLER_MODE,
+                            Cmd.SET_LIMITS, Cmd.CLEAR_ERRORS, Cmd.ESTOP})
 
 #: DC bus voltage of the winder's drive [V] (a 48 V tether power supply's low side).
 BUS_VOLTAGE_V = 48.0
@@ -25,8 +35,14 @@ class WinderCanNode:
 
     def __init__(self, link: CanLink, plant: Plant, axis_node_id: int = AXIS_NODE_ID_DEFAULT,
                  sensor_node_id: int = WINCH_SENSOR_NODE_ID_DEFAULT,
-                 watchdog_timeout_s: float = 0.1) -> None:
+                 watchdog_timeout_s: float = 0.1, lockstep: bool = False,
+                 answer_timeout_s: float = 0.25) -> None:
         self.link = link
+        self.lockstep = lockstep
+        self.answer_timeout_s = answer_timeout_s
+        self.host_seen = False
+        self.late_answers = 0
+        self._awaiting = False
         self.plant = plant
         w = plant.params.winder
         two_pi = 2.0 * math.pi
@@ -43,9 +59,31 @@ class WinderCanNode:
             rx = self.link.recv(timeout_s=0.0)
             if rx is None:
                 break
-            self.frames_received += 1
-            self._send(self.axis.handle(t_s, rx.arbitration_id, rx.data, rx.is_remote,
-                                        rx.is_extended))
+            self._receive(t_s, rx)
+
+    def _receive(self, t_s: float, rx: RxFrame) -> None:
+        self.frames_received += 1
+        node, cmd = split_id(rx.arbitration_id)
+        if node == self.axis.node_id and not rx.is_remote and cmd in _HOST_COMMANDS:
+            self.host_seen = True
+            self._awaiting = False
+        self._send(self.axis.handle(t_s, rx.arbitration_id, rx.data, rx.is_remote,
+                                    rx.is_extended))
+
+    def await_host(self, t_s: float) -> None:
+        """In lockstep, once a host has shown itself, wait (at most ``answer_timeout_s`` of
+        wall time) for its answer to the encoder frame just sent, so the torque it computes
+        from the drum's state at ``t_s`` applies from ``t_s`` on."""
+        if not (self.lockstep and self.host_seen and self._awaiting):
+            return
+        end = time.monotonic() + self.answer_timeout_s
+        while self._awaiting:
+            rx = self.link.recv(timeout_s=max(end - time.monotonic(), 0.0))
+            if rx is None:
+                self.late_answers += 1
+                self._awaiting = False
+                return
+            self._receive(t_s, rx)
 
     def tick(self, t_s: float) -> tuple[float, bool]:
         """Emit the cyclic frames due at ``t_s`` [s]; returns (torque request [N m], motor
@@ -56,14 +94,18 @@ class WinderCanNode:
         omega = p.drum_rate_rad_s
         applied = p.model.winder.motor_torque_n_m(self.axis.torque_command_nm, omega,
                                                   self.axis.enabled)
-        self._send(self.axis.tick(t_s, theta / two_pi, omega / two_pi, applied,
-                                  BUS_VOLTAGE_V))
+        frames = self.axis.tick(t_s, theta / two_pi, omega / two_pi, applied, BUS_VOLTAGE_V)
+        if any(split_id(f.arbitration_id)[1] == Cmd.GET_ENCODER_ESTIMATES and not f.is_remote
+               for f in frames):
+            self._awaiting = True
+        self._send(frames)
         tf = p.tether_forces()
         wm = p.model.winder
         self._send(self.sensors.tick(
             t_s, p.tether_length_m, omega * p.params.winder.drum_radius_m,
             tf.drum_tension_n, not self.axis.enabled,
             theta <= wm.theta_min + 1e-9, theta >= wm.theta_max - 1e-9))
+        self.await_host(t_s)
         return self.axis.torque_command_nm, self.axis.enabled
 
     def _send(self, frames: list) -> None:

@@ -35,6 +35,8 @@ def test_the_uav_reaches_the_goal(flight):
     pos = (last["x_m"], last["y_m"], last["z_m"])
     assert math.dist(pos, GOAL) < 0.02
     assert "0 bad frames" in flight["plant"]
+    # lockstep: the plant waited for the ground station's answer to every encoder frame
+    assert "0 late answers" in flight["plant"]
 
 
 def test_the_ground_station_pays_out_lbar_over_can(flight):

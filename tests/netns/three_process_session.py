@@ -24,11 +24,12 @@ def main() -> int:
     out_dir = Path(sys.argv[1])
     goal = [float(v) for v in sys.argv[2:5]]
     duration = sys.argv[5]
+    pacing = ["--real-time"] if len(sys.argv) > 6 and sys.argv[6] == "real-time" else []
     sim_port, comp_port = free_port(), free_port()
     log = out_dir / "truth.csv"
     py = sys.executable
     plant = subprocess.Popen(
-        [py, "-m", "sitl", "--port", str(sim_port), "--duration", duration, "--real-time",
+        [py, "-m", "sitl", "--port", str(sim_port), "--duration", duration, *pacing,
          "--can", "udp_multicast", "--no-noise", "--position", "4", "0", "10",
          "--tether-length", "12.5", "--truth-log", str(log)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
