@@ -64,6 +64,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     host, _, port = args.sim.rpartition(":")
     client = SimLinkClient(host, int(port), tuple(args.home))
     client.connect(timeout_s=args.connect_timeout)
+    print(f"companion: connected to the plant at {args.sim}"
+          + (f", component link on tcp:127.0.0.1:{components.port}" if components else ""),
+          flush=True)
     g = params.environment.gravity_m_s2
     flight = FlightController(gains, params.vehicle, params.tether, g)
     veh = params.vehicle

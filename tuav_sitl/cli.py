@@ -85,6 +85,12 @@ def _cmd_results(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_up(args: argparse.Namespace) -> int:
+    from tuav_sitl.up import run_up
+
+    return run_up(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``tuav-sitl``."""
     parser = argparse.ArgumentParser(
@@ -136,6 +142,16 @@ def build_parser() -> argparse.ArgumentParser:
     res.add_argument("--runs", default="runs", help="folder for the run folders")
     res.add_argument("--no-figures", action="store_true", help="metrics only")
     res.set_defaults(func=_cmd_results)
+
+    from tuav_sitl.up import add_arguments
+
+    up = sub.add_parser(
+        "up", help="start the plant, companion and ground station as three processes",
+        description="Start the three processes, wait until each is ready, print where to "
+                    "connect, keep their logs and the truth series in a run folder, and stop "
+                    "all of them on Ctrl-C or when one exits.")
+    add_arguments(up)
+    up.set_defaults(func=_cmd_up)
     return parser
 
 

@@ -1,0 +1,92 @@
+"""``tuav-sitl up`` supervised from outside: a normal end, Ctrl-C, a process dying, a port
+in use. Run inside a private network namespace; prints one JSON line."""
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def processes_mentioning(text: str) -> list[int]:
+    pids = []
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except OSError:
+            continue
+        if text in cmd and "up_session" not in cmd:
+            pids.append(int(pid))
+    return pids
+
+
+def up(logdir: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "tuav_sitl", "up", "--can", "udp_multicast",
+                             "--logdir", str(logdir), *extra], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def wait_banner(proc: subprocess.Popen) -> str:
+    lines = []
+    while True:
+        line = proc.stdout.readline()
+        if not line:
+            return "".join(lines)
+        lines.append(line)
+        if "Ctrl-C stops all three" in line:
+            return "".join(lines)
+
+
+def main() -> int:
+    base = Path(sys.argv[1])
+    out: dict = {}
+    # 1. a normal end: the plant's --duration
+    d1 = base / "normal"
+    p = up(d1, "--speedup", "max", "--duration", "3", "--goto", "5", "1", "11")
+    so, se = p.communicate(timeout=120)
+    run = next(d1.iterdir())
+    out["normal"] = {"rc": p.returncode, "stdout": so, "stderr": se,
+                     "files": sorted(f.name for f in run.iterdir()),
+                     "truth_rows": len((run / "truth.csv").read_text().splitlines()) - 1,
+                     "left": processes_mentioning(str(d1))}
+    # 2. Ctrl-C in real time
+    d2 = base / "sigint"
+    p = up(d2)
+    banner = wait_banner(p)
+    t0 = time.monotonic()
+    p.send_signal(signal.SIGINT)
+    so, se = p.communicate(timeout=30)
+    out["sigint"] = {"rc": p.returncode, "banner": banner, "stop_s": time.monotonic() - t0,
+                     "stdout": so, "left": processes_mentioning(str(d2))}
+    # 3. one process dies: the others are stopped and the exit code says so
+    d3 = base / "dies"
+    p = up(d3)
+    wait_banner(p)
+    victims = [pid for pid in processes_mentioning(str(d3))
+               if "groundstation" in Path(f"/proc/{pid}/cmdline").read_bytes().decode(
+                   errors="replace")]
+    for pid in victims:
+        os.kill(pid, signal.SIGKILL)
+    so, se = p.communicate(timeout=30)
+    out["dies"] = {"rc": p.returncode, "stderr": se, "killed": len(victims),
+                   "left": processes_mentioning(str(d3))}
+    # 4. a port in use
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 4560 + 10 * 3))
+        s.listen(1)
+        p = up(base / "busy", "--instance", "3")
+        so, se = p.communicate(timeout=60)
+    out["busy"] = {"rc": p.returncode, "stderr": se}
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,56 @@
+"""``tuav-sitl up`` starts, supervises and stops the three processes (in a private network
+namespace for the CAN bus)."""
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+from netns_util import netns_available, run_in_netns
+
+ROOT = Path(__file__).resolve().parents[1]
+
+pytestmark = pytest.mark.skipif(not netns_available(),
+                                reason="needs root (unshare) for a private network namespace")
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory) -> dict:
+    base = tmp_path_factory.mktemp("up")
+    res = run_in_netns([sys.executable, "-m", "tests.netns.up_session", str(base)],
+                       timeout_s=400, cwd=str(ROOT))
+    assert res.returncode == 0, res.stdout + res.stderr
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def test_a_run_ends_cleanly_with_its_folder(session):
+    n = session["normal"]
+    assert n["rc"] == 0, n["stderr"]
+    assert "plant, companion and ground station are running" in n["stdout"]
+    assert "plant finished" in n["stdout"]
+    assert {"plant.log", "companion.log", "groundstation.log", "truth.csv",
+            "params.toml"} <= set(n["files"])
+    assert n["truth_rows"] >= 140          # 3 s at 50 Hz
+    assert n["left"] == []
+
+
+def test_ctrl_c_stops_all_three_within_3_s(session):
+    s = session["sigint"]
+    assert "tcp:127.0.0.1:4560" in s["banner"] and "clock: real time" in s["banner"]
+    assert s["rc"] == 0
+    assert s["stop_s"] < 3.0
+    assert s["left"] == []
+
+
+def test_a_dying_process_stops_the_others(session):
+    d = session["dies"]
+    assert d["killed"] == 1
+    assert d["rc"] != 0
+    assert "groundstation exited" in d["stderr"]
+    assert d["left"] == []
+
+
+def test_a_busy_port_names_the_port_and_the_way_out(session):
+    b = session["busy"]
+    assert b["rc"] == 1
+    assert "port 4590 is in use" in b["stderr"] and "--instance 4" in b["stderr"]
