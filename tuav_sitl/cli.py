@@ -85,6 +85,12 @@ def _cmd_results(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_candump(args: argparse.Namespace) -> int:
+    from tuav_sitl.candump import run_candump
+
+    return run_candump(args)
+
+
 def _cmd_up(args: argparse.Namespace) -> int:
     from tuav_sitl.up import run_up
 
@@ -152,6 +158,14 @@ def build_parser() -> argparse.ArgumentParser:
                     "all of them on Ctrl-C or when one exits.")
     add_arguments(up)
     up.set_defaults(func=_cmd_up)
+
+    from tuav_sitl.candump import add_arguments as candump_arguments
+
+    dump = sub.add_parser("candump", help="print the live winder CAN bus as candump does",
+                          description="Print every frame on the winder's bus in can-utils' "
+                                      "candump formats (default or -L), line-buffered.")
+    candump_arguments(dump)
+    dump.set_defaults(func=_cmd_candump)
     return parser
 
 

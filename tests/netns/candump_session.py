@@ -1,0 +1,50 @@
+"""``tuav-sitl candump`` on a real udp_multicast bus: a sender puts known frames on it and
+two candump processes (default format with --decode, and -L) print them. Run inside a
+private network namespace; prints one JSON line."""
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from tuavdefs import can_protocol as cp
+from tuavdefs.canbus import CanLink
+
+ROOT = Path(__file__).resolve().parents[2]
+FRAMES = [
+    (cp.frame_id(0, cp.Cmd.SET_INPUT_TORQUE), cp.encode_set_input_torque(1.5), False),
+    (cp.frame_id(0, cp.Cmd.GET_ENCODER_ESTIMATES), cp.encode_encoder_estimates(2.25, -0.5),
+     False),
+    (cp.frame_id(0, cp.Cmd.GET_TORQUES), bytes(8), True),
+    (cp.frame_id(0, cp.Cmd.ESTOP), b"", False),
+    (cp.frame_id(cp.WINCH_SENSOR_NODE_ID_DEFAULT, cp.SensorCmd.WINCH_LENGTH),
+     cp.encode_winch_length(12.5, 0.25), False),
+]
+
+
+def main() -> int:
+    log = Path(sys.argv[1]) / "bus.log"
+    cmd = [sys.executable, "-m", "tuav_sitl", "candump", "--can", "udp_multicast",
+           "--count", str(len(FRAMES)), "--timeout", "20"]
+    dump_l = subprocess.Popen([*cmd, "-L", "--log", str(log)], cwd=ROOT,
+                              stdout=subprocess.PIPE, text=True)
+    dump_d = subprocess.Popen([*cmd, "--decode"], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    time.sleep(2.0)   # let both join the group
+    link = CanLink("udp_multicast")
+    for fid, data, remote in FRAMES:
+        link.send(fid, data, is_remote=remote, dlc=len(data))
+        time.sleep(0.05)
+    out_l = dump_l.communicate(timeout=60)[0]
+    out_d = dump_d.communicate(timeout=60)[0]
+    link.close()
+    decoded = subprocess.run([sys.executable, "-m", "cantools", "decode", str(cp.dbc_path())],
+                             input=out_l, capture_output=True, text=True, timeout=60)
+    print(json.dumps({"L": out_l.splitlines(), "default": out_d.splitlines(),
+                      "log_file": log.read_text().splitlines(),
+                      "cantools": decoded.stdout, "cantools_rc": decoded.returncode}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,105 @@
+"""``tuav-sitl candump``: the live winder bus, printed as can-utils' ``candump`` prints it.
+
+Works on every bus spec the stack uses (SocketCAN or udp_multicast), so it is the way to
+watch the bus where ``candump`` itself cannot (no SocketCAN). Output is line-buffered, so
+``tuav-sitl candump -L | python -m cantools decode <the DBC>`` works; ``--decode`` appends
+the signals decoded with the project's DBC; ``--log FILE`` also writes candump ``-L`` lines
+to a file (flushed at least once a second).
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+from typing import TextIO
+
+from tuav_sitl.candump_format import format_default, format_log
+from tuavdefs.can_protocol import dbc_path
+from tuavdefs.canbus import CanBusError, CanLink
+
+#: The interface name printed for a udp_multicast bus (candump needs a name).
+MULTICAST_IFACE = "udpmc0"
+
+
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options of ``tuav-sitl candump``."""
+    ap.add_argument("-L", dest="log_format", action="store_true",
+                    help="log format: (timestamp) iface id#data")
+    ap.add_argument("--decode", action="store_true", help="append the DBC's decoded signals")
+    ap.add_argument("--can", default="auto", metavar="SPEC",
+                    help="auto, socketcan:IFACE, udp_multicast[:GROUP]")
+    ap.add_argument("--log", default=None, help="also write -L lines to this file")
+    ap.add_argument("--count", type=int, default=None, help="stop after N frames")
+    ap.add_argument("--timeout", type=float, default=None,
+                    help="stop after this many seconds without a frame")
+
+
+def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """Print frames until interrupted (or ``--count``/``--timeout``); returns the exit code."""
+    try:
+        link = CanLink(args.can)
+    except CanBusError as exc:
+        print(f"tuav-sitl candump: {exc}", file=sys.stderr)
+        return 1
+    iface = link.channel if link.interface == "socketcan" else MULTICAST_IFACE
+    db = None
+    if args.decode:
+        import cantools
+
+        db = cantools.database.load_file(str(dbc_path()), strict=True)
+    log_file = open(args.log, "a") if args.log else None  # noqa: SIM115
+    stop = {"now": False}
+    signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
+    n = 0
+    last_rx = time.monotonic()
+    last_flush = time.monotonic()
+    try:
+        while not stop["now"]:
+            rx = link.recv(timeout_s=0.1)
+            now = time.monotonic()
+            if rx is None:
+                if args.timeout is not None and now - last_rx > args.timeout:
+                    break
+                continue
+            last_rx = now
+            ts = time.time()
+            if args.log_format:
+                line = format_log(ts, iface, rx.arbitration_id, rx.data, rx.is_remote,
+                                  rx.is_extended)
+            else:
+                line = format_default(iface, rx.arbitration_id, rx.data, rx.is_remote,
+                                      rx.is_extended, len(iface))
+            if db is not None and not rx.is_remote:
+                line += _decoded(db, rx.arbitration_id, rx.data)
+            out.write(line + "\n")
+            out.flush()
+            if log_file is not None:
+                log_file.write(format_log(ts, iface, rx.arbitration_id, rx.data,
+                                          rx.is_remote, rx.is_extended) + "\n")
+                if now - last_flush >= 1.0:
+                    log_file.flush()
+                    last_flush = now
+            n += 1
+            if args.count is not None and n >= args.count:
+                break
+    except KeyboardInterrupt:
+        pass
+    except BrokenPipeError:
+        return 0
+    finally:
+        link.close()
+        if log_file is not None:
+            log_file.close()
+    return 0
+
+
+def _decoded(db, arbitration_id: int, data: bytes) -> str:  # noqa: ANN001 - cantools Database
+    try:
+        msg = db.get_message_by_frame_id(arbitration_id)
+        values = msg.decode(data, decode_choices=True)
+    except (KeyError, ValueError):
+        return "  ::  (not in the DBC)"
+    body = ", ".join(f"{k}: {v}" for k, v in values.items())
+    return f"  ::  {msg.name}({body})"
