@@ -7,7 +7,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from netns_util import netns_available, run_in_netns
 
 ROOT = Path(__file__).resolve().parents[1]
