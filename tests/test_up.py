@@ -29,7 +29,8 @@ def test_a_run_ends_cleanly_with_its_folder(session):
     assert "plant, companion and ground station are running" in n["stdout"]
     assert "plant finished" in n["stdout"]
     assert {"plant.log", "companion.log", "groundstation.log", "truth.csv",
-            "params.toml"} <= set(n["files"])
+            "params.toml", "can.log"} <= set(n["files"])
+    assert n["can_decoded_torques"] > 10     # the bus recording decodes with the DBC
     assert n["truth_rows"] >= 140          # 3 s at 50 Hz
     assert n["left"] == []
 

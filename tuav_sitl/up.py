@@ -1,7 +1,8 @@
 """``tuav-sitl up``: the plant, the companion and the ground station as three OS processes.
 
 Starts them in order (plant, ground station, companion), waits until each says it is
-ready, prints a banner, and supervises them: Ctrl-C or SIGTERM stops all three within a few
+ready, prints a banner, and supervises them (a fourth, `tuav-sitl candump`, records the
+bus to ``can.log`` in candump's log format): Ctrl-C or SIGTERM stops all three within a few
 seconds and leaves none behind; if one exits, the others are stopped and the exit code says
 which failed. Each run gets a folder with every process's log, the plant's truth series and
 the parameters used.
@@ -61,6 +62,7 @@ class Stack:
     def __init__(self, run_dir: Path) -> None:
         self.run_dir = run_dir
         self.procs: dict[str, subprocess.Popen] = {}
+        self.recorders: dict[str, subprocess.Popen] = {}
         self.logs: dict[str, TextIO] = {}
 
     def start(self, name: str, args: list[str], ready_text: str) -> None:
@@ -81,6 +83,14 @@ class Stack:
             time.sleep(0.05)
         raise UpError(f"{name} did not become ready within {READY_TIMEOUT_S:.0f} s")
 
+    def start_recorder(self, name: str, args: list[str]) -> None:
+        """Start a process that needs no readiness check (its output goes to its log)."""
+        log = open(self.run_dir / f"{name}.log", "w")  # noqa: SIM115
+        self.logs[name] = log
+        self.recorders[name] = subprocess.Popen([sys.executable, *args], stdout=log,
+                                                stderr=subprocess.STDOUT,
+                                                start_new_session=True)
+
     def first_exit(self) -> tuple[str, int] | None:
         """(name, exit code) of a process that has exited, if any."""
         for name, proc in self.procs.items():
@@ -91,11 +101,12 @@ class Stack:
 
     def stop(self) -> None:
         """SIGTERM to all, then SIGKILL to whatever is left after the grace time."""
-        for proc in self.procs.values():
+        everyone = [*self.procs.values(), *self.recorders.values()]
+        for proc in everyone:
             if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + STOP_GRACE_S
-        for proc in self.procs.values():
+        for proc in everyone:
             try:
                 proc.wait(timeout=max(deadline - time.monotonic(), 0.01))
             except subprocess.TimeoutExpired:
@@ -179,6 +190,8 @@ def run_up(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     code = 0
     try:
+        stack.start_recorder("candump", ["-m", "tuav_sitl", "candump", "-L", "--can", can,
+                                         "--log", str(run_dir / "can.log")])
         stack.start("plant", plant_args, "listening on")
         stack.start("groundstation", gs_args, "groundstation: CAN")
         stack.start("companion", comp_args, "companion: connected")
@@ -222,6 +235,6 @@ def _banner(run_dir: Path, sim_port: int, comp_port: int, can: str,
         f"  winder CAN bus: {interface}:{channel}   watch it: {watch}",
         f"  home: {lat:.7f}, {lon:.7f}, {alt:.1f} m AMSL (the winder)",
         f"  clock: {'real time' if real_time else 'lockstep, as fast as possible'}",
-        f"  logs: {run_dir}",
+        f"  logs: {run_dir} (truth.csv, can.log, a log per process)",
         "  Ctrl-C stops all three.",
     ])

@@ -52,7 +52,12 @@ def main() -> int:
     p = up(d1, "--speedup", "max", "--duration", "3", "--goto", "5", "1", "11")
     so, se = p.communicate(timeout=120)
     run = next(d1.iterdir())
+    decoded = subprocess.run([sys.executable, "-m", "cantools", "decode",
+                              str(ROOT / "tuavdefs" / "data" / "tuav_winder.dbc")],
+                             input=(run / "can.log").read_text(), capture_output=True,
+                             text=True, timeout=60).stdout
     out["normal"] = {"rc": p.returncode, "stdout": so, "stderr": se,
+                     "can_decoded_torques": decoded.count("Input_Torque:"),
                      "files": sorted(f.name for f in run.iterdir()),
                      "truth_rows": len((run / "truth.csv").read_text().splitlines()) - 1,
                      "left": processes_mentioning(str(d1))}
