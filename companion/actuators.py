@@ -13,7 +13,8 @@ import math
 
 import numpy as np
 
-from tuavdefs.airframe import allocation_matrix, command_to_rotor_speed
+from tuavdefs.airframe import allocation_matrix, rotor_speed_setpoints
+from tuavdefs.jit import njit
 from tuavdefs.params import VehicleParams
 
 
@@ -35,14 +36,35 @@ class ActuatorModel:
 
     def command(self, commands: tuple[float, ...], armed: bool = True) -> None:
         """The commands just sent; they hold until the next call to :meth:`advance`."""
-        self._setpoints = np.array([command_to_rotor_speed(c, self.vehicle, armed)
-                                    for c in commands])
+        c0, c1, c2, c3 = commands
+        v = self.vehicle
+        rotor_speed_setpoints(self._setpoints, c0, c1, c2, c3, bool(armed),
+                              v.rotor_speed_min_rad_s, v.rotor_speed_max_rad_s)
 
     def advance(self) -> None:
         """Move the modelled speeds one control step toward the held set-points."""
-        self.speeds = self._setpoints + (self.speeds - self._setpoints) * self._decay
+        advance_kernel(self.speeds, self._setpoints, self._decay)
 
     def wrench(self) -> tuple[float, tuple[float, float, float]]:
         """(collective thrust [N], body torques [N m]) of the modelled rotor speeds."""
-        w = self._a @ (self.vehicle.rotor_thrust_coeff * self.speeds ** 2)
-        return float(w[0]), (float(w[1]), float(w[2]), float(w[3]))
+        u, tx, ty, tz = wrench_kernel(self._a, self.vehicle.rotor_thrust_coeff, self.speeds)
+        return u, (tx, ty, tz)
+
+
+@njit
+def advance_kernel(speeds: np.ndarray, setpoints: np.ndarray, decay: float) -> None:
+    """First-order lag over one step with the set-points held (exact), in place."""
+    for i in range(4):
+        speeds[i] = setpoints[i] + (speeds[i] - setpoints[i]) * decay
+
+
+@njit
+def wrench_kernel(a: np.ndarray, kf: float, speeds: np.ndarray
+            ) -> tuple[float, float, float, float]:
+    """a @ (k_f speeds^2): collective thrust and body torques."""
+    t0, t1 = kf * speeds[0] ** 2, kf * speeds[1] ** 2
+    t2, t3 = kf * speeds[2] ** 2, kf * speeds[3] ** 2
+    return (a[0, 0] * t0 + a[0, 1] * t1 + a[0, 2] * t2 + a[0, 3] * t3,
+            a[1, 0] * t0 + a[1, 1] * t1 + a[1, 2] * t2 + a[1, 3] * t3,
+            a[2, 0] * t0 + a[2, 1] * t1 + a[2, 2] * t2 + a[2, 3] * t3,
+            a[3, 0] * t0 + a[3, 1] * t1 + a[3, 2] * t2 + a[3, 3] * t3)

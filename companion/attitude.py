@@ -22,15 +22,18 @@ reference derivatives come from the filter, not from differentiating the positio
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+import operator
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy.linalg import expm
 
 from companion.gains import FlightControlParams
 from tuavdefs.frames import wrap_pi
+from tuavdefs.jit import njit
 
 Vec3 = tuple[float, float, float]
+Mat3 = tuple[float, float, float, float, float, float, float, float, float]  # row-major
 
 
 class AttitudeOutput(NamedTuple):
@@ -58,36 +61,77 @@ class CommandFilter:
         e = expm(m * dt_s)
         self._ad, self._bd = e[:2, :2], e[:2, 2]
         self._wn2, self._2zw = wn * wn, 2.0 * damping * wn
+        # the same numbers packed for the compiled step (_filter_step)
+        self.coeffs = np.array([self._ad[0, 0], self._ad[0, 1], self._ad[1, 0],
+                                self._ad[1, 1], self._bd[0], self._bd[1], self._wn2,
+                                self._2zw])
         self.state = np.zeros((n, 2))
         self.initialised = False
 
-    def reset(self, value: np.ndarray) -> None:
+    def reset(self, value: np.ndarray | Vec3) -> None:
         """Start at rest at ``value``."""
         self.state[:, 0] = value
         self.state[:, 1] = 0.0
         self.initialised = True
 
-    def update(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def update(self, u: np.ndarray | Vec3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(x, dx/dt, d2x/dt2) now, for input ``u`` held over the coming step; then advance
         the state by one step. The reference handed out is the filter's value at the time
         of the measurement it will be compared with, not one step ahead."""
         if not self.initialised:
             self.reset(u)
         s = self.state
-        x, xd = s[:, 0].copy(), s[:, 1].copy()
-        xdd = self._wn2 * (u - x) - self._2zw * xd
-        self.state = s @ self._ad.T + np.outer(u, self._bd)
+        n = s.shape[0]
+        x, xd, xdd = np.empty(n), np.empty(n), np.empty(n)
+        for i in range(n):
+            x[i], xd[i], xdd[i] = _filter_step(self.coeffs, s, i, float(u[i]))
         return x, xd, xdd
+
+
+@njit
+def _filter_step(c: np.ndarray, s: np.ndarray, i: int, u: float
+                 ) -> tuple[float, float, float]:
+    """One axis of :class:`CommandFilter`: (x, x', x'') of row ``i`` of the state ``s``,
+    then the row advanced in place by the exact discretisation ``c`` (ad row-major, bd,
+    wn^2, 2 zeta wn) for ``u`` held over the step."""
+    x, xd = s[i, 0], s[i, 1]
+    xdd = c[6] * (u - x) - c[7] * xd
+    s[i, 0] = x * c[0] + xd * c[1] + u * c[4]
+    s[i, 1] = x * c[2] + xd * c[3] + u * c[5]
+    return x, xd, xdd
+
+
+@njit
+def _euler_rate_entries(roll: float, pitch: float) -> tuple[Mat3, Mat3]:
+    """Entries (row-major) of W and T = W^-1 (see :func:`euler_rate_matrices`)."""
+    sr, cr = math.sin(roll), math.cos(roll)
+    sp, cp = math.sin(pitch), math.cos(pitch)
+    w = (1.0, 0.0, -sp, 0.0, cr, sr * cp, 0.0, -sr, cr * cp)
+    tp = sp / cp
+    t = (1.0, sr * tp, cr * tp, 0.0, cr, -sr, 0.0, sr / cp, cr / cp)
+    return w, t
 
 
 def euler_rate_matrices(roll: float, pitch: float) -> tuple[np.ndarray, np.ndarray]:
     """W with omega = W d(eta)/dt, and its inverse T, for Z-Y-X angles (valid |pitch| < 90 deg)."""
-    sr, cr = math.sin(roll), math.cos(roll)
-    sp, cp = math.sin(pitch), math.cos(pitch)
-    w = np.array([[1.0, 0.0, -sp], [0.0, cr, sr * cp], [0.0, -sr, cr * cp]])
-    tp = sp / cp
-    t = np.array([[1.0, sr * tp, cr * tp], [0.0, cr, -sr], [0.0, sr / cp, cr / cp]])
-    return w, t
+    w, t = _euler_rate_entries(float(roll), float(pitch))
+    return np.array(w).reshape(3, 3), np.array(t).reshape(3, 3)
+
+
+@njit
+def _mv(m: Mat3, x0: float, x1: float, x2: float) -> tuple[float, float, float]:
+    """m @ x for a row-major 3x3 ``m``."""
+    return (m[0] * x0 + m[1] * x1 + m[2] * x2,
+            m[3] * x0 + m[4] * x1 + m[5] * x2,
+            m[6] * x0 + m[7] * x1 + m[8] * x2)
+
+
+@njit
+def _mtv(m: Mat3, x0: float, x1: float, x2: float) -> tuple[float, float, float]:
+    """m' @ x for a row-major 3x3 ``m``."""
+    return (m[0] * x0 + m[3] * x1 + m[6] * x2,
+            m[1] * x0 + m[4] * x1 + m[7] * x2,
+            m[2] * x0 + m[5] * x1 + m[8] * x2)
 
 
 class AttitudeController:
@@ -105,6 +149,25 @@ class AttitudeController:
         self.xi_eta = np.zeros(3)
         self.xi_w = np.zeros(3)
         self._decay_w = np.exp(-self.k4 / self.j * dt_s)
+        self._pack()
+
+    def _pack(self) -> None:
+        """J, c, K3, K4 and the decays of xi_w and xi_eta over a step, packed for the
+        compiled law (:func:`attitude_law`)."""
+        decay_eta = np.exp(-self.k3 * self.dt_s)
+        self._p = np.concatenate([self.j, [float(self.c)], self.k3, self.k4, self._decay_w,
+                                  decay_eta]).astype(float)
+        self._packed_from = self._sources()
+
+    def _sources(self) -> tuple[Any, ...]:
+        return (self.j, self.c, self.k3, self.k4, self._decay_w, self.dt_s)
+
+    def params(self) -> np.ndarray:
+        """The packed parameters, packed again if an attribute they come from was
+        replaced."""
+        if not all(map(operator.is_, self._sources(), self._packed_from)):
+            self._pack()
+        return self._p
 
     def reset(self, attitude_rad: Vec3) -> None:
         """Start the command filter at rest at ``attitude_rad``; clear the compensation."""
@@ -120,47 +183,86 @@ class AttitudeController:
         :class:`companion.actuators.ActuatorModel`); without it the command is taken as
         achieved and the compensation stays zero.
         """
-        eta = np.array(attitude_rad)
-        om = np.array(body_rates_rad_s)
-        des = np.array(desired_rad, dtype=float)
-        if self.filter.initialised:
-            # follow yaw the short way round: unwrap the command next to the filter state
-            des[2] = self.filter.state[2, 0] + wrap_pi(des[2] - self.filter.state[2, 0])
-        eta_c, eta_c_d, eta_c_dd = self.filter.update(des)
-        e_eta = eta - eta_c
-        e_eta[2] = wrap_pi(e_eta[2])
-        w, t = euler_rate_matrices(eta[0], eta[1])
-        v = eta_c_d - self.k3 * e_eta
-        alpha = w @ v
-        eta_d = t @ om                                  # measured Euler rates
-        w_dot = _w_dot(eta[0], eta[1], eta_d[0], eta_d[1])
-        alpha_dot = w_dot @ v + w @ (eta_c_dd - self.k3 * (eta_d - eta_c_d))
-        e_w = om - alpha
-        e_eta_b = e_eta - self.xi_eta
-        e_w_b = e_w - self.xi_w
-        jw = self.j * om
-        tau = (np.cross(om, jw) + self.c * om + self.j * alpha_dot - t.T @ e_eta_b
-               - self.k4 * e_w)
-        lyap = 0.5 * float(e_eta_b @ e_eta_b) + 0.5 * float(e_w_b @ (self.j * e_w_b))
-        lyap_raw = 0.5 * float(e_eta @ e_eta) + 0.5 * float(e_w @ (self.j * e_w))
-        if achieved_torque_n_m is not None:
-            drive = (np.array(achieved_torque_n_m) - tau) / self.k4
-            xi_w_new = drive + (self.xi_w - drive) * self._decay_w
-            # xi_eta driven by T xi_w (trapezoid over the step), decaying at K3
-            d3 = np.exp(-self.k3 * self.dt_s)
-            u = 0.5 * (t @ self.xi_w + t @ xi_w_new)
-            self.xi_eta = u / self.k3 + (self.xi_eta - u / self.k3) * d3
-            self.xi_w = xi_w_new
-        return AttitudeOutput(tuple(tau), tuple(eta_c), tuple(alpha), tuple(e_eta_b),
-                              tuple(e_w_b), lyap, lyap_raw)
+        f = self.filter
+        achieved = achieved_torque_n_m is not None
+        r = attitude_law(self.params(), f.coeffs, f.state, self.xi_eta, self.xi_w, *attitude_rad,
+                          *body_rates_rad_s, *desired_rad, f.initialised, achieved,
+                          *(achieved_torque_n_m if achieved else (0.0, 0.0, 0.0)))
+        f.initialised = True
+        return attitude_output(r)
 
 
-def _w_dot(roll: float, pitch: float, roll_d: float, pitch_d: float) -> np.ndarray:
-    """Time derivative of W(roll, pitch)."""
+def attitude_output(r: tuple[Any, ...]) -> AttitudeOutput:
+    """The :class:`AttitudeOutput` of :func:`attitude_law`'s result."""
+    return AttitudeOutput._make(r)
+
+
+@njit
+def attitude_law(p: np.ndarray, fc: np.ndarray, fs: np.ndarray, xi_eta: np.ndarray,
+                 xi_w: np.ndarray, eta0: float, eta1: float, eta2: float, om0: float,
+                 om1: float, om2: float, des0: float, des1: float, des2: float,
+                 initialised: bool, achieved: bool, ta0: float, ta1: float, ta2: float
+                 ) -> tuple[Any, ...]:
+    """One step of :class:`AttitudeController` (the law of the module docstring), in
+    scalars: advances the command filter ``fs`` (started at rest at the desired attitude
+    unless ``initialised``) and the compensation ``xi_eta``, ``xi_w`` in place; returns the
+    fields of an :class:`AttitudeOutput`.
+    ``p`` = (J, c, K3, K4, decay of xi_w, decay of xi_eta) over one step."""
+    j0, j1, j2, c = p[0], p[1], p[2], p[3]
+    k30, k31, k32, k40, k41, k42 = p[4], p[5], p[6], p[7], p[8], p[9]
+    if initialised:
+        # follow yaw the short way round: unwrap the command next to the filter state
+        des2 = fs[2, 0] + wrap_pi(des2 - fs[2, 0])
+    else:
+        fs[0, 0], fs[1, 0], fs[2, 0] = des0, des1, des2
+        fs[0, 1] = fs[1, 1] = fs[2, 1] = 0.0
+    c0, cd0, cdd0 = _filter_step(fc, fs, 0, des0)     # eta_c and its derivatives
+    c1, cd1, cdd1 = _filter_step(fc, fs, 1, des1)
+    c2, cd2, cdd2 = _filter_step(fc, fs, 2, des2)
+    e0, e1, e2 = eta0 - c0, eta1 - c1, wrap_pi(eta2 - c2)
+    w, t = _euler_rate_entries(eta0, eta1)
+    v0, v1, v2 = cd0 - k30 * e0, cd1 - k31 * e1, cd2 - k32 * e2
+    a0, a1, a2 = _mv(w, v0, v1, v2)                   # alpha
+    ed0, ed1, ed2 = _mv(t, om0, om1, om2)             # measured Euler rates
+    w_dot = _w_dot(eta0, eta1, ed0, ed1)
+    p0, p1, p2 = _mv(w_dot, v0, v1, v2)
+    q0, q1, q2 = _mv(w, cdd0 - k30 * (ed0 - cd0), cdd1 - k31 * (ed1 - cd1),
+                     cdd2 - k32 * (ed2 - cd2))
+    ad0, ad1, ad2 = p0 + q0, p1 + q1, p2 + q2         # d(alpha)/dt
+    ew0, ew1, ew2 = om0 - a0, om1 - a1, om2 - a2
+    eb0, eb1, eb2 = e0 - xi_eta[0], e1 - xi_eta[1], e2 - xi_eta[2]
+    wb0, wb1, wb2 = ew0 - xi_w[0], ew1 - xi_w[1], ew2 - xi_w[2]
+    jw0, jw1, jw2 = j0 * om0, j1 * om1, j2 * om2
+    g0, g1, g2 = _mtv(t, eb0, eb1, eb2)               # T' e_eta_bar
+    tau0 = (om1 * jw2 - om2 * jw1) + c * om0 + j0 * ad0 - g0 - k40 * ew0
+    tau1 = (om2 * jw0 - om0 * jw2) + c * om1 + j1 * ad1 - g1 - k41 * ew1
+    tau2 = (om0 * jw1 - om1 * jw0) + c * om2 + j2 * ad2 - g2 - k42 * ew2
+    lyap = (0.5 * (eb0 * eb0 + eb1 * eb1 + eb2 * eb2)
+            + 0.5 * (wb0 * (j0 * wb0) + wb1 * (j1 * wb1) + wb2 * (j2 * wb2)))
+    lyap_raw = (0.5 * (e0 * e0 + e1 * e1 + e2 * e2)
+                + 0.5 * (ew0 * (j0 * ew0) + ew1 * (j1 * ew1) + ew2 * (j2 * ew2)))
+    if achieved:
+        dr0, dr1, dr2 = (ta0 - tau0) / k40, (ta1 - tau1) / k41, (ta2 - tau2) / k42
+        n0 = dr0 + (xi_w[0] - dr0) * p[10]
+        n1 = dr1 + (xi_w[1] - dr1) * p[11]
+        n2 = dr2 + (xi_w[2] - dr2) * p[12]
+        # xi_eta driven by T xi_w (trapezoid over the step), decaying at K3
+        o0, o1, o2 = _mv(t, xi_w[0], xi_w[1], xi_w[2])
+        m0, m1, m2 = _mv(t, n0, n1, n2)
+        u0, u1, u2 = 0.5 * (o0 + m0), 0.5 * (o1 + m1), 0.5 * (o2 + m2)
+        xi_eta[0] = u0 / k30 + (xi_eta[0] - u0 / k30) * p[13]
+        xi_eta[1] = u1 / k31 + (xi_eta[1] - u1 / k31) * p[14]
+        xi_eta[2] = u2 / k32 + (xi_eta[2] - u2 / k32) * p[15]
+        xi_w[0], xi_w[1], xi_w[2] = n0, n1, n2
+    return ((tau0, tau1, tau2), (c0, c1, c2), (a0, a1, a2), (eb0, eb1, eb2), (wb0, wb1, wb2),
+            lyap, lyap_raw)
+
+
+@njit
+def _w_dot(roll: float, pitch: float, roll_d: float, pitch_d: float) -> Mat3:
+    """Time derivative of W(roll, pitch), row-major."""
     sr, cr = math.sin(roll), math.cos(roll)
     sp, cp = math.sin(pitch), math.cos(pitch)
-    return np.array([
-        [0.0, 0.0, -cp * pitch_d],
-        [0.0, -sr * roll_d, cr * cp * roll_d - sr * sp * pitch_d],
-        [0.0, -cr * roll_d, -sr * cp * roll_d - cr * sp * pitch_d],
-    ])
+    return (0.0, 0.0, -cp * pitch_d,
+            0.0, -sr * roll_d, cr * cp * roll_d - sr * sp * pitch_d,
+            0.0, -cr * roll_d, -sr * cp * roll_d - cr * sp * pitch_d)

@@ -5,21 +5,29 @@ runs in-process: the reference (from the mission logic) and the vehicle's state 
 normalised rotor commands come out, through the onboard tether model (fed by the winch's
 reports), the backstepping position loop, the command-filtered attitude loop, the mixer and
 the controller's model of its own motors (docs/control.md).
+
+One step is one compiled call (:func:`flight_step`) through the same kernels the
+components run on their own, on their parameters and states.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
-from companion.actuators import ActuatorModel
-from companion.attitude import AttitudeController, AttitudeOutput
+import numpy as np
+
+from companion.actuators import ActuatorModel, advance_kernel, wrench_kernel
+from companion.attitude import AttitudeController, AttitudeOutput, attitude_law, attitude_output
 from companion.gains import FlightControlParams
-from companion.position import PositionController, PositionOutput
-from companion.tether_model import TetherModel, WinchReport
+from companion.position import PositionController, PositionOutput, position_law, position_output
+from companion.tether_model import TetherModel, WinchReport, estimate_kernel
 from companion.trajectory import RefSample
-from tuavdefs.airframe import Mixer
-from tuavdefs.frames import Quat, Vec3, quat_to_euler, quat_to_matrix
+from tuavdefs.airframe import Mixer, mix_kernel, rotor_speed_setpoints
+from tuavdefs.frames import Quat, Vec3, quat_to_euler, quat_to_euler_kernel, quat_to_matrix_kernel
+from tuavdefs.jit import JIT, njit
 from tuavdefs.params import TetherParams, VehicleParams
+
+_ZERO3 = (0.0, 0.0, 0.0)
 
 
 class VehicleState(NamedTuple):
@@ -59,6 +67,13 @@ class FlightController:
         self.tether_model = TetherModel(tether.weight_per_length_n_m(gravity_m_s2),
                                         tether.axial_stiffness_n)
         self.winch = WinchReport()
+        if JIT:
+            # load (or compile) the step's machine code now, not at the first control step:
+            # a process with deadlines must not wait for it there
+            at = (0.0, 0.0, 10.0)
+            flight_step(self.dt_s, *at, *_ZERO3, 1.0, 0.0, 0.0, 0.0, *_ZERO3, *at, *_ZERO3,
+                        *_ZERO3, 0.0, 12.0, True, 1.0, True, False, True, *self._constants(),
+                        *(a.copy() for a in self._arrays()))
 
     def reset(self, state: VehicleState, rotor_speeds_rad_s: tuple[float, ...]) -> None:
         """Start from the vehicle's current attitude and rotor speeds (e.g. hover trim)."""
@@ -75,17 +90,65 @@ class FlightController:
                armed: bool = True) -> FlightStep:
         """One control step at time ``t_s`` [s]."""
         g = self.gains
-        r = quat_to_matrix(state.quat)
-        est = self.tether_model.estimate(
-            state.pos_m, self.winch.length_at(t_s),
-            self.winch.tension_n if g.use_measured_tension else None)
-        f_t = est.force_n if g.use_tether_model else (0.0, 0.0, 0.0)
-        u_ach, tau_ach = self.actuators.wrench()
-        po = self.position.update(self.dt_s, state.pos_m, state.vel_m_s, ref.pos_m,
-                                  ref.vel_m_s, ref.acc_m_s2, ref.yaw_rad, r, f_t, u_ach)
-        ao = self.attitude.update(quat_to_euler(state.quat), state.rates_rad_s,
-                                  po.attitude_rad, tau_ach)
-        mix = self.mixer.mix(po.thrust_n, ao.torque_n_m)
-        self.actuators.command(mix.commands, armed)
-        self.actuators.advance()
-        return FlightStep(mix.commands, mix.saturated, po, ao, f_t)
+        tension = self.winch.tension_n if g.use_measured_tension else None
+        measured = tension is not None
+        f = self.attitude.filter
+        commands, saturated, p, a, tether_force = flight_step(
+            self.dt_s, *state.pos_m, *state.vel_m_s, *state.quat, *state.rates_rad_s,
+            *ref.pos_m, *ref.vel_m_s, *ref.acc_m_s2, ref.yaw_rad, self.winch.length_at(t_s),
+            measured, tension if measured else 0.0, g.use_tether_model, f.initialised,
+            bool(armed), *self._constants(), *self._arrays())
+        f.initialised = True
+        return FlightStep(commands, saturated, position_output(p), attitude_output(a),
+                          tether_force)
+
+    def _constants(self) -> tuple[float, ...]:
+        """The scalar parameters :func:`flight_step` takes from the components."""
+        tm, act = self.tether_model, self.actuators
+        v = act.vehicle
+        return (tm.w, tm.taut_stiffness_n, v.rotor_thrust_coeff, act._decay,
+                v.rotor_speed_min_rad_s, v.rotor_speed_max_rad_s)
+
+    def _arrays(self) -> tuple[np.ndarray, ...]:
+        """The components' packed parameters and states, in :func:`flight_step`'s order."""
+        pc, ac, mx, act = self.position, self.attitude, self.mixer, self.actuators
+        return (pc.params(), pc._state, ac.params(), ac.filter.coeffs, ac.filter.state, ac.xi_eta,
+                ac.xi_w, mx._inv, mx.params(), act._a, act.speeds, act._setpoints)
+
+
+@njit
+def flight_step(dt_s: float, px: float, py: float, pz: float, vx: float, vy: float,
+                vz: float, qw: float, qx: float, qy: float, qz: float, wx: float, wy: float,
+                wz: float, rpx: float, rpy: float, rpz: float, rvx: float, rvy: float,
+                rvz: float, rax: float, ray: float, raz: float, ref_yaw: float,
+                length_m: float, measured: bool, tension_n: float, use_tether: bool,
+                initialised: bool, armed: bool, w_n_m: float, taut_stiffness_n: float,
+                kf: float, decay: float, speed_min: float, speed_max: float,
+                pos_p: np.ndarray, pos_s: np.ndarray, att_p: np.ndarray,
+                filt_c: np.ndarray, filt_s: np.ndarray, xi_eta: np.ndarray,
+                xi_w: np.ndarray, mix_inv: np.ndarray, mix_p: np.ndarray,
+                alloc: np.ndarray, speeds: np.ndarray, setpoints: np.ndarray
+                ) -> tuple[Any, ...]:
+    """:meth:`FlightController.update` in scalars, on the components' packed parameters
+    and states (updated in place): the onboard tether model, the modelled rotors' wrench,
+    the position loop, the attitude loop, the mixer and the motor model's step. Returns
+    (commands, mixer saturated, position_law's and attitude_law's results, tether force)."""
+    q = (qw, qx, qy, qz)
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = quat_to_matrix_kernel(q)
+    ftx, fty, ftz = 0.0, 0.0, 0.0
+    if use_tether:
+        ftx, fty, ftz, _, _, _ = estimate_kernel(w_n_m, taut_stiffness_n, px, py, pz,
+                                                 length_m, measured, tension_n)
+    u_ach, ta0, ta1, ta2 = wrench_kernel(alloc, kf, speeds)
+    po = position_law(pos_p, pos_s, dt_s, px, py, pz, vx, vy, vz, rpx, rpy, rpz, rvx, rvy,
+                      rvz, rax, ray, raz, ref_yaw, r00, r01, r02, r10, r11, r12, r20, r21,
+                      r22, ftx, fty, ftz, True, u_ach)
+    roll, pitch, yaw = quat_to_euler_kernel(q)
+    des_roll, des_pitch, des_yaw = po[1]
+    ao = attitude_law(att_p, filt_c, filt_s, xi_eta, xi_w, roll, pitch, yaw, wx, wy, wz,
+                      des_roll, des_pitch, des_yaw, initialised, True, ta0, ta1, ta2)
+    tx, ty, tz = ao[0]
+    c0, c1, c2, c3, saturated = mix_kernel(mix_inv, mix_p, po[0], tx, ty, tz)
+    rotor_speed_setpoints(setpoints, c0, c1, c2, c3, armed, speed_min, speed_max)
+    advance_kernel(speeds, setpoints, decay)
+    return (c0, c1, c2, c3), saturated, po, ao, (ftx, fty, ftz)

@@ -29,11 +29,21 @@ yaw.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+import operator
+from typing import Any, NamedTuple
+
+import numpy as np
 
 from companion.gains import FlightControlParams
+from tuavdefs.jit import njit
 
 Vec3 = tuple[float, float, float]
+
+# indices of the packed parameters (PositionController._pack) and state
+(P_M, P_G, P_U_MAX, P_U_MIN, P_FZ_MIN, P_TAN_TILT, P_D_MAX, P_K1, P_K2, P_GAM,
+ P_DRAG) = (0, 1, 2, 3, 4, 5, 6, 7, 10, 13, 16)
+N_PARAMS = 19
+S_D_HAT, S_XI1, S_XI2 = 0, 3, 6
 
 
 class PositionOutput(NamedTuple):
@@ -51,7 +61,11 @@ class PositionOutput(NamedTuple):
 
 
 class PositionController:
-    """Backstepping position controller with an adaptive disturbance estimate."""
+    """Backstepping position controller with an adaptive disturbance estimate.
+
+    The gains and limits are packed for the compiled law (:func:`position_law`), again
+    whenever one of the attributes they come from is replaced.
+    """
 
     def __init__(self, gains: FlightControlParams, mass_kg: float, gravity_m_s2: float,
                  max_total_thrust_n: float, min_total_thrust_n: float = 0.0,
@@ -62,15 +76,45 @@ class PositionController:
         self.g = gravity_m_s2
         self.u_max = gains.max_thrust_fraction * max_total_thrust_n
         self.u_min = min_total_thrust_n
-        self.d_hat = [0.0, 0.0, 0.0]
-        self.xi1 = [0.0, 0.0, 0.0]
-        self.xi2 = [0.0, 0.0, 0.0]
+        self._state = np.zeros(9)     # d_hat, xi1, xi2
+        self._pack()
+
+    def _pack(self) -> None:
+        gn = self.gains
+        p = np.zeros(N_PARAMS)
+        p[P_M], p[P_G], p[P_U_MAX], p[P_U_MIN] = self.m, self.g, self.u_max, self.u_min
+        p[P_FZ_MIN] = self.u_min if self.u_min > 0 else 1e-3 * self.m * self.g
+        p[P_TAN_TILT] = math.tan(gn.max_tilt_rad)
+        p[P_D_MAX] = gn.disturbance_limit_m_s2
+        p[P_K1:P_K1 + 3] = gn.pos_k1_1_s
+        p[P_K2:P_K2 + 3] = gn.pos_k2_1_s
+        p[P_GAM:P_GAM + 3] = gn.disturbance_gain_1_s2
+        p[P_DRAG:P_DRAG + 3] = self.drag
+        self._p = p
+        self._packed_from = self._sources()
+
+    def _sources(self) -> tuple[Any, ...]:
+        return (self.gains, self.m, self.g, self.u_max, self.u_min, self.drag)
+
+    @property
+    def d_hat(self) -> list[float]:
+        """The disturbance estimate [m/s^2]."""
+        return self._state[S_D_HAT:S_D_HAT + 3].tolist()
+
+    @property
+    def xi1(self) -> list[float]:
+        """The position compensation signal [m]."""
+        return self._state[S_XI1:S_XI1 + 3].tolist()
+
+    @property
+    def xi2(self) -> list[float]:
+        """The velocity compensation signal [m/s]."""
+        return self._state[S_XI2:S_XI2 + 3].tolist()
 
     def reset(self, disturbance_m_s2: Vec3 = (0.0, 0.0, 0.0)) -> None:
         """Forget the disturbance estimate (or start from a given one) and the compensation."""
-        self.d_hat = list(disturbance_m_s2)
-        self.xi1 = [0.0, 0.0, 0.0]
-        self.xi2 = [0.0, 0.0, 0.0]
+        self._state[:] = 0.0
+        self._state[S_D_HAT:S_D_HAT + 3] = disturbance_m_s2
 
     def update(self, dt_s: float, pos: Vec3, vel: Vec3, ref_pos: Vec3, ref_vel: Vec3,
                ref_acc: Vec3, ref_yaw_rad: float,
@@ -86,68 +130,113 @@ class PositionController:
         :class:`companion.actuators.ActuatorModel`); without it the limited command is
         taken as achieved.
         """
-        r = rotation
-        body_z = (r[0][2], r[1][2], r[2][2])
-        gn = self.gains
-        k1, k2, gam = gn.pos_k1_1_s, gn.pos_k2_1_s, gn.disturbance_gain_1_s2
-        e1 = [pos[i] - ref_pos[i] for i in range(3)]
-        ev = [vel[i] - ref_vel[i] for i in range(3)]
-        e2 = [ev[i] + k1[i] * e1[i] for i in range(3)]
-        xi1, xi2 = self.xi1, self.xi2
-        e1b = [e1[i] - xi1[i] for i in range(3)]
-        e2b = [e2[i] - xi2[i] for i in range(3)]
-        a_d = [ref_acc[i] - k1[i] * ev[i] - e1b[i] - k2[i] * e2[i] - self.d_hat[i]
-               for i in range(3)]
-        a_d[2] += self.g
-        drag = _drag_force(r, self.drag, vel)
-        f_d = [self.m * a_d[i] - tether_force_n[i] - drag[i] for i in range(3)]
-        f, saturated = self._limit(f_d)
-        thrust = f[0] * body_z[0] + f[1] * body_z[1] + f[2] * body_z[2]
-        thrust = min(max(thrust, self.u_min), self.u_max)
-        attitude = attitude_from_thrust_vector(f, ref_yaw_rad)
-        # without actuator information the limited command is taken as achieved
-        f_a = f if achieved_thrust_n is None else [achieved_thrust_n * b for b in body_z]
-        lyap = 0.5 * sum(e * e for e in e1b) + 0.5 * sum(e * e for e in e2b)
-        lyap_raw = 0.5 * sum(e * e for e in e1) + 0.5 * sum(e * e for e in e2)
-        # no conditional integration: the compensated error already leaves out what the
-        # limits took away, and freezing would break dV/dt <= 0 (docs/control.md)
-        self._adapt(dt_s, e2b, gam)
-        # compensation signals, exact for one step with the input held
-        for i in range(3):
-            drive = (f_a[i] - f_d[i]) / self.m
-            xi1[i], xi2[i] = _compensate(xi1[i], xi2[i], k1[i], k2[i], drive, dt_s)
-        return PositionOutput(thrust, attitude, tuple(f), tuple(e1b), tuple(e2b),
-                              tuple(self.d_hat), saturated, lyap, lyap_raw)
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation
+        achieved = achieved_thrust_n is not None
+        r = position_law(self.params(), self._state, dt_s, *pos, *vel, *ref_pos, *ref_vel,
+                          *ref_acc, ref_yaw_rad, r00, r01, r02, r10, r11, r12, r20, r21,
+                          r22, *tether_force_n, achieved,
+                          achieved_thrust_n if achieved else 0.0)
+        return position_output(r)
 
-    def _adapt(self, dt_s: float, e2: list[float], gam: tuple[float, ...]) -> None:
-        step = [gam[i] * e2[i] * dt_s for i in range(3)]
-        new = [self.d_hat[i] + step[i] for i in range(3)]
-        lim = self.gains.disturbance_limit_m_s2
-        norm = math.sqrt(sum(v * v for v in new))
-        if norm > lim:  # projection onto the ball: keep the estimate bounded (anti-windup)
-            new = [v * lim / norm for v in new]
-        self.d_hat = new
-
-    def _limit(self, f: list[float]) -> tuple[list[float], bool]:
-        """Limit the thrust vector's tilt and magnitude, keeping its vertical part first."""
-        sat = False
-        fz = f[2]
-        fz_min = self.u_min if self.u_min > 0 else 1e-3 * self.m * self.g
-        if fz < fz_min:
-            fz, sat = fz_min, True
-        fz = min(fz, self.u_max)
-        if fz != f[2]:
-            sat = True
-        fh = math.hypot(f[0], f[1])
-        fh_max = min(fz * math.tan(self.gains.max_tilt_rad),
-                     math.sqrt(max(self.u_max * self.u_max - fz * fz, 0.0)))
-        fx, fy = f[0], f[1]
-        if fh > fh_max:
-            s = fh_max / fh
-            fx, fy, sat = fx * s, fy * s, True
-        return [fx, fy, fz], sat
+    def params(self) -> np.ndarray:
+        """The gains and limits packed for :func:`position_law`."""
+        if not all(map(operator.is_, self._sources(), self._packed_from)):
+            self._pack()
+        return self._p
 
 
+def position_output(r: tuple[Any, ...]) -> PositionOutput:
+    """The :class:`PositionOutput` of :func:`position_law`'s result."""
+    return PositionOutput._make(r)
+
+
+@njit
+def position_law(p: np.ndarray, s: np.ndarray, dt_s: float, px: float, py: float,
+                 pz: float, vx: float, vy: float, vz: float, rpx: float, rpy: float,
+                 rpz: float, rvx: float, rvy: float, rvz: float, rax: float, ray: float,
+                 raz: float, yaw: float, r00: float, r01: float, r02: float, r10: float,
+                 r11: float, r12: float, r20: float, r21: float, r22: float, ftx: float,
+                 fty: float, ftz: float, achieved: bool, u_ach: float
+                 ) -> tuple[Any, ...]:
+    """One step of :class:`PositionController` (the law of the module docstring), in
+    scalars: updates d_hat, xi1, xi2 in ``s`` in place; returns the fields of a
+    :class:`PositionOutput`. ``p`` holds the packed parameters."""
+    m = p[P_M]
+    k1x, k1y, k1z = p[P_K1], p[P_K1 + 1], p[P_K1 + 2]
+    k2x, k2y, k2z = p[P_K2], p[P_K2 + 1], p[P_K2 + 2]
+    e1x, e1y, e1z = px - rpx, py - rpy, pz - rpz
+    evx, evy, evz = vx - rvx, vy - rvy, vz - rvz
+    e2x, e2y, e2z = evx + k1x * e1x, evy + k1y * e1y, evz + k1z * e1z
+    e1bx, e1by, e1bz = e1x - s[S_XI1], e1y - s[S_XI1 + 1], e1z - s[S_XI1 + 2]
+    e2bx, e2by, e2bz = e2x - s[S_XI2], e2y - s[S_XI2 + 1], e2z - s[S_XI2 + 2]
+    adx = rax - k1x * evx - e1bx - k2x * e2x - s[S_D_HAT]
+    ady = ray - k1y * evy - e1by - k2y * e2y - s[S_D_HAT + 1]
+    adz = raz - k1z * evz - e1bz - k2z * e2z - s[S_D_HAT + 2]
+    adz += p[P_G]
+    dgx, dgy, dgz = _drag_force(r00, r01, r02, r10, r11, r12, r20, r21, r22,
+                                p[P_DRAG], p[P_DRAG + 1], p[P_DRAG + 2], vx, vy, vz)
+    fdx, fdy, fdz = m * adx - ftx - dgx, m * ady - fty - dgy, m * adz - ftz - dgz
+    fx, fy, fz, saturated = _limit(p, fdx, fdy, fdz)
+    thrust = fx * r02 + fy * r12 + fz * r22
+    thrust = min(max(thrust, p[P_U_MIN]), p[P_U_MAX])
+    roll, pitch, yaw = _attitude_from_thrust(fx, fy, fz, yaw)
+    # without actuator information the limited command is taken as achieved
+    if achieved:
+        fax, fay, faz = u_ach * r02, u_ach * r12, u_ach * r22
+    else:
+        fax, fay, faz = fx, fy, fz
+    lyap = 0.5 * (e1bx * e1bx + e1by * e1by + e1bz * e1bz) + 0.5 * (
+        e2bx * e2bx + e2by * e2by + e2bz * e2bz)
+    lyap_raw = 0.5 * (e1x * e1x + e1y * e1y + e1z * e1z) + 0.5 * (
+        e2x * e2x + e2y * e2y + e2z * e2z)
+    # no conditional integration: the compensated error already leaves out what the
+    # limits took away, and freezing would break dV/dt <= 0 (docs/control.md)
+    _adapt(p, s, dt_s, e2bx, e2by, e2bz)
+    # compensation signals, exact for one step with the input held
+    s[S_XI1], s[S_XI2] = _compensate(s[S_XI1], s[S_XI2], k1x, k2x, (fax - fdx) / m, dt_s)
+    s[S_XI1 + 1], s[S_XI2 + 1] = _compensate(s[S_XI1 + 1], s[S_XI2 + 1], k1y, k2y,
+                                             (fay - fdy) / m, dt_s)
+    s[S_XI1 + 2], s[S_XI2 + 2] = _compensate(s[S_XI1 + 2], s[S_XI2 + 2], k1z, k2z,
+                                             (faz - fdz) / m, dt_s)
+    return (thrust, (roll, pitch, yaw), (fx, fy, fz), (e1bx, e1by, e1bz), (e2bx, e2by, e2bz),
+            (s[S_D_HAT], s[S_D_HAT + 1], s[S_D_HAT + 2]), saturated, lyap, lyap_raw)
+
+
+@njit
+def _adapt(p: np.ndarray, s: np.ndarray, dt_s: float, e2x: float, e2y: float,
+           e2z: float) -> None:
+    """d(d_hat)/dt = Gamma e2_bar over one step, projected onto |d_hat| <= d_max."""
+    nx = s[S_D_HAT] + p[P_GAM] * e2x * dt_s
+    ny = s[S_D_HAT + 1] + p[P_GAM + 1] * e2y * dt_s
+    nz = s[S_D_HAT + 2] + p[P_GAM + 2] * e2z * dt_s
+    lim = p[P_D_MAX]
+    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if norm > lim:  # projection onto the ball: keep the estimate bounded (anti-windup)
+        nx, ny, nz = nx * lim / norm, ny * lim / norm, nz * lim / norm
+    s[S_D_HAT], s[S_D_HAT + 1], s[S_D_HAT + 2] = nx, ny, nz
+
+
+@njit
+def _limit(p: np.ndarray, fx: float, fy: float, fz0: float
+           ) -> tuple[float, float, float, bool]:
+    """Limit the thrust vector's tilt and magnitude, keeping its vertical part first."""
+    sat = False
+    u_max = p[P_U_MAX]
+    fz = fz0
+    if fz < p[P_FZ_MIN]:
+        fz, sat = p[P_FZ_MIN], True
+    fz = min(fz, u_max)
+    if fz != fz0:
+        sat = True
+    fh = math.hypot(fx, fy)
+    fh_max = min(fz * p[P_TAN_TILT], math.sqrt(max(u_max * u_max - fz * fz, 0.0)))
+    if fh > fh_max:
+        sc = fh_max / fh
+        fx, fy, sat = fx * sc, fy * sc, True
+    return fx, fy, fz, sat
+
+
+@njit
 def _compensate(x1: float, x2: float, k1: float, k2: float, u: float, dt: float
                 ) -> tuple[float, float]:
     """One step of dx1/dt = -k1 x1 + x2, dx2/dt = -k2 x2 + u with u held: exact (the
@@ -164,18 +253,26 @@ def _compensate(x1: float, x2: float, k1: float, k2: float, u: float, dt: float
     return x1_new, x2_new
 
 
-def _drag_force(r: tuple[Vec3, Vec3, Vec3], d: Vec3, v: Vec3) -> Vec3:
-    """Linear drag in still air, R diag(d) R' v, as the inertial force on the UAV [N]."""
-    b = [-(r[0][i] * v[0] + r[1][i] * v[1] + r[2][i] * v[2]) * d[i] for i in range(3)]
-    return tuple(r[j][0] * b[0] + r[j][1] * b[1] + r[j][2] * b[2]  # type: ignore[return-value]
-                 for j in range(3))
+@njit
+def _drag_force(r00: float, r01: float, r02: float, r10: float, r11: float, r12: float,
+                r20: float, r21: float, r22: float, dx: float, dy: float, dz: float,
+                vx: float, vy: float, vz: float) -> tuple[float, float, float]:
+    """Linear drag in still air, R diag(d) R' v, as the inertial force on the UAV [N]
+    (``r`` the rotation matrix's entries, row-major)."""
+    bx = -(r00 * vx + r10 * vy + r20 * vz) * dx
+    by = -(r01 * vx + r11 * vy + r21 * vz) * dy
+    bz = -(r02 * vx + r12 * vy + r22 * vz) * dz
+    return (r00 * bx + r01 * by + r02 * bz,
+            r10 * bx + r11 * by + r12 * bz,
+            r20 * bx + r21 * by + r22 * bz)
 
 
-def attitude_from_thrust_vector(f: list[float] | Vec3, yaw_rad: float) -> Vec3:
-    """Z-Y-X Euler angles (roll, pitch, yaw) [rad] of the attitude whose body z axis is along
-    ``f`` and whose heading is ``yaw_rad`` (z-up convention: body x forward, y left)."""
-    n = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
-    zx, zy, zz = f[0] / n, f[1] / n, f[2] / n
+@njit
+def _attitude_from_thrust(fx: float, fy: float, fz: float, yaw_rad: float
+                          ) -> tuple[float, float, float]:
+    """:func:`attitude_from_thrust_vector` in scalars."""
+    n = math.sqrt(fx * fx + fy * fy + fz * fz)
+    zx, zy, zz = fx / n, fy / n, fz / n
     cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
     # R = Rz(yaw) Ry(pitch) Rx(roll) has third column
     # (cy sp cr + sy sr, sy sp cr - cy sr, cp cr): rotate z_d back by -yaw about z
@@ -184,3 +281,9 @@ def attitude_from_thrust_vector(f: list[float] | Vec3, yaw_rad: float) -> Vec3:
     roll = math.asin(max(-1.0, min(1.0, -by)))
     pitch = math.atan2(bx, zz)
     return (roll, pitch, yaw_rad)
+
+
+def attitude_from_thrust_vector(f: list[float] | Vec3, yaw_rad: float) -> Vec3:
+    """Z-Y-X Euler angles (roll, pitch, yaw) [rad] of the attitude whose body z axis is along
+    ``f`` and whose heading is ``yaw_rad`` (z-up convention: body x forward, y left)."""
+    return _attitude_from_thrust(float(f[0]), float(f[1]), float(f[2]), float(yaw_rad))

@@ -17,6 +17,8 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+from tuavdefs.jit import njit
+
 
 class TetherEstimate(NamedTuple):
     """The modelled pull of the tether on the UAV (inertial z-up frame)."""
@@ -25,9 +27,6 @@ class TetherEstimate(NamedTuple):
     horizontal_tension_n: float
     top_vertical_tension_n: float
     regime: str  # "suspended", "touchdown", "slack", "vertical", "taut"
-
-
-_ZERO = (0.0, 0.0, 0.0)
 
 
 class WinchReport:
@@ -70,41 +69,55 @@ class TetherModel:
                  drum_tension_n: float | None = None) -> TetherEstimate:
         """The pull on the UAV at ``pos_m`` with ``length_m`` paid out [N]."""
         x, y, z = pos_m
-        z = max(z, 0.0)
-        h = math.hypot(x, y)
-        w = self.w
-        if not (length_m > 0 and math.isfinite(length_m)):
-            return TetherEstimate(_ZERO, 0.0, 0.0, "slack")
-        chord = math.hypot(h, z)
-        if length_m <= chord:
-            # taut: a straight spring along the chord
-            t = self.taut_stiffness_n * (chord - length_m) / length_m + w * z
-            if drum_tension_n is not None:
-                t = drum_tension_n + w * z
-            if chord == 0.0:
-                return TetherEstimate(_ZERO, 0.0, 0.0, "taut")
-            return TetherEstimate((-t * x / chord, -t * y / chord, -t * z / chord),
-                                  t * h / chord, t * z / chord, "taut")
-        if length_m >= h + z or h < 1e-9:
-            # slack (or vertical): hangs straight down from the UAV, the rest lies flat
-            v_top = w * min(z, length_m)
-            regime = "vertical" if h < 1e-9 else "slack"
-            return TetherEstimate((0.0, 0.0, -v_top), 0.0, v_top, regime)
-        a = _suspended_parameter(h, z, length_m)
-        v_top = 0.5 * w * (length_m + z / math.tanh(h / (2.0 * a)))
-        regime = "suspended"
-        if v_top - w * length_m < 0.0:
-            a = _touchdown_parameter(h, z, length_m)
-            v_top = w * math.sqrt(z * z + 2.0 * a * z)
-            regime = "touchdown"
-        hz = w * a
-        if drum_tension_n is not None and drum_tension_n >= 0.0:
-            t_model = math.hypot(hz, v_top)
-            scale = (drum_tension_n + w * z) / t_model
-            hz, v_top = hz * scale, v_top * scale
-        return TetherEstimate((-hz * x / h, -hz * y / h, -v_top), hz, v_top, regime)
+        measured = drum_tension_n is not None
+        fx, fy, fz, hz, v_top, regime = estimate_kernel(
+            self.w, self.taut_stiffness_n, x, y, z, length_m, measured,
+            drum_tension_n if measured else 0.0)
+        return TetherEstimate((fx, fy, fz), hz, v_top, _REGIMES[regime])
 
 
+_REGIMES = ("slack", "taut", "vertical", "suspended", "touchdown")
+
+
+@njit
+def estimate_kernel(w: float, taut_stiffness_n: float, x: float, y: float, z: float,
+              length_m: float, measured: bool, drum_tension_n: float
+              ) -> tuple[float, float, float, float, float, int]:
+    """:meth:`TetherModel.estimate` in scalars: (force, horizontal tension, top vertical
+    tension, index into ``_REGIMES``); ``measured`` says whether ``drum_tension_n`` is."""
+    z = max(z, 0.0)
+    h = math.hypot(x, y)
+    if not (length_m > 0 and math.isfinite(length_m)):
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0                                  # slack
+    chord = math.hypot(h, z)
+    if length_m <= chord:
+        # taut: a straight spring along the chord
+        t = taut_stiffness_n * (chord - length_m) / length_m + w * z
+        if measured:
+            t = drum_tension_n + w * z
+        if chord == 0.0:
+            return 0.0, 0.0, 0.0, 0.0, 0.0, 1                              # taut
+        return -t * x / chord, -t * y / chord, -t * z / chord, t * h / chord, t * z / chord, 1
+    if length_m >= h + z or h < 1e-9:
+        # slack (or vertical): hangs straight down from the UAV, the rest lies flat
+        v_top = w * min(z, length_m)
+        return 0.0, 0.0, -v_top, 0.0, v_top, 2 if h < 1e-9 else 0
+    a = _suspended_parameter(h, z, length_m)
+    v_top = 0.5 * w * (length_m + z / math.tanh(h / (2.0 * a)))
+    regime = 3                                                              # suspended
+    if v_top - w * length_m < 0.0:
+        a = _touchdown_parameter(h, z, length_m)
+        v_top = w * math.sqrt(z * z + 2.0 * a * z)
+        regime = 4                                                          # touchdown
+    hz = w * a
+    if measured and drum_tension_n >= 0.0:
+        t_model = math.hypot(hz, v_top)
+        scale = (drum_tension_n + w * z) / t_model
+        hz, v_top = hz * scale, v_top * scale
+    return -hz * x / h, -hz * y / h, -v_top, hz, v_top, regime
+
+
+@njit
 def _suspended_parameter(h: float, v: float, length: float) -> float:
     """Catenary parameter a [m] with sqrt(v^2 + (2 a sinh(h/2a))^2) = length (Newton on
     u = h/(2a), solving sinh(u)/u = sqrt(length^2 - v^2)/h)."""
@@ -127,19 +140,23 @@ def _suspended_parameter(h: float, v: float, length: float) -> float:
     return h / (2.0 * u)
 
 
+@njit
+def _touchdown_residual(a: float, h: float, v: float, length: float) -> float:
+    """length - sqrt(v^2 + 2 a v) + a acosh(1 + v/a) - h: zero at the touchdown parameter."""
+    return length - math.sqrt(v * v + 2.0 * a * v) + a * math.acosh(1.0 + v / a) - h
+
+
+@njit
 def _touchdown_parameter(h: float, v: float, length: float) -> float:
     """Catenary parameter a [m] of a line lying on a frictionless ground from the exit and
     rising to the UAV: h = length - sqrt(v^2 + 2 a v) + a acosh(1 + v/a) (bisection)."""
-
-    def f(a: float) -> float:
-        return length - math.sqrt(v * v + 2.0 * a * v) + a * math.acosh(1.0 + v / a) - h
-
     lo, hi = 1e-9, 1.0
-    while f(hi) < 0.0 and hi < 1e9:  # f grows from (length - v) - h < 0 ... as a rises
+    # the residual grows from (length - v) - h < 0 ... as a rises
+    while _touchdown_residual(hi, h, v, length) < 0.0 and hi < 1e9:
         hi *= 2.0
     for _ in range(200):
         mid = 0.5 * (lo + hi)
-        if f(mid) < 0.0:
+        if _touchdown_residual(mid, h, v, length) < 0.0:
             lo = mid
         else:
             hi = mid

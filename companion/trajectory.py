@@ -179,10 +179,13 @@ class _Piecewise:
         self._first = self._eval_piece(0, 0.0) if pieces else self._final
 
     def _eval_piece(self, i: int, tau: float) -> tuple[tuple[float, ...], ...]:
-        return (tuple(_horner(r, tau) for r in self._p[i]),
-                tuple(_horner(r, tau) for r in self._v[i]),
-                tuple(_horner(r, tau) for r in self._a[i]),
-                tuple(_horner(r, tau) for r in self._j[i]))
+        if self.ndim == 1:  # the common scalar case (arc length), without the loops
+            return ((_horner(self._p[i][0], tau),), (_horner(self._v[i][0], tau),),
+                    (_horner(self._a[i][0], tau),), (_horner(self._j[i][0], tau),))
+        return (tuple([_horner(r, tau) for r in self._p[i]]),
+                tuple([_horner(r, tau) for r in self._v[i]]),
+                tuple([_horner(r, tau) for r in self._a[i]]),
+                tuple([_horner(r, tau) for r in self._j[i]]))
 
     def eval(self, t: float) -> tuple[tuple[float, ...], ...]:
         """(position, velocity, acceleration, jerk) at absolute time t."""

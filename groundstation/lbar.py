@@ -16,6 +16,14 @@ lies on the ground. The exit slope of the catenary is
 which grows with ``a`` toward the chord's slope v/h, so the smallest admissible ``a`` is
 found by bisection. Where even the chord is flatter than the minimum angle (the UAV low and
 far), the tether is kept at ``min_slack`` above the straight line instead.
+
+The bisection's result is what the estimator commands, to its last bit (its 1e-10 relative
+tolerance would otherwise show in dL-bar/dt, a difference quotient over 0.1 mm). To make it
+cheap, Newton's method first finds the root of the smooth exit slope to near machine
+precision; the bisection then runs unchanged, except that it compares its midpoints with
+that root instead of evaluating the slope, wherever the comparison is certain (everywhere but
+within a guard band around the root scaled by the slope's rounding error). The law is
+compiled (``tuavdefs.jit``).
 """
 
 from __future__ import annotations
@@ -24,6 +32,7 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from tuavdefs.jit import njit
 from tuavdefs.paramspec import Params, quantity
 
 
@@ -45,6 +54,7 @@ SMOOTHING_A_M = 1.0
 SMOOTHING_L_M = 0.02
 
 
+@njit
 def smooth_max(x: float, y: float, width: float) -> float:
     """A smooth maximum of ``x`` and ``y``: at least ``max(x, y)``, at most
     ``max(x, y) + width/2``, infinitely differentiable."""
@@ -59,6 +69,7 @@ class LBar(NamedTuple):
     a_m: float
 
 
+@njit
 def catenary_length_m(a_m: float, h_m: float, v_m: float) -> float:
     """Length of the catenary of parameter ``a_m`` spanning ``h_m`` across, ``v_m`` up [m]."""
     if h_m <= 0.0:
@@ -69,11 +80,137 @@ def catenary_length_m(a_m: float, h_m: float, v_m: float) -> float:
     return math.hypot(v_m, 2.0 * a_m * math.sinh(x))
 
 
+@njit
 def exit_slope(a_m: float, h_m: float, v_m: float) -> float:
     """V_bottom / H: the tangent of the tether's angle above the ground at the exit."""
     x = h_m / (2.0 * a_m)
     length = catenary_length_m(a_m, h_m, v_m)
     return (v_m / math.tanh(x) - length) / (2.0 * a_m)
+
+
+@njit
+def _exit_slope_derivative(a_m: float, h_m: float, v_m: float) -> float:
+    """d(exit_slope)/da: with x = h/2a, S = 2a sinh x, L = sqrt(v^2 + S^2),
+    dS/da = 2 (sinh x - x cosh x), d(coth x)/da = x / (a sinh^2 x), and
+    d/da [(v coth x - L) / 2a] = (d(v coth x - L)/da - 2 slope) / 2a."""
+    x = h_m / (2.0 * a_m)
+    sh = math.sinh(x)
+    s_len = 2.0 * a_m * sh
+    length = math.hypot(v_m, s_len)
+    dl = s_len * 2.0 * (sh - x * math.cosh(x)) / length
+    slope = (v_m / math.tanh(x) - length) / (2.0 * a_m)
+    return (v_m * x / (a_m * sh * sh) - dl - 2.0 * slope) / (2.0 * a_m)
+
+
+@njit
+def _exit_slope_root(h: float, v: float, tan_min: float, lo: float, guess: float
+                     ) -> tuple[float, float]:
+    """(a, guard): the root of exit_slope(a) = tan_min above ``lo`` (where the slope is
+    below it) by Newton's method from ``guess``, safeguarded by bisection, and the distance
+    from it beyond which the sign of exit_slope - tan_min as computed is certain;
+    (nan, inf) if it does not converge."""
+    hi = math.inf
+    a = guess if lo < guess < math.inf else 2.0 * lo
+    for _ in range(100):
+        f = exit_slope(a, h, v) - tan_min
+        if not math.isfinite(f):
+            if f > 0.0:
+                break
+            lo = a
+            a = 2.0 * a if hi == math.inf else 0.5 * (lo + hi)
+            continue
+        if f < 0.0:
+            lo = a
+        else:
+            hi = a
+        df = _exit_slope_derivative(a, h, v)
+        a_new = a - f / df
+        if not lo < a_new < hi:
+            a_new = 2.0 * a if hi == math.inf else 0.5 * (lo + hi)
+        x = h / (2.0 * a_new)
+        # rounding error of the computed slope near a_new, as a distance in a
+        noise = (16.0 * 2.2e-16 * (abs(v / math.tanh(x)) + catenary_length_m(a_new, h, v))
+                 / (2.0 * a_new) / df)
+        if abs(a_new - a) <= 1e-14 * a_new + noise:
+            guard = 1e-12 * a_new + 64.0 * noise
+            if math.isfinite(guard) and guard > 0.0:
+                return a_new, guard
+            break
+        a = a_new
+    return math.nan, math.inf
+
+
+@njit
+def _below(a: float, h: float, v: float, tan_min: float, root: float, guard: float) -> bool:
+    """exit_slope(a) < tan_min, decided by the side of ``root`` that ``a`` is on where it
+    is at least ``guard`` away from it, and by evaluating the slope elsewhere."""
+    if abs(a - root) > guard:
+        return a < root
+    return exit_slope(a, h, v) < tan_min
+
+
+@njit
+def _a_for_exit_slope(h: float, v: float, a_target: float, tan_min: float, root: float,
+                      guard: float) -> float:
+    """The least a >= a_target with exit_slope(a) >= tan_min, by bisection to 1e-10
+    relative (``root``, ``guard`` from :func:`_exit_slope_root` spare evaluations)."""
+    lo = a_target
+    hi = max(2.0 * lo, h)
+    while _below(hi, h, v, tan_min, root, guard) and hi < 1e9:
+        hi *= 2.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if _below(mid, h, v, tan_min, root, guard):
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-10 * hi:
+            break
+    return hi
+
+
+@njit
+def _length(x: float, y: float, z: float, a_target: float, tan_min: float,
+            min_slack: float, guess: float) -> tuple[float, float, float]:
+    """:meth:`LBarEstimator.length` in scalars: (L-bar, a, the exit-angle root found or
+    ``guess``), ``guess`` a starting point for that root's Newton iteration."""
+    h = math.hypot(x, y)
+    v = max(z, 0.0)
+    chord = math.hypot(h, v)
+    if h < 1e-6:
+        return v + min_slack, math.inf, guess
+    if v <= 0.0 or v / h <= tan_min:
+        return chord + min_slack, math.inf, guess
+    a = a_target
+    if exit_slope(a, h, v) < tan_min:
+        root, guard = _exit_slope_root(h, v, tan_min, a_target, guess)
+        a = _a_for_exit_slope(h, v, a_target, tan_min, root, guard)
+        if math.isfinite(root):
+            guess = root
+    # smooth maximum of the target and the exit-angle bound: never below either, and
+    # no kink in L-bar where one takes over from the other (a kink is a step in
+    # dL-bar/dt, i.e. a torque spike at the winder)
+    a = smooth_max(a, a_target, SMOOTHING_A_M)
+    length = catenary_length_m(a, h, v)
+    return smooth_max(length, chord + min_slack, SMOOTHING_L_M), a, guess
+
+
+@njit
+def lbar_kernel(px: float, py: float, pz: float, vx: float, vy: float, vz: float,
+              a_target: float, tan_min: float, min_slack: float, guess: float
+              ) -> tuple[float, float, float, float]:
+    """:meth:`LBarEstimator.estimate` in scalars: (L-bar, its rate, a, root guess)."""
+    length, a, guess = _length(px, py, pz, a_target, tan_min, min_slack, guess)
+    speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+    if speed == 0.0:
+        return length, 0.0, a, guess
+    step = 1e-4  # [m] along the velocity direction
+    ux, uy, uz = vx / speed, vy / speed, vz / speed
+    fwd, _, guess = _length(px + step * ux, py + step * uy, pz + step * uz, a_target,
+                            tan_min, min_slack, guess)
+    back, _, guess = _length(px - step * ux, py - step * uy, pz - step * uz, a_target,
+                             tan_min, min_slack, guess)
+    return length, speed * (fwd - back) / (2.0 * step), a, guess
 
 
 class LBarEstimator:
@@ -84,51 +221,22 @@ class LBarEstimator:
         self.w = w_n_m
         self.a_target = params.target_horizontal_tension_n / w_n_m
         self._tan_min = math.tan(params.min_exit_angle_rad)
+        self._root = math.nan  # the last exit-angle root: where Newton starts next time
 
     def length(self, pos_m: tuple[float, float, float]) -> tuple[float, float]:
         """(L-bar [m], a [m]) for the UAV at ``pos_m``."""
-        h = math.hypot(pos_m[0], pos_m[1])
-        v = max(pos_m[2], 0.0)
-        chord = math.hypot(h, v)
-        if h < 1e-6:
-            return v + self.p.min_slack_m, math.inf
-        if v <= 0.0 or v / h <= self._tan_min:
-            return chord + self.p.min_slack_m, math.inf
-        a = self.a_target
-        if exit_slope(a, h, v) < self._tan_min:
-            a = self._a_for_exit_slope(h, v)
-        # smooth maximum of the target and the exit-angle bound: never below either, and
-        # no kink in L-bar where one takes over from the other (a kink is a step in
-        # dL-bar/dt, i.e. a torque spike at the winder)
-        a = smooth_max(a, self.a_target, SMOOTHING_A_M)
-        length = catenary_length_m(a, h, v)
-        return smooth_max(length, chord + self.p.min_slack_m, SMOOTHING_L_M), a
-
-    def _a_for_exit_slope(self, h: float, v: float) -> float:
-        lo = self.a_target
-        hi = max(2.0 * lo, h)
-        while exit_slope(hi, h, v) < self._tan_min and hi < 1e9:
-            hi *= 2.0
-        for _ in range(100):
-            mid = 0.5 * (lo + hi)
-            if exit_slope(mid, h, v) < self._tan_min:
-                lo = mid
-            else:
-                hi = mid
-            if hi - lo <= 1e-10 * hi:
-                break
-        return hi
+        x, y, z = pos_m
+        length, a, self._root = _length(x, y, z, self.a_target, self._tan_min,
+                                        self.p.min_slack_m, self._root)
+        return length, a
 
     def estimate(self, pos_m: tuple[float, float, float],
                  vel_m_s: tuple[float, float, float]) -> LBar:
         """L-bar, its time derivative along the UAV's velocity (central differences of the
         length along the velocity direction, exact to O(step^2)), and the parameter a."""
-        length, a = self.length(pos_m)
-        speed = math.sqrt(sum(c * c for c in vel_m_s))
-        if speed == 0.0:
-            return LBar(length, 0.0, a)
-        step = 1e-4  # [m] along the velocity direction
-        u = [c / speed for c in vel_m_s]
-        fwd = self.length(tuple(pos_m[i] + step * u[i] for i in range(3)))[0]
-        back = self.length(tuple(pos_m[i] - step * u[i] for i in range(3)))[0]
-        return LBar(length, speed * (fwd - back) / (2.0 * step), a)
+        x, y, z = pos_m
+        vx, vy, vz = vel_m_s
+        length, rate, a, self._root = lbar_kernel(x, y, z, vx, vy, vz, self.a_target,
+                                                self._tan_min, self.p.min_slack_m,
+                                                self._root)
+        return LBar(length, rate, a)

@@ -21,9 +21,13 @@ limited to the motor's, and alpha to the speed limit.
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
+import numpy as np
+
+from tuavdefs.jit import JIT, njit
 from tuavdefs.params import TetherParams, WinderParams
 from tuavdefs.paramspec import Params, quantity
 
@@ -56,8 +60,18 @@ class WinderCommand(NamedTuple):
     saturated: bool
 
 
+# indices of the packed parameters (WinderController._pack) and of the filter's state
+(P_K_L, P_K_W, P_C, P_RATE_FILTER, P_R_W, P_BETA, P_TAU_MAX, P_OMEGA_MAX, P_M_BAR, P_RHO,
+ P_L_T, P_R2, P_I_ROTOR) = range(13)
+S_STARTED, S_RATE, S_ACC = 0, 1, 2
+
+
 class WinderController:
-    """The winder's backstepping torque law (a controller-side model of the drum)."""
+    """The winder's backstepping torque law (a controller-side model of the drum).
+
+    The gains and the drum model are packed for the compiled law (:func:`winder_law`),
+    again whenever one of the attributes they come from is replaced.
+    """
 
     def __init__(self, gains: WinderControlParams, winder: WinderParams,
                  tether: TetherParams) -> None:
@@ -71,47 +85,87 @@ class WinderController:
         self._lt = tether.total_length_m
         self._r2 = winder.drum_radius_m ** 2 + winder.drum_inner_radius_m ** 2
         self._i_rotor = winder.rotor_inertia_kg_m2
-        self._rate_f: float | None = None     # filtered dL_c/dt
-        self._acc_f = 0.0                     # its derivative, d2L_c/dt2
+        self._pack()
+        # the reference filter: started?, filtered dL_c/dt, its derivative d2L_c/dt2
+        self.state = np.zeros(3)
+        if JIT:  # load (or compile) the law's machine code now, not at the first update
+            winder_law(self._p, self.state.copy(), 0.01, 10.0, 0.0, 1.0, 10.0, 0.0)
+
+    def _sources(self) -> tuple[Any, ...]:
+        return (self.g, self.r_w, self.beta, self.tau_max, self.omega_max, self._m_bar,
+                self._rho, self._lt, self._r2, self._i_rotor)
+
+    def _pack(self) -> None:
+        g = self.g
+        self._p = np.array([
+            g.k_length_1_s, g.k_rate_n_m_s, g.length_stiffness_n_m, g.rate_filter_s,
+            self.r_w, self.beta, self.tau_max, self.omega_max, self._m_bar, self._rho,
+            self._lt, self._r2, self._i_rotor], dtype=float)
+        self._packed_from = self._sources()
+
+    def params(self) -> np.ndarray:
+        """The gains and drum model packed for :func:`winder_law`."""
+        if not all(map(operator.is_, self._sources(), self._packed_from)):
+            self._pack()
+        return self._p
 
     def inertia_kg_m2(self, length_m: float) -> float:
         """The law's model of the drum inertia at a paid-out length [kg m^2]."""
-        m_w = self._m_bar + max(self._lt - length_m, 0.0) * self._rho
-        return 0.5 * m_w * self._r2 + self._i_rotor
+        return drum_inertia_model(self.params(), length_m)
 
     def reset(self) -> None:
         """Forget the reference filter."""
-        self._rate_f = None
-        self._acc_f = 0.0
+        self.state[:] = 0.0
 
     def update(self, dt_s: float, length_m: float, omega_rad_s: float, drum_tension_n: float,
                ref_length_m: float, ref_rate_m_s: float) -> WinderCommand:
         """Torque request [N m] for the measured length, drum rate and tension."""
-        g = self.g
-        # second derivative of the reference from a first-order filter on its rate
-        if self._rate_f is None:
-            self._rate_f = ref_rate_m_s
-        k = 1.0 - math.exp(-dt_s / g.rate_filter_s)
-        new_rate = self._rate_f + k * (ref_rate_m_s - self._rate_f)
-        self._acc_f = (new_rate - self._rate_f) / dt_s
-        self._rate_f = new_rate
-        ref_acc = self._acc_f
+        return WinderCommand(*winder_law(self.params(), self.state, dt_s, length_m,
+                                         omega_rad_s, drum_tension_n, ref_length_m,
+                                         ref_rate_m_s))
 
-        r = self.r_w
-        e_l = length_m - ref_length_m
-        alpha = (ref_rate_m_s - g.k_length_1_s * e_l) / r
-        alpha_limited = min(max(alpha, -self.omega_max), self.omega_max)
-        l_dot = r * omega_rad_s
-        alpha_dot = (ref_acc - g.k_length_1_s * (l_dot - ref_rate_m_s)) / r
-        if alpha_limited != alpha:
-            alpha_dot = 0.0
-        e_w = omega_rad_s - alpha_limited
-        inertia = self.inertia_kg_m2(length_m)
-        inertia_dot = -0.5 * self._rho * self._r2 * l_dot
-        tau = (-r * drum_tension_n + self.beta * omega_rad_s + inertia * alpha_dot
-               - 0.5 * inertia_dot * e_w - g.k_rate_n_m_s * e_w
-               - g.length_stiffness_n_m * r * e_l)
-        tau_limited = min(max(tau, -self.tau_max), self.tau_max)
-        lyap = 0.5 * g.length_stiffness_n_m * e_l * e_l + 0.5 * inertia * e_w * e_w
-        return WinderCommand(tau_limited, e_l, e_w, alpha_limited, lyap,
-                             tau_limited != tau or alpha_limited != alpha)
+
+@njit
+def drum_inertia_model(p: np.ndarray, length_m: float) -> float:
+    """:meth:`WinderController.inertia_kg_m2` on the packed parameters ``p``."""
+    m_w = p[P_M_BAR] + max(p[P_L_T] - length_m, 0.0) * p[P_RHO]
+    return 0.5 * m_w * p[P_R2] + p[P_I_ROTOR]
+
+
+@njit
+def winder_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
+               omega_rad_s: float, drum_tension_n: float, ref_length_m: float,
+               ref_rate_m_s: float) -> tuple[float, float, float, float, float, bool]:
+    """One step of :class:`WinderController` (the law of the module docstring) on the packed
+    parameters ``p``, advancing the reference filter ``s`` in place; returns the fields of
+    a :class:`WinderCommand`."""
+    # second derivative of the reference from a first-order filter on its rate
+    if not s[S_STARTED]:
+        s[S_STARTED], s[S_RATE] = 1.0, ref_rate_m_s
+    k = 1.0 - math.exp(-dt_s / p[P_RATE_FILTER])
+    new_rate = s[S_RATE] + k * (ref_rate_m_s - s[S_RATE])
+    s[S_ACC] = (new_rate - s[S_RATE]) / dt_s
+    s[S_RATE] = new_rate
+    ref_acc = s[S_ACC]
+
+    r = p[P_R_W]
+    k_l = p[P_K_L]
+    omega_max = p[P_OMEGA_MAX]
+    e_l = length_m - ref_length_m
+    alpha = (ref_rate_m_s - k_l * e_l) / r
+    alpha_limited = min(max(alpha, -omega_max), omega_max)
+    l_dot = r * omega_rad_s
+    alpha_dot = (ref_acc - k_l * (l_dot - ref_rate_m_s)) / r
+    if alpha_limited != alpha:
+        alpha_dot = 0.0
+    e_w = omega_rad_s - alpha_limited
+    inertia = drum_inertia_model(p, length_m)
+    inertia_dot = -0.5 * p[P_RHO] * p[P_R2] * l_dot
+    tau = (-r * drum_tension_n + p[P_BETA] * omega_rad_s + inertia * alpha_dot
+           - 0.5 * inertia_dot * e_w - p[P_K_W] * e_w
+           - p[P_C] * r * e_l)
+    tau_max = p[P_TAU_MAX]
+    tau_limited = min(max(tau, -tau_max), tau_max)
+    lyap = 0.5 * p[P_C] * e_l * e_l + 0.5 * inertia * e_w * e_w
+    return (tau_limited, e_l, e_w, alpha_limited, lyap,
+            tau_limited != tau or alpha_limited != alpha)

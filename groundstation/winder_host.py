@@ -3,15 +3,25 @@ telemetry to the motor's torque request.
 
 What the ground-station process runs for every encoder frame it receives, and what the
 offline runner runs in-process: L-bar and its rate from the UAV's position and velocity
-(`groundstation.lbar`), then the backstepping torque law (`groundstation.winder_control`).
+(`groundstation.lbar`), then the backstepping torque law (`groundstation.winder_control`),
+in one compiled call (:func:`winder_step`) through the same kernels.
 """
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
-from groundstation.lbar import LBarEstimator, LBarParams
-from groundstation.winder_control import WinderCommand, WinderController, WinderControlParams
+import numpy as np
+
+from groundstation.lbar import LBarEstimator, LBarParams, lbar_kernel
+from groundstation.winder_control import (
+    WinderCommand,
+    WinderController,
+    WinderControlParams,
+    winder_law,
+)
+from tuavdefs.jit import JIT, njit
 from tuavdefs.params import TetherParams, WinderParams
 
 
@@ -32,13 +42,38 @@ class WinderHost:
         self.dt_s = 1.0 / gains.rate_hz
         self.lbar = LBarEstimator(lbar, tether.weight_per_length_n_m(gravity_m_s2))
         self.controller = WinderController(gains, winder, tether)
+        if JIT:
+            # load (or compile) the step's machine code now, not at the first encoder frame
+            lb, ctl = self.lbar, self.controller
+            winder_step(1.0, 0.0, 10.0, 0.0, 0.0, 0.0, lb.a_target, lb._tan_min,
+                        lb.p.min_slack_m, math.nan, ctl.params(), ctl.state.copy(), self.dt_s,
+                        10.0, 0.0, 1.0)
 
     def update(self, length_m: float, omega_rad_s: float, drum_tension_n: float,
                uav_pos_m: tuple[float, float, float],
                uav_vel_m_s: tuple[float, float, float]) -> WinderStep:
         """Torque request [N m] for the measured length [m], drum rate [rad/s] and drum
         tension [N], and the UAV's position [m] and velocity [m/s]."""
-        lb = self.lbar.estimate(uav_pos_m, uav_vel_m_s)
-        cmd = self.controller.update(self.dt_s, length_m, omega_rad_s, drum_tension_n,
-                                     lb.length_m, lb.rate_m_s)
-        return WinderStep(cmd.torque_n_m, lb.length_m, lb.rate_m_s, cmd)
+        lb, ctl = self.lbar, self.controller
+        px, py, pz = uav_pos_m
+        vx, vy, vz = uav_vel_m_s
+        lbar_m, rate, lb._root, cmd = winder_step(
+            px, py, pz, vx, vy, vz, lb.a_target, lb._tan_min, lb.p.min_slack_m, lb._root,
+            ctl.params(), ctl.state, self.dt_s, length_m, omega_rad_s, drum_tension_n)
+        return WinderStep(cmd[0], lbar_m, rate, WinderCommand(*cmd))
+
+
+@njit
+def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float,
+                a_target: float, tan_min: float, min_slack: float, root_guess: float,
+                law_p: np.ndarray, law_s: np.ndarray, dt_s: float, length_m: float,
+                omega_rad_s: float, drum_tension_n: float
+                ) -> tuple[float, float, float, tuple[float, float, float, float, float, bool]]:
+    """:meth:`WinderHost.update` in scalars: L-bar and its rate (:func:`lbar_kernel`), then
+    the torque law (:func:`winder_law`, its filter ``law_s`` advanced in place). Returns
+    (L-bar, its rate, the exit-angle root for next time, the WinderCommand's fields)."""
+    lbar_m, rate, _, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
+                                        min_slack, root_guess)
+    cmd = winder_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, lbar_m,
+                     rate)
+    return lbar_m, rate, root, cmd

@@ -37,6 +37,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from sitl._jit import JIT, njit
 from sitl.kernel import (
     GROUND_EPS_M,
     STICK_SPEED_M_S,
@@ -48,7 +49,7 @@ from sitl.kernel import (
 from sitl.tether import Tether, TetherForces
 from sitl.wind import WindModel
 from sitl.winder import WinderModel
-from tuavdefs.airframe import command_to_rotor_speed
+from tuavdefs.airframe import command_to_rotor_speed, rotor_speed_setpoints
 from tuavdefs.frames import euler_to_quat, quat_to_euler
 from tuavdefs.params import SystemParams
 
@@ -56,6 +57,20 @@ N_STATES = 19
 POS, VEL, QUAT, RATES, ROTORS, DRUM_ANGLE, DRUM_RATE = (
     slice(0, 3), slice(3, 6), slice(6, 10), slice(10, 13), slice(13, 17), 17, 18)
 
+
+@njit
+def _rk4_step(x: np.ndarray, dt: float, p: np.ndarray, setpoints: np.ndarray,
+              winder_cmd_n_m: float, winder_enabled: bool, wind: np.ndarray,
+              warm: np.ndarray) -> tuple[np.ndarray, float, float, float, float]:
+    """:func:`sitl.kernel.rk4_kernel`, then the quaternion scaled to unit norm; returns the
+    new state with what the projections look at: its height, drum angle and drum rate, and
+    the drum rate before the step."""
+    omega_before = x[DRUM_RATE]
+    x = rk4_kernel(x, dt, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
+    n = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
+    for i in range(6, 10):
+        x[i] = x[i] / n
+    return x, x[2], x[DRUM_ANGLE], x[DRUM_RATE], omega_before
 
 
 class PlantInputs(NamedTuple):
@@ -157,39 +172,71 @@ class Plant:
         if self.x.shape != (N_STATES,) or not np.all(np.isfinite(self.x)):
             raise ValueError(f"state must be {N_STATES} finite floats")
         self.wind_m_s: tuple[float, float, float] = tuple(self.params.wind.steady_m_s)
+        # what step hands the kernel: the wind, and the rotor set-points with the commands
+        # they were computed for
+        self._wind_held = self.wind_m_s
+        self._wind = np.array(self._wind_held, dtype=float)
+        self._speed_min = self.params.vehicle.rotor_speed_min_rad_s
+        self._speed_max = self.params.vehicle.rotor_speed_max_rad_s
+        self._setpoints = np.zeros(4)
+        self._held_commands: tuple[float, ...] | None = None
+        self._held_armed: object = None
+        if JIT:  # load (or compile) step's machine code now, not in the first step
+            m = self.model
+            _rk4_step(self.x.copy(), float(dt_s), m.p, self._setpoints.copy(), 0.0, False,
+                      self._wind.copy(), m.warm.copy())
+            rotor_speed_setpoints(self._setpoints.copy(), 0.0, 0.0, 0.0, 0.0, False,
+                                  self._speed_min, self._speed_max)
 
     def step(self, u: PlantInputs) -> None:
         """Advance the plant by one step of ``dt_s`` with inputs ``u``."""
         x = self.x
-        self.wind_m_s = self.wind.sample(self.t_s, float(x[2]), (x[3], x[4], x[5]))
+        if self.wind.constant:  # sample would return the steady wind and change nothing
+            wind = self.wind.steady_m_s
+        else:
+            _, _, z, vx, vy, vz = x[:6].tolist()
+            wind = self.wind.sample(self.t_s, z, (vx, vy, vz))
+        if wind != self._wind_held:
+            self._wind[0], self._wind[1], self._wind[2] = self._wind_held = wind
+        self.wind_m_s = wind
+        cmds, armed = u.rotor_commands, u.armed
+        if cmds is not self._held_commands or armed is not self._held_armed:
+            # the set-points (PlantModel.rotor_setpoints) change only with the commands
+            c0, c1, c2, c3 = cmds
+            rotor_speed_setpoints(self._setpoints, c0, c1, c2, c3, bool(armed),
+                                  self._speed_min, self._speed_max)
+            # a mutable sequence could change in place: only tuples are remembered
+            self._held_commands = cmds if type(cmds) is tuple else None
+            self._held_armed = armed
         m = self.model
-        setpoints = np.array(m.rotor_setpoints(u))
-        omega_before = float(x[DRUM_RATE])
-        x = rk4_kernel(x, self.dt_s, m.p, setpoints, float(u.winder_torque_n_m),
-                       bool(u.winder_enabled), np.array(self.wind_m_s), m.warm)
-        self._project(x, omega_before, braked=not u.winder_enabled)
+        x, z, theta, omega, omega_before = _rk4_step(
+            x, self.dt_s, m.p, self._setpoints, float(u.winder_torque_n_m),
+            bool(u.winder_enabled), self._wind, m.warm)
+        # the constraints (the quaternion's norm is restored already): ground contact, then
+        # the drum's brake and hard stops
+        if z <= m.gear + GROUND_EPS_M:
+            self._ground(x)
+        theta_p, omega_p = m.winder.project(theta, omega, omega_before,
+                                            not u.winder_enabled)
+        if theta_p is not theta or omega_p is not omega:
+            x[DRUM_ANGLE], x[DRUM_RATE] = theta_p, omega_p
         self.x = x
         self.t_s += self.dt_s
 
-    def _project(self, x: np.ndarray, omega_before: float, braked: bool) -> None:
-        q = x[QUAT]
-        x[QUAT] = q / math.sqrt(float(q @ q))
+    def _ground(self, x: np.ndarray) -> None:
+        """Ground contact after a step that ended at or below the gear's height."""
         m = self.model
-        if x[2] <= m.gear + GROUND_EPS_M:
-            x[2] = max(x[2], m.gear)
-            if x[5] < 0.0:
-                x[5] = 0.0
-            fz_up = self._vertical_force_n(x)
-            if fz_up <= 0.0:
-                # resting on the gear: level, no body rates, no creeping below stick speed
-                _, _, yaw = quat_to_euler(tuple(x[QUAT]))
-                x[QUAT] = euler_to_quat(0.0, 0.0, yaw)
-                x[RATES] = 0.0
-                if math.hypot(x[3], x[4]) < STICK_SPEED_M_S:
-                    x[3] = x[4] = 0.0
-        theta, omega = m.winder.project(float(x[DRUM_ANGLE]), float(x[DRUM_RATE]),
-                                        omega_before, braked)
-        x[DRUM_ANGLE], x[DRUM_RATE] = theta, omega
+        x[2] = max(x[2], m.gear)
+        if x[5] < 0.0:
+            x[5] = 0.0
+        fz_up = self._vertical_force_n(x)
+        if fz_up <= 0.0:
+            # resting on the gear: level, no body rates, no creeping below stick speed
+            _, _, yaw = quat_to_euler(tuple(x[QUAT]))
+            x[QUAT] = euler_to_quat(0.0, 0.0, yaw)
+            x[RATES] = 0.0
+            if math.hypot(x[3], x[4]) < STICK_SPEED_M_S:
+                x[3] = x[4] = 0.0
 
     def _vertical_force_n(self, x: np.ndarray) -> float:
         """Net upward force on the UAV from rotors, gravity and tether [N] (no drag)."""

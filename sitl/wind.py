@@ -187,6 +187,12 @@ class WindModel:
         return self._steady
 
     @property
+    def constant(self) -> bool:
+        """True when the wind is the steady wind at every instant (no turbulence, no gusts):
+        :meth:`sample` then returns :attr:`steady_m_s` and changes nothing."""
+        return not (self._turbulent or self._gusts)
+
+    @property
     def w20_m_s(self) -> float:
         """Wind speed at 20 ft scaling the turbulence; 0 with no turbulence [m/s]."""
         return self._w20
@@ -226,6 +232,8 @@ class WindModel:
         field passes it at ``V = max(|steady - vehicle velocity|, MIN_PASSING_SPEED_M_S)``.
         Returns steady + turbulence + gusts, then advances the turbulence by one ``dt_s``.
         """
+        if not (self._turbulent or self._gusts):  # constant: the same answer, faster
+            return self._steady
         wx, wy, wz = self._steady
         if self._turbulent:
             vx, vy, vz = vehicle_velocity_m_s

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import struct
 import sys
 import time
 from collections.abc import Callable
@@ -31,7 +32,7 @@ from companion.trajectory import (
 )
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
-from sitl.plant import Plant, PlantInputs
+from sitl.plant import POS, QUAT, RATES, VEL, Plant, PlantInputs
 from sitl.trim import hover_trim
 from tuav_sitl.scenario import ScenarioParams
 from tuavdefs.frames import quat_to_euler, wrap_pi
@@ -42,6 +43,16 @@ GROUND_REGIMES = (int(CatenaryRegime.TOUCHDOWN), int(CatenaryRegime.SLACK),
                   int(CatenaryRegime.FLAT))
 #: Distance to the goal within which a set-point run counts as settled [m].
 SETTLE_BAND_M = 0.05
+#: The time series logged at every control step, in the order of a row: (name, width),
+#: width 0 for a scalar.
+SERIES: tuple[tuple[str, int], ...] = (
+    ("t", 0), ("pos", 3), ("vel", 3), ("ref_pos", 3), ("ref_vel", 3), ("euler", 3),
+    ("att_cmd", 3), ("att_des", 3), ("rates", 3), ("thrust", 0), ("torque", 3),
+    ("rotor_cmd", 4), ("mixer_sat", 0), ("pos_sat", 0), ("d_hat", 3), ("v_pos", 0),
+    ("v_att", 0), ("v_win", 0), ("v_pos_raw", 0), ("v_att_raw", 0), ("length", 0),
+    ("lbar", 0), ("lbar_rate", 0), ("lbar_fresh", 0), ("drum_rate", 0),
+    ("winder_torque", 0), ("drum_tension", 0), ("top_tension", 0), ("regime", 0),
+    ("lowest", 0), ("wind", 3), ("tether_force", 3), ("tether_force_est", 3))
 
 
 class ProgressBar:
@@ -168,64 +179,58 @@ class OfflineRunner:
 
     def _vehicle_state(self) -> VehicleState:
         """What the companion receives: the truth state (docs/architecture.md)."""
-        p = self.plant
-        return VehicleState(tuple(p.position_m), tuple(p.velocity_m_s), p.quaternion,
-                            tuple(p.body_rates_rad_s))
+        x = self.plant.x.tolist()
+        return VehicleState(tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]), tuple(x[RATES]))
 
     def run(self, progress: TextIO | None = None,
             on_sample: Callable[[float], None] | None = None) -> RunResult:
         """Run the scenario; returns the time series and metrics."""
         sc, plant = self.sc, self.plant
+        flight, winder_host, reference = self.flight, self.winder_host, self.reference
         r_w = self.params.winder.drum_radius_m
-        n_steps = round(sc.duration_s / self.dt)
-        n_log = n_steps // self.n_ctrl + 1
-        log = _Log(n_log)
+        dt, n_wind, n_ctrl = self.dt, self.n_wind, self.n_ctrl
+        n_steps = round(sc.duration_s / dt)
+        n_log = n_steps // n_ctrl + 1
+        log = _Log(n_log, SERIES)
         bar = ProgressBar(sc.duration_s, progress)
         inputs = PlantInputs()
         winder_torque, winder_lyap, lbar = 0.0, 0.0, (0.0, 0.0)
-        self.flight.winch_report(0.0, plant.tether_length_m, 0.0,
-                                 plant.tether_forces().drum_tension_n)
+        flight.winch_report(0.0, plant.tether_length_m, 0.0,
+                            plant.tether_forces().drum_tension_n)
         events: list[tuple[str, int, float]] = []
         wall0 = time.perf_counter()
         for k in range(n_steps + 1):
-            t = k * self.dt
-            fresh = k % self.n_wind == 0
+            t = k * dt
+            fresh = k % n_wind == 0
             if fresh:
                 # ground station: encoder, load cell and the UAV's telemetry
                 drum_tension = plant.tether_forces().drum_tension_n
-                ws = self.winder_host.update(plant.tether_length_m, plant.drum_rate_rad_s,
-                                             drum_tension, tuple(plant.position_m),
-                                             tuple(plant.velocity_m_s))
+                x = plant.x.tolist()
+                ws = winder_host.update(plant.tether_length_m, plant.drum_rate_rad_s,
+                                        drum_tension, tuple(x[POS]), tuple(x[VEL]))
                 winder_torque, winder_lyap = ws.torque_n_m, ws.command.lyapunov
                 lbar = (ws.lbar_m, ws.lbar_rate_m_s)
                 # ... and the winch's report reaches the companion
-                self.flight.winch_report(t, plant.tether_length_m,
-                                         plant.drum_rate_rad_s * r_w, drum_tension)
-            if k % self.n_ctrl == 0:
+                flight.winch_report(t, plant.tether_length_m, plant.drum_rate_rad_s * r_w,
+                                    drum_tension)
+            if k % n_ctrl == 0:
                 state = self._vehicle_state()
-                ref = self.reference.sample(t, state.pos_m, state.vel_m_s)
-                events.extend(self.reference.events())
-                fs = self.flight.update(t, state, ref)
+                ref = reference.sample(t, state.pos_m, state.vel_m_s)
+                events.extend(reference.events())
+                fs = flight.update(t, state, ref)
                 po, ao = fs.position, fs.attitude
                 inputs = PlantInputs(fs.rotor_commands, True, winder_torque, True)
-                truth_tether = plant.tether_forces()
-                log.add(t=t, pos=state.pos_m, vel=state.vel_m_s, ref_pos=ref.pos_m,
-                        ref_vel=ref.vel_m_s, euler=quat_to_euler(state.quat),
-                        att_cmd=ao.attitude_cmd_rad, att_des=po.attitude_rad,
-                        rates=state.rates_rad_s, thrust=po.thrust_n, torque=ao.torque_n_m,
-                        rotor_cmd=fs.rotor_commands, mixer_sat=fs.mixer_saturated,
-                        pos_sat=po.saturated, d_hat=po.disturbance_m_s2,
-                        v_pos=po.lyapunov, v_att=ao.lyapunov, v_win=winder_lyap,
-                        v_pos_raw=po.lyapunov_raw, v_att_raw=ao.lyapunov_raw,
-                        length=plant.tether_length_m, lbar=lbar[0], lbar_rate=lbar[1],
-                        lbar_fresh=fresh,
-                        drum_rate=plant.drum_rate_rad_s, winder_torque=winder_torque,
-                        drum_tension=truth_tether.drum_tension_n,
-                        top_tension=truth_tether.top_tension_n,
-                        regime=int(truth_tether.info.regime),
-                        lowest=truth_tether.info.lowest_point_height_m,
-                        wind=plant.wind_m_s, tether_force=truth_tether.on_uav_n,
-                        tether_force_est=fs.tether_force_est_n)
+                truth = plant.tether_forces()
+                info = truth.info
+                log.add((t, *state.pos_m, *state.vel_m_s, *ref.pos_m, *ref.vel_m_s,
+                         *quat_to_euler(state.quat), *ao.attitude_cmd_rad, *po.attitude_rad,
+                         *state.rates_rad_s, po.thrust_n, *ao.torque_n_m, *fs.rotor_commands,
+                         fs.mixer_saturated, po.saturated, *po.disturbance_m_s2,
+                         po.lyapunov, ao.lyapunov, winder_lyap, po.lyapunov_raw,
+                         ao.lyapunov_raw, plant.tether_length_m, lbar[0], lbar[1], fresh,
+                         plant.drum_rate_rad_s, winder_torque, truth.drum_tension_n,
+                         truth.top_tension_n, int(info.regime), info.lowest_point_height_m,
+                         *plant.wind_m_s, *truth.on_uav_n, *fs.tether_force_est_n))
                 bar.update(t)
                 if on_sample is not None:
                     on_sample(t)
@@ -243,27 +248,34 @@ class OfflineRunner:
 
 
 class _Log:
-    """Preallocated columns of the time series."""
+    """The time series: rows of :data:`SERIES` packed as doubles as they come (at most
+    ``n``), split into columns at the end."""
 
-    def __init__(self, n: int) -> None:
+    def __init__(self, n: int, columns: tuple[tuple[str, int], ...]) -> None:
         self.n = n
         self.i = 0
-        self.cols: dict[str, np.ndarray] = {}
+        self.columns = columns
+        self.width = sum(max(w, 1) for _, w in columns)
+        self._pack = struct.Struct(f"{self.width}d").pack
+        self._rows: list[bytes] = []
 
-    def add(self, **values: Any) -> None:
+    def add(self, row: tuple[Any, ...]) -> None:
+        """One row: the columns' values in order, vectors flattened (bools count 0/1)."""
         if self.i >= self.n:
             return
-        for name, v in values.items():
-            col = self.cols.get(name)
-            if col is None:
-                width = len(v) if isinstance(v, (tuple, list)) else 0
-                shape = (self.n, width) if width else (self.n,)
-                col = self.cols[name] = np.full(shape, np.nan)
-            col[self.i] = v
+        self._rows.append(self._pack(*row))
         self.i += 1
 
     def arrays(self) -> dict[str, np.ndarray]:
-        return {k: v[: self.i] for k, v in self.cols.items()}
+        if not self.i:
+            return {}
+        data = np.frombuffer(b"".join(self._rows), dtype=float).reshape(self.i, self.width)
+        out: dict[str, np.ndarray] = {}
+        j = 0
+        for name, w in self.columns:
+            out[name] = data[:, j].copy() if w == 0 else data[:, j:j + w].copy()
+            j += max(w, 1)
+        return out
 
 
 def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray], reference: Reference,

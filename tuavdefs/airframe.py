@@ -15,11 +15,15 @@ reaction torque -spin_i * k_m * Omega_i^2 about +z (spin +1 = counter-clockwise 
 from __future__ import annotations
 
 import math
+import operator
 from typing import NamedTuple
 
 import numpy as np
 
+from tuavdefs.jit import njit
 from tuavdefs.params import VehicleParams
+
+Vec4 = tuple[float, float, float, float]
 
 #: (x sign, y sign, spin) of rotors 1..4 in the body frame (x forward, y left, z up).
 ROTOR_LAYOUT: tuple[tuple[float, float, float], ...] = (
@@ -39,14 +43,39 @@ def command_to_rotor_speed(command: float, vehicle: VehicleParams, armed: bool) 
     """
     if not armed:
         return 0.0
+    return rotor_speed_setpoint(command, vehicle.rotor_speed_min_rad_s,
+                                vehicle.rotor_speed_max_rad_s)
+
+
+@njit
+def rotor_speed_setpoint(command: float, lo: float, hi: float) -> float:
+    """:func:`command_to_rotor_speed` of an armed rotor idling at ``lo``, full at ``hi``."""
     c = 0.0 if math.isnan(command) else min(max(command, 0.0), 1.0)  # NaN -> 0
-    lo, hi = vehicle.rotor_speed_min_rad_s, vehicle.rotor_speed_max_rad_s
     return lo + c * (hi - lo)
+
+
+@njit
+def rotor_speed_setpoints(out: np.ndarray, c0: float, c1: float, c2: float, c3: float,
+                          armed: bool, lo: float, hi: float) -> None:
+    """The set-points of four commands (:func:`command_to_rotor_speed`), into ``out``."""
+    if not armed:
+        out[:] = 0.0
+        return
+    out[0] = rotor_speed_setpoint(c0, lo, hi)
+    out[1] = rotor_speed_setpoint(c1, lo, hi)
+    out[2] = rotor_speed_setpoint(c2, lo, hi)
+    out[3] = rotor_speed_setpoint(c3, lo, hi)
 
 
 def rotor_speed_to_command(speed_rad_s: float, vehicle: VehicleParams) -> float:
     """The command in [0, 1] whose set-point is ``speed_rad_s`` (clamped)."""
-    lo, hi = vehicle.rotor_speed_min_rad_s, vehicle.rotor_speed_max_rad_s
+    return _speed_to_command(speed_rad_s, vehicle.rotor_speed_min_rad_s,
+                             vehicle.rotor_speed_max_rad_s)
+
+
+@njit
+def _speed_to_command(speed_rad_s: float, lo: float, hi: float) -> float:
+    """:func:`rotor_speed_to_command` for the speed range [``lo``, ``hi``]."""
     return min(max((speed_rad_s - lo) / (hi - lo), 0.0), 1.0)
 
 
@@ -84,40 +113,89 @@ class Mixer:
         self._inv = np.linalg.inv(allocation_matrix(vehicle))
         self._t_min = vehicle.rotor_thrust_coeff * vehicle.rotor_speed_min_rad_s ** 2
         self._t_max = vehicle.rotor_thrust_coeff * vehicle.rotor_speed_max_rad_s ** 2
+        self._pack()
+
+    def _pack(self) -> None:
+        """Thrust limits, k_f and the speed range, packed for the compiled mixer."""
+        v = self.vehicle
+        self._p = np.array([self._t_min, self._t_max, v.rotor_thrust_coeff,
+                            v.rotor_speed_min_rad_s, v.rotor_speed_max_rad_s], dtype=float)
+        self._packed_from = (self._t_min, self._t_max, v)
+
+    def params(self) -> np.ndarray:
+        """The packed parameters of :func:`mix_kernel`, packed again if an attribute they
+        come from was replaced."""
+        if not all(map(operator.is_, (self._t_min, self._t_max, self.vehicle),
+                       self._packed_from)):
+            self._pack()
+        return self._p
 
     def rotor_thrusts(self, thrust_n: float, torque_n_m: tuple[float, float, float]
                       ) -> np.ndarray:
         """Unconstrained per-rotor thrusts [N] that give exactly the requested wrench."""
-        return self._inv @ np.array([thrust_n, torque_n_m[0], torque_n_m[1], torque_n_m[2]])
+        return np.array(_rotor_thrusts(self._inv, thrust_n, torque_n_m[0], torque_n_m[1],
+                                       torque_n_m[2]))
 
     def mix(self, thrust_n: float, torque_n_m: tuple[float, float, float]) -> MixerOutput:
         """Commands for collective thrust ``thrust_n`` [N] and body torques [N m]."""
-        lo, hi = self._t_min, self._t_max
-        u = min(max(thrust_n, 4 * lo), 4 * hi)
-        saturated = u != thrust_n
-        t = self.rotor_thrusts(u, torque_n_m)
-        if t.min() < lo - 1e-9 or t.max() > hi + 1e-9:
-            saturated = True
-            t = self._fit(u, torque_n_m, lo, hi)
-        speeds = np.sqrt(np.clip(t, lo, hi) / self.vehicle.rotor_thrust_coeff)
-        cmds = tuple(rotor_speed_to_command(float(s), self.vehicle) for s in speeds)
-        return MixerOutput(cmds, saturated)  # type: ignore[arg-type]
-
-    def _fit(self, u: float, tau: tuple[float, float, float], lo: float, hi: float
-             ) -> np.ndarray:
-        base = self.rotor_thrusts(u, (0.0, 0.0, 0.0))
-        rp = self.rotor_thrusts(0.0, (tau[0], tau[1], 0.0))
-        yaw = self.rotor_thrusts(0.0, (0.0, 0.0, tau[2]))
-        s_rp = _largest_scale(base, rp, lo, hi)
-        with_rp = base + s_rp * rp
-        s_yaw = _largest_scale(with_rp, yaw, lo, hi) if s_rp >= 1.0 else 0.0
-        return with_rp + s_yaw * yaw
+        c0, c1, c2, c3, saturated = mix_kernel(self._inv, self.params(), thrust_n,
+                                               torque_n_m[0], torque_n_m[1], torque_n_m[2])
+        return MixerOutput((c0, c1, c2, c3), saturated)
 
 
-def _largest_scale(base: np.ndarray, delta: np.ndarray, lo: float, hi: float) -> float:
+@njit
+def _rotor_thrusts(inv: np.ndarray, u: float, tx: float, ty: float, tz: float) -> Vec4:
+    """inv @ (u, tx, ty, tz): the rotor thrusts of a wrench (``inv`` the allocation
+    matrix's inverse)."""
+    return (inv[0, 0] * u + inv[0, 1] * tx + inv[0, 2] * ty + inv[0, 3] * tz,
+            inv[1, 0] * u + inv[1, 1] * tx + inv[1, 2] * ty + inv[1, 3] * tz,
+            inv[2, 0] * u + inv[2, 1] * tx + inv[2, 2] * ty + inv[2, 3] * tz,
+            inv[3, 0] * u + inv[3, 1] * tx + inv[3, 2] * ty + inv[3, 3] * tz)
+
+
+@njit
+def mix_kernel(inv: np.ndarray, p: np.ndarray, thrust_n: float, tx: float, ty: float, tz: float
+         ) -> tuple[float, float, float, float, bool]:
+    """:meth:`Mixer.mix` in scalars: the four commands and whether the request was cut
+    back. ``p`` = (least and greatest rotor thrust, k_f, least and greatest rotor speed)."""
+    lo, hi, kf = p[0], p[1], p[2]
+    u = min(max(thrust_n, 4 * lo), 4 * hi)
+    saturated = u != thrust_n
+    t = _rotor_thrusts(inv, u, tx, ty, tz)
+    if (t[0] < lo - 1e-9 or t[1] < lo - 1e-9 or t[2] < lo - 1e-9 or t[3] < lo - 1e-9
+            or t[0] > hi + 1e-9 or t[1] > hi + 1e-9 or t[2] > hi + 1e-9
+            or t[3] > hi + 1e-9):
+        saturated = True
+        t = _fit(inv, u, tx, ty, tz, lo, hi)
+    return (_speed_to_command(math.sqrt(min(max(t[0], lo), hi) / kf), p[3], p[4]),
+            _speed_to_command(math.sqrt(min(max(t[1], lo), hi) / kf), p[3], p[4]),
+            _speed_to_command(math.sqrt(min(max(t[2], lo), hi) / kf), p[3], p[4]),
+            _speed_to_command(math.sqrt(min(max(t[3], lo), hi) / kf), p[3], p[4]),
+            saturated)
+
+
+@njit
+def _fit(inv: np.ndarray, u: float, tx: float, ty: float, tz: float, lo: float, hi: float
+         ) -> Vec4:
+    """Rotor thrusts within [lo, hi] keeping the collective thrust: roll/pitch torque
+    scaled down first, yaw torque only with what is left."""
+    base = _rotor_thrusts(inv, u, 0.0, 0.0, 0.0)
+    rp = _rotor_thrusts(inv, 0.0, tx, ty, 0.0)
+    yaw = _rotor_thrusts(inv, 0.0, 0.0, 0.0, tz)
+    s_rp = _largest_scale(base, rp, lo, hi)
+    with_rp = (base[0] + s_rp * rp[0], base[1] + s_rp * rp[1], base[2] + s_rp * rp[2],
+               base[3] + s_rp * rp[3])
+    s_yaw = _largest_scale(with_rp, yaw, lo, hi) if s_rp >= 1.0 else 0.0
+    return (with_rp[0] + s_yaw * yaw[0], with_rp[1] + s_yaw * yaw[1],
+            with_rp[2] + s_yaw * yaw[2], with_rp[3] + s_yaw * yaw[3])
+
+
+@njit
+def _largest_scale(base: Vec4, delta: Vec4, lo: float, hi: float) -> float:
     """Largest s in [0, 1] with lo <= base + s * delta <= hi element-wise."""
     s = 1.0
-    for b, d in zip(base, delta, strict=True):
+    for i in range(4):
+        b, d = base[i], delta[i]
         if d > 1e-12:
             s = min(s, (hi - b) / d)
         elif d < -1e-12:

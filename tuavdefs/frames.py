@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import math
 
+from tuavdefs.jit import njit
+
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
 
@@ -124,20 +126,22 @@ def quat_to_euler(q: Quat) -> Vec3:
         pitch = math.copysign(math.pi / 2, sinp)
         roll = 0.0
         yaw = -2.0 * math.atan2(x, w) if sinp > 0 else 2.0 * math.atan2(x, w)
-        return (roll, pitch, _wrap_pi(yaw))
+        return (roll, pitch, wrap_pi(yaw))
     roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
     pitch = math.asin(sinp)
     yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
     return (roll, pitch, yaw)
 
 
-def _wrap_pi(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
+@njit
 def wrap_pi(angle_rad: float) -> float:
     """An angle wrapped into [-pi, pi) [rad]."""
-    return _wrap_pi(angle_rad)
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+#: Compiled versions of the same functions, for the controllers' kernels.
+quat_to_matrix_kernel = njit(quat_to_matrix)
+quat_to_euler_kernel = njit(quat_to_euler)
 
 
 def quat_enu_flu_to_ned_frd(q: Quat) -> Quat:
@@ -154,12 +158,12 @@ def quat_ned_frd_to_enu_flu(q: Quat) -> Quat:
 def yaw_enu_to_ned(yaw_rad: float) -> float:
     """Heading from the z-up convention (from east, counter-clockwise) to NED (from north,
     clockwise) [rad], wrapped to [-pi, pi)."""
-    return _wrap_pi(math.pi / 2 - yaw_rad)
+    return wrap_pi(math.pi / 2 - yaw_rad)
 
 
 def yaw_ned_to_enu(yaw_rad: float) -> float:
     """Heading from NED (from north, clockwise) to the z-up convention [rad]."""
-    return _wrap_pi(math.pi / 2 - yaw_rad)
+    return wrap_pi(math.pi / 2 - yaw_rad)
 
 
 def local_enu_to_global(pos_enu_m: Vec3, home: tuple[float, float, float]

@@ -1,0 +1,156 @@
+"""The controllers' compiled steps are the laws they are built from: the flight controller's
+one-call step equals its components stepped one by one, the L-bar bisection that compares
+with a Newton root equals the bisection that evaluates every midpoint, and the compiled
+closed loop equals the interpreted one (TUAV_NO_JIT=1)."""
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from companion.flight_controller import FlightController, VehicleState
+from companion.gains import FlightControlParams
+from companion.position import PositionController
+from companion.trajectory import RefSample
+from groundstation.lbar import LBarParams, _a_for_exit_slope, _exit_slope_root
+from groundstation.winder_control import WinderControlParams
+from groundstation.winder_host import WinderHost
+from tuavdefs.frames import euler_to_quat, quat_to_euler, quat_to_matrix
+from tuavdefs.params import SystemParams
+
+ROOT = Path(__file__).resolve().parents[1]
+RNG = np.random.default_rng(20261122)
+
+
+def _component_step(fc: FlightController, t: float, state: VehicleState, ref: RefSample):
+    """FlightController.update written out with the components' own methods."""
+    est = fc.tether_model.estimate(state.pos_m, fc.winch.length_at(t), fc.winch.tension_n)
+    u_ach, tau_ach = fc.actuators.wrench()
+    po = fc.position.update(fc.dt_s, state.pos_m, state.vel_m_s, ref.pos_m, ref.vel_m_s,
+                            ref.acc_m_s2, ref.yaw_rad, quat_to_matrix(state.quat),
+                            est.force_n, u_ach)
+    ao = fc.attitude.update(quat_to_euler(state.quat), state.rates_rad_s, po.attitude_rad,
+                            tau_ach)
+    mix = fc.mixer.mix(po.thrust_n, ao.torque_n_m)
+    fc.actuators.command(mix.commands)
+    fc.actuators.advance()
+    return mix.commands, mix.saturated, po, ao, est.force_n
+
+
+def test_the_flight_step_is_its_components_step():
+    p = SystemParams()
+    fcs = [FlightController(FlightControlParams(), p.vehicle, p.tether, 9.81) for _ in "ab"]
+    hover = (440.0,) * 4
+    for k in range(400):
+        t = 0.004 * k
+        pos = tuple(RNG.uniform(-1.0, 1.0, 3) + (6.0, 2.0, 12.0))
+        vel = tuple(RNG.uniform(-1.0, 1.0, 3))
+        quat = euler_to_quat(*RNG.uniform(-0.3, 0.3, 3))
+        state = VehicleState(pos, vel, quat, tuple(RNG.uniform(-0.5, 0.5, 3)))
+        ref = RefSample((6.0, 2.0, 12.0), (0.5, 0.0, 0.0), (0.0, 0.1, 0.0), (0.0, 0.0, 0.0),
+                        float(RNG.uniform(-3.0, 3.0)), 0.0)
+        if k == 0:
+            for fc in fcs:
+                fc.reset(state, hover)
+        if k % 3 == 0:
+            length, tension = float(RNG.uniform(13.0, 16.0)), float(RNG.uniform(0.5, 4.0))
+            for fc in fcs:
+                fc.winch_report(t, length, 0.1, tension)
+        a = fcs[0].update(t, state, ref)
+        b = _component_step(fcs[1], t, state, ref)
+        assert (a.rotor_commands, a.mixer_saturated, a.position, a.attitude,
+                a.tether_force_est_n) == b
+    assert np.array_equal(fcs[0].actuators.speeds, fcs[1].actuators.speeds)
+
+
+def _lbar_cases(n):
+    tan_min = math.tan(LBarParams().min_exit_angle_rad)
+    for k in range(n):
+        h = float(RNG.uniform(0.5, 80.0))
+        if k % 3 == 0:   # chord barely steeper than the least exit angle: a far out
+            v = h * tan_min * (1.0 + 10.0 ** RNG.uniform(-10.0, -1.0))
+        else:
+            v = float(RNG.uniform(0.5, 60.0))
+        yield h, v, tan_min
+
+
+def test_the_bisection_with_a_newton_root_is_the_bisection():
+    w = 0.034 * 9.81
+    a_target = LBarParams().target_horizontal_tension_n / w
+    checked = 0
+    guess = math.nan
+    for h, v, tan_min in _lbar_cases(3000):
+        if v / h <= tan_min:
+            continue
+        root, guard = _exit_slope_root(h, v, tan_min, a_target, guess)
+        plain = _a_for_exit_slope(h, v, a_target, tan_min, math.nan, math.inf)
+        assert _a_for_exit_slope(h, v, a_target, tan_min, root, guard) == plain, (h, v)
+        if math.isfinite(root):
+            checked += 1
+            guess = root
+    assert checked > 2500
+
+
+SCRIPT = """
+import json
+from tuav_sitl.offline import OfflineRunner
+from tuav_sitl.scenario import load_scenario
+from tuavdefs import jit
+sc = load_scenario("circle-windy").replace(duration_s=1.5, metrics_after_s=0.0)
+s = OfflineRunner(sc).run().series
+print(json.dumps({"jit": jit.JIT, **{k: s[k].tolist() for k in
+                  ("pos", "euler", "torque", "rotor_cmd", "lbar", "lbar_rate",
+                   "winder_torque", "d_hat")}}))
+"""
+
+
+def _run(no_jit: bool) -> dict:
+    env = dict(os.environ)
+    env.pop("TUAV_NO_JIT", None)
+    if no_jit:
+        env["TUAV_NO_JIT"] = "1"
+    res = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, env=env,
+                         capture_output=True, text=True, timeout=600, check=True)
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def test_compiled_and_interpreted_closed_loops_agree():
+    compiled, interpreted = _run(False), _run(True)
+    assert compiled.pop("jit") is True and interpreted.pop("jit") is False
+    for name in compiled:
+        a, b = np.array(compiled[name]), np.array(interpreted[name])
+        assert np.allclose(a, b, rtol=1e-7, atol=1e-9), name
+
+
+def test_the_winder_step_is_its_components_step():
+    p = SystemParams()
+    hosts = [WinderHost(WinderControlParams(), LBarParams(), p.winder, p.tether, 9.81)
+             for _ in "ab"]
+    for _ in range(300):
+        pos = tuple(RNG.uniform(-15.0, 15.0, 2)) + (float(RNG.uniform(1.0, 30.0)),)
+        vel = tuple(RNG.uniform(-2.0, 2.0, 3))
+        length, omega, tension = (float(RNG.uniform(5.0, 40.0)), float(RNG.uniform(-5, 5)),
+                                  float(RNG.uniform(0.0, 5.0)))
+        a = hosts[0].update(length, omega, tension, pos, vel)
+        b = hosts[1]
+        lb = b.lbar.estimate(pos, vel)
+        cmd = b.controller.update(b.dt_s, length, omega, tension, lb.length_m, lb.rate_m_s)
+        assert a == (cmd.torque_n_m, lb.length_m, lb.rate_m_s, cmd)
+
+
+def test_a_replaced_parameter_takes_effect():
+    """The compiled laws take their parameters packed; replacing one repacks them."""
+    g1 = FlightControlParams()
+    g2 = g1.replace(pos_k1_1_s=(1.0, 1.2, 1.4), disturbance_limit_m_s2=2.0)
+    a = PositionController(g1, 2.84, 9.81, 80.0)
+    b = PositionController(g2, 2.84, 9.81, 80.0)
+    a.gains = g2
+    a.u_max = b.u_max = 30.0
+    args = (0.004, (1.0, 2.0, 10.0), (0.1, 0.2, 0.0), (0.0, 0.0, 10.5), (0.0, 0.0, 0.0),
+            (0.0, 0.0, 0.0), 0.3)
+    for _ in range(3):
+        assert a.update(*args) == b.update(*args)
