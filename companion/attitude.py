@@ -22,7 +22,6 @@ reference derivatives come from the filter, not from differentiating the positio
 from __future__ import annotations
 
 import math
-import operator
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -157,15 +156,14 @@ class AttitudeController:
         decay_eta = np.exp(-self.k3 * self.dt_s)
         self._p = np.concatenate([self.j, [float(self.c)], self.k3, self.k4, self._decay_w,
                                   decay_eta]).astype(float)
-        self._packed_from = self._sources()
-
-    def _sources(self) -> tuple[Any, ...]:
-        return (self.j, self.c, self.k3, self.k4, self._decay_w, self.dt_s)
+        self._packed_from = (self.j, self.c, self.k3, self.k4, self._decay_w, self.dt_s)
 
     def params(self) -> np.ndarray:
         """The packed parameters, packed again if an attribute they come from was
         replaced."""
-        if not all(map(operator.is_, self._sources(), self._packed_from)):
+        f = self._packed_from
+        if (self.j is not f[0] or self.c is not f[1] or self.k3 is not f[2]
+                or self.k4 is not f[3] or self._decay_w is not f[4] or self.dt_s is not f[5]):
             self._pack()
         return self._p
 

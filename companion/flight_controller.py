@@ -72,8 +72,9 @@ class FlightController:
             # a process with deadlines must not wait for it there
             at = (0.0, 0.0, 10.0)
             flight_step(self.dt_s, *at, *_ZERO3, 1.0, 0.0, 0.0, 0.0, *_ZERO3, *at, *_ZERO3,
-                        *_ZERO3, 0.0, 12.0, True, 1.0, True, False, True, *self._constants(),
-                        *(a.copy() for a in self._arrays()))
+                        *_ZERO3, 0.0, 12.0, True, 1.0, True, False, True,
+                        *(c.copy() if isinstance(c, np.ndarray) else c
+                          for c in self._components()))
 
     def reset(self, state: VehicleState, rotor_speeds_rad_s: tuple[float, ...]) -> None:
         """Start from the vehicle's current attitude and rotor speeds (e.g. hover trim)."""
@@ -89,31 +90,29 @@ class FlightController:
     def update(self, t_s: float, state: VehicleState, ref: RefSample,
                armed: bool = True) -> FlightStep:
         """One control step at time ``t_s`` [s]."""
-        g = self.gains
-        tension = self.winch.tension_n if g.use_measured_tension else None
+        g, winch = self.gains, self.winch
+        tension = winch.tension_n if g.use_measured_tension else None
         measured = tension is not None
         f = self.attitude.filter
         commands, saturated, p, a, tether_force = flight_step(
             self.dt_s, *state.pos_m, *state.vel_m_s, *state.quat, *state.rates_rad_s,
-            *ref.pos_m, *ref.vel_m_s, *ref.acc_m_s2, ref.yaw_rad, self.winch.length_at(t_s),
+            *ref.pos_m, *ref.vel_m_s, *ref.acc_m_s2, ref.yaw_rad, winch.length_at(t_s),
             measured, tension if measured else 0.0, g.use_tether_model, f.initialised,
-            bool(armed), *self._constants(), *self._arrays())
+            bool(armed), *self._components())
         f.initialised = True
         return FlightStep(commands, saturated, position_output(p), attitude_output(a),
                           tether_force)
 
-    def _constants(self) -> tuple[float, ...]:
-        """The scalar parameters :func:`flight_step` takes from the components."""
-        tm, act = self.tether_model, self.actuators
-        v = act.vehicle
+    def _components(self) -> tuple[Any, ...]:
+        """What :func:`flight_step` takes from the components: their scalar parameters,
+        then their packed parameters and states (arrays, updated in place)."""
+        tm, pc, ac, mx, act = (self.tether_model, self.position, self.attitude, self.mixer,
+                               self.actuators)
+        f, v = ac.filter, act.vehicle
         return (tm.w, tm.taut_stiffness_n, v.rotor_thrust_coeff, act._decay,
-                v.rotor_speed_min_rad_s, v.rotor_speed_max_rad_s)
-
-    def _arrays(self) -> tuple[np.ndarray, ...]:
-        """The components' packed parameters and states, in :func:`flight_step`'s order."""
-        pc, ac, mx, act = self.position, self.attitude, self.mixer, self.actuators
-        return (pc.params(), pc._state, ac.params(), ac.filter.coeffs, ac.filter.state, ac.xi_eta,
-                ac.xi_w, mx._inv, mx.params(), act._a, act.speeds, act._setpoints)
+                v.rotor_speed_min_rad_s, v.rotor_speed_max_rad_s, pc.params(), pc._state,
+                ac.params(), f.coeffs, f.state, ac.xi_eta, ac.xi_w, mx._inv, mx.params(),
+                act._a, act.speeds, act._setpoints)
 
 
 @njit

@@ -29,7 +29,6 @@ yaw.
 from __future__ import annotations
 
 import math
-import operator
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -91,10 +90,7 @@ class PositionController:
         p[P_GAM:P_GAM + 3] = gn.disturbance_gain_1_s2
         p[P_DRAG:P_DRAG + 3] = self.drag
         self._p = p
-        self._packed_from = self._sources()
-
-    def _sources(self) -> tuple[Any, ...]:
-        return (self.gains, self.m, self.g, self.u_max, self.u_min, self.drag)
+        self._packed_from = (self.gains, self.m, self.g, self.u_max, self.u_min, self.drag)
 
     @property
     def d_hat(self) -> list[float]:
@@ -140,7 +136,9 @@ class PositionController:
 
     def params(self) -> np.ndarray:
         """The gains and limits packed for :func:`position_law`."""
-        if not all(map(operator.is_, self._sources(), self._packed_from)):
+        f = self._packed_from
+        if (self.gains is not f[0] or self.m is not f[1] or self.g is not f[2]
+                or self.u_max is not f[3] or self.u_min is not f[4] or self.drag is not f[5]):
             self._pack()
         return self._p
 

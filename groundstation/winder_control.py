@@ -21,7 +21,6 @@ limited to the motor's, and alpha to the speed limit.
 from __future__ import annotations
 
 import math
-import operator
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -105,7 +104,7 @@ class WinderController:
 
     def params(self) -> np.ndarray:
         """The gains and drum model packed for :func:`winder_law`."""
-        if not all(map(operator.is_, self._sources(), self._packed_from)):
+        if any(a is not b for a, b in zip(self._sources(), self._packed_from, strict=True)):
             self._pack()
         return self._p
 

@@ -15,7 +15,6 @@ reaction torque -spin_i * k_m * Omega_i^2 about +z (spin +1 = counter-clockwise 
 from __future__ import annotations
 
 import math
-import operator
 from typing import NamedTuple
 
 import numpy as np
@@ -125,8 +124,8 @@ class Mixer:
     def params(self) -> np.ndarray:
         """The packed parameters of :func:`mix_kernel`, packed again if an attribute they
         come from was replaced."""
-        if not all(map(operator.is_, (self._t_min, self._t_max, self.vehicle),
-                       self._packed_from)):
+        f = self._packed_from
+        if self._t_min is not f[0] or self._t_max is not f[1] or self.vehicle is not f[2]:
             self._pack()
         return self._p
 
