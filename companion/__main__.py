@@ -1,48 +1,101 @@
 """``python -m companion``: the onboard flight computer process.
 
-Connects to the plant's simulator link, and at every control period runs the shared
-:class:`companion.flight_controller.FlightController` on the truth state it receives
-(HIL_STATE_QUATERNION) and answers with the rotor commands. For now it holds its starting
-position or flies to ``--goto``; the ArduCopter-compatible ground-station side comes next
-(docs/architecture.md). On its component link (TCP 5762) it sends the UAV's position to the
-winch component (the ground-station process) and takes its WINCH_STATUS as the winch's
-reports for the onboard tether model; without them the tether's pull is left to the
-disturbance estimate.
+Connects to the plant's simulator link and, at every control period, runs the shared
+:class:`companion.navigation.Navigator` (modes, arming, take-off, landing, guided targets,
+missions) and :class:`companion.flight_controller.FlightController` on the truth state it
+receives (HIL_STATE_QUATERNION), and answers with the rotor commands. Ground stations and
+scripts drive it as an ArduCopter (``companion.autopilot``) on TCP 127.0.0.1:5760 and UDP
+pushed to 127.0.0.1:14550 and 14540; every frame is logged to ``--tlog``.
+
+On its component link (TCP 5762) it sends the UAV's position to the winch component (the
+ground-station process), takes its WINCH_STATUS as the winch's reports for the onboard
+tether model, and routes messages between the winch and the ground stations.
+
+If the plant starts the vehicle in the air, it starts armed in GUIDED, holding there (and
+flies to ``--goto`` if given); on the ground it waits, disarmed, for a ground station.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
+import signal
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from companion.autopilot import Autopilot, Telemetry
 from companion.component_server import ComponentServer
 from companion.flight_controller import FlightController, VehicleState
 from companion.gains import FlightControlParams
+from companion.mavlink_io import (
+    GCS_TCP_PORT_DEFAULT,
+    UDP_API_PORT_DEFAULT,
+    UDP_GCS_PORT_DEFAULT,
+    MavlinkEndpoints,
+    TelemetryLog,
+)
+from companion.navigation import NavigationParams, Navigator
+from companion.param_protocol import params_to_defs
 from companion.simlink_client import SimLinkClient
-from companion.trajectory import Hold, SequenceBuilder, Trajectory
 from tuavdefs import component_link as cl
 from tuavdefs import simlink as sl
 from tuavdefs.frames import quat_to_euler
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import ParameterError, load_toml
 
+#: Ground-station names of the flight-control gains (SI units; docs/protocols.md).
+GAIN_NAMES = {
+    "rate_hz": "CTL_RATE_HZ", "pos_k1_1_s": "PSC_K1", "pos_k2_1_s": "PSC_K2",
+    "disturbance_gain_1_s2": "PSC_DIST_GAIN",
+    "disturbance_limit_m_s2": "PSC_DIST_LIM", "max_tilt_rad": "PSC_TILT_MAX",
+    "max_thrust_fraction": "PSC_THR_MAX", "att_k3_1_s": "ATC_K3", "att_k4_n_m_s": "ATC_K4",
+    "command_filter_hz": "ATC_FILT_HZ", "command_filter_damping": "ATC_FILT_ZETA",
+    "use_tether_model": "TETH_MODEL", "use_measured_tension": "TETH_TENSION",
+}
+#: Ground-station names of the navigation parameters.
+NAV_NAMES = {
+    "speed_m_s": "WP_SPEED", "speed_up_m_s": "WP_SPEED_UP", "speed_down_m_s": "WP_SPEED_DN",
+    "acc_m_s2": "WP_ACCEL", "land_speed_m_s": "LAND_SPEED", "land_alt_low_m": "LAND_ALT_LOW",
+    "rtl_alt_m": "RTL_ALT", "rtl_loiter_s": "RTL_LOIT_TIME", "acceptance_radius_m": "WP_RADIUS",
+    "takeoff_accept_m": "TKOFF_ACCEPT", "disarm_delay_s": "DISARM_DELAY",
+    "land_detect_s": "LAND_DETECT_T", "reach_fraction": "TETH_REACH",
+    "reach_slack_m": "TETH_SLACK", "guided_velocity_timeout_s": "GUID_TIMEOUT",
+}
+#: Wall time without a state from the plant after which the companion gives up [s].
+SIM_SILENCE_S = 30.0
+
+
+def _address(text: str) -> tuple[str, int]:
+    host, _, port = text.rpartition(":")
+    return (host or "127.0.0.1", int(port))
+
 
 def build_parser() -> argparse.ArgumentParser:
     """Arguments of the companion process."""
-    ap = argparse.ArgumentParser(prog="python -m companion", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m companion", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sim", default=f"127.0.0.1:{sl.SIM_PORT_DEFAULT}",
                     help="HOST:PORT of the plant's simulator link")
     ap.add_argument("--home", type=float, nargs=3, default=sl.HOME_DEFAULT,
-                    metavar=("LAT", "LON", "ALT"), help="the winder's global position")
+                    metavar=("LAT", "LON", "ALT"),
+                    help="the winder's global position (ground altitude AMSL [m])")
     ap.add_argument("--params", default=None, help="system parameters TOML (the vehicle)")
     ap.add_argument("--gains", default=None, help="flight-control gains TOML")
+    ap.add_argument("--nav", default=None, help="navigation parameters TOML (speeds, ...)")
     ap.add_argument("--goto", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
-                    help="fly here [m] (z-up frame) after 0.5 s, then hold")
-    ap.add_argument("--max-speed", type=float, default=2.0, help="[m/s]")
-    ap.add_argument("--max-acc", type=float, default=1.5, help="[m/s^2]")
+                    help="when starting in the air: fly here [m] (z-up frame), then hold")
+    ap.add_argument("--gcs-tcp", type=int, default=GCS_TCP_PORT_DEFAULT,
+                    help="TCP port for ground stations on 127.0.0.1 (0: any free port; "
+                         "-1: none)")
+    ap.add_argument("--gcs-udp", action="append", default=None, metavar="HOST:PORT",
+                    help="push MAVLink by UDP here (repeatable; default 127.0.0.1:14550 and "
+                         "127.0.0.1:14540; 'none' for none)")
+    ap.add_argument("--tlog", default=None, help="telemetry log of all ground-station traffic")
+    ap.add_argument("--param-file", default=None,
+                    help="parameters persisted here (.parm); loaded at start if present")
     ap.add_argument("--connect-timeout", type=float, default=30.0, help="[s]")
     ap.add_argument("--component-port", type=int, default=cl.COMPONENT_PORT_DEFAULT,
                     help="TCP port of the component link (0: none)")
@@ -57,54 +110,134 @@ def main(argv: Sequence[str] | None = None) -> int:
                                                                        Path(args.params))
         gains = (FlightControlParams() if args.gains is None
                  else load_toml(FlightControlParams, Path(args.gains)))
+        nav_params = (NavigationParams() if args.nav is None
+                      else load_toml(NavigationParams, Path(args.nav)))
     except ParameterError as exc:
         print(f"companion: bad parameter: {exc}", file=sys.stderr)
         return 2
-    components = ComponentServer(args.component_port) if args.component_port else None
+    udp = ([] if args.gcs_udp == ["none"] else
+           [_address(a) for a in args.gcs_udp] if args.gcs_udp else
+           [("127.0.0.1", UDP_GCS_PORT_DEFAULT), ("127.0.0.1", UDP_API_PORT_DEFAULT)])
+    try:
+        components = ComponentServer(args.component_port) if args.component_port else None
+        endpoints = MavlinkEndpoints(None if args.gcs_tcp < 0 else args.gcs_tcp, udp,
+                                     tlog=TelemetryLog(args.tlog) if args.tlog else None)
+    except OSError as exc:
+        print(f"companion: cannot listen: {exc.strerror} ({exc})", file=sys.stderr)
+        return 1
     host, _, port = args.sim.rpartition(":")
     client = SimLinkClient(host, int(port), tuple(args.home))
-    client.connect(timeout_s=args.connect_timeout)
-    print(f"companion: connected to the plant at {args.sim}"
-          + (f", component link on tcp:127.0.0.1:{components.port}" if components else ""),
-          flush=True)
-    g = params.environment.gravity_m_s2
-    flight = FlightController(gains, params.vehicle, params.tether, g)
-    veh = params.vehicle
-    hover_speed = math.sqrt(veh.mass_kg * g / (4.0 * veh.rotor_thrust_coeff))
-    ref: Trajectory | None = None
-    steps = 0
     try:
-        while True:
-            sim = client.receive_state(timeout_s=30.0)
+        client.connect(timeout_s=args.connect_timeout)
+    except TimeoutError as exc:
+        print(f"companion: {exc}", file=sys.stderr)
+        return 1
+    g = params.environment.gravity_m_s2
+    veh = params.vehicle
+    flight = FlightController(gains, veh, params.tether, g)
+    nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m)
+
+    def set_gains(new: FlightControlParams) -> None:
+        flight.set_gains(new)
+
+    def set_nav(new: NavigationParams) -> None:
+        nav.p = new
+
+    defs = [d if d.name != "CTL_RATE_HZ" else dataclasses.replace(
+                d, set=lambda _v: "CTL_RATE_HZ is read-only: the plant sets the control rate")
+            for d in params_to_defs(gains, GAIN_NAMES, set_gains)]
+    defs += params_to_defs(nav_params, NAV_NAMES, set_nav)
+    autopilot = Autopilot(endpoints, nav, tuple(args.home), defs,
+                          param_file=Path(args.param_file) if args.param_file else None,
+                          component=components)
+    if args.param_file and Path(args.param_file).exists():
+        for warning in autopilot.params.load() or []:
+            print(f"companion: {warning}", flush=True)
+    autopilot.on_winch_status(lambda m: flight.winch_report(
+        last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None))
+    stop = {"signal": None}
+    signal.signal(signal.SIGTERM, lambda s, _f: stop.update(signal=s))
+    signal.signal(signal.SIGINT, lambda s, _f: stop.update(signal=s))
+    udp_text = ", ".join(f"udp:{h}:{p}" for h, p in udp) or "no udp"
+    tcp_text = f"tcp:127.0.0.1:{endpoints.tcp_port}" if endpoints.tcp_port else "no tcp"
+    print(f"companion: connected to the plant at {args.sim}; MAVLink on {tcp_text}, "
+          f"{udp_text}"
+          + (f"; component link on tcp:127.0.0.1:{components.port}" if components else ""),
+          flush=True)
+    last_t = [0.0]
+    min_speed = veh.rotor_speed_min_rad_s
+    hover_speed = math.sqrt(veh.mass_kg * g / (4.0 * veh.rotor_thrust_coeff))
+    dt = 1.0 / gains.rate_hz
+    started = False
+    was_flying = False
+    was_armed = False
+    throttle = 0.0
+    steps = 0
+    last_state_wall = time.monotonic()
+    reason = "link closed"
+    try:
+        while stop["signal"] is None:
+            try:
+                sim = client.receive_state(timeout_s=0.05)
+            except TimeoutError:
+                autopilot.service(None)
+                if time.monotonic() - last_state_wall > SIM_SILENCE_S:
+                    reason = "no state from the plant"
+                    break
+                continue
+            last_state_wall = time.monotonic()
             truth = sim.truth
             if truth is None:
                 continue
+            t = sim.sim_time_s
+            last_t[0] = t
             state = VehicleState(truth.position_enu_m, truth.velocity_enu_m_s,
                                  truth.quaternion, truth.body_rates_flu_rad_s)
-            t = sim.sim_time_s
-            if ref is None:
-                flight.reset(state, (hover_speed,) * 4)
-                yaw = quat_to_euler(state.quat)[2]
-                if args.goto is None:
-                    ref = Hold(state.pos_m, yaw, t)
-                else:
-                    b = SequenceBuilder(state.pos_m, t, args.max_speed, args.max_acc, yaw=yaw)
-                    ref = b.hold(0.5).goto(tuple(args.goto)).build()
+            yaw = quat_to_euler(state.quat)[2]
+            if not started:
+                started = True
+                nav.start(t, state.pos_m, state.vel_m_s, yaw)
+                if nav.flying:
+                    flight.reset(state, (hover_speed,) * 4)
+                    was_flying = True
+                    if args.goto is not None:
+                        why = nav.goto(tuple(args.goto))
+                        if why is not None:
+                            print(f"companion: --goto refused: {why}", flush=True)
+                autopilot.armed_changed()
+            autopilot.service(Telemetry(t, state.pos_m, state.vel_m_s, state.quat,
+                                        state.rates_rad_s, throttle))
+            if nav.armed and not was_armed:
+                autopilot.armed_changed()
+            was_armed = nav.armed
             if components is not None:
-                for msg in components.poll():
-                    if msg.get_type() == "WINCH_STATUS":
-                        flight.winch_report(t, msg.line_length, msg.speed, msg.tension * g)
                 components.send_position(t, state.pos_m, state.vel_m_s)
-            step = flight.update(t, state, ref.sample(t))
-            client.send_actuators(sim.time_usec, step.rotor_commands, armed=True)
+            ref, motors = nav.step(t, state.pos_m, state.vel_m_s, yaw, dt)
+            if motors == "fly" and ref is not None:
+                if not was_flying:
+                    flight.reset(state, (min_speed,) * 4)
+                was_flying = True
+                cmds = flight.update(t, state, ref).rotor_commands
+            else:
+                was_flying = False
+                cmds = (0.0, 0.0, 0.0, 0.0)
+            armed = motors != "off"
+            client.send_actuators(sim.time_usec, cmds, armed=armed)
+            throttle = sum(cmds) / 4.0 if armed else 0.0
             steps += 1
     except ConnectionError:
         pass
     finally:
         client.close()
+        endpoints.close()
+        if endpoints.tlog is not None:
+            endpoints.tlog.close()
         if components is not None:
             components.close()
-    print(f"companion: link closed after {steps} control periods", flush=True)
+    if stop["signal"] is not None:
+        reason = "stopped"
+    print(f"companion: {reason} after {steps} control periods; "
+          f"{endpoints.bad_frames} bad MAVLink frames dropped", flush=True)
     return 0
 
 

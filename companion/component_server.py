@@ -61,10 +61,25 @@ class ComponentServer:
         n = enu_to_ned(pos_enu)
         v = enu_to_ned(vel_enu)
         msg = self.mav.local_position_ned_encode(int(t_s * 1000), *n, *v)
+        self.send_bytes(msg.pack(self.mav))
+
+    @property
+    def connected(self) -> bool:
+        """Whether a component is connected."""
+        return self.conn is not None
+
+    def send_bytes(self, data: bytes) -> None:
+        """Write packed frames to the component (forwarded ground-station messages)."""
+        if self.conn is None:
+            return
         try:
-            self.conn.sendall(msg.pack(self.mav))
+            self.conn.setblocking(True)
+            self.conn.settimeout(0.5)
+            self.conn.sendall(data)
         except OSError:
             self._drop()
+            return
+        self.conn.setblocking(False)
 
     def _drop(self) -> None:
         if self.conn is not None:

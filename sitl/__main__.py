@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TextIO
 
-from sitl.plant import Plant
+from sitl.plant import Plant, initial_state
 from sitl.sensors import SensorNoise
 from sitl.simlink_server import SimLinkServer, WinderInputs
 from sitl.trim import hover_trim
@@ -69,10 +69,15 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--control-rate", type=float, default=sl.CONTROL_RATE_HZ_DEFAULT,
                     help="control periods per simulated second [Hz]")
     ap.add_argument("--real-time", action="store_true", help="pace by the wall clock")
+    ap.add_argument("--speedup", type=float, default=None, metavar="N",
+                    help="lockstep paced at N x real time (1: the same as --real-time; "
+                         "default: lockstep as fast as possible)")
     ap.add_argument("--duration", type=float, default=None, help="stop after [s] of sim time")
     ap.add_argument("--params", default=None, help="system parameters TOML")
     ap.add_argument("--position", type=float, nargs=3, default=(2.0, 0.0, 10.0),
-                    metavar=("X", "Y", "Z"), help="start in hover trim here [m], z-up frame")
+                    metavar=("X", "Y", "Z"),
+                    help="start here [m], z-up frame: in hover trim, or resting on the "
+                         "ground if Z is at most the gear height (e.g. 0)")
     ap.add_argument("--tether-length", type=float, default=None,
                     help="paid-out length at the start [m] (default 1.15 x the distance)")
     ap.add_argument("--home", type=float, nargs=3, default=sl.HOME_DEFAULT,
@@ -91,6 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the plant process; returns the exit code."""
     args = build_parser().parse_args(argv)
+    real_time = args.real_time or args.speedup == 1.0
     try:
         params = SystemParams() if args.params is None else load_toml(SystemParams,
                                                                        Path(args.params))
@@ -98,13 +104,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"plant: bad parameter: {exc}", file=sys.stderr)
         return 2
     pos = tuple(args.position)
-    length = args.tether_length or 1.15 * math.dist(pos, (0.0, 0.0, 0.0))
-    x0, _ = hover_trim(params, pos, length)
-    plant = Plant(params, state=x0)
+    gear = params.vehicle.gear_height_m
+    if pos[2] <= gear:
+        # resting on its gear, rotors stopped, the tether lying out to it with a little slack
+        pos = (pos[0], pos[1], gear)
+        length = args.tether_length or math.dist(pos, (0.0, 0.0, 0.0)) + 0.1
+        plant = Plant(params)
+        plant.x[:] = initial_state(plant.model, pos, tether_length_m=length)
+    else:
+        length = args.tether_length or 1.15 * math.dist(pos, (0.0, 0.0, 0.0))
+        x0, _ = hover_trim(params, pos, length)
+        plant = Plant(params, state=x0)
     node = None
     if args.can:
         try:
-            node = WinderCanNode(CanLink(args.can), plant, lockstep=not args.real_time)
+            node = WinderCanNode(CanLink(args.can), plant, lockstep=not real_time)
         except CanBusError as exc:
             print(f"plant: {exc}", file=sys.stderr)
             return 1
@@ -123,7 +137,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         server = SimLinkServer(plant, control_rate_hz=args.control_rate,
                                home=tuple(args.home), port=args.port,
-                               real_time=args.real_time,
+                               real_time=real_time, speedup=args.speedup,
                                sensor_noise=SensorNoise.off() if args.no_noise else None,
                                on_step=on_step)
     except OSError as exc:
@@ -135,7 +149,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     can_text = f", winder on CAN {node.link.description}" if node else ", winder braked"
     print(f"plant: listening on tcp:127.0.0.1:{server.port} "
-          f"({'real time' if args.real_time else 'lockstep'}{can_text})", flush=True)
+          f"({server.pacing.replace('-', ' ')}{can_text})", flush=True)
     try:
         summary = server.serve(max_sim_time_s=args.duration, stop_event=stop,
                                accept_timeout_s=args.accept_timeout)

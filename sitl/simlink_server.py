@@ -140,7 +140,8 @@ class SimLinkServer:
                  gps_rate_hz: float = sl.GPS_RATE_HZ_DEFAULT,
                  winder_inputs: WinderInputs = _WINDER_BRAKED,
                  earth_field_ned_gauss: tuple[float, float, float] | None = None,
-                 on_step: Callable[[SimLinkServer], None] | None = None) -> None:
+                 on_step: Callable[[SimLinkServer], None] | None = None,
+                 speedup: float | None = None) -> None:
         _check_loopback(host)
         self.plant = plant
         self.control_rate_hz = float(control_rate_hz)
@@ -149,6 +150,11 @@ class SimLinkServer:
         self.gps_period_us = sl.control_period_us(gps_rate_hz)
         self.home = tuple(float(v) for v in home)
         self.real_time = bool(real_time)
+        #: Lockstep paced at this many times real time (None: as fast as possible).
+        self.speedup = None if real_time or speedup is None or math.isinf(speedup) \
+            else float(speedup)
+        if self.speedup is not None and not self.speedup > 0:
+            raise ValueError(f"speedup must be > 0, got {speedup!r}")
         self.winder_inputs = winder_inputs
         self.on_step = on_step
         suite_kw = {} if earth_field_ned_gauss is None else {
@@ -181,7 +187,9 @@ class SimLinkServer:
     @property
     def pacing(self) -> str:
         """"real-time" or "lockstep"."""
-        return "real-time" if self.real_time else "lockstep"
+        if self.real_time:
+            return "real-time"
+        return "lockstep" if self.speedup is None else f"lockstep at {self.speedup:g}x"
 
     def close(self) -> None:
         """Close the listening socket (and a connection, if any)."""
@@ -242,6 +250,14 @@ class SimLinkServer:
                     deadline: float | None = due + self.period_us * 1e-6
                 else:
                     deadline = None
+                    if self.speedup is not None:
+                        due = sched0 + self.steps * self.period_us * 1e-6 / self.speedup
+                        now = time.monotonic()
+                        if now < due:
+                            self._sleep_until(due, stop)
+                        elif now > due + 0.1:
+                            # fell behind (a slow step): resume the pace, don't sprint
+                            sched0 = now - self.steps * self.period_us * 1e-6 / self.speedup
                 self._send_batch(t_us)
                 answered, n_late, n_ignored = self._wait_answer(t_us, deadline, stop)
                 late += n_late

@@ -31,7 +31,8 @@ def _fly(tmp: Path, duration: float = 12.0) -> tuple[np.ndarray, str, str]:
         assert "listening on tcp:127.0.0.1:" in ready, ready
         comp = subprocess.run(
             [sys.executable, "-m", "companion", "--sim", f"127.0.0.1:{port}",
-             "--component-port", "0", "--goto", *map(str, GOAL)],
+             "--component-port", "0", "--gcs-tcp", "0", "--gcs-udp", "none",
+             "--goto", *map(str, GOAL)],
             cwd=ROOT, capture_output=True, text=True, timeout=180)
         out, _ = plant.communicate(timeout=60)
     finally:

@@ -11,7 +11,9 @@ the parameters used.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime as _dt
+import math
 import os
 import signal
 import socket
@@ -19,13 +21,19 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import TextIO
+from typing import NamedTuple, TextIO
 
 from tuavdefs import component_link as cl
 from tuavdefs import simlink as sl
 from tuavdefs.canbus import DEFAULT_GROUP, resolve_spec
-from tuavdefs.params import SystemParams
-from tuavdefs.paramspec import load_toml, to_dict
+from tuavdefs.gcs import (
+    GCS_TCP_PORT_DEFAULT,
+    INSTANCE_PORT_STEP,
+    UDP_API_PORT_DEFAULT,
+    UDP_GCS_PORT_DEFAULT,
+)
+from tuavdefs.params import SystemParams, TetherParams, VehicleParams, WinderParams
+from tuavdefs.paramspec import ParameterError, load_toml, to_dict
 
 #: How long a process may take to say it is ready [s].
 READY_TIMEOUT_S = 60.0
@@ -59,8 +67,10 @@ def _can_spec(spec: str, instance: int) -> str:
 class Stack:
     """The three processes and their logs."""
 
-    def __init__(self, run_dir: Path) -> None:
+    def __init__(self, run_dir: Path, echo: bool = False) -> None:
         self.run_dir = run_dir
+        self.echo = echo
+        self._echoed: dict[str, int] = {}
         self.procs: dict[str, subprocess.Popen] = {}
         self.recorders: dict[str, subprocess.Popen] = {}
         self.logs: dict[str, TextIO] = {}
@@ -90,6 +100,22 @@ class Stack:
         self.recorders[name] = subprocess.Popen([sys.executable, *args], stdout=log,
                                                 stderr=subprocess.STDOUT,
                                                 start_new_session=True)
+
+    def echo_new(self) -> None:
+        """With ``echo``, print the lines the processes logged since the last call."""
+        if not self.echo:
+            return
+        for name in [*self.procs, *self.recorders]:
+            path = self.run_dir / f"{name}.log"
+            try:
+                with open(path) as f:
+                    f.seek(self._echoed.get(name, 0))
+                    text = f.read()
+                    self._echoed[name] = f.tell()
+            except OSError:
+                continue
+            for line in text.splitlines():
+                print(f"[{name}] {line}", flush=True)
 
     def first_exit(self) -> tuple[str, int] | None:
         """(name, exit code) of a process that has exited, if any."""
@@ -121,43 +147,128 @@ def _last_line(path: Path) -> str:
     return lines[-1] if lines else "(no output)"
 
 
+def _home(text: str) -> tuple[float, float, float]:
+    parts = [float(v) for v in text.replace(" ", ",").split(",") if v]
+    if len(parts) != 3 or not (-90 <= parts[0] <= 90 and -180 <= parts[1] <= 180):
+        raise argparse.ArgumentTypeError("--home takes LAT,LON,ALT (degrees, degrees, m AMSL)")
+    return (parts[0], parts[1], parts[2])
+
+
+def _wind(text: str) -> tuple[float, float, str]:
+    parts = [v.strip() for v in text.split(",")]
+    try:
+        speed, from_deg = float(parts[0]), float(parts[1]) if len(parts) > 1 else 0.0
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            "--wind takes SPEED,FROM_DEG[,TURBULENCE], e.g. 5,270,light") from None
+    turb = parts[2] if len(parts) > 2 else "none"
+    if turb not in ("none", "light", "moderate", "severe") or speed < 0:
+        raise argparse.ArgumentTypeError(
+            "--wind: speed >= 0 m/s, turbulence none|light|moderate|severe")
+    return (speed, from_deg, turb)
+
+
+def _speedup(text: str) -> float:
+    if text == "max":
+        return math.inf
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError("--speedup takes a number > 0 or 'max'") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError("--speedup takes a number > 0 or 'max'")
+    return value
+
+
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     """The options of ``tuav-sitl up``."""
-    ap.add_argument("--speedup", default="1", help="1: real time (default); max: lockstep, "
-                    "as fast as the processes allow")
-    ap.add_argument("--params", default=None, help="system parameters TOML (vehicle, tether, "
-                    "winder, wind)")
+    ap.add_argument("--speedup", type=_speedup, default=1.0, metavar="N|max",
+                    help="simulated time per wall time: 1 real time (default), N paced at N x, "
+                         "max as fast as the processes allow (all in lockstep but 1)")
+    ap.add_argument("--params", default=None, help="whole system parameters TOML (vehicle, "
+                    "tether, winder, wind, environment)")
+    ap.add_argument("--vehicle", default=None, metavar="FILE", help="vehicle TOML (fields of "
+                    "[vehicle] at top level) replacing the default paper vehicle")
+    ap.add_argument("--tether", default=None, metavar="FILE", help="tether TOML")
+    ap.add_argument("--winder", default=None, metavar="FILE", help="winder TOML")
+    ap.add_argument("--wind", type=_wind, default=None, metavar="SPEED,FROM_DEG[,TURB]",
+                    help="steady wind [m/s] blowing from FROM_DEG (compass, 0 = north) with "
+                         "Dryden turbulence none|light|moderate|severe, e.g. 5,270,light")
     ap.add_argument("--can", default="auto", metavar="SPEC",
                     help="CAN bus: auto, socketcan:IFACE, udp_multicast[:GROUP]")
-    ap.add_argument("--home", type=float, nargs=3, default=sl.HOME_DEFAULT,
-                    metavar=("LAT", "LON", "ALT"), help="the winder's global position")
-    ap.add_argument("--position", type=float, nargs=3, default=(4.0, 0.0, 10.0),
-                    metavar=("X", "Y", "Z"), help="start in hover here [m], z-up frame")
+    ap.add_argument("--home", type=_home, default=sl.HOME_DEFAULT, metavar="LAT,LON,ALT",
+                    help="the winder's global position (ground altitude AMSL)")
+    ap.add_argument("--position", type=float, nargs=3, default=(2.0, 0.0, 0.0),
+                    metavar=("X", "Y", "Z"),
+                    help="where the UAV starts [m], z-up frame from the winder: on the "
+                         "ground (default 2 m east) or, with Z above the gear, in hover")
     ap.add_argument("--goto", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
-                    help="have the companion fly here [m] (until missions come over MAVLink)")
+                    help="when starting in the air, fly here [m] at once")
     ap.add_argument("--duration", type=float, default=None,
                     help="stop after [s] of simulated time")
     ap.add_argument("--logdir", default="runs", help="where run folders go")
     ap.add_argument("--instance", type=int, default=0,
                     help="offset every port (by 10 per instance) to run stacks side by side")
+    out = ap.add_mutually_exclusive_group()
+    out.add_argument("--headless", action="store_true",
+                     help="print only errors and the log folder (no banner, no status)")
+    out.add_argument("--verbose", action="store_true",
+                     help="also echo every process's log lines to the terminal")
+
+
+def _system_params(args: argparse.Namespace) -> SystemParams:
+    """The run's parameters: --params, then --vehicle/--tether/--winder, then --wind."""
+    params = SystemParams() if args.params is None else load_toml(SystemParams,
+                                                                  Path(args.params))
+    for name, cls in (("vehicle", VehicleParams), ("tether", TetherParams),
+                      ("winder", WinderParams)):
+        path = getattr(args, name)
+        if path is not None:
+            try:
+                params = dataclasses.replace(params, **{name: load_toml(cls, Path(path))})
+            except ParameterError as exc:
+                raise ParameterError(f"{name}.{exc.field}", str(exc).split(": ", 1)[-1]) \
+                    from None
+    if args.wind is not None:
+        speed, from_deg, turb = args.wind
+        to = math.radians(from_deg + 180.0)   # the air moves towards the opposite bearing
+        steady = (speed * math.sin(to), speed * math.cos(to), 0.0)
+        params = dataclasses.replace(params, wind=dataclasses.replace(
+            params.wind, steady_m_s=steady, turbulence=turb))
+    return params
+
+
+class Ports(NamedTuple):
+    """The ports of one instance."""
+
+    sim: int
+    component: int
+    gcs_tcp: int
+    udp_gcs: int
+    udp_api: int
+
+
+def ports_for(instance: int) -> Ports:
+    """ArduPilot's convention: every port moves by 10 per instance."""
+    k = INSTANCE_PORT_STEP * instance
+    return Ports(sl.SIM_PORT_DEFAULT + k, cl.COMPONENT_PORT_DEFAULT + k,
+                 GCS_TCP_PORT_DEFAULT + k, UDP_GCS_PORT_DEFAULT + k, UDP_API_PORT_DEFAULT + k)
 
 
 def run_up(args: argparse.Namespace) -> int:
     """Start, supervise and stop the stack; returns the exit code."""
-    if args.speedup not in ("1", "max"):
-        print("tuav-sitl up: --speedup takes 1 (real time) or max (lockstep) for now",
-              file=sys.stderr)
-        return 2
-    real_time = args.speedup == "1"
-    sim_port = sl.SIM_PORT_DEFAULT + 10 * args.instance
-    comp_port = cl.COMPONENT_PORT_DEFAULT + 10 * args.instance
-    for port in (sim_port, comp_port):
+    speedup = args.speedup
+    ports = ports_for(args.instance)
+    for port in (ports.sim, ports.component, ports.gcs_tcp):
         if not _port_free(port):
             print(f"tuav-sitl up: port {port} is in use (another stack?); "
                   f"try --instance {args.instance + 1}", file=sys.stderr)
             return 1
-    params = SystemParams() if args.params is None else load_toml(SystemParams,
-                                                                   Path(args.params))
+    try:
+        params = _system_params(args)
+    except ParameterError as exc:
+        print(f"tuav-sitl up: bad parameter: {exc}", file=sys.stderr)
+        return 2
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     run_dir = Path(args.logdir) / f"up-{stamp}-{args.instance}"
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -167,20 +278,24 @@ def run_up(args: argparse.Namespace) -> int:
     can = _can_spec(args.can, args.instance)
     home = [str(v) for v in args.home]
     common = ["--params", str(run_dir / "params.toml")]
-    plant_args = ["-m", "sitl", "--port", str(sim_port), "--can", can, "--home", *home,
+    plant_args = ["-m", "sitl", "--port", str(ports.sim), "--can", can, "--home", *home,
                   "--position", *map(str, args.position),
                   "--truth-log", str(run_dir / "truth.csv"), *common]
-    if real_time:
-        plant_args.append("--real-time")
+    if math.isfinite(speedup):
+        plant_args += ["--speedup", repr(speedup)]
     if args.duration is not None:
         plant_args += ["--duration", str(args.duration)]
-    comp_args = ["-m", "companion", "--sim", f"127.0.0.1:{sim_port}", "--component-port",
-                 str(comp_port), "--home", *home, *common]
+    comp_args = ["-m", "companion", "--sim", f"127.0.0.1:{ports.sim}", "--component-port",
+                 str(ports.component), "--home", *home, "--gcs-tcp", str(ports.gcs_tcp),
+                 "--gcs-udp", f"127.0.0.1:{ports.udp_gcs}",
+                 "--gcs-udp", f"127.0.0.1:{ports.udp_api}",
+                 "--tlog", str(run_dir / "flight.tlog"),
+                 "--param-file", str(run_dir / "companion.parm"), *common]
     if args.goto is not None:
         comp_args += ["--goto", *map(str, args.goto)]
-    gs_args = ["-m", "groundstation", "--can", can, "--mavlink", f"127.0.0.1:{comp_port}",
-               *common]
-    stack = Stack(run_dir)
+    gs_args = ["-m", "groundstation", "--can", can, "--mavlink",
+               f"127.0.0.1:{ports.component}", *common]
+    stack = Stack(run_dir, echo=args.verbose)
     stopping = {"signal": None}
 
     def on_signal(signum: int, _frame: object) -> None:
@@ -195,14 +310,17 @@ def run_up(args: argparse.Namespace) -> int:
         stack.start("plant", plant_args, "listening on")
         stack.start("groundstation", gs_args, "groundstation: CAN")
         stack.start("companion", comp_args, "companion: connected")
-        print(_banner(run_dir, sim_port, comp_port, can, args, real_time), flush=True)
+        if not args.headless:
+            print(_banner(run_dir, ports, can, args, speedup), flush=True)
         while stopping["signal"] is None:
+            stack.echo_new()
             ended = stack.first_exit()
             if ended is not None:
                 name, rc = ended
                 if name == "plant" and rc == 0:
-                    print(f"tuav-sitl up: plant finished: "
-                          f"{_last_line(run_dir / 'plant.log')}", flush=True)
+                    if not args.headless:
+                        print(f"tuav-sitl up: plant finished: "
+                              f"{_last_line(run_dir / 'plant.log')}", flush=True)
                 else:
                     print(f"tuav-sitl up: {name} exited with code {rc}: "
                           f"{_last_line(run_dir / f'{name}.log')}", file=sys.stderr)
@@ -214,27 +332,33 @@ def run_up(args: argparse.Namespace) -> int:
         code = 1
     finally:
         stack.stop()
-    if stopping["signal"] is not None:
+    if stopping["signal"] is not None and not args.headless:
         print("tuav-sitl up: stopped", flush=True)
     print(f"tuav-sitl up: logs in {run_dir}", flush=True)
     return code
 
 
-def _banner(run_dir: Path, sim_port: int, comp_port: int, can: str,
-            args: argparse.Namespace, real_time: bool) -> str:
+def _banner(run_dir: Path, ports: Ports, can: str, args: argparse.Namespace,
+            speedup: float) -> str:
     interface, channel = resolve_spec(can)
-    watch = (f"candump {channel}" if interface == "socketcan" else
-             f"python -c \"import can; b=can.Bus(interface='udp_multicast', "
-             f"channel='{channel}', hop_limit=0); [print(m) for m in b]\"")
+    watch = (f"candump {channel}   (or: tuav-sitl candump --can {interface}:{channel})"
+             if interface == "socketcan" else
+             f"tuav-sitl candump --can {interface}:{channel} [--decode | -L]")
     lat, lon, alt = args.home
+    clock = ("real time" if speedup == 1.0 else
+             "lockstep, as fast as possible" if math.isinf(speedup) else
+             f"lockstep, paced at {speedup:g}x real time")
     return "\n".join([
         "tuav-sitl up: plant, companion and ground station are running",
-        f"  simulator link (plant <-> companion): tcp:127.0.0.1:{sim_port}",
-        f"  component link (companion <-> winch): tcp:127.0.0.1:{comp_port}",
-        "  ground-station MAVLink endpoints (tcp:5760, udp:14550/14540): not yet built",
+        f"  MAVLink (connect a ground station or script): tcp:127.0.0.1:{ports.gcs_tcp}",
+        f"    UDP pushed to udp:127.0.0.1:{ports.udp_gcs} (ground stations) and "
+        f"udp:127.0.0.1:{ports.udp_api} (APIs)",
+        f"    e.g. mavproxy.py --master tcp:127.0.0.1:{ports.gcs_tcp}",
+        f"  simulator link (plant <-> companion): tcp:127.0.0.1:{ports.sim}",
+        f"  component link (companion <-> winch): tcp:127.0.0.1:{ports.component}",
         f"  winder CAN bus: {interface}:{channel}   watch it: {watch}",
         f"  home: {lat:.7f}, {lon:.7f}, {alt:.1f} m AMSL (the winder)",
-        f"  clock: {'real time' if real_time else 'lockstep, as fast as possible'}",
-        f"  logs: {run_dir} (truth.csv, can.log, a log per process)",
+        f"  clock: {clock}",
+        f"  logs: {run_dir} (flight.tlog, can.log, truth.csv, a log per process)",
         "  Ctrl-C stops all three.",
     ])

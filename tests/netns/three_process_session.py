@@ -39,7 +39,8 @@ def main() -> int:
                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     time.sleep(0.5)
     comp = subprocess.Popen([py, "-m", "companion", "--sim", f"127.0.0.1:{sim_port}",
-                             "--component-port", str(comp_port), "--goto", *map(str, goal)],
+                             "--component-port", str(comp_port), "--gcs-tcp", "0",
+                             "--gcs-udp", "none", "--goto", *map(str, goal)],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True)
     plant_out = plant.communicate(timeout=300)[0]

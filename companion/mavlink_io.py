@@ -1,0 +1,301 @@
+"""The companion's ground-station endpoints: MAVLink over TCP and UDP, with a telemetry log.
+
+As ArduPilot SITL presents them: a TCP server (``127.0.0.1:5760``) that takes any number
+of clients, and UDP sockets that push to fixed addresses (``127.0.0.1:14550`` for ground
+stations, ``127.0.0.1:14540`` for APIs) and answer whoever writes back, each peer at its
+own address. Every link has its own parser, so MAVLink 1 and 2 frames are both accepted;
+everything sent is MAVLink 2, from system 1 component 1 unless the bytes are forwarded
+from another component (the winch).
+
+A *peer* is a hashable tuple: ``("tcp", fd)`` or ``("udp", socket_index, (host, port))``.
+Malformed or truncated frames are counted (``bad_frames``) and dropped; a peer that goes
+away is forgotten. Nothing here raises on what arrives from the network.
+
+The ``.tlog`` is what MAVProxy and QGroundControl write: each frame, in and out, prefixed
+by its wall-clock time as a big-endian unsigned 64-bit count of microseconds since the
+Unix epoch; pymavlink's ``mavutil.mavlink_connection(path)`` reads it back.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import select
+import socket
+import struct
+import time
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any, BinaryIO
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+from tuavdefs import gcs
+from tuavdefs.gcs import GCS_TCP_PORT_DEFAULT, UDP_API_PORT_DEFAULT, UDP_GCS_PORT_DEFAULT
+
+Peer = tuple[Any, ...]
+Address = tuple[str, int]
+
+SYSTEM_ID = gcs.SYSTEM_ID
+COMPONENT_ID = gcs.AUTOPILOT_COMPONENT_ID
+
+_TLOG_STAMP = struct.Struct(">Q")
+_TLOG_FLUSH_S = 1.0
+#: Unsent bytes a TCP client may fall behind by before frames to it are dropped.
+_TCP_BACKLOG_BYTES = 1 << 20
+
+
+class TelemetryLog:
+    """A ``.tlog``: timestamped raw frames, flushed at least once a second."""
+
+    def __init__(self, path: Path | str) -> None:
+        self.path = Path(path)
+        self._file: BinaryIO = open(self.path, "ab")  # noqa: SIM115 - lives with the process
+        self._flushed = time.monotonic()
+
+    def write(self, data: bytes) -> None:
+        """Record one frame (or several back to back) with the current wall time."""
+        self._file.write(_TLOG_STAMP.pack(int(time.time() * 1e6)) + data)
+        now = time.monotonic()
+        if now - self._flushed >= _TLOG_FLUSH_S:
+            self._file.flush()
+            self._flushed = now
+
+    def flush(self) -> None:
+        """Write out what is buffered."""
+        self._file.flush()
+        self._flushed = time.monotonic()
+
+    def close(self) -> None:
+        """Flush and close."""
+        self._file.close()
+
+
+class _Link:
+    """One peer's parser (accepts MAVLink 1 and 2)."""
+
+    def __init__(self) -> None:
+        self.parser = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self.parser.robust_parsing = True
+        self.last_rx = time.monotonic()
+
+
+class MavlinkEndpoints:
+    """The TCP server and the UDP push sockets, polled without blocking.
+
+    ``tcp_port`` 0 picks a free port (see :attr:`tcp_port`); ``None`` disables TCP.
+    ``udp_targets`` are the push addresses (one socket each, bound to an ephemeral port on
+    127.0.0.1). ``tlog`` records every frame in and out.
+    """
+
+    def __init__(self, tcp_port: int | None = GCS_TCP_PORT_DEFAULT,
+                 udp_targets: Iterable[Address] = (("127.0.0.1", UDP_GCS_PORT_DEFAULT),
+                                                   ("127.0.0.1", UDP_API_PORT_DEFAULT)),
+                 host: str = "127.0.0.1", tlog: TelemetryLog | None = None) -> None:
+        self.mav = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self.tlog = tlog
+        self.bad_frames = 0
+        self.listener: socket.socket | None = None
+        if tcp_port is not None:
+            lst = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            lst.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                lst.bind((host, tcp_port))
+            except OSError:
+                lst.close()
+                raise
+            lst.listen(8)
+            lst.setblocking(False)
+            self.listener = lst
+        self.tcp_port = self.listener.getsockname()[1] if self.listener else None
+        self._tcp: dict[int, socket.socket] = {}
+        self._pending: dict[int, bytearray] = {}
+        self._closed: list[Peer] = []
+        self.udp: list[socket.socket] = []
+        self.udp_targets: list[Address] = []
+        for target in udp_targets:
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            s.bind((host, 0))
+            s.setblocking(False)
+            self.udp.append(s)
+            self.udp_targets.append((target[0], int(target[1])))
+        self._links: dict[Peer, _Link] = {}
+        self._udp_peers: list[set[Address]] = [set() for _ in self.udp]
+
+    # ----- receiving
+
+    @property
+    def peers(self) -> list[Peer]:
+        """Peers heard from (TCP clients, UDP addresses that wrote to us)."""
+        return list(self._links)
+
+    def links(self) -> list[Peer]:
+        """Every link telemetry goes to: TCP clients, each UDP push address, and every
+        address that has written to a UDP socket."""
+        out: list[Peer] = [("tcp", fd) for fd in self._tcp]
+        for i, target in enumerate(self.udp_targets):
+            out.append(("udp", i, target))
+            out.extend(("udp", i, a) for a in self._udp_peers[i] if a != target)
+        return out
+
+    def _sockets(self) -> list[socket.socket]:
+        socks = [*self._tcp.values(), *self.udp]
+        if self.listener is not None:
+            socks.append(self.listener)
+        return socks
+
+    def poll(self, timeout_s: float = 0.0) -> list[tuple[Peer, Any]]:
+        """Messages that arrived, as (peer, message), waiting at most ``timeout_s`` [s]."""
+        try:
+            ready, _, _ = select.select(self._sockets(), [], [], timeout_s)
+        except (OSError, ValueError):
+            ready = []
+        out: list[tuple[Peer, Any]] = []
+        for fd, pending in list(self._pending.items()):
+            if pending:
+                self._flush_tcp(("tcp", fd))
+        for sock in ready:
+            if sock is self.listener:
+                self._accept()
+            elif sock in self.udp:
+                self._read_udp(self.udp.index(sock), sock, out)
+            else:
+                self._read_tcp(sock, out)
+        return out
+
+    def _accept(self) -> None:
+        assert self.listener is not None
+        while True:
+            try:
+                conn, _ = self.listener.accept()
+            except (BlockingIOError, OSError):
+                return
+            conn.setblocking(False)
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._tcp[conn.fileno()] = conn
+            self._links[("tcp", conn.fileno())] = _Link()
+
+    def _read_tcp(self, sock: socket.socket, out: list[tuple[Peer, Any]]) -> None:
+        peer: Peer = ("tcp", sock.fileno())
+        try:
+            data = sock.recv(65536)
+        except BlockingIOError:
+            return
+        except OSError:
+            data = b""
+        if not data:
+            self._drop_tcp(peer)
+            return
+        self._parse(peer, data, out)
+
+    def _read_udp(self, index: int, sock: socket.socket, out: list[tuple[Peer, Any]]) -> None:
+        for _ in range(64):
+            try:
+                data, addr = sock.recvfrom(65536)
+            except (BlockingIOError, ConnectionRefusedError):
+                return
+            except OSError:
+                return
+            addr = (addr[0], addr[1])
+            self._udp_peers[index].add(addr)
+            self._parse(("udp", index, addr), data, out)
+
+    def _parse(self, peer: Peer, data: bytes, out: list[tuple[Peer, Any]]) -> None:
+        link = self._links.get(peer)
+        if link is None:
+            link = self._links[peer] = _Link()
+        link.last_rx = time.monotonic()
+        p = link.parser
+        before = p.total_receive_errors
+        try:
+            msgs = p.parse_buffer(data) or []
+        except (mavlink2.MAVError, struct.error, ValueError, IndexError):
+            self.bad_frames += 1
+            msgs = []
+        self.bad_frames += p.total_receive_errors - before
+        for m in msgs:
+            if m.get_type() == "BAD_DATA":
+                self.bad_frames += 1
+                continue
+            if self.tlog is not None:
+                self.tlog.write(m.get_msgbuf())
+            out.append((peer, m))
+
+    def pop_closed(self) -> list[Peer]:
+        """Peers whose connection closed since the last call."""
+        out, self._closed = self._closed, []
+        return out
+
+    def _drop_tcp(self, peer: Peer) -> None:
+        if peer[1] in self._tcp:
+            self._closed.append(peer)
+        sock = self._tcp.pop(peer[1], None)
+        self._pending.pop(peer[1], None)
+        self._links.pop(peer, None)
+        if sock is not None:
+            sock.close()
+
+    # ----- sending
+
+    def pack(self, msg: Any) -> bytes:
+        """MAVLink 2 bytes of ``msg`` from system 1, component 1."""
+        return msg.pack(self.mav)
+
+    def send(self, msg: Any, peer: Peer | None = None) -> None:
+        """Send ``msg`` (a pymavlink message object) to ``peer``, or to every link."""
+        self.send_bytes(self.pack(msg), peer)
+
+    def send_bytes(self, data: bytes, peer: Peer | None = None) -> None:
+        """Send packed frames as they are (used to forward other components' messages)."""
+        if self.tlog is not None:
+            self.tlog.write(data)
+        if peer is None:
+            for fd in list(self._tcp):
+                self._send_tcp(("tcp", fd), data)
+            for i, sock in enumerate(self.udp):
+                targets = {self.udp_targets[i], *self._udp_peers[i]}
+                for addr in targets:
+                    self._send_udp(sock, addr, data)
+        elif peer[0] == "tcp":
+            self._send_tcp(peer, data)
+        elif peer[0] == "udp":
+            self._send_udp(self.udp[peer[1]], peer[2], data)
+
+    def _send_tcp(self, peer: Peer, data: bytes) -> None:
+        sock = self._tcp.get(peer[1])
+        if sock is None:
+            return
+        pending = self._pending.setdefault(peer[1], bytearray())
+        if len(pending) > _TCP_BACKLOG_BYTES:
+            # a client that does not read loses whole frames rather than stalling the vehicle
+            return
+        pending += data
+        self._flush_tcp(peer)
+
+    def _flush_tcp(self, peer: Peer) -> None:
+        sock = self._tcp.get(peer[1])
+        pending = self._pending.get(peer[1])
+        if sock is None or not pending:
+            return
+        try:
+            n = sock.send(pending)
+        except BlockingIOError:
+            return
+        except OSError:
+            self._drop_tcp(peer)
+            return
+        del pending[:n]
+
+    @staticmethod
+    def _send_udp(sock: socket.socket, addr: Address, data: bytes) -> None:
+        # nobody listening (ICMP port unreachable) or a full buffer: UDP drops the frame
+        with contextlib.suppress(OSError):
+            sock.sendto(data, addr)
+
+    def close(self) -> None:
+        """Close every socket and flush the log."""
+        for sock in self._sockets():
+            sock.close()
+        self._tcp.clear()
+        self._links.clear()
+        if self.tlog is not None:
+            self.tlog.flush()

@@ -1,0 +1,768 @@
+"""The vehicle's flight logic: arming, flight modes, take-off, landing, return, guided
+targets and missions, as ArduCopter behaves; independent of MAVLink.
+
+:class:`Navigator` turns what ground stations ask for into the reference the
+:class:`companion.flight_controller.FlightController` tracks, at every control period, in
+simulated time and the inertial z-up frame. The MAVLink layer (``companion/autopilot.py``)
+translates messages into its calls and reports its events.
+
+What ArduCopter does and this follows:
+
+- Disarmed: rotors stopped. Armed on the ground: rotors idle until a take-off; disarmed
+  again after ``disarm_delay_s`` without one.
+- Take-off (GUIDED ``NAV_TAKEOFF``, or the mission's take-off item) climbs straight up at
+  ``speed_up_m_s`` to the altitude asked for.
+- LAND descends where it is: at ``speed_down_m_s`` to ``land_alt_low_m``, then at
+  ``land_speed_m_s``; the land detector (on the gear, still, for ``land_detect_s``)
+  disarms. RTL climbs to ``rtl_alt_m`` if lower, flies back above its launch point (home),
+  and lands there, while the ground winds the tether in (the winder follows L-bar).
+- LOITER, BRAKE, POSHOLD, ALT_HOLD and STABILIZE hold the position where they begin
+  (there is no pilot stick input here); GUIDED flies to each new target; AUTO flies the
+  mission.
+- Missions: take-off, waypoints (hold time, acceptance radius), loiter-turns circles (the
+  paper's circle), land, return to launch, change of speed; an item whose horizontal
+  position is unset (latitude = longitude = 0) is flown from where the vehicle is.
+
+Targets are checked against the tether (``reach_m``) and the ground before anything is
+flown: :meth:`Navigator.check_target` says why one is refused.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from enum import IntEnum
+
+from companion.trajectory import (
+    CircleItem,
+    GotoItem,
+    RefSample,
+    WaypointFollower,
+)
+from tuavdefs.paramspec import Params, quantity
+
+Vec3 = tuple[float, float, float]
+_ZERO3: Vec3 = (0.0, 0.0, 0.0)
+
+
+class FlightMode(IntEnum):
+    """ArduCopter's custom mode numbers (HEARTBEAT.custom_mode)."""
+
+    STABILIZE = 0
+    ACRO = 1
+    ALT_HOLD = 2
+    AUTO = 3
+    GUIDED = 4
+    LOITER = 5
+    RTL = 6
+    CIRCLE = 7
+    LAND = 9
+    DRIFT = 11
+    SPORT = 13
+    FLIP = 14
+    AUTOTUNE = 15
+    POSHOLD = 16
+    BRAKE = 17
+    THROW = 18
+    AVOID_ADSB = 19
+    GUIDED_NOGPS = 20
+    SMART_RTL = 21
+    FLOWHOLD = 22
+    FOLLOW = 23
+    ZIGZAG = 24
+    SYSTEMID = 25
+    AUTOROTATE = 26
+    AUTO_RTL = 27
+
+
+#: Modes this vehicle flies; the others are refused.
+SUPPORTED_MODES = frozenset({FlightMode.STABILIZE, FlightMode.ALT_HOLD, FlightMode.AUTO,
+                             FlightMode.GUIDED, FlightMode.LOITER, FlightMode.RTL,
+                             FlightMode.LAND, FlightMode.POSHOLD, FlightMode.BRAKE})
+#: Modes that hold where they begin (no pilot input in a simulation).
+HOLD_MODES = frozenset({FlightMode.STABILIZE, FlightMode.ALT_HOLD, FlightMode.LOITER,
+                        FlightMode.POSHOLD, FlightMode.BRAKE})
+#: Modes in which the vehicle may be armed (ArduCopter refuses RTL and LAND).
+ARMABLE_MODES = frozenset({FlightMode.STABILIZE, FlightMode.ALT_HOLD, FlightMode.AUTO,
+                           FlightMode.GUIDED, FlightMode.LOITER, FlightMode.POSHOLD})
+
+
+@dataclass(frozen=True)
+class NavigationParams(Params):
+    """Speeds, altitudes and limits of the vehicle's flight logic (ground stations change
+    them through the parameter protocol)."""
+
+    speed_m_s: float = quantity(2.0, "m/s", "horizontal speed of waypoint and guided moves",
+                                gt=0, le=20)
+    speed_up_m_s: float = quantity(1.5, "m/s", "climb speed (take-off, RTL climb)", gt=0,
+                                   le=10)
+    speed_down_m_s: float = quantity(1.0, "m/s", "descent speed above land_alt_low_m", gt=0,
+                                     le=10)
+    acc_m_s2: float = quantity(1.5, "m/s^2", "acceleration limit of planned moves", gt=0,
+                               le=10)
+    land_speed_m_s: float = quantity(0.5, "m/s", "final descent speed", gt=0, le=5)
+    land_alt_low_m: float = quantity(5.0, "m", "height below which LAND slows to "
+                                     "land_speed_m_s", ge=0)
+    rtl_alt_m: float = quantity(10.0, "m", "lowest altitude RTL returns at", ge=0)
+    rtl_loiter_s: float = quantity(2.0, "s", "pause above home before RTL descends", ge=0)
+    acceptance_radius_m: float = quantity(0.5, "m", "a waypoint is reached within this",
+                                          gt=0)
+    takeoff_accept_m: float = quantity(0.3, "m", "take-off is done within this of its "
+                                       "altitude", gt=0)
+    disarm_delay_s: float = quantity(10.0, "s", "armed on the ground this long without a "
+                                     "take-off: disarm (0: never)", ge=0)
+    land_detect_s: float = quantity(1.0, "s", "on the gear and still this long: landed",
+                                    gt=0)
+    reach_fraction: float = quantity(0.95, "1", "share of the tether a target may need "
+                                     "(straight-line distance + slack)", gt=0, le=1)
+    reach_slack_m: float = quantity(0.5, "m", "slack added to a target's distance in the "
+                                    "reach check (L-bar exceeds it by under 4 %)", ge=0)
+    guided_velocity_timeout_s: float = quantity(3.0, "s", "a guided velocity target stops "
+                                                "after this without an update", gt=0)
+
+
+# ----- mission commands (the autopilot converts MAVLink items into these)
+
+@dataclass(frozen=True)
+class NavCommand:
+    """One mission step, inertial z-up frame.
+
+    ``kind``: "takeoff", "waypoint", "loiter_turns", "land", "rtl" or "speed".
+    ``xy_m`` None means "where the vehicle is when the step begins".
+    """
+
+    seq: int
+    kind: str
+    xy_m: tuple[float, float] | None = None
+    z_m: float | None = None
+    hold_s: float = 0.0
+    accept_m: float | None = None
+    turns: float = 1.0
+    circle_radius_m: float = 0.0
+    clockwise: bool = True
+    speed_m_s: float | None = None
+
+
+NAV_KINDS = ("takeoff", "waypoint", "loiter_turns", "land", "rtl", "speed")
+
+
+class NavEvent:
+    """Event kinds the navigator reports (:meth:`Navigator.pop_events`)."""
+
+    CURRENT = "current"          # a mission item became current (seq)
+    REACHED = "reached"          # a mission item was reached (seq)
+    MISSION_DONE = "mission_done"
+    TAKEOFF_DONE = "takeoff_done"
+    LANDED = "landed"
+    DISARMED = "disarmed"
+    MODE = "mode"                # the navigator changed mode by itself (e.g. failsafe)
+
+
+# ----- legs: one planned movement each
+
+class _Leg:
+    """A planned movement: a WaypointFollower over one item, optionally open-ended."""
+
+    def __init__(self, follower: WaypointFollower, landing: bool = False,
+                 seq: int | None = None, tag: str = "") -> None:
+        self.follower = follower
+        self.landing = landing
+        self.seq = seq
+        self.tag = tag
+        self.finished = False
+        self.item: GotoItem | CircleItem | None = None
+
+
+class _VelocityRef:
+    """A guided velocity target: the reference velocity approaches the command as a
+    critically damped second-order system (so acceleration is continuous), its
+    acceleration limited; the position integrates it."""
+
+    def __init__(self, ref: RefSample, acc_max: float, omega: float = 2.5) -> None:
+        self.pos = list(ref.pos_m)
+        self.vel = list(ref.vel_m_s)
+        self.acc = list(ref.acc_m_s2)
+        self.yaw = ref.yaw_rad
+        self.cmd: Vec3 = _ZERO3
+        self.acc_max = acc_max
+        self.omega = omega
+        self.yaw_rate = 0.0
+
+    def step(self, dt: float) -> RefSample:
+        w = self.omega
+        jerk = [w * w * (self.cmd[i] - self.vel[i]) - 2.0 * w * self.acc[i] for i in range(3)]
+        acc = [self.acc[i] + jerk[i] * dt for i in range(3)]
+        n = math.sqrt(sum(a * a for a in acc))
+        if n > self.acc_max:
+            acc = [a * self.acc_max / n for a in acc]
+        for i in range(3):
+            self.vel[i] += 0.5 * (self.acc[i] + acc[i]) * dt
+            self.pos[i] += self.vel[i] * dt
+        self.acc = acc
+        self.yaw = _wrap(self.yaw + self.yaw_rate * dt)
+        return RefSample(tuple(self.pos), tuple(self.vel), tuple(self.acc), tuple(jerk),
+                         self.yaw, self.yaw_rate)
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class Navigator:
+    """Modes, arming and the reference, stepped at every control period.
+
+    ``gear_height_m`` is the height of the centre of mass when the vehicle rests on its
+    gear; ``tether_length_m`` the length on the full drum (reach check);
+    ``on_event(kind, value)`` hears what happens (also queued for :meth:`pop_events`).
+    """
+
+    def __init__(self, params: NavigationParams, gear_height_m: float,
+                 tether_length_m: float,
+                 on_event: Callable[[str, object], None] | None = None) -> None:
+        self.p = params
+        self.gear_height_m = gear_height_m
+        self.tether_length_m = tether_length_m
+        self.on_event = on_event
+        self.mode = FlightMode.STABILIZE
+        self.armed = False
+        self.landed = True
+        self.home_m: Vec3 | None = None
+        """Launch point [m] (set at arming on the ground, or at the first state)."""
+        self.mission: list[NavCommand] = []
+        self.mission_index = 0
+        """Index into :attr:`mission` of the current item."""
+        self.mission_running = False
+        self._events: list[tuple[str, object]] = []
+        self._leg: _Leg | None = None
+        self._legs: list[_Leg] = []
+        self._vel: _VelocityRef | None = None
+        self._ref: RefSample | None = None
+        self._t = 0.0
+        self._armed_on_ground_since: float | None = None
+        self._still_since: float | None = None
+        self._speed_override: float | None = None
+        self._pos: Vec3 = _ZERO3
+        self._vel_now: Vec3 = _ZERO3
+        self._yaw = 0.0
+        self._auto_takeoff_pending = False
+
+    # ----- state
+
+    @property
+    def flying(self) -> bool:
+        """Armed and off the ground."""
+        return self.armed and not self.landed
+
+    @property
+    def reach_m(self) -> float:
+        """Largest straight-line distance [m] from the winder a target may have."""
+        return self.p.reach_fraction * self.tether_length_m - self.p.reach_slack_m
+
+    @property
+    def speed_m_s(self) -> float:
+        """Horizontal speed of planned moves now [m/s] (DO_CHANGE_SPEED overrides)."""
+        return self._speed_override if self._speed_override is not None else self.p.speed_m_s
+
+    @property
+    def landing(self) -> bool:
+        """A landing descent is under way."""
+        return self._leg is not None and self._leg.landing
+
+    @property
+    def current_seq(self) -> int:
+        """MAVLink sequence number of the current mission item (0 when none)."""
+        if 0 <= self.mission_index < len(self.mission):
+            return self.mission[self.mission_index].seq
+        return 0
+
+    def reference(self) -> RefSample | None:
+        """The last reference produced (None before the first flying step)."""
+        return self._ref
+
+    def pop_events(self) -> list[tuple[str, object]]:
+        """(kind, value) events since the last call."""
+        out, self._events = self._events, []
+        return out
+
+    def _emit(self, kind: str, value: object = None) -> None:
+        self._events.append((kind, value))
+        if self.on_event is not None:
+            self.on_event(kind, value)
+
+    # ----- checks
+
+    def check_target(self, pos_m: Iterable[float]) -> str | None:
+        """Why ``pos_m`` [m] cannot be flown to, or None if it can."""
+        p = tuple(float(v) for v in pos_m)
+        if len(p) != 3 or not all(math.isfinite(v) for v in p):
+            return "target is not a number"
+        if p[2] < 0.0:
+            return f"target {p[2]:.1f} m below the ground"
+        d = math.sqrt(p[0] ** 2 + p[1] ** 2 + p[2] ** 2)
+        if d > self.reach_m:
+            return f"beyond tether reach ({d:.1f} > {self.reach_m:.1f} m)"
+        return None
+
+    # ----- commands (return None when done, else the reason it was refused)
+
+    def start(self, t: float, pos: Vec3, vel: Vec3, yaw: float) -> None:
+        """Initialise from the first state: on the ground (disarmed) or in the air (armed,
+        GUIDED, holding where it is, as when a simulation starts airborne)."""
+        self._t, self._pos, self._vel_now, self._yaw = t, pos, vel, yaw
+        self.landed = pos[2] <= self.gear_height_m + 0.3
+        self.home_m = pos if self.landed else (pos[0], pos[1], self.gear_height_m)
+        if not self.landed:
+            self.armed = True
+            self.mode = FlightMode.GUIDED
+            self._ref = RefSample(pos, _ZERO3, _ZERO3, _ZERO3, yaw, 0.0)
+            self._hold()
+
+    def arm(self, force: bool = False) -> str | None:
+        """Arm (ArduCopter's checks: an armable mode; with force, any)."""
+        if self.armed:
+            return None
+        if not force and self.mode not in ARMABLE_MODES:
+            return f"Arm: Mode not armable ({self.mode.name})"
+        if not force and self.mode == FlightMode.AUTO and not self._mission_has_items():
+            return "Arm: mission is empty"
+        self.armed = True
+        if self.landed:
+            self.home_m = self._pos
+            self._armed_on_ground_since = self._t
+            if self.mode == FlightMode.AUTO:
+                self._auto_takeoff_pending = True
+        return None
+
+    def disarm(self, force: bool = False) -> str | None:
+        """Disarm; in flight only with force (the rotors stop and it falls)."""
+        if not self.armed:
+            return None
+        if self.flying and not force:
+            return "Disarm: vehicle is flying (use force)"
+        self._disarm()
+        return None
+
+    def _disarm(self) -> None:
+        self.armed = False
+        self._leg, self._legs, self._vel = None, [], None
+        self.mission_running = False
+        self._armed_on_ground_since = None
+        self._auto_takeoff_pending = False
+        self._emit(NavEvent.DISARMED)
+
+    def set_mode(self, mode: int) -> str | None:
+        """Change the flight mode."""
+        try:
+            m = FlightMode(int(mode))
+        except ValueError:
+            return f"unknown mode {mode}"
+        if m not in SUPPORTED_MODES:
+            return f"mode {m.name} not supported"
+        if m == FlightMode.AUTO and not self._mission_has_items():
+            return "Auto: mission is empty"
+        if (m == FlightMode.AUTO and self.landed and self.armed
+                and self._first_nav().kind != "takeoff"):
+            return "Auto: Missing Takeoff Cmd"
+        self.mode = m
+        self._vel = None
+        if m == FlightMode.AUTO:
+            if self.flying:
+                self._start_mission(self.mission_index if self.mission_running else 0)
+            elif self.armed:
+                self._auto_takeoff_pending = True
+        elif m == FlightMode.RTL:
+            self.mission_running = False
+            if self.flying:
+                self._rtl()
+        elif m == FlightMode.LAND:
+            self.mission_running = False
+            if self.flying:
+                self._land_here()
+        else:
+            self.mission_running = False
+            if self.flying:
+                self._hold()
+        return None
+
+    def takeoff(self, alt_m: float) -> str | None:
+        """GUIDED take-off to ``alt_m`` [m above the ground]."""
+        if not math.isfinite(alt_m) or alt_m <= 0.0:
+            return f"Takeoff: bad altitude {alt_m}"
+        if self.mode != FlightMode.GUIDED:
+            return "Takeoff: not in GUIDED"
+        if not self.armed:
+            return "Takeoff: not armed"
+        if not self.landed:
+            return "Takeoff: already flying"
+        target = (self._pos[0], self._pos[1], alt_m)
+        why = self.check_target(target)
+        if why is not None:
+            return why
+        self._takeoff(target)
+        return None
+
+    def goto(self, pos_m: Vec3, yaw_rad: float | None = None,
+             speed_m_s: float | None = None) -> str | None:
+        """GUIDED: fly to ``pos_m`` [m] (``yaw_rad`` there if given)."""
+        why = self.check_target(pos_m)
+        if why is not None:
+            return why
+        if self.mode != FlightMode.GUIDED:
+            return "not in GUIDED"
+        if not self.flying:
+            return "not flying (take off first)"
+        if speed_m_s is not None and speed_m_s > 0 and math.isfinite(speed_m_s):
+            self._speed_override = float(speed_m_s)
+        self._vel = None
+        self._fly_to(pos_m, yaw_rad)
+        return None
+
+    def set_velocity(self, vel_m_s: Vec3, yaw_rad: float | None = None,
+                     yaw_rate_rad_s: float | None = None) -> str | None:
+        """GUIDED: fly at ``vel_m_s`` [m/s] until a new target, or a stop after
+        ``guided_velocity_timeout_s`` without an update."""
+        if not all(math.isfinite(v) for v in vel_m_s):
+            return "velocity is not a number"
+        if self.mode != FlightMode.GUIDED:
+            return "not in GUIDED"
+        if not self.flying:
+            return "not flying (take off first)"
+        ref = self._current_ref()
+        if self._vel is None:
+            self._vel = _VelocityRef(ref, self.p.acc_m_s2)
+            self._leg, self._legs = None, []
+        self._vel.cmd = tuple(float(v) for v in vel_m_s)
+        if yaw_rad is not None and math.isfinite(yaw_rad):
+            self._vel.yaw = yaw_rad
+        self._vel.yaw_rate = yaw_rate_rad_s if (yaw_rate_rad_s is not None
+                                                and math.isfinite(yaw_rate_rad_s)) else 0.0
+        self._vel_deadline = self._t + self.p.guided_velocity_timeout_s
+        return None
+
+    def set_yaw(self, yaw_rad: float) -> str | None:
+        """Turn to ``yaw_rad`` [rad] where it is (CONDITION_YAW)."""
+        if not math.isfinite(yaw_rad):
+            return "yaw is not a number"
+        if not self.flying:
+            return "not flying"
+        ref = self._current_ref()
+        if self._vel is not None:
+            self._vel.yaw = yaw_rad
+            return None
+        target = self._leg.follower.target_m if self._leg is not None else None
+        self._fly_to(target if target is not None else ref.pos_m, yaw_rad)
+        return None
+
+    def change_speed(self, speed_m_s: float) -> str | None:
+        """DO_CHANGE_SPEED: the horizontal speed of planned moves from now on [m/s]."""
+        if not (math.isfinite(speed_m_s) and speed_m_s > 0.0):
+            return f"bad speed {speed_m_s}"
+        self._speed_override = min(float(speed_m_s), 20.0)
+        if self.flying and self._leg is not None and not self._leg.landing \
+                and self._leg.tag in ("goto", "mission"):
+            target = self._leg.follower.target_m
+            if target is not None and self._leg.tag == "goto":
+                self._fly_to(target, None)
+        return None
+
+    def set_mission(self, commands: list[NavCommand]) -> None:
+        """A new mission (items from seq 1 on); the current item returns to the first."""
+        self.mission = list(commands)
+        self.mission_index = 0
+        if self.mission_running and self.mode == FlightMode.AUTO and self.flying:
+            if self.mission:
+                self._start_mission(0)
+            else:
+                self.mission_running = False
+                self._hold()
+
+    def set_current(self, seq: int) -> str | None:
+        """MISSION_SET_CURRENT: fly item ``seq`` next."""
+        for i, c in enumerate(self.mission):
+            if c.seq == seq:
+                if self.mission_running and self.flying:
+                    self._start_mission(i)
+                else:
+                    self.mission_index = i
+                    self._emit(NavEvent.CURRENT, c.seq)
+                return None
+        return f"no mission item {seq}"
+
+    def start_mission(self, first_seq: int = 0) -> str | None:
+        """MISSION_START: AUTO, from ``first_seq`` (0: from the start)."""
+        if not self._mission_has_items():
+            return "Auto: mission is empty"
+        if not self.armed:
+            return "MISSION_START: not armed"
+        index = 0
+        if first_seq > 0:
+            for i, c in enumerate(self.mission):
+                if c.seq == first_seq:
+                    index = i
+                    break
+        if self.landed and self.mission[index].kind != "takeoff":
+            return "Auto: Missing Takeoff Cmd"
+        self.mode = FlightMode.AUTO
+        self._vel = None
+        self._start_mission(index)
+        return None
+
+    # ----- stepping
+
+    def step(self, t: float, pos: Vec3, vel: Vec3, yaw: float, dt: float
+             ) -> tuple[RefSample | None, str]:
+        """Advance to ``t`` [s] with the vehicle at ``pos`` [m], ``vel`` [m/s], ``yaw``
+        [rad]. Returns (reference or None, motors) with motors "off", "idle" or "fly"."""
+        self._t, self._pos, self._vel_now, self._yaw = t, pos, vel, yaw
+        if not self.armed:
+            self._ref = None
+            if not self.landed and pos[2] <= self.gear_height_m + 0.05:
+                self.landed = True
+            return None, "off"
+        if self.landed:
+            if self._auto_takeoff_pending and self.mode == FlightMode.AUTO:
+                self._auto_takeoff_pending = False
+                if self._mission_has_items() and self._first_nav().kind == "takeoff":
+                    self._start_mission(0)
+            if self.landed:
+                since = self._armed_on_ground_since
+                if since is None:
+                    self._armed_on_ground_since = since = t
+                if self.p.disarm_delay_s > 0 and t - since >= self.p.disarm_delay_s:
+                    self._disarm()
+                    return None, "off"
+                return None, "idle"
+        self._armed_on_ground_since = None
+        ref = self._advance(t, dt)
+        self._ref = ref
+        self._land_detector(t, pos, vel)
+        if not self.armed:
+            return None, "off"
+        return ref, "fly"
+
+    def _advance(self, t: float, dt: float) -> RefSample:
+        if self._vel is not None:
+            if t > getattr(self, "_vel_deadline", math.inf):
+                self._vel.cmd = _ZERO3
+            return self._vel.step(dt)
+        if self._leg is None:
+            self._hold()
+        leg = self._leg
+        assert leg is not None
+        ref = leg.follower.update(t, self._pos)
+        for ev in leg.follower.pop_events():
+            if ev.kind == "reached" and leg.seq is not None and leg.tag == "mission":
+                self._emit(NavEvent.REACHED, leg.seq)
+        if leg.follower.done and not leg.landing and not leg.finished:
+            leg.finished = True
+            self._leg_done(t, leg)
+        return ref
+
+    def _leg_done(self, t: float, leg: _Leg) -> None:
+        if leg.tag == "takeoff":
+            self._emit(NavEvent.TAKEOFF_DONE)
+        if self._legs:
+            self._leg = self._legs.pop(0)
+            self._restart(self._leg, t)
+            return
+        if leg.tag in ("rtl_home", "land_approach"):
+            item = leg.item
+            self._queue(self._landing_legs((item.pos_m[0], item.pos_m[1]), leg.seq))
+        elif leg.tag == "mission" and self.mission_running:
+            self._next_mission_item(t)
+        # otherwise the finished leg's reference rests at its target: a hold
+
+    def _land_detector(self, t: float, pos: Vec3, vel: Vec3) -> None:
+        on_gear = pos[2] <= self.gear_height_m + 0.05
+        still = math.sqrt(sum(v * v for v in vel)) < 0.3
+        if self.landing and on_gear and still:
+            if self._still_since is None:
+                self._still_since = t
+            elif t - self._still_since >= self.p.land_detect_s:
+                self._still_since = None
+                self.landed = True
+                was_mission = self.mission_running
+                self._emit(NavEvent.LANDED, self._leg.seq if self._leg else None)
+                if was_mission and self._leg is not None and self._leg.seq is not None:
+                    self._emit(NavEvent.REACHED, self._leg.seq)
+                    self._emit(NavEvent.MISSION_DONE, None)
+                self._disarm()
+        else:
+            self._still_since = None
+
+    # ----- planning
+
+    def _current_ref(self) -> RefSample:
+        if self._ref is None:
+            return RefSample(self._pos, _ZERO3, _ZERO3, _ZERO3, self._yaw, 0.0)
+        return self._ref
+
+    def _follower(self, speed: float, accept: float | None = None, hold_s: float = 0.0
+                  ) -> WaypointFollower:
+        return WaypointFollower(speed, self.p.acc_m_s2,
+                                accept if accept is not None else self.p.acceptance_radius_m,
+                                hold_s)
+
+    def _start_leg(self, leg: _Leg, item: GotoItem | CircleItem) -> None:
+        ref = self._current_ref()
+        leg.follower.start(self._t, ref.pos_m, ref.vel_m_s, [item], current_yaw=ref.yaw_rad,
+                           current_acc=ref.acc_m_s2)
+        leg.follower.pop_events()
+        leg.item = item
+        self._leg = leg
+
+    def _restart(self, leg: _Leg, t: float) -> None:
+        self._start_leg(leg, leg.item)
+
+    def _queue(self, legs: list[tuple[_Leg, GotoItem | CircleItem]]) -> None:
+        """Fly these legs in order, the first from the current reference."""
+        for leg, item in legs:
+            leg.item = item
+        first, item = legs[0]
+        self._legs = [leg for leg, _ in legs[1:]]
+        self._start_leg(first, item)
+
+    def _hold(self) -> None:
+        ref = self._current_ref()
+        self._vel = None
+        self._queue([(_Leg(self._follower(self.speed_m_s), tag="hold"),
+                      GotoItem(_stop_point(ref, self.p.acc_m_s2), ref.yaw_rad))])
+
+    def _fly_to(self, pos: Vec3, yaw: float | None) -> None:
+        leg = _Leg(self._follower(self.speed_m_s), tag="goto")
+        self._queue([(leg, GotoItem(tuple(pos), yaw))])
+
+    def _takeoff(self, target: Vec3, seq: int | None = None) -> None:
+        self.landed = False
+        self._armed_on_ground_since = None
+        self._ref = RefSample(self._pos, _ZERO3, _ZERO3, _ZERO3, self._yaw, 0.0)
+        tag = "mission" if seq is not None else "takeoff"
+        leg = _Leg(self._follower(self.p.speed_up_m_s, self.p.takeoff_accept_m), seq=seq,
+                   tag=tag)
+        self._queue([(leg, GotoItem(target, None))])
+
+    def _landing_legs(self, xy: tuple[float, float], seq: int | None = None
+                      ) -> list[tuple[_Leg, GotoItem]]:
+        ref = self._current_ref()
+        legs: list[tuple[_Leg, GotoItem]] = []
+        low = self.gear_height_m + self.p.land_alt_low_m
+        if ref.pos_m[2] > low + 0.5:
+            legs.append((_Leg(self._follower(self.p.speed_down_m_s, 1.0), seq=seq,
+                              tag="land_high"), GotoItem((xy[0], xy[1], low), None)))
+        # the final descent aims below the ground: the land detector ends it
+        legs.append((_Leg(self._follower(self.p.land_speed_m_s), landing=True, seq=seq,
+                          tag="land"), GotoItem((xy[0], xy[1], -1.0), None)))
+        return legs
+
+    def _land_here(self, seq: int | None = None) -> None:
+        ref = self._current_ref()
+        stop = _stop_point(ref, self.p.acc_m_s2)
+        self._vel = None
+        self._queue(self._landing_legs((stop[0], stop[1]), seq))
+
+    def _rtl(self, seq: int | None = None) -> None:
+        ref = self._current_ref()
+        home = self.home_m if self.home_m is not None else (0.0, 0.0, 0.0)
+        alt = max(ref.pos_m[2], self.gear_height_m + self.p.rtl_alt_m)
+        legs: list[tuple[_Leg, GotoItem]] = []
+        stop = _stop_point(ref, self.p.acc_m_s2)
+        if alt > stop[2] + 0.5:
+            legs.append((_Leg(self._follower(self.p.speed_up_m_s), seq=seq, tag="rtl_climb"),
+                         GotoItem((stop[0], stop[1], alt), None)))
+        legs.append((_Leg(self._follower(self.speed_m_s, hold_s=self.p.rtl_loiter_s),
+                          seq=seq, tag="rtl_home"), GotoItem((home[0], home[1], alt), None)))
+        self._vel = None
+        self._queue(legs)
+
+    # ----- missions
+
+    def _mission_has_items(self) -> bool:
+        return any(c.kind in ("takeoff", "waypoint", "loiter_turns", "land", "rtl")
+                   for c in self.mission)
+
+    def _first_nav(self) -> NavCommand:
+        for c in self.mission[self.mission_index:] or self.mission:
+            if c.kind != "speed":
+                return c
+        return self.mission[0]
+
+    def _start_mission(self, index: int) -> None:
+        self.mission_running = True
+        self.mission_index = max(0, min(index, len(self.mission)))
+        self._begin_item(self._t)
+
+    def _next_mission_item(self, t: float) -> None:
+        self.mission_index += 1
+        self._begin_item(t)
+
+    def _begin_item(self, t: float) -> None:
+        while self.mission_index < len(self.mission):
+            c = self.mission[self.mission_index]
+            self._emit(NavEvent.CURRENT, c.seq)
+            if c.kind == "speed":
+                if c.speed_m_s is not None and c.speed_m_s > 0:
+                    self._speed_override = c.speed_m_s
+                self.mission_index += 1
+                continue
+            self._fly_item(c)
+            return
+        # past the last item: ArduCopter holds where it is (the mission is complete)
+        self.mission_running = False
+        self._emit(NavEvent.MISSION_DONE, None)
+        if self.flying:
+            self._hold()
+
+    def _item_xy(self, c: NavCommand) -> tuple[float, float]:
+        if c.xy_m is not None:
+            return c.xy_m
+        ref = self._current_ref()
+        return (ref.pos_m[0], ref.pos_m[1])
+
+    def _fly_item(self, c: NavCommand) -> None:
+        xy = self._item_xy(c)
+        if c.kind == "takeoff":
+            z = c.z_m if c.z_m is not None else self.p.rtl_alt_m
+            if self.landed:
+                self._takeoff((self._pos[0], self._pos[1], z), seq=c.seq)
+            else:
+                # already flying: ArduCopter climbs to the altitude if below it
+                ref = self._current_ref()
+                leg = _Leg(self._follower(self.p.speed_up_m_s, self.p.takeoff_accept_m),
+                           seq=c.seq, tag="mission")
+                self._queue([(leg, GotoItem((ref.pos_m[0], ref.pos_m[1],
+                                             max(z, ref.pos_m[2])), None))])
+        elif c.kind == "waypoint":
+            z = c.z_m if c.z_m is not None else self._current_ref().pos_m[2]
+            leg = _Leg(self._follower(self.speed_m_s, c.accept_m, c.hold_s), seq=c.seq,
+                       tag="mission")
+            self._queue([(leg, GotoItem((xy[0], xy[1], z), None))])
+        elif c.kind == "loiter_turns":
+            z = c.z_m if c.z_m is not None else self._current_ref().pos_m[2]
+            speed = self.speed_m_s
+            item = CircleItem(xy, abs(c.circle_radius_m), z, speed, turns=c.turns,
+                              clockwise=c.clockwise)
+            leg = _Leg(self._follower(speed, c.accept_m), seq=c.seq, tag="mission")
+            self._queue([(leg, item)])
+        elif c.kind == "land":
+            if c.xy_m is None:
+                self._land_here(seq=c.seq)
+            else:
+                ref = self._current_ref()
+                legs: list[tuple[_Leg, GotoItem]] = [(
+                    _Leg(self._follower(self.speed_m_s), seq=c.seq, tag="land_approach"),
+                    GotoItem((xy[0], xy[1], ref.pos_m[2]), None))]
+                self._queue(legs)
+        elif c.kind == "rtl":
+            self._rtl(seq=c.seq)
+
+
+def _stop_point(ref: RefSample, acc: float) -> Vec3:
+    """Where the reference comes to rest braking at ``acc`` [m/s^2] (ArduCopter's stopping
+    point), so a hold begins without a jerk back."""
+    v = ref.vel_m_s
+    speed = math.sqrt(sum(x * x for x in v))
+    if speed < 1e-6:
+        return ref.pos_m
+    d = speed * speed / (2.0 * acc)
+    return tuple(ref.pos_m[i] + v[i] / speed * d for i in range(3))  # type: ignore

@@ -1,0 +1,302 @@
+"""The companion as an ArduCopter-compatible vehicle: real plant and companion processes
+driven by a real pymavlink client over TCP (and UDP): connect, GUIDED, arm, take off,
+guided targets, parameters, a mission in AUTO, landing and disarming, the refusals of bad
+input, malformed frames, and the telemetry log."""
+
+from __future__ import annotations
+
+import math
+import socket
+import struct
+import time
+
+import pytest
+from gcs_util import Vehicle, command, download_mission, free_port, upload_mission, wait_msg
+from pymavlink import mavutil
+
+from tuavdefs.frames import global_to_local_enu, local_enu_to_global
+from tuavdefs.simlink import HOME_DEFAULT
+
+M = mavutil.mavlink
+REL = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+
+
+def ll(x: float, y: float) -> tuple[float, float]:
+    """Latitude and longitude [deg] of a point of the z-up frame."""
+    lat, lon, _ = local_enu_to_global((x, y, 0.0), HOME_DEFAULT)
+    return lat, lon
+
+
+def local(msg) -> tuple[float, float, float]:
+    """The z-up position of a GLOBAL_POSITION_INT."""
+    x, y, _ = global_to_local_enu(msg.lat * 1e-7, msg.lon * 1e-7, 0.0, HOME_DEFAULT)
+    return (x, y, msg.relative_alt * 1e-3)
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    """One flight shared by the tests below, in order; records what each step saw."""
+    tmp = tmp_path_factory.mktemp("gcs")
+    udp_port = free_port(socket.SOCK_DGRAM)
+    veh = Vehicle(tmp, udp_port=udp_port)
+    rec: dict = {"veh": veh, "udp_port": udp_port}
+    try:
+        m = veh.connect()
+        rec["m"] = m
+        yield rec
+    finally:
+        rec["logs"] = veh.stop()
+
+
+def test_heartbeat_identifies_an_arducopter_on_the_ground(flight):
+    m = flight["m"]
+    hb = wait_msg(m, "HEARTBEAT", lambda h: h.get_srcComponent() == 1)
+    assert (hb.type, hb.autopilot) == (M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA)
+    assert hb.get_srcSystem() == 1 and hb.base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    assert not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+    assert hb.system_status == M.MAV_STATE_STANDBY
+    assert m.flightmode == "STABILIZE"
+    m.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0,
+                            M.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0)
+    ver = wait_msg(m, "AUTOPILOT_VERSION")
+    for cap in (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT, M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT,
+                M.MAV_PROTOCOL_CAPABILITY_MAVLINK2,
+                M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED):
+        assert ver.capabilities & cap
+    # the default streams arrive without asking
+    seen = set()
+    end = time.monotonic() + 20
+    want = {"SYS_STATUS", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE",
+            "GPS_RAW_INT", "VFR_HUD", "EXTENDED_SYS_STATE", "BATTERY_STATUS"}
+    while not want <= seen and time.monotonic() < end:
+        msg = m.recv_match(blocking=True, timeout=1)
+        if msg is not None:
+            seen.add(msg.get_type())
+    assert want <= seen
+    gps = m.messages["GPS_RAW_INT"]
+    assert gps.fix_type == M.GPS_FIX_TYPE_3D_FIX
+    pos = local(m.messages["GLOBAL_POSITION_INT"])
+    assert pos[0] == pytest.approx(2.0, abs=0.01) and pos[1] == pytest.approx(0.0, abs=0.01)
+    lp = m.messages["LOCAL_POSITION_NED"]
+    assert (lp.x, lp.y) == pytest.approx((0.0, 2.0), abs=0.01)   # NED: 2 m east of winder
+    assert m.messages["EXTENDED_SYS_STATE"].landed_state == M.MAV_LANDED_STATE_ON_GROUND
+    sys_status = m.messages["SYS_STATUS"]
+    assert sys_status.onboard_control_sensors_health & M.MAV_SYS_STATUS_SENSOR_GPS
+
+
+def test_set_a_parameter_and_read_it_back(flight):
+    m = flight["m"]
+    m.mav.param_set_send(1, 1, b"PSC_K1_Z", 2.5, M.MAV_PARAM_TYPE_REAL32)
+    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "PSC_K1_Z")
+    assert v.param_value == pytest.approx(2.5)
+    m.mav.param_request_read_send(1, 1, b"PSC_K1_Z", -1)
+    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "PSC_K1_Z")
+    assert v.param_value == pytest.approx(2.5)
+    # out of bounds: refused by name, value unchanged
+    m.mav.param_set_send(1, 1, b"PSC_K1_Z", -1.0, M.MAV_PARAM_TYPE_REAL32)
+    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "PSC_K1_Z")
+    assert v.param_value == pytest.approx(2.5)
+    assert "PSC_K1_Z" in flight["veh"].param_file.read_text()
+    # the whole list arrives
+    m.mav.param_request_list_send(1, 1)
+    names = set()
+    count = None
+    end = time.monotonic() + 20
+    while time.monotonic() < end and (count is None or len(names) < count):
+        p = m.recv_match(type="PARAM_VALUE", blocking=True, timeout=1)
+        if p is not None:
+            names.add(p.param_id)
+            count = p.param_count
+    assert count is not None and len(names) == count
+    assert {"WP_SPEED", "PSC_K1_X", "ATC_K3_Z", "RTL_ALT", "TETH_REACH"} <= names
+
+
+def test_guided_arm_and_take_off_to_10_m(flight):
+    m = flight["m"]
+    ack = command(m, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 10)
+    assert ack.result == M.MAV_RESULT_FAILED                  # not in GUIDED, not armed
+    m.set_mode("GUIDED")
+    assert wait_msg(m, "COMMAND_ACK", lambda a: a.command == M.MAV_CMD_DO_SET_MODE).result \
+        == M.MAV_RESULT_ACCEPTED
+    ack = command(m, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+    hb = wait_msg(m, "HEARTBEAT", lambda h: h.get_srcComponent() == 1
+                  and h.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+    assert hb.custom_mode == 4 and hb.system_status == M.MAV_STATE_ACTIVE
+    home = wait_msg(m, "HOME_POSITION")
+    assert local(type("G", (), {"lat": home.latitude, "lon": home.longitude,
+                                "relative_alt": 0})())[:2] == pytest.approx((2.0, 0.0),
+                                                                           abs=0.01)
+    ack = command(m, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, 10)
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+    assert wait_msg(m, "GLOBAL_POSITION_INT", lambda g: g.relative_alt > 9700, 60)
+    assert wait_msg(m, "STATUSTEXT", lambda s: "Takeoff complete" in s.text, 30)
+
+
+def test_guided_target_and_reposition(flight):
+    m = flight["m"]
+    # SET_POSITION_TARGET_LOCAL_NED: 6 m east, 4 m north, 12 m up (NED: x north, y east)
+    mask = 0b0000111111111000
+    m.mav.set_position_target_local_ned_send(0, 1, 1, M.MAV_FRAME_LOCAL_NED, mask,
+                                             4.0, 6.0, -12.0, 0, 0, 0, 0, 0, 0, 0, 0)
+    got = wait_msg(m, "GLOBAL_POSITION_INT",
+                   lambda g: math.dist(local(g), (6.0, 4.0, 12.0)) < 0.2, 60)
+    assert got is not None
+    # DO_REPOSITION (COMMAND_INT, relative altitude)
+    lat, lon = ll(0.0, 8.0)
+    m.mav.command_int_send(1, 1, REL, M.MAV_CMD_DO_REPOSITION, 0, 0, -1, 0, 0, math.nan,
+                           round(lat * 1e7), round(lon * 1e7), 11.0)
+    ack = wait_msg(m, "COMMAND_ACK", lambda a: a.command == M.MAV_CMD_DO_REPOSITION)
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+    assert wait_msg(m, "GLOBAL_POSITION_INT",
+                    lambda g: math.dist(local(g), (0.0, 8.0, 11.0)) < 0.2, 60)
+
+
+def test_targets_beyond_the_tether_or_below_ground_are_refused(flight):
+    m = flight["m"]
+    seen: list = []
+    lat, lon = ll(80.0, 0.0)
+    m.mav.command_int_send(1, 1, REL, M.MAV_CMD_DO_REPOSITION, 0, 0, -1, 0, 0, math.nan,
+                           round(lat * 1e7), round(lon * 1e7), 10.0)
+    ack = wait_msg(m, "COMMAND_ACK", lambda a: a.command == M.MAV_CMD_DO_REPOSITION,
+                   seen=seen)
+    assert ack.result == M.MAV_RESULT_DENIED
+    text = wait_msg(m, "STATUSTEXT", lambda s: "reach" in s.text, seen=seen)
+    assert text is not None and text.severity <= M.MAV_SEVERITY_WARNING
+    ack = command(m, M.MAV_CMD_DO_REPOSITION, 0, 0, 0, 0, math.nan, math.nan, 10)
+    assert ack.result == M.MAV_RESULT_DENIED
+    mask = 0b0000111111111000
+    m.mav.set_position_target_local_ned_send(0, 1, 1, M.MAV_FRAME_LOCAL_NED, mask,
+                                             0.0, 0.0, 5.0, 0, 0, 0, 0, 0, 0, 0, 0)
+    assert wait_msg(m, "STATUSTEXT", lambda s: "below the ground" in s.text)
+    # the vehicle stayed where it was
+    g = wait_msg(m, "GLOBAL_POSITION_INT")
+    assert math.dist(local(g), (0.0, 8.0, 11.0)) < 0.2
+    # a mission with an unreachable waypoint: the error names it, the old mission stays
+    before = download_mission(m)
+    lat_far, lon_far = ll(0.0, 70.0)
+    ack = upload_mission(m, [(M.MAV_CMD_NAV_TAKEOFF, REL, 0, 0, 0, 0, 0, 0, 10),
+                             (M.MAV_CMD_NAV_WAYPOINT, REL, 0, 0, 0, 0, lat_far, lon_far, 10)])
+    assert ack.type == M.MAV_MISSION_INVALID_PARAM5_X
+    assert wait_msg(m, "STATUSTEXT", lambda s: "item 2" in s.text)
+    assert len(download_mission(m)) == len(before)
+    ack = upload_mission(m, [(M.MAV_CMD_NAV_WAYPOINT, REL, 0, 0, 0, 0, *ll(3, 3), -5)])
+    assert ack.type == M.MAV_MISSION_INVALID_PARAM7
+    ack = command(m, 31999)                                   # no such command
+    assert ack.result == M.MAV_RESULT_UNSUPPORTED
+    assert command(m, M.MAV_CMD_COMPONENT_ARM_DISARM, 0).result == M.MAV_RESULT_FAILED
+
+
+def test_malformed_frames_are_dropped_and_mavlink1_is_accepted(flight):
+    veh = flight["veh"]
+    with socket.create_connection(("127.0.0.1", veh.tcp_port)) as s:
+        s.sendall(b"\xfd\x09\x00\x00\x00\xff\xbe\x00\x00\x00" + b"\x00" * 4)   # truncated
+        s.sendall(b"\xfd" + bytes(range(40)))                                  # garbage
+        good = M.MAVLink(None, srcSystem=255, srcComponent=190)
+        frame = bytearray(good.heartbeat_encode(6, 8, 0, 0, 0).pack(good))
+        frame[-1] ^= 0xFF                                                      # bad CRC
+        s.sendall(bytes(frame))
+        v1 = mavutil.mavlink_connection(f"tcp:127.0.0.1:{veh.tcp_port}", source_system=254,
+                                        dialect="ardupilotmega")
+    v1 = mavutil.mavlink_connection(f"tcp:127.0.0.1:{veh.tcp_port}", source_system=254)
+    v1.WIRE_PROTOCOL_VERSION = "1.0"
+    mav1 = mavutil.mavlink.MAVLink(None, srcSystem=254, srcComponent=190)
+    # a MAVLink 1 COMMAND_LONG: an STX of 0xFE frame
+    try:
+        from pymavlink.dialects.v10 import common as v10
+        mav1 = v10.MAVLink(None, srcSystem=254, srcComponent=190)
+        data = mav1.command_long_encode(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0,
+                                        M.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0,
+                                        0).pack(mav1)
+        assert data[0] == 0xFE
+        v1.write(data)
+        ack = wait_msg(v1, "COMMAND_ACK", lambda a: a.command == M.MAV_CMD_REQUEST_MESSAGE)
+        assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+    finally:
+        v1.close()
+    # the vehicle still flies and answers
+    assert wait_msg(flight["m"], "HEARTBEAT", lambda h: h.get_srcComponent() == 1)
+
+
+def test_udp_endpoint_pushes_and_answers(flight):
+    u = mavutil.mavlink_connection(f"udpin:127.0.0.1:{flight['udp_port']}",
+                                   source_system=253, source_component=190)
+    try:
+        assert u.wait_heartbeat(timeout=10) is not None
+        u.target_system, u.target_component = 1, 1
+        u.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0,
+                                M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0)
+        ack = wait_msg(u, "COMMAND_ACK", lambda a: a.command == M.MAV_CMD_REQUEST_MESSAGE)
+        assert ack.result == M.MAV_RESULT_ACCEPTED
+        assert (ack.target_system, ack.target_component) == (253, 190)
+        assert wait_msg(u, "HOME_POSITION") is not None
+    finally:
+        u.close()
+
+
+def test_mission_in_auto_reaches_every_item_then_lands_and_disarms(flight):
+    m = flight["m"]
+    items = [
+        (M.MAV_CMD_NAV_TAKEOFF, REL, 0, 0, 0, 0, 0, 0, 10),
+        (M.MAV_CMD_NAV_WAYPOINT, REL, 0, 0, 0, 0, *ll(5.0, 0.0), 10),
+        (M.MAV_CMD_NAV_WAYPOINT, REL, 1, 0, 0, 0, *ll(5.0, 6.0), 12),
+        (M.MAV_CMD_NAV_WAYPOINT, REL, 0, 0, 0, 0, *ll(-3.0, 6.0), 12),
+        (M.MAV_CMD_NAV_LAND, REL, 0, 0, 0, 0, 0, 0, 0),
+    ]
+    ack = upload_mission(m, items)
+    assert ack.type == M.MAV_MISSION_ACCEPTED
+    got = download_mission(m)
+    assert [i.command for i in got[1:]] == [c[0] for c in items]
+    m.set_mode("AUTO")
+    seen: list = []
+    reached: list[int] = []
+    disarmed = None
+    end = time.monotonic() + 180
+    while time.monotonic() < end:
+        msg = wait_msg(m, ["MISSION_ITEM_REACHED", "HEARTBEAT"], timeout=5, seen=seen)
+        if msg is None:
+            continue
+        if msg.get_type() == "MISSION_ITEM_REACHED":
+            reached.append(msg.seq)
+            if msg.seq == 3:
+                pos = local(m.messages["GLOBAL_POSITION_INT"])
+                assert math.dist(pos, (5.0, 6.0, 12.0)) < 0.6
+        elif msg.get_srcComponent() == 1 and not msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED:
+            disarmed = msg
+            break
+    assert reached == [1, 2, 3, 4, 5]
+    assert disarmed is not None
+    g = wait_msg(m, "GLOBAL_POSITION_INT")
+    assert local(g)[2] < 0.3
+    assert math.hypot(local(g)[0] + 3.0, local(g)[1] - 6.0) < 0.3
+    texts = [s.text for s in seen if s.get_type() == "STATUSTEXT"]
+    assert any("Reached command #2" in t for t in texts)
+    assert wait_msg(m, "EXTENDED_SYS_STATE").landed_state == M.MAV_LANDED_STATE_ON_GROUND
+
+
+def test_the_telemetry_log_parses_completely(flight):
+    veh = flight["veh"]
+    plant_log, comp_log = veh.stop()
+    assert "Traceback" not in comp_log
+    assert "bad MAVLink frames dropped" in comp_log
+    bad = int(comp_log.split("; ")[-1].split()[0])
+    assert bad >= 3                                 # the malformed frames were counted
+    tlog = mavutil.mavlink_connection(str(veh.tlog))
+    kinds: dict[str, int] = {}
+    last_t = 0.0
+    while True:
+        msg = tlog.recv_match()
+        if msg is None:
+            break
+        kinds[msg.get_type()] = kinds.get(msg.get_type(), 0) + 1
+        assert msg._timestamp >= last_t - 1.0
+        last_t = msg._timestamp
+    assert kinds.get("BAD_DATA", 0) == 0
+    for k in ("HEARTBEAT", "COMMAND_LONG", "COMMAND_ACK", "MISSION_ITEM_INT",
+              "MISSION_ITEM_REACHED", "PARAM_SET", "GLOBAL_POSITION_INT"):
+        assert kinds.get(k, 0) > 0, k
+    # each record is an 8-byte big-endian microsecond stamp followed by a frame
+    raw = veh.tlog.read_bytes()
+    (stamp,) = struct.unpack(">Q", raw[:8])
+    assert abs(stamp * 1e-6 - time.time()) < 3600
+    assert raw[8] in (0xFD, 0xFE)
