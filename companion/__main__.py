@@ -143,8 +143,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     def set_nav(new: NavigationParams) -> None:
         nav.p = new
 
-    defs = [d if d.name != "CTL_RATE_HZ" else dataclasses.replace(
-                d, set=lambda _v: "CTL_RATE_HZ is read-only: the plant sets the control rate")
+    def read_only_rate(value: float) -> str | None:
+        if value == gains.rate_hz:
+            return None
+        return "CTL_RATE_HZ is read-only: the plant sets the control rate"
+
+    defs = [d if d.name != "CTL_RATE_HZ" else dataclasses.replace(d, set=read_only_rate)
             for d in params_to_defs(gains, GAIN_NAMES, set_gains)]
     defs += params_to_defs(nav_params, NAV_NAMES, set_nav)
     autopilot = Autopilot(endpoints, nav, tuple(args.home), defs,

@@ -167,6 +167,21 @@ class AttitudeController:
             self._pack()
         return self._p
 
+    def set_gains(self, gains: FlightControlParams) -> None:
+        """Use ``gains`` (K3, K4, the command filter's frequency and damping) from the next
+        step on, keeping the command filter's state and the compensation."""
+        self.gains = gains
+        self.k3 = np.array(gains.att_k3_1_s)
+        self.k4 = np.array(gains.att_k4_n_m_s)
+        self._decay_w = np.exp(-self.k4 / self.j * self.dt_s)
+        old = self.filter
+        new = CommandFilter(gains.command_filter_hz, gains.command_filter_damping, self.dt_s,
+                            old.state.shape[0])
+        new.state = old.state
+        new.initialised = old.initialised
+        self.filter = new
+        self._pack()
+
     def reset(self, attitude_rad: Vec3) -> None:
         """Start the command filter at rest at ``attitude_rad``; clear the compensation."""
         self.filter.reset(np.array(attitude_rad))

@@ -255,11 +255,12 @@ class Autopilot:
         for msg in self.component.poll():
             if msg.get_srcComponent() != cl.WINCH_COMPONENT_ID:
                 continue
+            if (msg.get_type() == "COMMAND_ACK" and msg.command == M.MAV_CMD_DO_WINCH
+                    and self._winch_acked(msg)):
+                continue   # answered from the autopilot, to whom it was sent
             self.io.send_bytes(msg.get_msgbuf())
             if msg.get_type() == "WINCH_STATUS" and self._winch_sink is not None:
                 self._winch_sink(msg)
-            if msg.get_type() == "COMMAND_ACK" and msg.command == M.MAV_CMD_DO_WINCH:
-                self._winch_acked(msg)
         keep = []
         for entry in self._winch_pending:
             t0, peer, sysid, compid, cmd = entry
@@ -277,13 +278,16 @@ class Autopilot:
         """Call ``sink(msg)`` with every WINCH_STATUS the winch sends."""
         self._winch_sink = sink
 
-    def _winch_acked(self, ack: Any) -> None:
+    def _winch_acked(self, ack: Any) -> bool:
+        """Answer a DO_WINCH that was sent to the autopilot with the winch's result;
+        False if ``ack`` answers no such command."""
         for i, (_, peer, sysid, compid, cmd) in enumerate(self._winch_pending):
             if ack.target_system in (0, sysid) and ack.target_component in (0, compid):
                 self.io.send(M.MAVLink_command_ack_message(cmd, ack.result, 0, 0, sysid,
                                                            compid), peer)
                 del self._winch_pending[i]
-                return
+                return True
+        return False
 
     # ----- commands
 
@@ -678,6 +682,8 @@ class Autopilot:
             self.statustext(M.MAV_SEVERITY_INFO, "Takeoff complete")
         elif kind == NavEvent.LANDED:
             self.statustext(M.MAV_SEVERITY_INFO, "Landed")
+        elif kind == NavEvent.ERROR:
+            self.statustext(M.MAV_SEVERITY_ERROR, f"Nav: {value}"[:150])
         elif kind == NavEvent.DISARMED:
             self.statustext(M.MAV_SEVERITY_INFO, "Disarmed")
             self.send_heartbeat()
@@ -756,7 +762,9 @@ class Autopilot:
                                               round(100 * tm.throttle),
                                               self.origin[2] + tm.pos_m[2], -vn[2])
         if name == "SYS_STATUS":
-            return M.MAVLink_sys_status_message(_SENSORS, _SENSORS, _SENSORS, 100, 48000,
+            # the fence's health bit is set as ArduPilot sets it while no fence is breached
+            return M.MAVLink_sys_status_message(_SENSORS, _SENSORS,
+                                                _SENSORS | M.MAV_SYS_STATUS_GEOFENCE, 100, 48000,
                                                 round(100 * 100 * tm.throttle), 100, 0, 0, 0,
                                                 0, 0, 0)
         if name == "BATTERY_STATUS":

@@ -17,17 +17,19 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from companion.actuators import ActuatorModel, advance_kernel, wrench_kernel
-from companion.attitude import AttitudeController, AttitudeOutput, attitude_law, attitude_output
+from companion.attitude import AttitudeController, AttitudeOutput, attitude_law
 from companion.gains import FlightControlParams
-from companion.position import PositionController, PositionOutput, position_law, position_output
+from companion.position import PositionController, PositionOutput, position_law
 from companion.tether_model import TetherModel, WinchReport, estimate_kernel
 from companion.trajectory import RefSample
 from tuavdefs.airframe import Mixer, mix_kernel, rotor_speed_setpoints
 from tuavdefs.frames import Quat, Vec3, quat_to_euler, quat_to_euler_kernel, quat_to_matrix_kernel
-from tuavdefs.jit import JIT, njit
+from tuavdefs.jit import entry_point, njit
 from tuavdefs.params import TetherParams, VehicleParams
 
 _ZERO3 = (0.0, 0.0, 0.0)
+_position_output = PositionOutput._make
+_attitude_output = AttitudeOutput._make
 
 
 class VehicleState(NamedTuple):
@@ -67,14 +69,25 @@ class FlightController:
         self.tether_model = TetherModel(tether.weight_per_length_n_m(gravity_m_s2),
                                         tether.axial_stiffness_n)
         self.winch = WinchReport()
-        if JIT:
-            # load (or compile) the step's machine code now, not at the first control step:
-            # a process with deadlines must not wait for it there
-            at = (0.0, 0.0, 10.0)
-            flight_step(self.dt_s, *at, *_ZERO3, 1.0, 0.0, 0.0, 0.0, *_ZERO3, *at, *_ZERO3,
-                        *_ZERO3, 0.0, 12.0, True, 1.0, True, False, True,
-                        *(c.copy() if isinstance(c, np.ndarray) else c
-                          for c in self._components()))
+        # load (or compile) the step's machine code now, not at the first control step (a
+        # process with deadlines must not wait for it there), and call it without numba's
+        # dispatch: the arguments' types never change
+        at = (0.0, 0.0, 10.0)
+        self._step = entry_point(flight_step, self.dt_s, *at, *_ZERO3, 1.0, 0.0, 0.0, 0.0,
+                                 *_ZERO3, *at, *_ZERO3, *_ZERO3, 0.0, 12.0, True, 1.0, True,
+                                 False, True, *self._components())
+
+    def set_gains(self, gains: FlightControlParams) -> None:
+        """Fly with ``gains`` from the next step on (a ground station changed a parameter),
+        keeping every internal state: the disturbance estimate, the compensation signals,
+        the command filter and the motor model. The control rate is that of the running
+        loop: ``gains.rate_hz`` must equal it (ValueError otherwise, nothing changed)."""
+        if gains.rate_hz != self.gains.rate_hz:
+            raise ValueError(f"rate_hz: the control loop runs at {self.gains.rate_hz} Hz; "
+                             f"it cannot change to {gains.rate_hz} Hz while running")
+        self.gains = gains
+        self.position.set_gains(gains)
+        self.attitude.set_gains(gains)
 
     def reset(self, state: VehicleState, rotor_speeds_rad_s: tuple[float, ...]) -> None:
         """Start from the vehicle's current attitude and rotor speeds (e.g. hover trim)."""
@@ -94,13 +107,13 @@ class FlightController:
         tension = winch.tension_n if g.use_measured_tension else None
         measured = tension is not None
         f = self.attitude.filter
-        commands, saturated, p, a, tether_force = flight_step(
+        commands, saturated, p, a, tether_force = self._step(
             self.dt_s, *state.pos_m, *state.vel_m_s, *state.quat, *state.rates_rad_s,
             *ref.pos_m, *ref.vel_m_s, *ref.acc_m_s2, ref.yaw_rad, winch.length_at(t_s),
             measured, tension if measured else 0.0, g.use_tether_model, f.initialised,
             bool(armed), *self._components())
         f.initialised = True
-        return FlightStep(commands, saturated, position_output(p), attitude_output(a),
+        return FlightStep(commands, saturated, _position_output(p), _attitude_output(a),
                           tether_force)
 
     def _components(self) -> tuple[Any, ...]:

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 from companion.trajectory import (
+    Circle,
     CircleItem,
     GotoItem,
     RefSample,
@@ -157,6 +158,7 @@ class NavEvent:
     LANDED = "landed"
     DISARMED = "disarmed"
     MODE = "mode"                # the navigator changed mode by itself (e.g. failsafe)
+    ERROR = "error"              # a plan could not be flown; holding instead (text)
 
 
 # ----- legs: one planned movement each
@@ -534,7 +536,15 @@ class Navigator:
                     return None, "off"
                 return None, "idle"
         self._armed_on_ground_since = None
-        ref = self._advance(t, dt)
+        try:
+            ref = self._advance(t, dt)
+        except ValueError as exc:
+            # a plan the limits cannot fly (e.g. limits changed mid-mission): hold instead
+            self._emit(NavEvent.ERROR, str(exc))
+            self.mission_running = False
+            self._leg, self._legs, self._vel = None, [], None
+            self._hold()
+            ref = self._leg.follower.update(t, self._pos)
         self._ref = ref
         self._land_detector(t, pos, vel)
         if not self.armed:
@@ -739,9 +749,13 @@ class Navigator:
             self._queue([(leg, GotoItem((xy[0], xy[1], z), None))])
         elif c.kind == "loiter_turns":
             z = c.z_m if c.z_m is not None else self._current_ref().pos_m[2]
-            speed = self.speed_m_s
-            item = CircleItem(xy, abs(c.circle_radius_m), z, speed, turns=c.turns,
-                              clockwise=c.clockwise)
+            radius = abs(c.circle_radius_m)
+            # as ArduCopter's circle does, the speed is cut to what the acceleration limit
+            # allows on this radius (centripetal acceleration v^2/r, with margin)
+            speed = min(self.speed_m_s, 0.95 * math.sqrt(self.p.acc_m_s2 * radius))
+            lead_in = max(5.0, 1.01 * Circle.min_lead_in_s(radius, speed, self.p.acc_m_s2))
+            item = CircleItem(xy, radius, z, speed, turns=c.turns, clockwise=c.clockwise,
+                              lead_in_s=lead_in)
             leg = _Leg(self._follower(speed, c.accept_m), seq=c.seq, tag="mission")
             self._queue([(leg, item)])
         elif c.kind == "land":

@@ -73,6 +73,7 @@ class PositionController:
         self.drag = drag_coeff_n_s_m
         self.m = mass_kg
         self.g = gravity_m_s2
+        self.max_total_thrust_n = max_total_thrust_n
         self.u_max = gains.max_thrust_fraction * max_total_thrust_n
         self.u_min = min_total_thrust_n
         self._state = np.zeros(9)     # d_hat, xi1, xi2
@@ -106,6 +107,13 @@ class PositionController:
     def xi2(self) -> list[float]:
         """The velocity compensation signal [m/s]."""
         return self._state[S_XI2:S_XI2 + 3].tolist()
+
+    def set_gains(self, gains: FlightControlParams) -> None:
+        """Use ``gains`` (K1, K2, Gamma, the disturbance bound, the tilt and thrust limits)
+        from the next step on, keeping the disturbance estimate and the compensation."""
+        self.gains = gains
+        self.u_max = gains.max_thrust_fraction * self.max_total_thrust_n
+        self._pack()
 
     def reset(self, disturbance_m_s2: Vec3 = (0.0, 0.0, 0.0)) -> None:
         """Forget the disturbance estimate (or start from a given one) and the compensation."""

@@ -1,23 +1,27 @@
 """``python -m groundstation``: the ground station's winder controller process.
 
-CAN host of the winder motor (ODrive CAN Simple): brings the axis to closed-loop torque
-control, and for every encoder frame it receives runs the shared
+CAN host of the winder motor (ODrive CAN Simple) and MAVLink winch component (system 1,
+component 169). The winch's behaviour is :class:`groundstation.winch.Winch`: when the axis
+first shows itself (its first encoder frame) it clears errors, selects torque control and
+arms closed loop; it answers every encoder frame with ``Set_Input_Torque`` from the shared
 :class:`groundstation.winder_host.WinderHost` (L-bar from the UAV's position and velocity,
-then the backstepping torque law, with the load cell's tension as feed-forward) and answers
-with ``Set_Input_Torque`` — which also feeds the axis's watchdog. It follows simulated time
-because it acts only on the frames the plant sends.
+then the backstepping torque law with the load cell's tension as feed-forward) or from the
+same law tracking the length reference of a ``MAV_CMD_DO_WINCH`` mode; LOCK and HOLD put
+the axis in IDLE so its brake holds the drum. It follows simulated time because it acts
+only on the frames the plant sends.
 
 The UAV's position and velocity come from the companion's component link (MAVLink
-``LOCAL_POSITION_NED`` over TCP, ``--mavlink``); the winch's state goes back on the same
-link as ``WINCH_STATUS`` (line length [m], speed [m/s], tension [kg] as the message defines)
-from component 169, so the companion can use it. Until the first position arrives the law
-holds the current length. A lost encoder stream (> 100 ms without a frame) is reported.
+``LOCAL_POSITION_NED`` over TCP, ``--mavlink``), with the ground stations' commands
+(``COMMAND_LONG``/``COMMAND_INT``, answered with ``COMMAND_ACK``); the winch's state goes
+back on the same link as ``WINCH_STATUS`` (20 Hz of simulated time, at least every 0.1 s of
+wall time) and ``STATUSTEXT``. Until the first position arrives the law holds the length
+the drum had. Encoder frames missing for 0.1 s of wall time brake the drum until they come
+back.
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import signal
 import sys
 import threading
@@ -25,7 +29,10 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from pymavlink.dialects.v20 import common as mavlink2
+
 from groundstation.lbar import LBarParams
+from groundstation.winch import ENCODER_TIMEOUT_S, Winch, WinchOutput
 from groundstation.winch_link import WinchLinkClient
 from groundstation.winder_control import WinderControlParams
 from groundstation.winder_host import WinderHost
@@ -35,8 +42,7 @@ from tuavdefs.component_link import COMPONENT_PORT_DEFAULT
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import ParameterError, load_toml
 
-#: Encoder silence after which the ground station reports the stream lost [s, wall].
-ENCODER_TIMEOUT_S = 0.1
+__all__ = ["ENCODER_TIMEOUT_S", "build_parser", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -68,77 +74,59 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     g = params.environment.gravity_m_s2
     host = WinderHost(WinderControlParams(), LBarParams(), params.winder, params.tether, g)
-    r_w = params.winder.drum_radius_m
+    winch = Winch(host, params.winder, params.tether, g, axis_node_id=args.node)
     mav = None if args.mavlink == "none" else WinchLinkClient(args.mavlink)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     print(f"groundstation: CAN {link.description}, axis node {args.node}, "
           f"MAVLink {args.mavlink}", flush=True)
-    node = args.node
-    send = link.send
-    send(cp.frame_id(node, cp.Cmd.CLEAR_ERRORS), cp.encode_clear_errors())
-    send(cp.frame_id(node, cp.Cmd.SET_CONTROLLER_MODE), cp.encode_set_controller_mode(
-        cp.ControlMode.TORQUE, cp.InputMode.PASSTHROUGH))
-    send(cp.frame_id(node, cp.Cmd.SET_AXIS_STATE),
-         cp.encode_set_axis_state(cp.AxisState.CLOSED_LOOP_CONTROL))
-    tension_n = 0.0
-    length_m = math.nan
-    speed_m_s = 0.0
-    brake = True
-    last_encoder = time.monotonic()
-    lost = False
-    frames = torques = 0
+
+    def emit(out: WinchOutput) -> None:
+        for f in out.frames:
+            link.send(f.arbitration_id, f.data, f.is_remote, len(f.data))
+        for n in out.notices:
+            print(f"groundstation: {n.text}", flush=True)
+            if mav is not None:
+                mav.statustext(n.severity, n.text)
+        st = out.status
+        if st is not None and mav is not None:
+            mav.winch_status(st.line_length_m, st.speed_m_s, st.tension_kg,
+                             bool(st.flags & mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED),
+                             flags=st.flags, voltage_v=st.voltage_v, current_a=st.current_a,
+                             temperature_c=st.temperature_c)
+
     start = time.monotonic()
+    was_lost = False
     try:
         while not stop.is_set():
             if args.duration is not None and time.monotonic() - start > args.duration:
                 break
             if mav is not None:
                 mav.poll()
+                winch.set_uav(mav.uav_state())
+                for req in mav.take_commands():
+                    reply = winch.command(req, time.monotonic())
+                    if reply is None:
+                        continue
+                    mav.command_ack(reply.command, reply.result, reply.target_system,
+                                    reply.target_component)
+                    emit(WinchOutput(notices=list(reply.notices)))
             rx = link.recv(timeout_s=0.01)
             now = time.monotonic()
-            if rx is None:
-                if not lost and frames and now - last_encoder > ENCODER_TIMEOUT_S:
-                    lost = True
-                    print("groundstation: encoder frames lost", flush=True)
-                continue
-            nid, cmd = cp.split_id(rx.arbitration_id)
-            if nid == cp.WINCH_SENSOR_NODE_ID_DEFAULT and not rx.is_remote:
-                if cmd == cp.SensorCmd.WINCH_TENSION:
-                    wt = cp.decode_winch_tension(rx.data)
-                    tension_n, brake = wt.tension_n, wt.brake_engaged
-                elif cmd == cp.SensorCmd.WINCH_LENGTH:
-                    wl = cp.decode_winch_length(rx.data)
-                    length_m, speed_m_s = wl.length_m, wl.speed_m_s
-                continue
-            if nid != node or rx.is_remote or cmd != cp.Cmd.GET_ENCODER_ESTIMATES:
-                continue
-            frames += 1
-            last_encoder = now
-            if lost:
-                lost = False
-                print("groundstation: encoder frames back", flush=True)
-            enc = cp.decode_encoder_estimates(rx.data)
-            theta = enc.pos_rev * 2.0 * math.pi
-            omega = enc.vel_rev_s * 2.0 * math.pi
-            length = theta * r_w
-            pos_vel = mav.uav_state() if mav is not None else None
-            if pos_vel is None:
-                # no UAV position yet: hold the present length
-                step = host.controller.update(host.dt_s, length, omega, tension_n, length, 0.0)
-                torque = step.torque_n_m
-            else:
-                torque = host.update(length, omega, tension_n, *pos_vel).torque_n_m
-            send(cp.frame_id(node, cp.Cmd.SET_INPUT_TORQUE), cp.encode_set_input_torque(torque))
-            torques += 1
-            if mav is not None and not math.isnan(length_m):
-                mav.winch_status(length_m, speed_m_s, tension_n / g, brake)
+            if rx is not None:
+                emit(winch.on_frame(now, rx.arbitration_id, rx.data, rx.is_remote))
+            emit(winch.poll(now))
+            if winch.lost != was_lost:      # the log lines of the stream itself
+                was_lost = winch.lost
+                print(f"groundstation: encoder frames {'lost' if was_lost else 'back'}",
+                      flush=True)
     finally:
         link.close()
         if mav is not None:
             mav.close()
-    print(f"groundstation: {frames} encoder frames, {torques} torque commands", flush=True)
+    print(f"groundstation: {winch.encoder_frames} encoder frames, "
+          f"{winch.torque_commands} torque commands", flush=True)
     return 0
 
 

@@ -1,4 +1,11 @@
-"""The winch component's end of the companion's component link (a TCP client)."""
+"""The winch component's end of the companion's component link (a TCP client).
+
+In: the UAV's ``LOCAL_POSITION_NED``, and ``COMMAND_LONG``/``COMMAND_INT`` (the companion
+forwards ground stations' commands as they were sent, so their sender ids are the ground
+station's). Out, as system 1 component 169: ``HEARTBEAT`` (1 Hz of wall time, from
+:meth:`WinchLinkClient.poll`), ``WINCH_STATUS``, ``COMMAND_ACK`` and ``STATUSTEXT``. The
+client connects, and reconnects after a drop, on its own; sends while unconnected are lost.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +14,7 @@ import time
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from groundstation.winch import TEMPERATURE_UNKNOWN, CommandRequest
 from tuavdefs import component_link as cl
 from tuavdefs.frames import ned_to_enu
 
@@ -14,7 +22,8 @@ Vec3 = tuple[float, float, float]
 
 
 class WinchLinkClient:
-    """Receives the UAV's position and velocity; sends WINCH_STATUS and heartbeats."""
+    """Receives the UAV's position and velocity and commands; sends WINCH_STATUS,
+    COMMAND_ACK, STATUSTEXT and heartbeats."""
 
     def __init__(self, address: str, connect_timeout_s: float = 30.0) -> None:
         host, _, port = address.rpartition(":")
@@ -24,6 +33,7 @@ class WinchLinkClient:
         self._deadline = time.monotonic() + connect_timeout_s
         self._state: tuple[Vec3, Vec3] | None = None
         self._last_heartbeat = 0.0
+        self._commands: list[CommandRequest] = []
         self.bad_frames = 0
 
     def _connect(self) -> bool:
@@ -60,8 +70,14 @@ class WinchLinkClient:
                 self.bad_frames += 1
                 msgs = []
             for m in msgs:
-                if m.get_type() == "LOCAL_POSITION_NED":
+                kind = m.get_type()
+                if kind == "LOCAL_POSITION_NED":
                     self._state = (ned_to_enu((m.x, m.y, m.z)), ned_to_enu((m.vx, m.vy, m.vz)))
+                elif kind in ("COMMAND_LONG", "COMMAND_INT"):
+                    self._commands.append(CommandRequest(
+                        m.command, m.target_system, m.target_component, m.get_srcSystem(),
+                        m.get_srcComponent(), m.param1, m.param2, m.param3, m.param4,
+                        m.confirmation if kind == "COMMAND_LONG" else 0))
         now = time.monotonic()
         if now - self._last_heartbeat >= 1.0:
             self._last_heartbeat = now
@@ -73,13 +89,35 @@ class WinchLinkClient:
         """The latest (position [m], velocity [m/s]) of the UAV, z-up frame, or None."""
         return self._state
 
+    def take_commands(self) -> list[CommandRequest]:
+        """The COMMAND_LONG/COMMAND_INT messages received since the last call (any target:
+        :meth:`groundstation.winch.Winch.command` decides which are for the winch)."""
+        commands, self._commands = self._commands, []
+        return commands
+
     def winch_status(self, length_m: float, speed_m_s: float, tension_kg: float,
-                     brake_engaged: bool) -> None:
-        """Send WINCH_STATUS (tension in kg, as the message defines)."""
-        flags = cl.winch_status_flags(brake_engaged, abs(speed_m_s) > 0.01)
+                     brake_engaged: bool, *, flags: int | None = None,
+                     voltage_v: float = float("nan"), current_a: float = float("nan"),
+                     temperature_c: int = TEMPERATURE_UNKNOWN) -> None:
+        """Send WINCH_STATUS: length [m], speed [m/s, + paying out], tension [kg, as the
+        message defines], bus voltage [V] and current [A] (NaN unknown), temperature [degC]
+        (INT16_MAX unknown); ``flags`` the MAV_WINCH_STATUS_FLAG bits (default: healthy,
+        moving above 1 cm/s, clutch engaged = brake)."""
+        if flags is None:
+            flags = cl.winch_status_flags(brake_engaged, abs(speed_m_s) > 0.01)
         self._send(self.mav.winch_status_encode(
             int(time.monotonic() * 1e6), length_m, speed_m_s, tension_kg,
-            float("nan"), float("nan"), 32767, flags))
+            voltage_v, current_a, temperature_c, flags))
+
+    def command_ack(self, command: int, result: int, target_system: int,
+                    target_component: int) -> None:
+        """Send COMMAND_ACK (``result`` a MAV_RESULT) to the command's sender."""
+        self._send(self.mav.command_ack_encode(command, result, 0, 0, target_system,
+                                               target_component))
+
+    def statustext(self, severity: int, text: str) -> None:
+        """Send STATUSTEXT (``severity`` a MAV_SEVERITY; text cut to 50 characters)."""
+        self._send(self.mav.statustext_encode(severity, text.encode()[:50]))
 
     def _send(self, msg: mavlink2.MAVLink_message) -> None:
         if self.sock is None:

@@ -104,7 +104,11 @@ class WinderController:
 
     def params(self) -> np.ndarray:
         """The gains and drum model packed for :func:`winder_law`."""
-        if any(a is not b for a, b in zip(self._sources(), self._packed_from, strict=True)):
+        f = self._packed_from
+        if (self.g is not f[0] or self.r_w is not f[1] or self.beta is not f[2]
+                or self.tau_max is not f[3] or self.omega_max is not f[4]
+                or self._m_bar is not f[5] or self._rho is not f[6] or self._lt is not f[7]
+                or self._r2 is not f[8] or self._i_rotor is not f[9]):
             self._pack()
         return self._p
 

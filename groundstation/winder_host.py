@@ -21,7 +21,7 @@ from groundstation.winder_control import (
     WinderControlParams,
     winder_law,
 )
-from tuavdefs.jit import JIT, njit
+from tuavdefs.jit import entry_point, njit
 from tuavdefs.params import TetherParams, WinderParams
 
 
@@ -34,6 +34,9 @@ class WinderStep(NamedTuple):
     command: WinderCommand
 
 
+_command = WinderCommand._make
+
+
 class WinderHost:
     """L-bar estimator + winder torque law, at ``gains.rate_hz``."""
 
@@ -42,12 +45,12 @@ class WinderHost:
         self.dt_s = 1.0 / gains.rate_hz
         self.lbar = LBarEstimator(lbar, tether.weight_per_length_n_m(gravity_m_s2))
         self.controller = WinderController(gains, winder, tether)
-        if JIT:
-            # load (or compile) the step's machine code now, not at the first encoder frame
-            lb, ctl = self.lbar, self.controller
-            winder_step(1.0, 0.0, 10.0, 0.0, 0.0, 0.0, lb.a_target, lb._tan_min,
-                        lb.p.min_slack_m, math.nan, ctl.params(), ctl.state.copy(), self.dt_s,
-                        10.0, 0.0, 1.0)
+        # load (or compile) the step's machine code now, not at the first encoder frame,
+        # and call it without numba's dispatch (the arguments' types never change)
+        lb, ctl = self.lbar, self.controller
+        self._step = entry_point(winder_step, 1.0, 0.0, 10.0, 0.0, 0.0, 0.0, lb.a_target,
+                                 lb._tan_min, lb.p.min_slack_m, math.nan, ctl.params(),
+                                 ctl.state, self.dt_s, 10.0, 0.0, 1.0)
 
     def update(self, length_m: float, omega_rad_s: float, drum_tension_n: float,
                uav_pos_m: tuple[float, float, float],
@@ -57,10 +60,10 @@ class WinderHost:
         lb, ctl = self.lbar, self.controller
         px, py, pz = uav_pos_m
         vx, vy, vz = uav_vel_m_s
-        lbar_m, rate, lb._root, cmd = winder_step(
+        lbar_m, rate, lb._root, cmd = self._step(
             px, py, pz, vx, vy, vz, lb.a_target, lb._tan_min, lb.p.min_slack_m, lb._root,
             ctl.params(), ctl.state, self.dt_s, length_m, omega_rad_s, drum_tension_n)
-        return WinderStep(cmd[0], lbar_m, rate, WinderCommand(*cmd))
+        return WinderStep(cmd[0], lbar_m, rate, _command(cmd))
 
 
 @njit

@@ -28,6 +28,7 @@ from tuav_sitl.figures import (
     draw_goals,
     draw_ground,
     drawn_arm_m,
+    has_data,
     load_run,
     quad_outline,
     reached_indices,
@@ -108,8 +109,9 @@ class _Scene:
         ax = self.ax = self.fig.add_subplot(projection="3d")
         draw_ground(ax, lo, hi)
         ref = s["ref_pos"]
-        ax.plot(ref[:, 0], ref[:, 1], ref[:, 2], "--", color="0.5", lw=0.8,
-                label="reference path")
+        if has_data(s, "ref_pos"):   # an imported up run has none
+            ax.plot(ref[:, 0], ref[:, 1], ref[:, 2], "--", color="0.5", lw=0.8,
+                    label="reference path")
         waypoints = sc.trajectory.kind == "waypoints"
         draw_goals(ax, self.geo, reached=0 if waypoints else None)
         # waypoints reached so far: filled stars drawn over the hollow ones

@@ -63,13 +63,30 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _cmd_plot(args: argparse.Namespace) -> int:
     from tuav_sitl.animation import make_animation
     from tuav_sitl.figures import make_figures
+    from tuav_sitl.run_import import RunImportError, import_up_run, needs_import
 
     run_dir = Path(args.run_dir)
+    if needs_import(run_dir):   # a 'tuav-sitl up' run folder: truth.csv, flight.tlog, ...
+        try:
+            imported = import_up_run(run_dir)
+        except (RunImportError, OSError) as exc:
+            print(f"tuav-sitl plot: cannot import the up run {run_dir}: {exc}",
+                  file=sys.stderr)
+            return 2
+        used = ", ".join(imported.metrics["imported_from"])
+        print(f"imported the 'tuav-sitl up' run from {used}: wrote "
+              + ", ".join(str(p) for p in imported.written))
+        for note in imported.notes:
+            print(f"  note: {note}")
     if not (run_dir / "timeseries.npz").is_file():
-        print(f"tuav-sitl plot: {run_dir} has no timeseries.npz", file=sys.stderr)
+        print(f"tuav-sitl plot: {run_dir} has no timeseries.npz (a 'tuav-sitl run' folder) "
+              "nor truth.csv (a 'tuav-sitl up' folder)", file=sys.stderr)
         return 2
-    figs = make_figures(run_dir)
+    skipped: list[str] = []
+    figs = make_figures(run_dir, skipped=skipped)
     print(f"wrote {len(figs)} figures in {run_dir}/figures")
+    for note in skipped:
+        print(f"  skipped {note}")
     if not args.no_animation:
         for a in make_animation(run_dir):
             print(f"wrote {a}")
@@ -95,6 +112,16 @@ def _cmd_up(args: argparse.Namespace) -> int:
     from tuav_sitl.up import run_up
 
     return run_up(args)
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    try:
+        from benchmarks.__main__ import main as bench_main
+    except ImportError:  # not on the path: the benchmarks live beside this package
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+        from benchmarks.__main__ import main as bench_main
+    return bench_main([*(["--quick"] if args.quick else []),
+                       *(["--no-processes"] if args.no_processes else [])])
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -134,8 +161,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=_cmd_run)
 
-    plot = sub.add_parser("plot", help="draw the figures and animation of a run folder")
-    plot.add_argument("run_dir", help="a folder written by 'tuav-sitl run'")
+    plot = sub.add_parser(
+        "plot", help="draw the figures and animation of a run folder",
+        description="Draw the figures and the animation of a run folder of 'tuav-sitl run', "
+                    "or of 'tuav-sitl up': its truth.csv, params.toml, flight.tlog and "
+                    "can.log are first imported into timeseries.npz, metrics.json and "
+                    "scenario.toml (figures that need data the run does not have are "
+                    "skipped with a note).")
+    plot.add_argument("run_dir", help="a folder written by 'tuav-sitl run' or 'tuav-sitl up'")
     plot.add_argument("--no-animation", action="store_true", help="skip the animation")
     plot.set_defaults(func=_cmd_plot)
 
@@ -166,6 +199,18 @@ def build_parser() -> argparse.ArgumentParser:
                                       "candump formats (default or -L), line-buffered.")
     candump_arguments(dump)
     dump.set_defaults(func=_cmd_candump)
+
+    bench = sub.add_parser(
+        "bench", help="run every benchmark and print one table (python -m benchmarks)",
+        description="Run every benchmark (tether solve vs MoorPy, plant step, offline closed "
+                    "loop, the three processes in lockstep and in real time, latencies) and "
+                    "print one table of medians and same-run ratios, each goal beside its "
+                    "measurement (docs/performance.md).")
+    bench.add_argument("--quick", action="store_true",
+                       help="each benchmark once in a tiny configuration")
+    bench.add_argument("--no-processes", action="store_true",
+                       help="skip the benchmarks of the three processes")
+    bench.set_defaults(func=_cmd_bench)
     return parser
 
 

@@ -1,8 +1,10 @@
 """Figures of an offline run: the paper's plots, drawn from a run folder.
 
-A run folder written by :mod:`tuav_sitl.offline` holds ``timeseries.npz``, ``metrics.json``
-and ``scenario.toml``. :func:`make_figures` reads it and writes one PNG per figure into its
-``figures/`` sub-folder; :func:`build_figures` does the drawing from the arrays and the
+A run folder written by :mod:`tuav_sitl.offline` (or imported from a ``tuav-sitl up`` run by
+:mod:`tuav_sitl.run_import`) holds ``timeseries.npz``, ``metrics.json`` and
+``scenario.toml``. :func:`make_figures` reads it and writes one PNG per figure into its
+``figures/`` sub-folder (skipping those whose series the run lacks, :data:`FIGURE_NEEDS`);
+:func:`build_figures` does the drawing from the arrays and the
 scenario alone and returns matplotlib :class:`~matplotlib.figure.Figure` objects (no pyplot
 global state and no backend switch: a bare Figure renders with Agg when saved).
 :data:`FIGURE_CAPTIONS` gives each figure's caption for the documentation.
@@ -38,14 +40,17 @@ __all__ = [
     "DPI",
     "FIGURE_CAPTIONS",
     "FIGURE_NAMES",
+    "FIGURE_NEEDS",
     "FIG_SIZE_IN",
     "ReferenceGeometry",
     "RunData",
     "TetherDrawer",
     "build_figures",
+    "has_data",
     "length_error",
     "load_run",
     "make_figures",
+    "missing_series",
     "quad_outline",
     "reached_indices",
     "reference_geometry",
@@ -102,6 +107,15 @@ FIGURE_CAPTIONS: dict[str, str] = {
 }
 #: The figures :func:`build_figures` draws, in order.
 FIGURE_NAMES: tuple[str, ...] = tuple(FIGURE_CAPTIONS)
+#: Series a figure cannot do without (all of them): a run folder imported from
+#: ``tuav-sitl up`` (:mod:`tuav_sitl.run_import`) has no reference, attitude command or
+#: Lyapunov functions, which stay NaN; :func:`make_figures` skips these figures there.
+FIGURE_NEEDS: dict[str, tuple[str, ...]] = {
+    "errors": ("ref_pos", "att_cmd"),
+    "position_tracking": ("ref_pos",),
+    "attitude_tracking": ("att_cmd",),
+    "lyapunov": ("v_pos", "v_att", "v_win"),
+}
 
 # Tether regimes with part of the line on the ground.
 _GROUND_REGIMES = (int(CatenaryRegime.TOUCHDOWN), int(CatenaryRegime.SLACK),
@@ -137,6 +151,17 @@ def load_run(run_dir: Path) -> RunData:
     metrics_file = run_dir / "metrics.json"
     metrics = json.loads(metrics_file.read_text()) if metrics_file.is_file() else None
     return RunData(series, scenario, metrics)
+
+
+def has_data(series: Mapping[str, np.ndarray], name: str) -> bool:
+    """Whether the run has the series ``name`` with at least one finite value."""
+    v = series.get(name)
+    return v is not None and bool(np.isfinite(np.asarray(v, dtype=float)).any())
+
+
+def missing_series(series: Mapping[str, np.ndarray], name: str) -> list[str]:
+    """The series the figure ``name`` needs (:data:`FIGURE_NEEDS`) that the run lacks."""
+    return [k for k in FIGURE_NEEDS.get(name, ()) if not has_data(series, k)]
 
 
 # --------------------------------------------------------------------------------------
@@ -181,17 +206,20 @@ def reached_indices(series: Mapping[str, np.ndarray], geo: ReferenceGeometry,
 
     Taken from the run's ``metrics["waypoints_reached"]`` when given, else found the way
     the mission logic decides it: the reference has come to rest on the waypoint and the
-    UAV is within the acceptance radius of it.
+    UAV is within the acceptance radius of it (where the run has no reference, as an
+    imported ``tuav-sitl up`` run: the UAV within the acceptance radius).
     """
     t = series["t"]
     if metrics and metrics.get("waypoints_reached") is not None:
-        times = [float(r["t_s"]) for r in metrics["waypoints_reached"]]
+        times = [float(r["t_s"]) for r in metrics["waypoints_reached"]
+                 if r.get("t_s") is not None]   # None: an up run's event it could not time
         return [int(min(np.searchsorted(t, ts - 1e-6), len(t) - 1)) for ts in times]
     pos, ref = series["pos"], series["ref_pos"]
     out: list[int] = []
     start = 0
     for p in geo.points:
         at_rest = np.linalg.norm(ref[start:] - p, axis=1) <= 1e-4
+        at_rest |= ~np.isfinite(ref[start:]).all(axis=1)   # no reference: proximity alone
         near = np.linalg.norm(pos[start:] - p, axis=1) <= geo.acceptance_m * (1.0 + 1e-9)
         hit = np.nonzero(at_rest & near)[0]
         if len(hit) == 0:
@@ -411,8 +439,11 @@ def _angles_deg(s: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np
     """Measured, commanded and desired attitude [deg]; yaw unwrapped along the command so
     that no curve jumps by 360 deg."""
     cmd = s["att_cmd"].copy()
-    cmd[:, 2] = np.unwrap(cmd[:, 2])
     meas = s["euler"].copy()
+    if not np.isfinite(cmd[:, 2]).any():   # no command logged (an imported up run)
+        meas[:, 2] = np.unwrap(meas[:, 2])
+        return np.degrees(meas), np.degrees(cmd), np.degrees(s["att_des"])
+    cmd[:, 2] = np.unwrap(cmd[:, 2])
     meas[:, 2] = cmd[:, 2] + _wrap(meas[:, 2] - cmd[:, 2])
     des = s["att_des"].copy()
     des[:, 2] = cmd[:, 2] + _wrap(des[:, 2] - cmd[:, 2])
@@ -451,12 +482,14 @@ def fig_states(s: Mapping[str, np.ndarray], sc: ScenarioParams,
         ax = fig.add_subplot(gs[i, 0], sharex=first)
         first = first or ax
         ax.plot(t, s["pos"][:, i], color=_AXIS_COLOURS[i], label=name)
-        ax.plot(t, s["ref_pos"][:, i], "k--", lw=1.0, label=f"{name} reference")
+        if has_data(s, "ref_pos"):
+            ax.plot(t, s["ref_pos"][:, i], "k--", lw=1.0, label=f"{name} reference")
         _finish(ax, f"{name} [m]")
     for i, name in enumerate(("roll", "pitch", "yaw")):
         ax = fig.add_subplot(gs[i, 1], sharex=first)
         ax.plot(t, meas[:, i], color=_AXIS_COLOURS[i], label=name)
-        ax.plot(t, cmd[:, i], "k--", lw=1.0, label=f"{name} command")
+        if has_data(s, "att_cmd"):
+            ax.plot(t, cmd[:, i], "k--", lw=1.0, label=f"{name} command")
         _finish(ax, f"{name} [deg]")
     ax = fig.add_subplot(gs[3, :], sharex=first)
     ax.plot(t, s["length"], color=_TETHER_COLOUR, label="tether length L")
@@ -555,8 +588,9 @@ def fig_path_3d(s: Mapping[str, np.ndarray], sc: ScenarioParams,
     draw_ground(ax, lo, hi)
     pos, ref = s["pos"], s["ref_pos"]
     ax.plot(pos[:, 0], pos[:, 1], pos[:, 2], color=_PATH_COLOUR, lw=2.2, label="UAV path")
-    ax.plot(ref[:, 0], ref[:, 1], ref[:, 2], "--", color=_REF_COLOUR, lw=0.9,
-            label="reference path")
+    if has_data(s, "ref_pos"):
+        ax.plot(ref[:, 0], ref[:, 1], ref[:, 2], "--", color=_REF_COLOUR, lw=0.9,
+                label="reference path")
     draw_goals(ax, geo, label=True, circle=False)
     drawer = TetherDrawer(sc)
     instants = spread_instants(pos, 5)
@@ -618,8 +652,9 @@ def fig_snapshots(s: Mapping[str, np.ndarray], sc: ScenarioParams,
     for j, k in enumerate(idx):
         ax = fig.add_subplot(rows, cols, j + 1, projection="3d")
         draw_ground(ax, lo, hi)
-        ax.plot(ref[:, 0], ref[:, 1], ref[:, 2], "--", color="0.55", lw=0.8,
-                label="reference path")
+        if has_data(s, "ref_pos"):
+            ax.plot(ref[:, 0], ref[:, 1], ref[:, 2], "--", color="0.55", lw=0.8,
+                    label="reference path")
         n_reached = sum(1 for r in reached if r <= k) if waypoints else None
         draw_goals(ax, geo, reached=n_reached)
         ax.plot(pos[: k + 1, 0], pos[: k + 1, 1], pos[: k + 1, 2], color=_PATH_COLOUR,
@@ -697,10 +732,17 @@ def fig_tension_and_winder(s: Mapping[str, np.ndarray], sc: ScenarioParams,
         _shade_ground_contact(ax, t, s["regime"], label=j == 0)
     axs[0].plot(t, s["top_tension"], color="C3", label="tension at the UAV (top)")
     axs[0].plot(t, s["drum_tension"], color="C0", label="tension at the drum")
+    if has_data(s, "winch_tension"):   # an imported up run: what the winch reported
+        axs[0].plot(t, s["winch_tension"], color="C1", ls=":", lw=1.2,
+                    label="tension reported by the winch (WINCH_STATUS)")
     _finish(axs[0], "tension [N]")
     axs[1].plot(t, s["winder_torque"], color="C4", label="winder motor torque")
+    if not has_data(s, "winder_torque"):
+        axs[1].text(0.5, 0.5, "winder torque not recorded (no CAN log)",
+                    transform=axs[1].transAxes, ha="center", va="center", color="0.4")
     lim = sc.winder.motor_torque_limit_n_m
-    w_max = float(np.nanmax(np.abs(s["winder_torque"]))) if len(t) else 0.0
+    w_max = (float(np.nanmax(np.abs(s["winder_torque"])))
+             if has_data(s, "winder_torque") else 0.0)
     if w_max > 0.5 * lim:
         for sign in (1, -1):
             axs[1].axhline(sign * lim, color="C4", ls=":", lw=1.0,
@@ -753,13 +795,21 @@ def save_figures(figures: Mapping[str, Figure], out_dir: Path) -> list[Path]:
     return paths
 
 
-def make_figures(run_dir: Path, names: Iterable[str] | None = None) -> list[Path]:
+def make_figures(run_dir: Path, names: Iterable[str] | None = None,
+                 skipped: list[str] | None = None) -> list[Path]:
     """Read the run folder ``run_dir`` and write its figures into ``run_dir/figures/``;
-    returns the PNG paths in :data:`FIGURE_NAMES` order."""
+    returns the PNG paths in :data:`FIGURE_NAMES` order. A figure whose data the run does
+    not have (:func:`missing_series`) is not drawn; a one-line note on it is appended to
+    ``skipped`` if given."""
     run = load_run(Path(run_dir))
     out = Path(run_dir) / "figures"
     paths: list[Path] = []
     for name in FIGURE_NAMES if names is None else tuple(names):
+        lacking = missing_series(run.series, name) if name in _BUILDERS else []
+        if lacking:
+            if skipped is not None:
+                skipped.append(f"{name}: the run has no {', '.join(lacking)}")
+            continue
         # one figure at a time keeps memory low for long runs
         paths += save_figures(build_figures(run.series, run.scenario, [name], run.metrics), out)
     return paths
@@ -775,8 +825,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("names", nargs="*", help=f"figures (default all): {', '.join(FIGURE_NAMES)}")
     a = p.parse_args(argv)
     t0 = time.perf_counter()
-    for path in make_figures(a.run_dir, a.names or None):
+    skipped: list[str] = []
+    for path in make_figures(a.run_dir, a.names or None, skipped):
         print(path)
+    for note in skipped:
+        print(f"skipped {note}")
     print(f"{time.perf_counter() - t0:.1f} s")
     return 0
 

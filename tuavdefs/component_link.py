@@ -34,3 +34,17 @@ def new_mavlink(component_id: int) -> mavlink2.MAVLink:
     mav = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=component_id)
     mav.robust_parsing = True
     return mav
+
+
+#: ``MAV_CMD_DO_WINCH`` is taken when addressed to the winch, to the autopilot (which
+#: forwards it to the winch) or to every component.
+DO_WINCH_TARGET_COMPONENTS = (WINCH_COMPONENT_ID, AUTOPILOT_COMPONENT_ID, 0)
+#: Winch instance numbers (``param1``) the winch answers to.
+WINCH_INSTANCES = (0, 1)
+
+
+def winch_status_flag(name: str) -> int:
+    """The ``MAV_WINCH_STATUS_<name>`` bit, or 0 where the installed common dialect does not
+    define it (pymavlink 2.4.x knows HEALTHY, FULLY_RETRACTED, MOVING, CLUTCH_ENGAGED; newer
+    common.xml adds LOCKED, RETRACTING, ...)."""
+    return int(getattr(mavlink2, f"MAV_WINCH_STATUS_{name}", 0))

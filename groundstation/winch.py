@@ -1,0 +1,647 @@
+"""The ground station's winch: ``MAV_CMD_DO_WINCH``, the drum's length reference, the
+brake, encoder-loss handling and ``WINCH_STATUS``, as pure logic.
+
+No sockets and no clock. The process (``python -m groundstation``) hands every CAN frame it
+receives to :meth:`Winch.on_frame`, calls :meth:`Winch.poll` on every turn of its loop,
+passes each MAVLink command addressed to it to :meth:`Winch.command`, and keeps the UAV's
+position current with :meth:`Winch.set_uav`; every call returns what to send (CAN frames,
+``STATUSTEXT`` notices, a ``WINCH_STATUS`` report, a ``COMMAND_ACK``). Wall-clock times
+[s] are passed in; simulated time is counted from the encoder frames.
+
+Two clocks:
+
+- **Simulated time** is the encoder frame counter times the control period
+  (``WinderControlParams.rate_hz``, 10 ms): the axis sends ``Get_Encoder_Estimates`` every
+  10 ms of its own time, so the n-th frame is at n x 10 ms (the plant's frames sit on its 4 ms
+  control grid, 8 or 12 ms apart, 10 ms on average). The ramps of the length reference
+  advance by one period per frame, and ``WINCH_STATUS`` goes out every
+  ``round(1 / (status_rate_hz x period))`` frames (every 5th: 20 Hz). The drum's position
+  cannot serve as a clock: it does not change while the drum holds still.
+- **Wall time** decides that the encoder is lost (no frame for ``encoder_timeout_s``,
+  0.1 s) and sends ``WINCH_STATUS`` whenever ``status_wall_period_s`` (0.09 s) has passed
+  without one (lost, or frames slower than about half real time), so that with the
+  process's 10 ms loop no gap exceeds 0.1 s.
+
+Modes (the ``WINCH_ACTIONS`` value of the last accepted ``DO_WINCH``):
+
+- ``WINCH_RELAXED`` (0, the default): the drum follows L-bar through
+  :meth:`WinderHost.update` (slack, never taut). Until the UAV's position is known it holds
+  the length it had.
+- ``WINCH_RELATIVE_LENGTH_CONTROL`` (1): from the measured length, pay out (+) or wind in
+  (-) ``param3`` m at ``|param4|`` m/s (``default_rate_m_s`` if 0 or NaN), then hold: the
+  backstepping law (the host's own :class:`WinderController`) tracks this ramped
+  reference and its rate instead of L-bar.
+- ``WINCH_RATE_CONTROL`` (2): the reference moves at ``param4`` m/s until the next command.
+- ``WINCH_LOCK`` (3), ``WINCH_HOLD`` (5): the axis goes IDLE (``Set_Axis_State 1``), so
+  the brake holds the drum; every encoder frame is answered with that request again (it
+  reasserts the brake, and it is the answer a lockstep plant waits for). Any other action
+  re-arms: ``Clear_Errors``, torque control, ``CLOSED_LOOP_CONTROL``.
+- ``WINCH_RETRACT`` (6): wind in at ``|param4|`` m/s (``retract_rate_m_s`` if 0 or NaN) to
+  the shortest length the geometry allows, the straight-line distance to the UAV plus
+  L-bar's minimum slack (the *taut floor*), then hold that length.
+
+Safety: in modes 1, 2 and 6 the reference never goes below the taut floor (it is raised
+with it when the UAV moves away), nor above the drum's capacity less ``end_margin_m``, nor
+below the drum's full stop; the first time a command meets a limit a ``STATUSTEXT`` says
+so, and a command whose length is clamped is still ``ACCEPTED``. Rates above the law's speed
+limit are clamped likewise. ``DELIVER``, ``LOAD_LINE``, ``ABANDON_LINE`` and
+``LOAD_PAYLOAD`` are ``UNSUPPORTED``; a NaN where a value is required, an unknown action or
+an instance other than 0 or 1 is ``DENIED`` with a ``STATUSTEXT``. LOCK and HOLD brake the
+drum whatever the UAV does (a warning says when the UAV's distance reaches the held
+length).
+
+Encoder loss: after ``encoder_timeout_s`` of wall time without ``Get_Encoder_Estimates``
+the axis is sent IDLE (the brake holds), a CRITICAL ``STATUSTEXT`` says so, and
+``WINCH_STATUS`` drops HEALTHY and sets CLUTCH_ENGAGED. The first frame back re-arms the
+axis (unless the mode is LOCK or HOLD), a ``STATUSTEXT`` says so, and the active mode
+resumes where its reference stood (it did not advance without frames).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+from groundstation.winder_host import WinderHost
+from tuavdefs import can_protocol as cp
+from tuavdefs import component_link as cl
+from tuavdefs.params import TetherParams, WinderParams
+from tuavdefs.paramspec import Params, quantity
+
+Vec3 = tuple[float, float, float]
+UavState = tuple[Vec3, Vec3]
+
+#: Encoder silence after which the drum is braked and the stream reported lost [s, wall].
+ENCODER_TIMEOUT_S = 0.1
+#: WINCH_STATUS ``temperature`` when unknown (INT16_MAX, as the message defines).
+TEMPERATURE_UNKNOWN = 32767
+#: STATUSTEXT holds at most this many characters in one message.
+STATUSTEXT_MAX_LEN = 50
+
+_TWO_PI = 2.0 * math.pi
+
+
+class WinchMode(enum.IntEnum):
+    """The winch's mode: the ``WINCH_ACTIONS`` value of the last accepted action."""
+
+    RELAXED = mavlink2.WINCH_RELAXED
+    RELATIVE_LENGTH = mavlink2.WINCH_RELATIVE_LENGTH_CONTROL
+    RATE = mavlink2.WINCH_RATE_CONTROL
+    LOCK = mavlink2.WINCH_LOCK
+    HOLD = mavlink2.WINCH_HOLD
+    RETRACT = mavlink2.WINCH_RETRACT
+
+
+#: Modes in which the brake holds the drum (axis IDLE).
+BRAKED_MODES = frozenset({WinchMode.LOCK, WinchMode.HOLD})
+#: ``WINCH_ACTIONS`` this winch does not implement (ACK UNSUPPORTED).
+UNSUPPORTED_ACTIONS = frozenset({mavlink2.WINCH_DELIVER, mavlink2.WINCH_LOAD_LINE,
+                                 mavlink2.WINCH_ABANDON_LINE, mavlink2.WINCH_LOAD_PAYLOAD})
+
+# MAV_WINCH_STATUS_FLAG bits; 0 for those the installed dialect does not define
+FLAG_HEALTHY = cl.winch_status_flag("HEALTHY")
+FLAG_FULLY_RETRACTED = cl.winch_status_flag("FULLY_RETRACTED")
+FLAG_MOVING = cl.winch_status_flag("MOVING")
+FLAG_CLUTCH_ENGAGED = cl.winch_status_flag("CLUTCH_ENGAGED")
+FLAG_LOCKED = cl.winch_status_flag("LOCKED")
+FLAG_RETRACTING = cl.winch_status_flag("RETRACTING")
+
+
+@dataclass(frozen=True)
+class WinchParams(Params):
+    """Settings of the winch component (rates, limits, reporting)."""
+
+    default_rate_m_s: float = quantity(
+        0.5, "m/s", "line speed of RELATIVE_LENGTH_CONTROL when param4 is 0 or NaN", gt=0)
+    retract_rate_m_s: float = quantity(
+        0.5, "m/s", "line speed of RETRACT when param4 is 0 or NaN", gt=0)
+    status_rate_hz: float = quantity(
+        20.0, "Hz", "WINCH_STATUS rate in simulated time (encoder frames)", gt=0)
+    status_wall_period_s: float = quantity(
+        0.09, "s", "WINCH_STATUS after this much wall time without one (a process polling "
+        "every 10 ms then never leaves a gap over 0.1 s)", gt=0)
+    encoder_timeout_s: float = quantity(
+        ENCODER_TIMEOUT_S, "s", "wall-clock encoder silence that brakes the drum", gt=0)
+    moving_speed_m_s: float = quantity(
+        0.01, "m/s", "line speed above which WINCH_STATUS says MOVING", ge=0)
+    retracted_tolerance_m: float = quantity(
+        0.02, "m", "FULLY_RETRACTED within this of the taut floor", ge=0)
+    end_margin_m: float = quantity(
+        0.5, "m", "tether always left on the drum below its capacity", ge=0)
+    duplicate_window_s: float = quantity(
+        3.0, "s", "a retransmitted COMMAND_LONG within this [wall] is acknowledged again, "
+        "not executed again", ge=0)
+
+
+class Notice(NamedTuple):
+    """A ``STATUSTEXT``: ``MAV_SEVERITY`` and text (at most 50 characters)."""
+
+    severity: int
+    text: str
+
+
+class CommandRequest(NamedTuple):
+    """A ``COMMAND_LONG`` or ``COMMAND_INT`` as received: its command id, target ids, the
+    sender's ids, ``param1..param4`` and ``confirmation`` (0 for COMMAND_INT)."""
+
+    command: int
+    target_system: int
+    target_component: int
+    source_system: int
+    source_component: int
+    param1: float
+    param2: float
+    param3: float
+    param4: float
+    confirmation: int = 0
+
+
+class CommandReply(NamedTuple):
+    """The ``COMMAND_ACK`` to send (``result`` a ``MAV_RESULT``, addressed to the
+    command's sender) and the notices that go with it."""
+
+    command: int
+    result: int
+    target_system: int
+    target_component: int
+    notices: tuple[Notice, ...]
+
+
+class WinchStatusReport(NamedTuple):
+    """The fields of a ``WINCH_STATUS``: length [m], line speed [m/s, + paying out],
+    tension [kg], bus voltage [V] and current [A] (NaN unknown), temperature [degC]
+    (INT16_MAX unknown), ``MAV_WINCH_STATUS_FLAG`` bits."""
+
+    line_length_m: float
+    speed_m_s: float
+    tension_kg: float
+    voltage_v: float
+    current_a: float
+    temperature_c: int
+    flags: int
+
+
+@dataclass
+class WinchOutput:
+    """What one call asks the process to send."""
+
+    frames: list[cp.Frame] = field(default_factory=list)
+    notices: list[Notice] = field(default_factory=list)
+    status: WinchStatusReport | None = None
+
+    def extend(self, other: WinchOutput) -> None:
+        """Append ``other``'s frames and notices; its status, if any, replaces ours."""
+        self.frames.extend(other.frames)
+        self.notices.extend(other.notices)
+        if other.status is not None:
+            self.status = other.status
+
+
+def _notice(severity: int, text: str) -> Notice:
+    return Notice(severity, text[:STATUSTEXT_MAX_LEN])
+
+
+def _identity(req: CommandRequest) -> tuple:
+    """What makes two requests the same command (NaN parameters compare equal)."""
+    return tuple(None if isinstance(v, float) and math.isnan(v) else v
+                 for v in req._replace(confirmation=0))
+
+
+def _finite(*values: float) -> bool:
+    return all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)
+
+
+class Winch:
+    """The winch component's behaviour (module docstring): mode state machine, length
+    reference, brake, encoder-loss handling and status, around a :class:`WinderHost`.
+
+    ``winder``/``tether`` give the drum's limits (full stop ``min_paid_out_m``, capacity
+    ``total_length_m``), ``gravity_m_s2`` turns the load cell's newtons into the kilograms
+    ``WINCH_STATUS`` carries.
+    """
+
+    def __init__(self, host: WinderHost, winder: WinderParams, tether: TetherParams,
+                 gravity_m_s2: float, params: WinchParams | None = None,
+                 axis_node_id: int = cp.AXIS_NODE_ID_DEFAULT,
+                 sensor_node_id: int = cp.WINCH_SENSOR_NODE_ID_DEFAULT) -> None:
+        self.host = host
+        self.p = params or WinchParams()
+        self.g = gravity_m_s2
+        self.node = axis_node_id
+        self.sensor_node = sensor_node_id
+        self.dt_s = host.dt_s
+        self.r_w = winder.drum_radius_m
+        self.min_slack_m = host.lbar.p.min_slack_m
+        #: fastest line speed a command may ask for [m/s]: the law's own speed limit
+        self.max_rate_m_s = host.controller.omega_max * self.r_w
+        self.length_min_m = winder.min_paid_out_m
+        self.length_max_m = max(tether.total_length_m - self.p.end_margin_m, self.length_min_m)
+        self.status_every = max(1, round(1.0 / (self.p.status_rate_hz * self.dt_s)))
+
+        self.mode = WinchMode.RELAXED
+        self.encoder_frames = 0
+        self.torque_commands = 0
+        self.bad_frames = 0
+        self.lost = False
+        self._last_encoder_wall: float | None = None
+        # measurements
+        self.length_m = math.nan            # from the encoder [m]
+        self.omega_rad_s = 0.0
+        self.sensor_length_m = math.nan     # Winch_Length
+        self.sensor_speed_m_s = math.nan
+        self.tension_n = math.nan           # last finite Winch_Tension [N]
+        self.sensor_brake: bool | None = None
+        self.load_cell_healthy: bool | None = None
+        self.at_full_stop = False
+        self.axis_error: int | None = None
+        self.axis_state: int | None = None
+        self.voltage_v = math.nan
+        self.current_a = math.nan
+        self.uav: UavState | None = None
+        # reference of modes 1, 2, 6 and of RELAXED without a UAV position
+        self.ref_m = math.nan
+        self.ref_rate_m_s = 0.0
+        self._target_m = math.nan
+        self._speed_m_s = 0.0               # |ramp rate| (1, 6) or signed rate (2)
+        self._retract_reached = False
+        self._hold_m = math.nan
+        self._limit_noticed = False
+        self._lock_noticed = False
+        # axis
+        self._arm_pending = False
+        # reporting
+        self._frames_since_status = 0
+        self._last_status_wall: float | None = None
+        self._last_command: tuple[tuple, float, CommandReply] | None = None
+
+    # ------------------------------------------------------------------------ inputs
+
+    def set_uav(self, state: UavState | None) -> None:
+        """The UAV's latest (position [m], velocity [m/s]), z-up frame with the origin at
+        the winder's exit; ignored if None or not finite."""
+        if state is None:
+            return
+        (px, py, pz), (vx, vy, vz) = state
+        if _finite(px, py, pz, vx, vy, vz):
+            self.uav = ((px, py, pz), (vx, vy, vz))
+
+    @property
+    def braked(self) -> bool:
+        """The winch keeps the axis IDLE (brake engaged): LOCK, HOLD or encoder lost."""
+        return self.mode in BRAKED_MODES or self.lost
+
+    def taut_floor(self) -> tuple[float, float]:
+        """(shortest safe length [m], its rate [m/s]): the straight-line distance to the
+        UAV plus L-bar's minimum slack, at least the drum's full stop; (NaN, 0) while the
+        UAV's position is unknown."""
+        if self.uav is None:
+            return math.nan, 0.0
+        (px, py, pz), (vx, vy, vz) = self.uav
+        d = math.sqrt(px * px + py * py + pz * pz)
+        rate = (px * vx + py * vy + pz * vz) / d if d > 1e-9 else 0.0
+        floor = d + self.min_slack_m
+        if floor < self.length_min_m:
+            return self.length_min_m, 0.0
+        return floor, rate
+
+    def reference(self) -> tuple[float, float]:
+        """(length reference [m], its rate [m/s]) of the last control step."""
+        return self.ref_m, self.ref_rate_m_s
+
+    # --------------------------------------------------------------------- CAN frames
+
+    def on_frame(self, wall_s: float, arbitration_id: int, data: bytes,
+                 is_remote: bool = False) -> WinchOutput:
+        """Handle one received CAN frame at wall time ``wall_s`` [s]."""
+        if is_remote or not 0 <= arbitration_id <= 0x7FF:
+            return WinchOutput()
+        nid, cmd = cp.split_id(arbitration_id)
+        try:
+            if nid == self.sensor_node:
+                self._on_sensor(cmd, data)
+                return WinchOutput()
+            if nid != self.node:
+                return WinchOutput()
+            if cmd == cp.Cmd.GET_ENCODER_ESTIMATES:
+                enc = cp.decode_encoder_estimates(data)
+                return self._on_encoder(wall_s, enc.pos_rev, enc.vel_rev_s)
+            if cmd == cp.Cmd.HEARTBEAT:
+                return self._on_axis_heartbeat(cp.decode_heartbeat(data))
+            if cmd == cp.Cmd.GET_BUS_VOLTAGE_CURRENT:
+                bvc = cp.decode_bus_voltage_current(data)
+                self.voltage_v, self.current_a = bvc.voltage_v, bvc.current_a
+        except cp.CanFrameError:
+            self.bad_frames += 1
+        return WinchOutput()
+
+    def _on_sensor(self, cmd: int, data: bytes) -> None:
+        if cmd == cp.SensorCmd.WINCH_LENGTH:
+            wl = cp.decode_winch_length(data)
+            if _finite(wl.length_m, wl.speed_m_s):
+                self.sensor_length_m, self.sensor_speed_m_s = wl.length_m, wl.speed_m_s
+        elif cmd == cp.SensorCmd.WINCH_TENSION:
+            wt = cp.decode_winch_tension(data)
+            self.sensor_brake = wt.brake_engaged
+            if _finite(wt.tension_n):
+                self.tension_n = wt.tension_n
+        elif cmd == cp.SensorCmd.WINCH_HEARTBEAT:
+            hb = cp.decode_winch_heartbeat(data)
+            self.load_cell_healthy = hb.load_cell_healthy
+            self.at_full_stop = hb.at_full_stop
+            self.sensor_brake = hb.brake_engaged
+
+    def _on_axis_heartbeat(self, hb: cp.Heartbeat) -> WinchOutput:
+        out = WinchOutput()
+        if hb.axis_error and hb.axis_error != self.axis_error:
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_CRITICAL,
+                                       f"winch: axis error 0x{hb.axis_error:08X}"))
+        self.axis_error, self.axis_state = hb.axis_error, hb.axis_state
+        return out
+
+    def _arm_frames(self) -> list[cp.Frame]:
+        """Clear_Errors, torque control (passthrough), CLOSED_LOOP_CONTROL."""
+        n = self.node
+        return [
+            cp.Frame(cp.frame_id(n, cp.Cmd.CLEAR_ERRORS), cp.encode_clear_errors()),
+            cp.Frame(cp.frame_id(n, cp.Cmd.SET_CONTROLLER_MODE), cp.encode_set_controller_mode(
+                cp.ControlMode.TORQUE, cp.InputMode.PASSTHROUGH)),
+            cp.Frame(cp.frame_id(n, cp.Cmd.SET_AXIS_STATE),
+                     cp.encode_set_axis_state(cp.AxisState.CLOSED_LOOP_CONTROL)),
+        ]
+
+    def _idle_frame(self) -> cp.Frame:
+        return cp.Frame(cp.frame_id(self.node, cp.Cmd.SET_AXIS_STATE),
+                        cp.encode_set_axis_state(cp.AxisState.IDLE))
+
+    def _on_encoder(self, wall_s: float, pos_rev: float, vel_rev_s: float) -> WinchOutput:
+        out = WinchOutput()
+        if not _finite(pos_rev, vel_rev_s):
+            self.bad_frames += 1
+            return out
+        self.encoder_frames += 1
+        self._last_encoder_wall = wall_s
+        self.length_m = pos_rev * _TWO_PI * self.r_w
+        self.omega_rad_s = vel_rev_s * _TWO_PI
+        if self.encoder_frames == 1:
+            self._hold_m = self.length_m
+            self._arm_pending = True
+        if self.lost:
+            self.lost = False
+            self._arm_pending = True
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE, "winch: encoder back"))
+        if self.mode in BRAKED_MODES:
+            out.frames.append(self._idle_frame())
+            self._check_locked(out)
+        else:
+            if self._arm_pending:
+                out.frames.extend(self._arm_frames())
+                self.host.controller.reset()
+                self._arm_pending = False
+            torque = self._control(out)
+            out.frames.append(cp.Frame(cp.frame_id(self.node, cp.Cmd.SET_INPUT_TORQUE),
+                                       cp.encode_set_input_torque(torque)))
+            self.torque_commands += 1
+        self._frames_since_status += 1
+        if self._frames_since_status >= self.status_every:
+            out.status = self._status(wall_s)
+            out.frames.append(cp.Frame(
+                cp.frame_id(self.node, cp.Cmd.GET_BUS_VOLTAGE_CURRENT), bytes(8), True))
+        return out
+
+    def _check_locked(self, out: WinchOutput) -> None:
+        floor, _ = self.taut_floor()
+        if (not self._lock_noticed and math.isfinite(floor)
+                and self.length_m <= floor + self.p.retracted_tolerance_m):
+            self._lock_noticed = True
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_WARNING,
+                                       "winch: held drum, tether near taut"))
+
+    # ------------------------------------------------------------------------- control
+
+    def _control(self, out: WinchOutput) -> float:
+        """Torque [N m] for this encoder frame in the active (closed-loop) mode."""
+        tension = self.tension_n if math.isfinite(self.tension_n) else 0.0
+        length, omega = self.length_m, self.omega_rad_s
+        if self.mode == WinchMode.RELAXED:
+            if self.uav is not None:
+                pos, vel = self.uav
+                step = self.host.update(length, omega, tension, pos, vel)
+                self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
+                torque = step.torque_n_m
+            else:
+                self.ref_m, self.ref_rate_m_s = self._hold_m, 0.0
+                torque = self.host.controller.update(self.dt_s, length, omega, tension,
+                                                     self._hold_m, 0.0).torque_n_m
+        else:
+            self._advance_reference(out)
+            torque = self.host.controller.update(self.dt_s, length, omega, tension,
+                                                 self.ref_m, self.ref_rate_m_s).torque_n_m
+        return torque if math.isfinite(torque) else 0.0
+
+    def _advance_reference(self, out: WinchOutput) -> None:
+        """One period of the reference of modes 1, 2 and 6, then the safety limits."""
+        dt = self.dt_s
+        floor, floor_rate = self.taut_floor()
+        if self.mode == WinchMode.RATE:
+            self.ref_m += self._speed_m_s * dt
+            self.ref_rate_m_s = self._speed_m_s
+        else:
+            if (self.mode == WinchMode.RETRACT and not self._retract_reached
+                    and math.isfinite(floor)):
+                self._target_m = floor
+            diff = self._target_m - self.ref_m
+            step = self._speed_m_s * dt
+            if abs(diff) <= step:
+                self.ref_m = self._target_m
+                self.ref_rate_m_s = 0.0
+                if self.mode == WinchMode.RETRACT:
+                    self._retract_reached = True
+            else:
+                self.ref_m += math.copysign(step, diff)
+                self.ref_rate_m_s = math.copysign(self._speed_m_s, diff)
+        if math.isfinite(floor) and self.ref_m < floor:
+            self.ref_m = floor
+            self.ref_rate_m_s = max(self.ref_rate_m_s, floor_rate)
+            if self.mode == WinchMode.RETRACT:
+                self._retract_reached = True
+                self._target_m = floor
+            elif not self._limit_noticed:
+                out.notices.append(_notice(mavlink2.MAV_SEVERITY_WARNING,
+                                           f"winch: stopped at taut limit {floor:.2f} m"))
+            self._limit_noticed = True
+        if self.ref_m > self.length_max_m:
+            self.ref_m = self.length_max_m
+            self.ref_rate_m_s = min(self.ref_rate_m_s, 0.0)
+            if not self._limit_noticed:
+                out.notices.append(_notice(mavlink2.MAV_SEVERITY_WARNING,
+                                           f"winch: stopped at drum end {self.length_max_m:.2f} m"))
+            self._limit_noticed = True
+        elif self.ref_m < self.length_min_m:
+            self.ref_m = self.length_min_m
+            self.ref_rate_m_s = max(self.ref_rate_m_s, 0.0)
+
+    # ------------------------------------------------------------------------ the clock
+
+    def poll(self, wall_s: float) -> WinchOutput:
+        """Wall-clock duties at ``wall_s`` [s]: brake on encoder loss, and WINCH_STATUS
+        when frames have not brought one for ``status_wall_period_s``."""
+        out = WinchOutput()
+        last = self._last_encoder_wall
+        if (not self.lost and last is not None
+                and wall_s - last > self.p.encoder_timeout_s):
+            self.lost = True
+            out.frames.append(self._idle_frame())
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_CRITICAL,
+                                       "winch: encoder lost, drum braked"))
+            out.status = self._status(wall_s)
+        elif (self._last_status_wall is None
+              or wall_s - self._last_status_wall >= self.p.status_wall_period_s):
+            out.status = self._status(wall_s)
+        return out
+
+    # ------------------------------------------------------------------------- status
+
+    def status_flags(self) -> int:
+        """``MAV_WINCH_STATUS_FLAG`` bits of the present state."""
+        flags = 0
+        if (self.encoder_frames and not self.lost and not self.axis_error
+                and self.load_cell_healthy is not False):
+            flags |= FLAG_HEALTHY
+        length = self._report_length()
+        floor, _ = self.taut_floor()
+        if self.at_full_stop or (math.isfinite(floor) and math.isfinite(length)
+                                 and length <= floor + self.p.retracted_tolerance_m):
+            flags |= FLAG_FULLY_RETRACTED
+        if abs(self._report_speed()) > self.p.moving_speed_m_s:
+            flags |= FLAG_MOVING
+        if self.braked or self.sensor_brake:
+            flags |= FLAG_CLUTCH_ENGAGED
+        if self.mode in BRAKED_MODES:
+            flags |= FLAG_LOCKED
+        if self.mode == WinchMode.RETRACT and not self._retract_reached:
+            flags |= FLAG_RETRACTING
+        return flags
+
+    def _report_length(self) -> float:
+        return self.sensor_length_m if math.isfinite(self.sensor_length_m) else self.length_m
+
+    def _report_speed(self) -> float:
+        if math.isfinite(self.sensor_speed_m_s):
+            return self.sensor_speed_m_s
+        return 0.0 if self.lost else self.omega_rad_s * self.r_w
+
+    def _status(self, wall_s: float) -> WinchStatusReport | None:
+        """The WINCH_STATUS to send now, or None while no length is known."""
+        length = self._report_length()
+        if not math.isfinite(length):
+            return None
+        self._frames_since_status = 0
+        self._last_status_wall = wall_s
+        return WinchStatusReport(length, self._report_speed(), self.tension_n / self.g,
+                                 self.voltage_v, self.current_a, TEMPERATURE_UNKNOWN,
+                                 self.status_flags())
+
+    # ----------------------------------------------------------------------- commands
+
+    def command(self, req: CommandRequest, wall_s: float) -> CommandReply | None:
+        """Handle a COMMAND_LONG/COMMAND_INT; returns the COMMAND_ACK to send, or None when
+        the command is not for this component (no ACK)."""
+        if req.target_system not in (cl.SYSTEM_ID, 0):
+            return None
+        if req.command != mavlink2.MAV_CMD_DO_WINCH:
+            if req.target_component == cl.WINCH_COMPONENT_ID:
+                return self._reply(req, mavlink2.MAV_RESULT_UNSUPPORTED)
+            return None
+        if req.target_component not in cl.DO_WINCH_TARGET_COMPONENTS:
+            return None
+        last = self._last_command
+        if (req.confirmation > 0 and last is not None and last[0] == _identity(req)
+                and wall_s - last[1] <= self.p.duplicate_window_s):
+            return last[2]._replace(notices=())
+        reply = self._execute(req)
+        self._last_command = (_identity(req), wall_s, reply)
+        return reply
+
+    def _reply(self, req: CommandRequest, result: int, *notices: Notice) -> CommandReply:
+        return CommandReply(req.command, result, req.source_system, req.source_component,
+                            tuple(notices))
+
+    def _execute(self, req: CommandRequest) -> CommandReply:
+        instance, action, length, rate = req.param1, req.param2, req.param3, req.param4
+        sev_warn = mavlink2.MAV_SEVERITY_WARNING
+        denied = mavlink2.MAV_RESULT_DENIED
+        if not _finite(instance) or instance not in cl.WINCH_INSTANCES:
+            return self._reply(req, denied, _notice(sev_warn, f"winch: no instance {instance}"))
+        if not _finite(action) or action != int(action):
+            return self._reply(req, denied, _notice(sev_warn, f"winch: bad action {action}"))
+        action = int(action)
+        if action in UNSUPPORTED_ACTIONS:
+            name = mavlink2.enums["WINCH_ACTIONS"][action].name.removeprefix("WINCH_")
+            return self._reply(req, mavlink2.MAV_RESULT_UNSUPPORTED,
+                               _notice(mavlink2.MAV_SEVERITY_INFO, f"winch: {name} unsupported"))
+        if action not in WinchMode._value2member_map_:
+            return self._reply(req, denied, _notice(sev_warn, f"winch: bad action {action}"))
+        mode = WinchMode(action)
+        if mode == WinchMode.RELATIVE_LENGTH and not _finite(length):
+            return self._reply(req, denied, _notice(sev_warn, "winch: length is NaN"))
+        if mode == WinchMode.RATE and not _finite(rate):
+            return self._reply(req, denied, _notice(sev_warn, "winch: rate is NaN"))
+        moves = mode in (WinchMode.RELATIVE_LENGTH, WinchMode.RATE, WinchMode.RETRACT)
+        if moves and (self.lost or not self.encoder_frames):
+            return self._reply(req, mavlink2.MAV_RESULT_TEMPORARILY_REJECTED,
+                               _notice(sev_warn, "winch: no encoder, command rejected"))
+        if mode == WinchMode.RETRACT and self.uav is None:
+            return self._reply(req, mavlink2.MAV_RESULT_TEMPORARILY_REJECTED,
+                               _notice(sev_warn, "winch: no UAV position, cannot retract"))
+
+        notices: list[Notice] = []
+        if moves:
+            if mode == WinchMode.RATE:
+                speed = rate
+            elif _finite(rate) and rate != 0.0:
+                speed = abs(rate)
+            else:
+                speed = (self.p.retract_rate_m_s if mode == WinchMode.RETRACT
+                         else self.p.default_rate_m_s)
+            if abs(speed) > self.max_rate_m_s:
+                speed = math.copysign(self.max_rate_m_s, speed)
+                notices.append(_notice(sev_warn, f"winch: rate clamped to {speed:.2f} m/s"))
+        disarmed = (self.axis_state is not None
+                    and self.axis_state != cp.AxisState.CLOSED_LOOP_CONTROL)
+        if mode not in BRAKED_MODES and not self.lost and (self.mode in BRAKED_MODES
+                                                           or disarmed):
+            # leaving LOCK/HOLD, or the axis disarmed itself (watchdog, errors): re-arm
+            self._arm_pending = True
+        self.mode = mode
+        self._limit_noticed = False
+        self._lock_noticed = False
+        self._retract_reached = False
+        start = self.length_m
+        if mode == WinchMode.RELAXED:
+            self._hold_m = start
+        elif mode == WinchMode.RELATIVE_LENGTH:
+            self.ref_m, self._speed_m_s = start, speed
+            target = start + length
+            floor, _ = self.taut_floor()
+            lower = max(floor, self.length_min_m) if math.isfinite(floor) else self.length_min_m
+            if target < lower:
+                target = lower
+                self._limit_noticed = True
+                notices.append(_notice(sev_warn, f"winch: length clamped to {target:.2f} m"))
+            elif target > self.length_max_m:
+                target = self.length_max_m
+                self._limit_noticed = True
+                notices.append(_notice(sev_warn, f"winch: length clamped to {target:.2f} m"))
+            self._target_m = target
+        elif mode == WinchMode.RATE:
+            self.ref_m, self._speed_m_s = start, speed
+        elif mode == WinchMode.RETRACT:
+            self.ref_m, self._speed_m_s = start, speed
+            self._target_m = self.taut_floor()[0]
+            notices.append(_notice(mavlink2.MAV_SEVERITY_INFO,
+                                   f"winch: retracting to {self._target_m:.2f} m"))
+        return self._reply(req, mavlink2.MAV_RESULT_ACCEPTED, *notices)

@@ -1,0 +1,577 @@
+"""The winch component's logic (groundstation/winch.py) without sockets: DO_WINCH answers,
+the length reference against its analytic ramp, the taut-floor clamp against the straight-line
+distance, the brake, encoder loss, WINCH_STATUS contents and rate; then the same class
+closing the loop around the plant's own simulated ODrive axis and drum model."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+from groundstation import winch as wm
+from groundstation.lbar import LBarParams
+from groundstation.winch import CommandRequest, Winch, WinchMode, WinchOutput
+from groundstation.winder_control import WinderControlParams
+from groundstation.winder_host import WinderHost
+from sitl.odrive_axis import OdriveAxis, WinchSensors
+from sitl.winder import WinderModel
+from tuavdefs import can_protocol as cp
+from tuavdefs.params import SystemParams
+
+NAN = math.nan
+PARAMS = SystemParams()
+G = PARAMS.environment.gravity_m_s2
+R_W = PARAMS.winder.drum_radius_m
+MIN_SLACK = LBarParams().min_slack_m
+DT = 1.0 / WinderControlParams().rate_hz
+UAV = ((3.0, 4.0, 12.0), (0.0, 0.0, 0.0))     # 13 m from the winder's exit
+GCS = (255, 190)
+ACK = mavlink2.MAV_RESULT_ACCEPTED
+ENC_ID = cp.frame_id(0, cp.Cmd.GET_ENCODER_ESTIMATES)
+
+
+def make_winch() -> Winch:
+    host = WinderHost(WinderControlParams(), LBarParams(), PARAMS.winder, PARAMS.tether, G)
+    return Winch(host, PARAMS.winder, PARAMS.tether, G)
+
+
+def request(action: float, length: float = NAN, rate: float = NAN, *, instance: float = 0,
+            target: int = 169, command: int = mavlink2.MAV_CMD_DO_WINCH,
+            target_system: int = 1, confirmation: int = 0) -> CommandRequest:
+    return CommandRequest(command, target_system, target, *GCS, instance, action, length, rate,
+                          confirmation)
+
+
+def encoder(w: Winch, wall: float, length_m: float, speed_m_s: float = 0.0) -> WinchOutput:
+    """Feed an encoder frame for a drum at ``length_m`` turning at ``speed_m_s`` of line."""
+    k = 2.0 * math.pi * R_W
+    return w.on_frame(wall, ENC_ID, cp.encode_encoder_estimates(length_m / k, speed_m_s / k))
+
+
+def decoded(frames: list[cp.Frame]) -> list[tuple[str, object]]:
+    """(message name, decoded payload) of the host's frames, through the message table."""
+    out = []
+    for f in frames:
+        spec = cp.spec_for_id(f.arbitration_id)
+        out.append((spec.name, "RTR" if f.is_remote else spec.decode(f.data)))
+    return out
+
+
+def ready(length_m: float = 20.0, uav=UAV) -> Winch:
+    w = make_winch()
+    w.set_uav(uav)
+    encoder(w, 0.0, length_m)
+    return w
+
+
+def track(w: Winch, frames: int, wall0: float = 1.0) -> list[tuple[float, float]]:
+    """Step ``frames`` encoder frames with the drum exactly on the reference (perfect
+    tracking); returns the reference (length, rate) after each."""
+    refs = []
+    for k in range(frames):
+        encoder(w, wall0 + k * DT, w.reference()[0])
+        refs.append(w.reference())
+    return refs
+
+
+# --------------------------------------------------------------------------------- ACKs
+
+EXPECTED = {
+    mavlink2.WINCH_RELAXED: ACK,
+    mavlink2.WINCH_RELATIVE_LENGTH_CONTROL: ACK,
+    mavlink2.WINCH_RATE_CONTROL: ACK,
+    mavlink2.WINCH_LOCK: ACK,
+    mavlink2.WINCH_DELIVER: mavlink2.MAV_RESULT_UNSUPPORTED,
+    mavlink2.WINCH_HOLD: ACK,
+    mavlink2.WINCH_RETRACT: ACK,
+    mavlink2.WINCH_LOAD_LINE: mavlink2.MAV_RESULT_UNSUPPORTED,
+    mavlink2.WINCH_ABANDON_LINE: mavlink2.MAV_RESULT_UNSUPPORTED,
+    mavlink2.WINCH_LOAD_PAYLOAD: mavlink2.MAV_RESULT_UNSUPPORTED,
+}
+
+
+def test_every_winch_action_of_the_dialect_has_an_expected_answer():
+    actions = {v for v, e in mavlink2.enums["WINCH_ACTIONS"].items()
+               if not e.name.endswith("ENUM_END")}
+    assert actions == set(EXPECTED)
+
+
+@pytest.mark.parametrize("action", sorted(EXPECTED))
+@pytest.mark.parametrize("target", [169, 1, 0])
+def test_ack_result_per_action_and_addressed_to_the_sender(action, target):
+    w = ready()
+    reply = w.command(request(action, 1.0, 0.2, target=target), 2.0)
+    assert reply is not None
+    assert reply.command == 42600
+    assert reply.result == EXPECTED[action]
+    assert (reply.target_system, reply.target_component) == GCS
+    if reply.result == ACK:
+        assert w.mode == action
+    else:
+        assert w.mode == WinchMode.RELAXED
+        assert reply.notices      # a STATUSTEXT says why
+
+
+@pytest.mark.parametrize("req, why", [
+    (request(mavlink2.WINCH_HOLD, instance=2), "instance"),
+    (request(mavlink2.WINCH_HOLD, instance=NAN), "instance"),
+    (request(mavlink2.WINCH_RELATIVE_LENGTH_CONTROL, NAN, 0.5), "NaN"),
+    (request(mavlink2.WINCH_RATE_CONTROL, 1.0, NAN), "NaN"),
+    (request(NAN), "action"),
+    (request(1.5, 1.0, 1.0), "action"),
+    (request(42), "action"),
+])
+def test_bad_parameters_are_denied_with_a_statustext(req, why):
+    w = ready()
+    reply = w.command(req, 2.0)
+    assert reply.result == mavlink2.MAV_RESULT_DENIED
+    assert len(reply.notices) == 1 and why in reply.notices[0].text
+    assert reply.notices[0].text.startswith("winch: ")
+    assert w.mode == WinchMode.RELAXED
+
+
+def test_instance_1_is_accepted_too():
+    assert ready().command(request(mavlink2.WINCH_HOLD, instance=1), 2.0).result == ACK
+
+
+def test_commands_for_others_get_no_answer_and_unknown_ones_for_us_unsupported():
+    w = ready()
+    assert w.command(request(mavlink2.WINCH_HOLD, target=42), 2.0) is None
+    assert w.command(request(mavlink2.WINCH_HOLD, target_system=7), 2.0) is None
+    other = mavlink2.MAV_CMD_DO_SET_MODE
+    assert w.command(request(0, command=other, target=1), 2.0) is None
+    assert w.command(request(0, command=other, target=0), 2.0) is None
+    reply = w.command(request(0, command=other, target=169), 2.0)
+    assert reply.result == mavlink2.MAV_RESULT_UNSUPPORTED and reply.command == other
+    assert w.mode == WinchMode.RELAXED
+
+
+def test_motion_needs_an_encoder_and_retract_a_uav_position():
+    w = make_winch()
+    w.set_uav(UAV)
+    r = w.command(request(mavlink2.WINCH_RELATIVE_LENGTH_CONTROL, 1.0, 0.5), 0.0)
+    assert r.result == mavlink2.MAV_RESULT_TEMPORARILY_REJECTED
+    assert w.command(request(mavlink2.WINCH_HOLD), 0.0).result == ACK   # no motion: fine
+    w = ready(uav=None)
+    r = w.command(request(mavlink2.WINCH_RETRACT), 1.0)
+    assert r.result == mavlink2.MAV_RESULT_TEMPORARILY_REJECTED and "UAV" in r.notices[0].text
+
+
+def test_a_retransmission_is_acknowledged_again_but_not_executed_again():
+    w = ready(20.0)
+    first = w.command(request(1, 1.0, NAN, confirmation=0), 1.0)
+    again = w.command(request(1, 1.0, NAN, confirmation=1), 1.5)
+    assert first.result == again.result == ACK
+    refs = track(w, 400, 2.0)
+    assert refs[-1][0] == pytest.approx(21.0, abs=1e-5)   # 1 m, not 2 m
+    w.command(request(1, 1.0, NAN, confirmation=0), 9.0)  # a new command (confirmation 0)
+    assert track(w, 400, 10.0)[-1][0] == pytest.approx(22.0, abs=1e-5)
+
+
+# ------------------------------------------------------------------------ the reference
+
+@pytest.mark.parametrize("length, rate", [(2.0, 0.4), (-3.0, 0.5), (-3.0, -0.5), (1.0, NAN),
+                                          (1.0, 0.0)])
+def test_relative_length_ramps_at_the_commanded_rate_then_holds(length, rate):
+    start = 20.0
+    w = ready(start)
+    assert w.command(request(1, length, rate), 1.0).result == ACK
+    speed = abs(rate) if math.isfinite(rate) and rate != 0.0 else wm.WinchParams().default_rate_m_s
+    n_ramp = round(abs(length) / speed / DT)
+    refs = track(w, n_ramp + 100)
+    for k in (0, n_ramp // 3, n_ramp - 2):
+        t = (k + 1) * DT                               # simulated time after frame k
+        assert refs[k][0] == pytest.approx(start + math.copysign(speed * t, length), abs=1e-5)
+        assert refs[k][1] == pytest.approx(math.copysign(speed, length))
+    assert refs[n_ramp - 1][0] == pytest.approx(start + length, abs=1e-5)
+    for ref, ref_rate in refs[n_ramp:]:
+        assert ref == pytest.approx(start + length, abs=1e-5) and ref_rate == 0.0
+
+
+def test_rate_control_runs_until_another_command():
+    w = ready(20.0)
+    assert w.command(request(2, NAN, 0.3), 1.0).result == ACK
+    refs = track(w, 300)
+    assert refs[-1] == (pytest.approx(20.0 + 0.3 * 3.0, abs=1e-5), 0.3)
+    w.command(request(2, NAN, 0.0), 5.0)        # stop: hold the length last measured
+    held = track(w, 50, 5.0)
+    assert held[-1] == (pytest.approx(20.9 - 0.3 * DT, abs=1e-5), 0.0)
+
+
+def test_a_length_below_the_taut_floor_is_clamped_to_it():
+    w = ready(14.0)
+    floor = math.dist(UAV[0], (0, 0, 0)) + MIN_SLACK           # 13.05 m
+    reply = w.command(request(1, -5.0, 0.5), 1.0)
+    assert reply.result == ACK
+    assert "13.05" in reply.notices[0].text and "clamped" in reply.notices[0].text
+    refs = track(w, 400)
+    assert min(r for r, _ in refs) == pytest.approx(floor, abs=1e-5)
+    assert refs[-1] == (pytest.approx(floor, abs=1e-5), 0.0)
+
+
+def test_rate_control_stops_at_the_taut_floor_and_follows_it_out():
+    w = ready(14.0)
+    floor = math.dist(UAV[0], (0, 0, 0)) + MIN_SLACK
+    reply = w.command(request(2, NAN, -1.0), 1.0)
+    assert reply.result == ACK and not reply.notices
+    notices = []
+    for k in range(200):
+        notices += encoder(w, 1.0 + k * DT, w.reference()[0]).notices
+    assert w.reference()[0] == pytest.approx(floor, abs=1e-5)
+    assert [n.text for n in notices] == [f"winch: stopped at taut limit {floor:.2f} m"]
+    # the UAV moves out at 1 m/s radially: the reference rises with the floor, at its rate
+    pos = (6.0, 8.0, 24.0)                                      # 26 m out
+    w.set_uav((pos, (6 / 26, 8 / 26, 24 / 26)))
+    encoder(w, 5.0, w.reference()[0])
+    assert w.reference() == (pytest.approx(26.0 + MIN_SLACK), pytest.approx(1.0))
+
+
+def test_rates_above_the_laws_limit_are_clamped():
+    w = ready(20.0)
+    vmax = WinderControlParams().speed_margin * PARAMS.winder.motor_speed_limit_rad_s * R_W
+    reply = w.command(request(2, NAN, 100.0), 1.0)
+    assert reply.result == ACK and f"{vmax:.2f}" in reply.notices[0].text
+    refs = track(w, 10)
+    assert refs[-1][1] == pytest.approx(vmax)
+    assert refs[-1][0] == pytest.approx(20.0 + 10 * DT * vmax)
+
+
+def test_the_drum_end_limits_paying_out():
+    w = ready(45.0)
+    end = PARAMS.tether.total_length_m - wm.WinchParams().end_margin_m
+    reply = w.command(request(1, 30.0, 1.0), 1.0)
+    assert reply.result == ACK and f"{end:.2f}" in reply.notices[0].text
+    assert track(w, 600)[-1][0] == pytest.approx(end)
+
+
+def test_retract_winds_in_to_the_straight_line_distance_plus_min_slack():
+    w = ready(20.0)
+    floor = math.dist(UAV[0], (0, 0, 0)) + MIN_SLACK
+    reply = w.command(request(6), 1.0)
+    assert reply.result == ACK and f"{floor:.2f}" in reply.notices[0].text
+    rate = wm.WinchParams().retract_rate_m_s
+    n = math.ceil((20.0 - floor) / rate / DT)
+    refs = track(w, n + 50)
+    assert refs[n // 2] == (pytest.approx(20.0 - rate * (n // 2 + 1) * DT), -rate)
+    assert refs[-1] == (pytest.approx(floor, abs=1e-5), 0.0)
+    assert w.status_flags() & wm.FLAG_FULLY_RETRACTED
+    # then it holds: the UAV coming closer does not wind further
+    w.set_uav(((3.0, 4.0, 10.0), (0.0, 0.0, 0.0)))
+    assert track(w, 50, 30.0)[-1][0] == pytest.approx(floor, abs=1e-5)
+
+
+def test_relaxed_follows_lbar_and_holds_its_length_without_a_uav_position():
+    w = ready(20.0, uav=None)
+    for k in range(20):
+        encoder(w, k * DT, 20.0 + 0.001 * k)
+    assert w.reference() == (pytest.approx(20.0, abs=1e-5), 0.0)   # its first length
+    w.set_uav(UAV)
+    encoder(w, 1.0, 20.0)
+    host = WinderHost(WinderControlParams(), LBarParams(), PARAMS.winder, PARAMS.tether, G)
+    assert w.reference()[0] == pytest.approx(host.lbar.length(UAV[0])[0], abs=1e-5)
+
+
+# ------------------------------------------------------------------------- the brake
+
+def test_hold_brakes_the_drum_and_leaving_it_rearms_closed_loop():
+    w = ready(20.0)
+    assert w.command(request(mavlink2.WINCH_HOLD), 1.0).result == ACK
+    out = encoder(w, 1.0, 20.0)
+    names = decoded(out.frames)
+    assert names[0] == ("Set_Axis_State", cp.AxisState.IDLE)
+    assert "Set_Input_Torque" not in [n for n, _ in names]
+    for k in range(1, 6):                        # every frame is answered with IDLE again
+        frames = encoder(w, 1.0 + k * DT, 20.0).frames
+        assert decoded(frames)[0] == ("Set_Axis_State", cp.AxisState.IDLE)
+    assert w.status_flags() & mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED
+    assert w.status_flags() & mavlink2.MAV_WINCH_STATUS_HEALTHY
+    assert w.command(request(mavlink2.WINCH_RELAXED), 2.0).result == ACK
+    names = decoded(encoder(w, 2.0, 20.0).frames)
+    assert names[:4] == [
+        ("Clear_Errors", False),
+        ("Set_Controller_Mode", (cp.ControlMode.TORQUE, cp.InputMode.PASSTHROUGH)),
+        ("Set_Axis_State", cp.AxisState.CLOSED_LOOP_CONTROL),
+        ("Set_Input_Torque", pytest.approx(names[3][1])),
+    ]
+    assert not w.status_flags() & mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED
+    # LOCK is the same hold
+    w.command(request(mavlink2.WINCH_LOCK), 3.0)
+    assert decoded(encoder(w, 3.0, 20.0).frames)[0] == ("Set_Axis_State", cp.AxisState.IDLE)
+
+
+def test_the_first_encoder_frame_arms_the_axis():
+    w = make_winch()
+    names = [n for n, _ in decoded(encoder(w, 0.0, 20.0).frames)]
+    assert names == ["Clear_Errors", "Set_Controller_Mode", "Set_Axis_State", "Set_Input_Torque"]
+    assert [n for n, _ in decoded(encoder(w, DT, 20.0).frames)] == ["Set_Input_Torque"]
+
+
+def test_encoder_loss_brakes_and_its_return_rearms_and_resumes():
+    w = ready(20.0)
+    w.command(request(2, NAN, 0.5), 0.0)
+    track(w, 50, 0.0)                            # last frame at wall 0.49 s
+    last = 0.49
+    ref_before = w.reference()[0]
+    assert not w.poll(last + 0.05).frames
+    out = w.poll(last + 0.11)
+    assert decoded(out.frames) == [("Set_Axis_State", cp.AxisState.IDLE)]
+    assert [(n.severity, n.text) for n in out.notices] == [
+        (mavlink2.MAV_SEVERITY_CRITICAL, "winch: encoder lost, drum braked")]
+    flags = out.status.flags
+    assert not flags & mavlink2.MAV_WINCH_STATUS_HEALTHY
+    assert flags & mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED
+    # while lost: WINCH_STATUS by the wall clock, no more frames or notices
+    sent = [last + 0.11]
+    for k in range(1, 101):                      # the process polls at least every 10 ms
+        o = w.poll(last + 0.11 + 0.01 * k)
+        assert not o.frames and not o.notices
+        if o.status is not None:
+            sent.append(last + 0.11 + 0.01 * k)
+            assert o.status.flags == out.status.flags
+    assert len(sent) >= 11                        # >= 10 Hz
+    assert max(b - a for a, b in zip(sent, sent[1:], strict=False)) <= 0.1 + 1e-9
+    out = encoder(w, last + 1.5, ref_before)
+    assert [n.text for n in out.notices] == ["winch: encoder back"]
+    assert [n for n, _ in decoded(out.frames)][:4] == [
+        "Clear_Errors", "Set_Controller_Mode", "Set_Axis_State", "Set_Input_Torque"]
+    assert decoded(out.frames)[2][1] == cp.AxisState.CLOSED_LOOP_CONTROL
+    # the rate mode resumes where its reference stood
+    assert w.reference() == (pytest.approx(ref_before + 0.5 * DT), 0.5)
+    assert w.poll(last + 1.5).status is None or w.status_flags() & wm.FLAG_HEALTHY
+    assert w.status_flags() & wm.FLAG_HEALTHY
+
+
+def test_encoder_back_during_hold_keeps_the_brake():
+    w = ready(20.0)
+    w.command(request(mavlink2.WINCH_HOLD), 0.0)
+    encoder(w, 0.0, 20.0)
+    w.poll(0.2)
+    out = encoder(w, 0.5, 20.0)
+    assert [n.text for n in out.notices] == ["winch: encoder back"]
+    assert decoded(out.frames)[0] == ("Set_Axis_State", cp.AxisState.IDLE)
+    assert "Clear_Errors" not in [n for n, _ in decoded(out.frames)]
+
+
+# ----------------------------------------------------------------------------- status
+
+def test_status_flag_bits_are_the_dialects():
+    enum = {e.name: v for v, e in mavlink2.enums["MAV_WINCH_STATUS_FLAG"].items()}
+    assert wm.FLAG_HEALTHY == enum["MAV_WINCH_STATUS_HEALTHY"] == 1
+    assert wm.FLAG_FULLY_RETRACTED == enum["MAV_WINCH_STATUS_FULLY_RETRACTED"] == 2
+    assert wm.FLAG_MOVING == enum["MAV_WINCH_STATUS_MOVING"] == 4
+    assert wm.FLAG_CLUTCH_ENGAGED == enum["MAV_WINCH_STATUS_CLUTCH_ENGAGED"] == 8
+    assert enum.get("MAV_WINCH_STATUS_LOCKED", 0) == wm.FLAG_LOCKED
+    assert enum.get("MAV_WINCH_STATUS_RETRACTING", 0) == wm.FLAG_RETRACTING
+
+
+def test_status_every_fifth_encoder_frame_with_the_measurements():
+    w = ready(20.0)
+    sensor = cp.WINCH_SENSOR_NODE_ID_DEFAULT
+    w.on_frame(0.0, cp.frame_id(sensor, cp.SensorCmd.WINCH_TENSION),
+               cp.encode_winch_tension(9.81, False))
+    w.on_frame(0.0, cp.frame_id(sensor, cp.SensorCmd.WINCH_LENGTH),
+               cp.encode_winch_length(20.25, 0.5))
+    outs = [encoder(w, 0.001 * k, 20.0, 0.5) for k in range(1, 100)]   # 100 frames in all
+    statuses = [o.status for o in outs if o.status is not None]
+    assert len(statuses) == 20                   # 20 Hz of simulated time
+    requests = [f for o in outs for f in o.frames if f.is_remote]
+    assert len(requests) == 20
+    assert {f.arbitration_id for f in requests} == {cp.frame_id(0, cp.Cmd.GET_BUS_VOLTAGE_CURRENT)}
+    st = statuses[0]
+    assert st.line_length_m == pytest.approx(20.25)
+    assert st.speed_m_s == pytest.approx(0.5)
+    assert st.tension_kg == pytest.approx(9.81 / G, rel=1e-6)
+    assert math.isnan(st.voltage_v) and math.isnan(st.current_a)
+    assert st.temperature_c == 32767
+    assert st.flags == (mavlink2.MAV_WINCH_STATUS_HEALTHY | mavlink2.MAV_WINCH_STATUS_MOVING)
+    w.on_frame(1.0, cp.frame_id(0, cp.Cmd.GET_BUS_VOLTAGE_CURRENT),
+               cp.encode_bus_voltage_current(48.0, -1.5))
+    st = w.poll(2.0).status
+    assert (st.voltage_v, st.current_a) == (48.0, -1.5)
+
+
+def test_status_by_the_wall_clock_when_frames_are_slow():
+    w = ready(20.0)
+    sent = []
+    for k in range(100):                          # a frame every 0.25 s, polls every 10 ms
+        wall = 0.01 * (k + 1)
+        out = encoder(w, wall, 20.0) if k % 25 == 0 else WinchOutput()
+        out.extend(w.poll(wall))
+        if out.status is not None:
+            sent.append(wall)
+    gaps = [b - a for a, b in zip([0.0] + sent, sent, strict=False)]
+    assert max(gaps) <= 0.1 + 1e-9 and len(sent) >= 10
+
+
+def test_no_status_before_any_length_is_known():
+    w = make_winch()
+    assert w.poll(0.0).status is None and w.poll(1.0).status is None
+
+
+def test_unhealthy_on_axis_errors_and_a_bad_load_cell():
+    w = ready(20.0)
+    out = w.on_frame(0.1, cp.frame_id(0, cp.Cmd.HEARTBEAT), cp.encode_heartbeat(
+        cp.ODriveError.WATCHDOG_TIMER_EXPIRED, cp.AxisState.IDLE))
+    assert out.notices[0].severity == mavlink2.MAV_SEVERITY_CRITICAL
+    assert "0x01000000" in out.notices[0].text
+    assert not w.status_flags() & wm.FLAG_HEALTHY
+    # a command that needs closed loop re-arms the axis that disarmed itself
+    w.command(request(mavlink2.WINCH_RELAXED), 0.2)
+    assert decoded(encoder(w, 0.2, 20.0).frames)[0][0] == "Clear_Errors"
+    w.on_frame(0.3, cp.frame_id(0, cp.Cmd.HEARTBEAT), cp.encode_heartbeat(
+        0, cp.AxisState.CLOSED_LOOP_CONTROL))
+    assert w.status_flags() & wm.FLAG_HEALTHY
+    w.on_frame(0.4, cp.frame_id(cp.WINCH_SENSOR_NODE_ID_DEFAULT, cp.SensorCmd.WINCH_HEARTBEAT),
+               cp.encode_winch_heartbeat(False, False, False, False, 1))
+    assert not w.status_flags() & wm.FLAG_HEALTHY
+
+
+def test_garbage_never_crashes():
+    w = ready(20.0)
+    for fid, data in [(ENC_ID, b"\x00"), (ENC_ID, cp.encode_encoder_estimates(NAN, 0.0)),
+                      (cp.frame_id(0, cp.Cmd.HEARTBEAT), b""), (0x7FF, b"\xff" * 8),
+                      (cp.frame_id(cp.WINCH_SENSOR_NODE_ID_DEFAULT, 2), b"\x01")]:
+        assert w.on_frame(0.5, fid, data) == WinchOutput()
+    assert w.bad_frames == 4
+    w.set_uav(((NAN, 0.0, 0.0), (0.0, 0.0, 0.0)))
+    assert w.uav == UAV
+
+
+# ------------------------------------------- closed loop around the plant's axis and drum
+
+class Bench:
+    """The winch against the plant's simulated ODrive axis, winch sensors and drum model
+    (sitl/), in one process: 1 kHz drum physics, the axis and sensors ticked on a 4 ms grid
+    as the plant does, a constant line tension at the drum; simulated time is the winch's
+    wall time."""
+
+    def __init__(self, length_m: float, tension_n: float = 5.0, uav=UAV) -> None:
+        wp = PARAMS.winder
+        self.model = WinderModel(wp, PARAMS.tether)
+        self.axis = OdriveAxis(torque_limit_nm=wp.motor_torque_limit_n_m,
+                               vel_limit_rev_s=wp.motor_speed_limit_rad_s / (2 * math.pi))
+        self.sensors = WinchSensors()
+        self.winch = make_winch()
+        self.winch.set_uav(uav)
+        self.theta = length_m / R_W
+        self.omega = 0.0
+        self.tension = tension_n
+        self.t = 0.0
+        self.n = 0
+        self.host_frames: list[tuple[float, str, object]] = []
+        self.statuses: list[tuple[float, wm.WinchStatusReport]] = []
+        self.notices: list[str] = []
+        self.encoder_on = True
+        self.last_encoder_t = math.nan
+
+    @property
+    def length(self) -> float:
+        return self.theta * R_W
+
+    def _handle(self, out: WinchOutput) -> None:
+        for f in out.frames:
+            spec = cp.spec_for_id(f.arbitration_id)
+            self.host_frames.append((self.t, spec.name,
+                                     None if f.is_remote else spec.decode(f.data)))
+            for reply in self.axis.handle(self.t, f.arbitration_id, f.data, f.is_remote):
+                self._handle(self.winch.on_frame(self.t, reply.arbitration_id, reply.data))
+        self.notices += [n.text for n in out.notices]
+        if out.status is not None:
+            self.statuses.append((self.t, out.status))
+
+    def run(self, seconds: float) -> None:
+        for _ in range(round(seconds * 1000)):
+            braked = not self.axis.enabled
+            applied = self.model.motor_torque_n_m(self.axis.torque_command_nm, self.omega,
+                                                  self.axis.enabled)
+            acc = self.model.acceleration(self.theta, self.omega, applied, self.tension, braked)
+            before = self.omega
+            self.omega += acc * 1e-3
+            self.theta += self.omega * 1e-3
+            self.theta, self.omega = self.model.project(self.theta, self.omega, before, braked)
+            self.n += 1
+            self.t = self.n * 1e-3
+            if self.n % 4 == 0:
+                two_pi = 2 * math.pi
+                frames = self.axis.tick(self.t, self.theta / two_pi, self.omega / two_pi,
+                                        applied, 48.0)
+                frames += self.sensors.tick(self.t, self.length, self.omega * R_W,
+                                            self.tension, braked, False, False)
+                for f in frames:
+                    if f.arbitration_id == ENC_ID:
+                        if not self.encoder_on:
+                            continue
+                        self.last_encoder_t = self.t
+                    self._handle(self.winch.on_frame(self.t, f.arbitration_id, f.data))
+            self._handle(self.winch.poll(self.t))
+
+    def command(self, req: CommandRequest) -> wm.CommandReply:
+        reply = self.winch.command(req, self.t)
+        self.notices += [n.text for n in reply.notices]
+        return reply
+
+
+def test_closed_loop_on_the_plants_axis_and_drum():
+    b = Bench(14.0)
+    b.run(3.0)
+    lbar = b.winch.host.lbar.length(UAV[0])[0]
+    assert b.axis.enabled
+    assert b.length == pytest.approx(lbar, abs=0.01)            # relaxed: on L-bar
+    # pay out 1 m at 0.4 m/s: mid-ramp line speed, then the length held
+    start = b.length
+    assert b.command(request(1, 1.0, 0.4)).result == ACK
+    b.run(1.25)
+    assert b.omega * R_W == pytest.approx(0.4, abs=0.02)
+    b.run(2.75)
+    assert b.length == pytest.approx(start + 1.0, abs=0.01)
+    assert abs(b.omega * R_W) < 0.01
+    # hold: the axis idles, the brake holds the drum under the line's pull
+    assert b.command(request(mavlink2.WINCH_HOLD)).result == ACK
+    b.run(0.05)
+    assert not b.axis.enabled
+    held = b.length
+    b.run(1.0)
+    assert b.length == pytest.approx(held, abs=1e-4)
+    assert b.statuses[-1][1].flags & mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED
+    # retract: to the taut floor, never below it
+    assert b.command(request(mavlink2.WINCH_RETRACT, NAN, 0.5)).result == ACK
+    b.run(0.05)
+    assert b.axis.enabled
+    b.run(6.0)
+    floor = math.dist(UAV[0], (0, 0, 0)) + MIN_SLACK
+    assert b.length == pytest.approx(floor, abs=0.01)
+    assert b.statuses[-1][1].flags & mavlink2.MAV_WINCH_STATUS_FULLY_RETRACTED
+    # WINCH_STATUS at 20 Hz of simulated time
+    times = [t for t, _ in b.statuses if t > 1.0]
+    assert (len(times) - 1) / (times[-1] - times[0]) == pytest.approx(20.0, rel=0.02)
+
+
+def test_closed_loop_encoder_loss_brakes_and_recovers():
+    b = Bench(14.0)
+    b.run(1.0)
+    assert b.command(request(2, NAN, 0.2)).result == ACK
+    b.run(1.0)
+    b.encoder_on = False
+    t_off = b.last_encoder_t
+    b.run(0.5)
+    idles = [t for t, name, v in b.host_frames
+             if t > t_off and name == "Set_Axis_State" and v == cp.AxisState.IDLE]
+    assert idles and t_off + 0.1 - 1e-9 < idles[0] <= t_off + 0.102
+    assert not b.axis.enabled
+    assert "winch: encoder lost, drum braked" in b.notices
+    lost = [s for t, s in b.statuses if t > idles[0]]
+    assert len(lost) >= 4
+    assert all(not s.flags & mavlink2.MAV_WINCH_STATUS_HEALTHY for s in lost)
+    assert all(s.flags & mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED for s in lost)
+    held = b.length
+    b.encoder_on = True
+    t_on = b.t
+    b.run(1.0)
+    assert b.notices[-1] == "winch: encoder back"
+    rearm = [name for t, name, _ in b.host_frames if t > t_on][:3]
+    assert rearm == ["Clear_Errors", "Set_Controller_Mode", "Set_Axis_State"]
+    assert b.axis.enabled and b.axis.active_errors == 0
+    assert b.omega * R_W == pytest.approx(0.2, abs=0.02)        # the rate mode resumed
+    assert b.length > held + 0.1
