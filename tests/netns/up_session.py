@@ -49,7 +49,8 @@ def main() -> int:
     out: dict = {}
     # 1. a normal end: the plant's --duration
     d1 = base / "normal"
-    p = up(d1, "--speedup", "max", "--duration", "3", "--goto", "5", "1", "11")
+    p = up(d1, "--speedup", "max", "--duration", "3", "--position", "4", "0", "10", "--goto",
+           "5", "1", "11")
     so, se = p.communicate(timeout=120)
     run = next(d1.iterdir())
     decoded = subprocess.run([sys.executable, "-m", "cantools", "decode",

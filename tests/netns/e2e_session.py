@@ -1,0 +1,77 @@
+"""End to end, inside a private network namespace: ``tuav-sitl up --speedup max`` as a
+subprocess, the pymavlink example mission flown against it, then Ctrl-C; prints one JSON
+line with what the test checks (the run folder, the example's record, stop time, leftover
+processes, the CAN capture decoded by cantools, the tlog parsed by pymavlink)."""
+
+import json
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from pymavlink import mavutil
+
+from tests.netns.up_session import processes_mentioning, wait_banner
+
+ROOT = Path(__file__).resolve().parents[2]
+DBC = ROOT / "tuavdefs" / "data" / "tuav_winder.dbc"
+
+
+def main() -> int:
+    base = Path(sys.argv[1])
+    out: dict = {}
+    logdir = base / "e2e"
+    up = subprocess.Popen([sys.executable, "-m", "tuav_sitl", "up", "--speedup", "max",
+                           "--can", "udp_multicast", "--logdir", str(logdir), "--instance", "2"],
+                          cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    banner = wait_banner(up)
+    out["banner"] = banner
+    port = int(re.search(r"tcp:127\.0\.0\.1:(\d+)\n", banner.split("MAVLink", 1)[1]).group(1))
+    rec = base / "record.json"
+    t0 = time.monotonic()
+    fly = subprocess.run([sys.executable, "examples/fly_mission.py", "--connect",
+                          f"tcp:127.0.0.1:{port}", "--record", str(rec), "--timeout", "400"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=500)
+    out["fly"] = {"rc": fly.returncode, "stdout": fly.stdout, "stderr": fly.stderr[-3000:],
+                  "wall_s": time.monotonic() - t0}
+    out["record"] = json.loads(rec.read_text()) if rec.exists() else None
+    time.sleep(1.0)
+    t0 = time.monotonic()
+    up.send_signal(signal.SIGINT)
+    so, se = up.communicate(timeout=30)
+    out["stop_s"] = time.monotonic() - t0
+    out["up_rc"], out["up_stdout"], out["up_stderr"] = up.returncode, so, se
+    out["left"] = processes_mentioning(str(logdir))
+    run = next(logdir.iterdir())
+    out["run_dir"] = str(run)
+    out["files"] = sorted(f.name for f in run.iterdir())
+    decoded = subprocess.run([sys.executable, "-m", "cantools", "decode", "--single-line",
+                              str(DBC)],
+                             input=(run / "can.log").read_text(), capture_output=True,
+                             text=True, timeout=120)
+    lines = decoded.stdout.splitlines()
+    out["can"] = {"rc": decoded.returncode, "lines": len(lines),
+                  "torque": sum("Set_Input_Torque" in ln for ln in lines),
+                  "encoder": sum("Get_Encoder_Estimates" in ln for ln in lines),
+                  "undecoded": sum(" :: " not in ln or "Unknown frame" in ln
+                                   for ln in lines),
+                  "torques_nm": [float(ln.split("Input_Torque: ")[1].split()[0])
+                                 for ln in lines if "Set_Input_Torque(" in ln][::50],
+                  "log_lines": len((run / "can.log").read_text().splitlines()),
+                  "sample": [ln for ln in lines if "Set_Input_Torque" in ln][:3]}
+    tlog = mavutil.mavlink_connection(str(run / "flight.tlog"))
+    kinds: dict = {}
+    while True:
+        msg = tlog.recv_match()
+        if msg is None:
+            break
+        kinds[msg.get_type()] = kinds.get(msg.get_type(), 0) + 1
+    out["tlog_kinds"] = kinds
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,127 @@
+"""End to end: ``tuav-sitl up --speedup max`` with the three processes on a real CAN bus (in
+a private network namespace), the example pymavlink script flying take-off, a loiter-turns
+circle, three waypoints and a landing; then the run's files are checked against independent
+truths: the plant's truth series against the ground station's L-bar and the tether's
+straight-line distance, the winch's WINCH_STATUS against L-bar, the CAN capture decoded by
+cantools, the tlog parsed by pymavlink, and Ctrl-C leaving no process behind."""
+
+import csv
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from netns_util import netns_available, run_in_netns
+
+from groundstation.lbar import LBarEstimator, LBarParams
+from tuavdefs.params import SystemParams
+
+ROOT = Path(__file__).resolve().parents[1]
+EARTH_R_M = 6378137.0
+
+pytestmark = pytest.mark.skipif(not netns_available(),
+                                reason="needs root (unshare) for a private network namespace")
+
+
+@pytest.fixture(scope="module")
+def e2e(tmp_path_factory) -> dict:
+    base = tmp_path_factory.mktemp("e2e")
+    res = run_in_netns([sys.executable, "-m", "tests.netns.e2e_session", str(base)],
+                       timeout_s=600, cwd=str(ROOT))
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    run = Path(out["run_dir"])
+    with open(run / "truth.csv") as f:
+        rows = [r for r in csv.DictReader(f) if r.get("rotor4") not in (None, "")]
+    cols = ("t_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "tether_length_m",
+            "armed")
+    out["truth"] = np.array([[float(r[k]) for k in cols] for r in rows])
+    return out
+
+
+def _lbar(points: np.ndarray) -> np.ndarray:
+    p = SystemParams()
+    est = LBarEstimator(LBarParams(), p.tether.weight_per_length_n_m(
+        p.environment.gravity_m_s2))
+    return np.array([est.length(tuple(q))[0] for q in points])
+
+
+def test_the_example_mission_flies_every_item(e2e):
+    fly = e2e["fly"]
+    assert fly["rc"] == 0, fly["stdout"] + fly["stderr"]
+    rec = e2e["record"]
+    assert [seq for seq, _ in rec["reached"]] == [1, 2, 3, 4, 5, 6]
+    lat0, lon0 = rec["origin"]
+
+    def xy(lat_e7: int, lon_e7: int) -> tuple[float, float]:
+        y = math.radians(lat_e7 * 1e-7 - lat0) * EARTH_R_M
+        x = math.radians(lon_e7 * 1e-7 - lon0) * EARTH_R_M * math.cos(math.radians(lat0))
+        return x, y
+
+    # items 3, 4, 5 are the three waypoints: the UAV was within the acceptance radius
+    for (seq, where), goal in zip(rec["reached"][2:5], rec["waypoints"], strict=True):
+        x, y = xy(where[0], where[1])
+        assert math.dist((x, y, where[2]), goal) <= 0.5 + 0.05, seq
+    # landed (item 6) within 0.3 m of the last waypoint's ground point
+    lat, lon, alt = rec["reached"][5][1]
+    assert math.dist(xy(lat, lon), rec["waypoints"][-1][:2]) < 0.3 and alt < 0.3
+
+
+def test_the_paid_out_length_follows_lbar_and_the_tether_is_never_taut(e2e):
+    tr = e2e["truth"]
+    pos, length, armed = tr[:, 1:4], tr[:, 7], tr[:, 8]
+    dist = np.linalg.norm(pos, axis=1)
+    assert np.all(dist < length)                       # never taut, whole run
+    assert np.min(length - dist) > 0.02
+    flying = (armed == 1) & (pos[:, 2] > 0.5)
+    assert flying.sum() > 1000
+    err = length[flying] - _lbar(pos[flying])
+    assert np.sqrt(np.mean(err**2)) < 0.02                # as the offline runner
+    assert np.max(np.abs(err)) < 0.10
+    assert pos[:, 2].max() > 11.5                       # it really flew the mission
+
+
+def test_winch_status_reached_the_ground_station_client_and_followed_lbar(e2e):
+    rec = e2e["record"]
+    winch = np.array(rec["winch"])
+    assert len(winch) > 200
+    lat0, lon0 = rec["origin"]
+    pos = np.array(rec["positions"])   # t, lat e7, lon e7, rel alt
+    # each WINCH_STATUS against L-bar at the position the client saw just before it
+    # (both streams are in arrival order in the record; pair by index in the tlog order)
+    assert np.all(np.isfinite(winch[:, 1]))
+    y = np.radians(pos[:, 1] * 1e-7 - lat0) * EARTH_R_M
+    x = np.radians(pos[:, 2] * 1e-7 - lon0) * EARTH_R_M * math.cos(math.radians(lat0))
+    lbar = _lbar(np.column_stack([x, y, pos[:, 3]]))
+    lo, hi = lbar.min(), lbar.max()
+    # the reported lengths span what L-bar spanned and stay within it, give or take
+    # the motion between the two streams
+    assert winch[:, 1].min() > lo - 0.3 and winch[:, 1].max() < hi + 0.3
+    assert winch[:, 1].max() - winch[:, 1].min() > 0.8 * (hi - lo)
+
+
+def test_the_can_capture_decodes_with_the_dbc(e2e):
+    can = e2e["can"]
+    assert can["rc"] == 0
+    assert can["torque"] > 1000 and can["encoder"] > 1000
+    assert can["lines"] == can["log_lines"]            # every frame on the bus decoded
+    assert can["undecoded"] == 0
+    torques = np.array(can["torques_nm"])
+    limit = SystemParams().winder.motor_torque_limit_n_m
+    assert np.all(np.abs(torques) <= limit) and np.ptp(torques) > 0.01
+
+
+def test_ctrl_c_stops_everything_and_the_tlog_parses(e2e):
+    assert e2e["up_rc"] == 0, e2e["up_stderr"]
+    assert e2e["stop_s"] < 3.0
+    assert e2e["left"] == []
+    assert {"flight.tlog", "can.log", "truth.csv", "params.toml", "plant.log",
+            "companion.log", "groundstation.log"} <= set(e2e["files"])
+    kinds = e2e["tlog_kinds"]
+    assert kinds.get("BAD_DATA", 0) == 0
+    for k in ("HEARTBEAT", "WINCH_STATUS", "MISSION_ITEM_REACHED", "COMMAND_ACK",
+              "GLOBAL_POSITION_INT", "MISSION_ITEM_INT"):
+        assert kinds.get(k, 0) > 0, k
+    assert "tcp:127.0.0.1:5780" in e2e["banner"]          # instance 2 moved every port
