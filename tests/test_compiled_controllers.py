@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from companion.flight_controller import FlightController, VehicleState
 from companion.gains import FlightControlParams
@@ -154,3 +155,74 @@ def test_a_replaced_parameter_takes_effect():
             (0.0, 0.0, 0.0), 0.3)
     for _ in range(3):
         assert a.update(*args) == b.update(*args)
+
+
+def _fly(fcs, steps, t0=0.0):
+    """Step the controllers ``fcs`` alike on the same states; returns their last outputs."""
+    rng = np.random.default_rng(7)
+    out = None
+    for k in range(steps):
+        t = t0 + 0.004 * k
+        pos = tuple(rng.uniform(-0.5, 0.5, 3) + (6.0, 2.0, 12.0))
+        state = VehicleState(pos, tuple(rng.uniform(-0.5, 0.5, 3)),
+                             euler_to_quat(*rng.uniform(-0.2, 0.2, 3)),
+                             tuple(rng.uniform(-0.3, 0.3, 3)))
+        ref = RefSample((6.0, 2.0, 12.0), (0.3, 0.0, 0.0), (0.0, 0.1, 0.0), (0.0, 0.0, 0.0),
+                        0.2, 0.0)
+        if k == 0 and t0 == 0.0:
+            for fc in fcs:
+                fc.reset(state, (440.0,) * 4)
+                fc.winch_report(0.0, 14.0, 0.1, 2.0)
+        out = [fc.update(t, state, ref) for fc in fcs]
+    return out
+
+
+def _states(fc: FlightController) -> list:
+    """Every internal state of a flight controller, as plain lists."""
+    a = fc.attitude
+    return [fc.position._state.tolist(), a.filter.state.tolist(), a.filter.initialised,
+            a.xi_eta.tolist(), a.xi_w.tolist(), fc.actuators.speeds.tolist(),
+            fc.actuators._setpoints.tolist()]
+
+
+def test_set_gains_keeps_the_states_and_takes_effect():
+    """PARAM_SET on a running controller: the same gains leave the next outputs
+    bit-identical; a new K1 changes them, exactly as a controller built with the new gains
+    in the same states would fly."""
+    p = SystemParams()
+    g = FlightControlParams()
+    a, b = (FlightController(g, p.vehicle, p.tether, 9.81) for _ in "ab")
+    _fly([a, b], 60)
+    a.set_gains(g.replace())                 # equal gains, another object
+    assert _states(a) == _states(b)
+    same = _fly([a, b], 20, t0=0.24)
+    assert same[0] == same[1]
+    assert _states(a) == _states(b)
+    g2 = g.replace(pos_k1_1_s=(1.1, 1.3, 1.7))
+    c = FlightController(g2, p.vehicle, p.tether, 9.81)
+    c.position._state[:] = a.position._state
+    c.attitude.filter.state[:] = a.attitude.filter.state
+    c.attitude.filter.initialised = a.attitude.filter.initialised
+    c.attitude.xi_eta[:], c.attitude.xi_w[:] = a.attitude.xi_eta, a.attitude.xi_w
+    c.actuators.speeds[:], c.actuators._setpoints[:] = a.actuators.speeds, a.actuators._setpoints
+    c.winch_report(0.0, 14.0, 0.1, 2.0)
+    before = _states(a)
+    a.set_gains(g2)
+    assert _states(a) == before              # set_gains itself changes no state
+    after = _fly([a, b, c], 20, t0=0.32)
+    assert after[0] != after[1]               # the new K1 acts at once ...
+    assert after[0] == after[2]               # ... as it would from these states
+    with pytest.raises(ValueError, match="rate_hz"):
+        a.set_gains(g2.replace(rate_hz=500.0))
+
+
+def test_set_gains_changes_the_attitude_filter_keeping_its_state():
+    p = SystemParams()
+    g = FlightControlParams()
+    a, b = (FlightController(g, p.vehicle, p.tether, 9.81) for _ in "ab")
+    _fly([a, b], 30)
+    state = a.attitude.filter.state.copy()
+    a.set_gains(g.replace(command_filter_hz=4.0, att_k3_1_s=(6.0, 6.0, 2.5)))
+    assert np.array_equal(a.attitude.filter.state, state)
+    out = _fly([a, b], 5, t0=0.12)
+    assert out[0].attitude != out[1].attitude

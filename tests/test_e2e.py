@@ -125,3 +125,14 @@ def test_ctrl_c_stops_everything_and_the_tlog_parses(e2e):
               "GLOBAL_POSITION_INT", "MISSION_ITEM_INT"):
         assert kinds.get(k, 0) > 0, k
     assert "tcp:127.0.0.1:5780" in e2e["banner"]          # instance 2 moved every port
+
+
+def test_winch_commands_and_heartbeats_pass_through_the_companion(e2e):
+    w = e2e["winch_cmd"]
+    accepted = 0
+    assert w["hold_169"] == [169, accepted, 255, 190]      # answered by the winch itself
+    assert w["relax_1"] == [1, accepted, 255, 190]         # sent to the autopilot: from it
+    assert w["bad_1"][0] == 1 and w["bad_1"][1] == 3       # DELIVER: UNSUPPORTED
+    assert w["heartbeats"]["169"] == [42, 8]               # MAV_TYPE_WINCH, autopilot INVALID
+    assert w["heartbeats"]["1"] == [2, 3]
+    assert w["flightmode"] == "AUTO"   # the vehicle's mode; the winch is not taken for one

@@ -133,15 +133,76 @@ def test_guided_arm_and_take_off_to_10_m(flight):
     assert wait_msg(m, "STATUSTEXT", lambda s: "Takeoff complete" in s.text, 30)
 
 
+def test_streams_follow_set_message_interval_and_request_data_stream(flight):
+    m = flight["m"]
+    ack = command(m, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE, 20_000)
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+    stamps = []
+    end = time.monotonic() + 20
+    while len(stamps) < 30 and time.monotonic() < end:
+        a = m.recv_match(type="ATTITUDE", blocking=True, timeout=1)
+        if a is not None:
+            stamps.append(a.time_boot_ms)
+    steps = sorted(set(b - a for a, b in zip(stamps[5:], stamps[6:], strict=False)))
+    assert steps and max(steps) <= 24 and min(steps) >= 16   # 50 Hz of simulated time
+    command(m, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE, 0)  # default
+    # POSITION group off on this link: no GLOBAL_POSITION_INT, heartbeats go on
+    m.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_POSITION, 0, 0)
+    wait_msg(m, "HEARTBEAT")
+    wait_msg(m, "HEARTBEAT")
+    seen: list = []
+    wait_msg(m, "HEARTBEAT", seen=seen)
+    wait_msg(m, "HEARTBEAT", seen=seen)
+    assert not any(x.get_type() == "GLOBAL_POSITION_INT" for x in seen)
+    m.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_POSITION, 10, 1)
+    assert wait_msg(m, "GLOBAL_POSITION_INT", timeout=10) is not None
+    # an unknown message id is refused
+    assert command(m, M.MAV_CMD_REQUEST_MESSAGE, 9999).result == M.MAV_RESULT_UNSUPPORTED
+
+
+def test_mavftp_is_refused_at_once_so_clients_fall_back(flight):
+    m = flight["m"]
+    path = b"@PARAM/param.pck"
+    payload = struct.pack("<HBBBBBBI", 7, 0, 4, len(path), 0, 0, 0, 0) + path
+    m.mav.file_transfer_protocol_send(0, 1, 1, list(payload.ljust(251, b"\0")))
+    nak = wait_msg(m, "FILE_TRANSFER_PROTOCOL", timeout=5)
+    data = bytes(nak.payload)
+    seq, session, opcode, size, req_opcode = struct.unpack("<HBBBB", data[:6])
+    assert (opcode, req_opcode, size, data[12]) == (129, 4, 1, 10)   # NAK FileNotFound
+    assert seq == 8
+
+
+def test_winch_commands_without_a_winch_fail_cleanly(flight):
+    m = flight["m"]
+    seen: list = []
+    ack = command(m, M.MAV_CMD_DO_WINCH, 1, M.WINCH_RELAXED, seen=seen)
+    assert ack.result == M.MAV_RESULT_FAILED
+    assert wait_msg(m, "STATUSTEXT", lambda s: "Winch" in s.text, 5, seen) is not None
+
+
 def test_guided_target_and_reposition(flight):
     m = flight["m"]
-    # SET_POSITION_TARGET_LOCAL_NED: 6 m east, 4 m north, 12 m up (NED: x north, y east)
+    # a waypoint-speed change takes effect on the next move
+    m.mav.param_set_send(1, 1, b"WP_SPEED", 3.0, M.MAV_PARAM_TYPE_REAL32)
+    assert wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "WP_SPEED").param_value == 3.0
+    # SET_POSITION_TARGET_LOCAL_NED: 14 m east, 10 m north, 12 m up (NED: x north, y east)
     mask = 0b0000111111111000
     m.mav.set_position_target_local_ned_send(0, 1, 1, M.MAV_FRAME_LOCAL_NED, mask,
-                                             4.0, 6.0, -12.0, 0, 0, 0, 0, 0, 0, 0, 0)
-    got = wait_msg(m, "GLOBAL_POSITION_INT",
-                   lambda g: math.dist(local(g), (6.0, 4.0, 12.0)) < 0.2, 60)
-    assert got is not None
+                                             10.0, 14.0, -12.0, 0, 0, 0, 0, 0, 0, 0, 0)
+    speeds: list[float] = []
+
+    def arrived(g) -> bool:
+        speeds.append(math.hypot(g.vx, g.vy) * 0.01)
+        return math.dist(local(g), (14.0, 10.0, 12.0)) < 0.2
+
+    assert wait_msg(m, "GLOBAL_POSITION_INT", arrived, 60) is not None
+    assert 2.7 < max(speeds) < 3.3                           # cruised at WP_SPEED
+    # SET_POSITION_TARGET_GLOBAL_INT, relative altitude
+    lat, lon = ll(2.0, 6.0)
+    m.mav.set_position_target_global_int_send(0, 1, 1, REL, mask, round(lat * 1e7),
+                                              round(lon * 1e7), 10.0, 0, 0, 0, 0, 0, 0, 0, 0)
+    assert wait_msg(m, "GLOBAL_POSITION_INT",
+                    lambda g: math.dist(local(g), (2.0, 6.0, 10.0)) < 0.2, 60)
     # DO_REPOSITION (COMMAND_INT, relative altitude)
     lat, lon = ll(0.0, 8.0)
     m.mav.command_int_send(1, 1, REL, M.MAV_CMD_DO_REPOSITION, 0, 0, -1, 0, 0, math.nan,

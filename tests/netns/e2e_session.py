@@ -19,6 +19,35 @@ ROOT = Path(__file__).resolve().parents[2]
 DBC = ROOT / "tuavdefs" / "data" / "tuav_winder.dbc"
 
 
+def winch_commands(port: int) -> dict:
+    """MAV_CMD_DO_WINCH through the companion's endpoint, to the winch (169) and to the
+    autopilot (1): who answered, with what, to whom; and what pymavlink took for the
+    vehicle while the winch's heartbeats were also arriving."""
+    m = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=255,
+                                   source_component=190)
+    m.wait_heartbeat(timeout=10)
+    res: dict = {}
+    for name, comp, action in (("hold_169", 169, 5), ("relax_1", 1, 0), ("bad_1", 1, 4)):
+        m.mav.command_long_send(1, comp, mavutil.mavlink.MAV_CMD_DO_WINCH, 0, 1, action, 0,
+                                0, 0, 0, 0)
+        ack = m.recv_match(type="COMMAND_ACK", blocking=True, timeout=5,
+                           condition="COMMAND_ACK.command==42600")
+        res[name] = None if ack is None else [ack.get_srcComponent(), ack.result,
+                                              ack.target_system, ack.target_component]
+        time.sleep(0.3)
+    hb = {}
+    end = time.monotonic() + 5
+    while time.monotonic() < end and len(hb) < 2:
+        h = m.recv_match(type="HEARTBEAT", blocking=True, timeout=1)
+        if h is not None:
+            hb[h.get_srcComponent()] = [h.type, h.autopilot]
+    res["heartbeats"] = {str(k): v for k, v in hb.items()}
+    res["flightmode"] = m.flightmode
+    res["vehicle_sysid"] = m.sysid
+    m.close()
+    return res
+
+
 def main() -> int:
     base = Path(sys.argv[1])
     out: dict = {}
@@ -37,6 +66,7 @@ def main() -> int:
     out["fly"] = {"rc": fly.returncode, "stdout": fly.stdout, "stderr": fly.stderr[-3000:],
                   "wall_s": time.monotonic() - t0}
     out["record"] = json.loads(rec.read_text()) if rec.exists() else None
+    out["winch_cmd"] = winch_commands(port)
     time.sleep(1.0)
     t0 = time.monotonic()
     up.send_signal(signal.SIGINT)
