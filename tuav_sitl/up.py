@@ -227,8 +227,10 @@ def _system_params(args: argparse.Namespace) -> SystemParams:
             try:
                 params = dataclasses.replace(params, **{name: load_toml(cls, Path(path))})
             except ParameterError as exc:
-                raise ParameterError(f"{name}.{exc.field}", str(exc).split(": ", 1)[-1]) \
-                    from None
+                stem = Path(path).stem
+                field = (name + exc.field[len(stem):] if exc.field.startswith(stem + ".")
+                         else f"{name}: {exc.field}")
+                raise ParameterError(field, str(exc).split(": ", 1)[-1]) from None
     if args.wind is not None:
         speed, from_deg, turb = args.wind
         to = math.radians(from_deg + 180.0)   # the air moves towards the opposite bearing

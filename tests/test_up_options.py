@@ -1,0 +1,64 @@
+"""``tuav-sitl up``'s options turn into the run's parameters and ports as documented."""
+
+import argparse
+import math
+
+import pytest
+
+from tuav_sitl.up import _home, _speedup, _system_params, _wind, add_arguments, ports_for
+from tuavdefs.params import SystemParams
+from tuavdefs.paramspec import ParameterError
+
+
+def parse(*argv: str) -> argparse.Namespace:
+    ap = argparse.ArgumentParser()
+    add_arguments(ap)
+    return ap.parse_args(list(argv))
+
+
+def test_defaults_are_real_time_on_the_ground_with_the_paper_vehicle():
+    args = parse()
+    assert args.speedup == 1.0 and args.position == (2.0, 0.0, 0.0)
+    assert _system_params(args) == SystemParams()
+
+
+def test_speedup_and_home_parse():
+    assert _speedup("max") == math.inf and _speedup("7.5") == 7.5
+    for bad in ("0", "-2", "fast"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            _speedup(bad)
+    assert _home("47.1,8.5,500") == (47.1, 8.5, 500.0)
+    with pytest.raises(argparse.ArgumentTypeError):
+        _home("95,8,1")
+
+
+def test_wind_from_the_west_blows_east():
+    args = parse("--wind", "5,270,light")
+    wind = _system_params(args).wind
+    assert wind.steady_m_s == pytest.approx((5.0, 0.0, 0.0), abs=1e-12)
+    assert wind.turbulence == "light"
+    assert _wind("3,0")[:2] == (3.0, 0.0)          # from the north: towards -y
+    assert _system_params(parse("--wind", "3,0")).wind.steady_m_s == pytest.approx(
+        (0.0, -3.0, 0.0), abs=1e-12)
+    with pytest.raises(argparse.ArgumentTypeError):
+        _wind("3,0,hurricane")
+
+
+def test_vehicle_tether_winder_files_replace_their_groups(tmp_path):
+    veh = tmp_path / "veh.toml"
+    veh.write_text("mass_kg = 3.2\n")
+    teth = tmp_path / "teth.toml"
+    teth.write_text("total_length_m = 80.0\n")
+    p = _system_params(parse("--vehicle", str(veh), "--tether", str(teth)))
+    assert p.vehicle.mass_kg == 3.2 and p.tether.total_length_m == 80.0
+    assert p.winder == SystemParams().winder
+    bad = tmp_path / "bad.toml"
+    bad.write_text("drum_radius_m = -1.0\n")
+    with pytest.raises(ParameterError) as exc:
+        _system_params(parse("--winder", str(bad)))
+    assert exc.value.field == "winder.drum_radius_m"
+
+
+def test_every_port_moves_by_ten_per_instance():
+    assert tuple(ports_for(0)) == (4560, 5762, 5760, 14550, 14540)
+    assert tuple(ports_for(3)) == (4590, 5792, 5790, 14580, 14570)
