@@ -35,6 +35,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink_io import MavlinkEndpoints, Peer
 from companion.mission_protocol import MissionItem, MissionProtocol
+from companion.mission_protocol import from_message as mission_from_message
 from companion.navigation import FlightMode, NavCommand, NavEvent, Navigator
 from companion.param_protocol import ParamDef, ParamProtocol
 from tuavdefs import component_link as cl
@@ -507,6 +508,49 @@ class Autopilot:
         if why is not None:
             self.statustext(M.MAV_SEVERITY_WARNING, why)
         self.io.send(self._mission_current(), peer)
+
+    # ----- guided targets as mission items (current = 2: go there; 3: change altitude)
+
+    def _on_mission_item_int(self, peer: Peer, msg: Any) -> None:
+        self._guided_item(peer, msg)
+
+    def _on_mission_item(self, peer: Peer, msg: Any) -> None:
+        self._guided_item(peer, msg)
+
+    def _guided_item(self, peer: Peer, msg: Any) -> None:
+        """What MAVProxy's ``guided`` and older ground stations send, as ArduCopter takes
+        it: answered with a MISSION_ACK."""
+        if msg.current not in (2, 3):
+            return
+        result = M.MAV_MISSION_ACCEPTED
+        why: str | None = None
+        try:
+            item = mission_from_message(msg)
+        except ValueError:
+            item = None
+        if item is None or item.frame not in _GLOBAL_FRAMES:
+            result, why = M.MAV_MISSION_UNSUPPORTED_FRAME, "Guided: frame not supported"
+        else:
+            target = self._global_to_local(item.x * 1e-7, item.y * 1e-7, item.z, item.frame)
+            ref = self.nav.reference()
+            here = ref.pos_m if ref is not None else self._pos()
+            if msg.current == 3:
+                target = (here[0], here[1], target[2])
+            why = self.nav.check_target(target)
+            if why is not None:
+                result = (M.MAV_MISSION_INVALID_PARAM7 if "ground" in why
+                          else M.MAV_MISSION_INVALID_PARAM5_X if "reach" in why
+                          else M.MAV_MISSION_INVALID)
+                self.counters["rejected_targets"] += 1
+            else:
+                why = self.nav.goto(target)
+                if why is not None:
+                    result = M.MAV_MISSION_ERROR
+        self.io.send(M.MAVLink_mission_ack_message(msg.get_srcSystem(),
+                                                   msg.get_srcComponent(), result,
+                                                   M.MAV_MISSION_TYPE_MISSION), peer)
+        if why is not None:
+            self.statustext(M.MAV_SEVERITY_WARNING, f"Guided: {why}")
 
     # ----- guided position targets
 

@@ -203,6 +203,13 @@ def test_guided_target_and_reposition(flight):
                                               round(lon * 1e7), 10.0, 0, 0, 0, 0, 0, 0, 0, 0)
     assert wait_msg(m, "GLOBAL_POSITION_INT",
                     lambda g: math.dist(local(g), (2.0, 6.0, 10.0)) < 0.2, 60)
+    # a guided mission item (current = 2), as MAVProxy's "guided" command sends
+    lat, lon = ll(4.0, 4.0)
+    m.mav.mission_item_int_send(1, 1, 0, REL, M.MAV_CMD_NAV_WAYPOINT, 2, 0, 0, 0, 0, 0,
+                                round(lat * 1e7), round(lon * 1e7), 11.0)
+    assert wait_msg(m, "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+    assert wait_msg(m, "GLOBAL_POSITION_INT",
+                    lambda g: math.dist(local(g), (4.0, 4.0, 11.0)) < 0.2, 60)
     # DO_REPOSITION (COMMAND_INT, relative altitude)
     lat, lon = ll(0.0, 8.0)
     m.mav.command_int_send(1, 1, REL, M.MAV_CMD_DO_REPOSITION, 0, 0, -1, 0, 0, math.nan,
