@@ -80,3 +80,24 @@ def test_processes_reject_bad_parameters_by_name(tmp_path):
                              capture_output=True, text=True, timeout=120)
         assert res.returncode == 2, module
         assert "vehicle.mass_kg" in res.stderr, module
+
+
+def test_speedup_paces_lockstep(tmp_path):
+    port = _free_port()
+    plant = subprocess.Popen(
+        [sys.executable, "-m", "sitl", "--port", str(port), "--duration", "1.0",
+         "--speedup", "20", "--no-noise", "--position", "4", "0", "10"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        ready = plant.stdout.readline()
+        assert "(lockstep at 20x" in ready, ready
+        comp = subprocess.run(
+            [sys.executable, "-m", "companion", "--sim", f"127.0.0.1:{port}",
+             "--component-port", "0", "--gcs-tcp", "-1", "--gcs-udp", "none"],
+            cwd=ROOT, capture_output=True, text=True, timeout=120)
+        out, _ = plant.communicate(timeout=60)
+    finally:
+        if plant.poll() is None:
+            plant.kill()
+    assert comp.returncode == 0, comp.stdout + comp.stderr
+    assert "max_sim_time: 250 periods" in out and "0 missed deadlines" in out
