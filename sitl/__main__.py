@@ -160,10 +160,20 @@ def main(argv: Sequence[str] | None = None) -> int:
             node.link.close()
     can_text = (f", CAN: {node.frames_received} frames in, {node.frames_sent} out, "
                 f"{node.late_answers} late answers" if node else "")
+    pacing_text = ""
+    if summary.pacing == "real-time" and summary.steps > 1:
+        ms = 1e3
+        pacing_text = (f"; pacing: period jitter p50 {summary.jitter_p50_s * ms:.3f} ms, "
+                       f"p99 {summary.jitter_p99_s * ms:.3f} ms, "
+                       f"max {summary.jitter_max_s * ms:.3f} ms, batches late p99 "
+                       f"{summary.lateness_p99_s * ms:.3f} ms, missed deadlines "
+                       f"{100.0 * summary.missed_fraction:.3f} % of "
+                       f"{summary.periods_in_service} periods from the first answer, "
+                       f"{summary.overruns} overruns")
     print(f"plant: {summary.end_reason}: {summary.steps} periods, "
-          f"{summary.sim_time_s:.2f} s simulated in {summary.wall_time_s:.2f} s, "
+          f"{summary.sim_time_s:.2f} s simulated in {summary.wall_time_s:.3f} s, "
           f"{summary.bad_frames} bad frames, {summary.missed_deadlines} missed deadlines"
-          f"{can_text}", flush=True)
+          f"{can_text}{pacing_text}", flush=True)
     return 0 if summary.end_reason != "no_client" else 1
 
 

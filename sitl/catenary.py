@@ -78,8 +78,9 @@ class CatenaryRegime(IntEnum):
     FLAT = 5  # height = 0: lies along the ground, taut or slack
 
 
-_REGIMES = (None, CatenaryRegime.SUSPENDED, CatenaryRegime.TOUCHDOWN, CatenaryRegime.SLACK,
-            CatenaryRegime.VERTICAL, CatenaryRegime.FLAT)
+#: The regime of each of _solve's regime numbers.
+REGIMES = (None, CatenaryRegime.SUSPENDED, CatenaryRegime.TOUCHDOWN, CatenaryRegime.SLACK,
+           CatenaryRegime.VERTICAL, CatenaryRegime.FLAT)
 
 
 class CatenaryInfo(NamedTuple):
@@ -324,7 +325,7 @@ def catenary_end_forces(span_m: float, height_m: float, length_m: float, ea_n: f
             f"catenary did not converge: span_m={span_m!r}, height_m={height_m!r}, "
             f"length_m={length_m!r}, ea_n={ea_n!r}, w_n_per_m={w_n_per_m!r}, "
             f"hf0={hf0!r}, vf0={vf0!r}")
-    info = CatenaryInfo(H, V, HA, VA, lbot, _REGIMES[reg], it, low, warm)
+    info = CatenaryInfo(H, V, HA, VA, lbot, REGIMES[reg], it, low, warm)
     return HA, VA, -H, -V, info
 
 

@@ -120,6 +120,23 @@ def drum_acceleration(p: np.ndarray, theta: float, omega: float, motor_torque_n_
 
 
 @njit
+def drum_projection(p: np.ndarray, theta: float, omega: float, omega_before: float,
+                    braked: bool) -> tuple[float, float]:
+    """The drum's (angle [rad], rate [rad/s]) after an integration step, projected onto
+    its constraints: the brake's sticking when the rate crossed zero during the step
+    (``omega_before`` the rate before it), and the hard stops."""
+    if braked and omega_before != 0.0 and (omega > 0.0) != (omega_before > 0.0):
+        omega = 0.0
+    if theta < p[P_THETA_MIN]:
+        theta = p[P_THETA_MIN]
+        omega = 0.0 if omega < 0.0 else omega      # max(omega, 0.0)
+    elif theta > p[P_THETA_MAX]:
+        theta = p[P_THETA_MAX]
+        omega = 0.0 if omega > 0.0 else omega      # min(omega, 0.0)
+    return theta, omega
+
+
+@njit
 def tether_pull(p: np.ndarray, px: float, py: float, pz: float, length: float,
                 warm: np.ndarray) -> tuple[float, float, float, float]:
     """(force on the UAV x, y, z [N], drum tension [N]) of the elastic catenary; updates
@@ -140,6 +157,16 @@ def tether_pull(p: np.ndarray, px: float, py: float, pz: float, length: float,
 def rhs_kernel(x: np.ndarray, p: np.ndarray, setpoints: np.ndarray, winder_cmd_n_m: float,
                winder_enabled: bool, wind: np.ndarray, warm: np.ndarray) -> np.ndarray:
     """dx/dt of the 19-state plant (layout in sitl/plant.py)."""
+    dx = np.empty(19)
+    rhs_into(dx, x, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
+    return dx
+
+
+@njit
+def rhs_into(dx: np.ndarray, x: np.ndarray, p: np.ndarray, setpoints: np.ndarray,
+             winder_cmd_n_m: float, winder_enabled: bool, wind: np.ndarray,
+             warm: np.ndarray) -> None:
+    """:func:`rhs_kernel` written into ``dx`` (19 floats, every one set)."""
     px, py, pz = x[0], x[1], x[2]
     vx, vy, vz = x[3], x[4], x[5]
     qw, qx, qy, qz = x[6], x[7], x[8], x[9]
@@ -196,7 +223,6 @@ def rhs_kernel(x: np.ndarray, p: np.ndarray, setpoints: np.ndarray, winder_cmd_n
         else:
             fx -= limit * vx / speed
             fy -= limit * vy / speed
-    dx = np.empty(19)
     dx[0], dx[1], dx[2] = vx, vy, vz
     dx[3], dx[4], dx[5] = fx / m, fy / m, fz / m
     # rotational dynamics: J domega = tau - c omega - omega x J omega
@@ -226,7 +252,6 @@ def rhs_kernel(x: np.ndarray, p: np.ndarray, setpoints: np.ndarray, winder_cmd_n
                                                         and omega_d > 0.0):
         dtheta = 0.0
     dx[17] = dtheta
-    return dx
 
 
 @njit
@@ -234,9 +259,31 @@ def rk4_kernel(x: np.ndarray, dt: float, p: np.ndarray, setpoints: np.ndarray,
                winder_cmd_n_m: float, winder_enabled: bool, wind: np.ndarray,
                warm: np.ndarray) -> np.ndarray:
     """One classical Runge-Kutta step of size ``dt`` [s], inputs and wind held."""
+    out = np.empty(19)
+    rk4_into(out, np.empty((5, 19)), x, dt, p, setpoints, winder_cmd_n_m, winder_enabled,
+             wind, warm)
+    return out
+
+
+@njit
+def rk4_into(out: np.ndarray, scratch: np.ndarray, x: np.ndarray, dt: float, p: np.ndarray,
+             setpoints: np.ndarray, winder_cmd_n_m: float, winder_enabled: bool,
+             wind: np.ndarray, warm: np.ndarray) -> None:
+    """:func:`rk4_kernel` written into ``out`` (which may not be ``x``), with a (5, 19)
+    ``scratch`` array for the stages: no allocation. The same arithmetic, element by
+    element, as the array expressions x + h/2 k1, ..., x + dt/6 (k1 + 2 k2 + 2 k3 + k4)."""
+    k1, k2, k3, k4, xt = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
     h2 = 0.5 * dt
-    k1 = rhs_kernel(x, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
-    k2 = rhs_kernel(x + h2 * k1, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
-    k3 = rhs_kernel(x + h2 * k2, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
-    k4 = rhs_kernel(x + dt * k3, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
-    return x + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    rhs_into(k1, x, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
+    for i in range(19):
+        xt[i] = x[i] + h2 * k1[i]
+    rhs_into(k2, xt, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
+    for i in range(19):
+        xt[i] = x[i] + h2 * k2[i]
+    rhs_into(k3, xt, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
+    for i in range(19):
+        xt[i] = x[i] + dt * k3[i]
+    rhs_into(k4, xt, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
+    c = dt / 6.0
+    for i in range(19):
+        out[i] = x[i] + c * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])

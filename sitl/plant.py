@@ -37,20 +37,24 @@ from typing import NamedTuple
 
 import numpy as np
 
-from sitl._jit import JIT, njit
+from sitl._jit import njit
 from sitl.kernel import (
     GROUND_EPS_M,
+    P_GEAR,
+    P_RW,
     STICK_SPEED_M_S,
+    drum_projection,
     pack_params,
     rhs_kernel,
-    rk4_kernel,
+    rk4_into,
     tether_pull,
 )
-from sitl.tether import Tether, TetherForces
-from sitl.wind import WindModel
+from sitl.tether import Tether, TetherForces, tether_forces_kernel
+from sitl.wind import WindModel, wind_kernel
 from sitl.winder import WinderModel
 from tuavdefs.airframe import command_to_rotor_speed, rotor_speed_setpoints
 from tuavdefs.frames import euler_to_quat, quat_to_euler
+from tuavdefs.jit import entry_point
 from tuavdefs.params import SystemParams
 
 N_STATES = 19
@@ -59,18 +63,76 @@ POS, VEL, QUAT, RATES, ROTORS, DRUM_ANGLE, DRUM_RATE = (
 
 
 @njit
-def _rk4_step(x: np.ndarray, dt: float, p: np.ndarray, setpoints: np.ndarray,
-              winder_cmd_n_m: float, winder_enabled: bool, wind: np.ndarray,
-              warm: np.ndarray) -> tuple[np.ndarray, float, float, float, float]:
-    """:func:`sitl.kernel.rk4_kernel`, then the quaternion scaled to unit norm; returns the
-    new state with what the projections look at: its height, drum angle and drum rate, and
-    the drum rate before the step."""
+def _rk4_step(x: np.ndarray, scratch: np.ndarray, dt: float, p: np.ndarray,
+              setpoints: np.ndarray, winder_cmd_n_m: float, winder_enabled: bool,
+              wind: np.ndarray, warm: np.ndarray) -> float:
+    """:func:`sitl.kernel.rk4_kernel` on ``x`` in place (``scratch``: (6, 19) floats), then
+    the quaternion scaled to unit norm; returns the drum rate before the step."""
     omega_before = x[DRUM_RATE]
-    x = rk4_kernel(x, dt, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
-    n = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
+    out = scratch[5]
+    rk4_into(out, scratch, x, dt, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
+    n = math.sqrt(out[6] * out[6] + out[7] * out[7] + out[8] * out[8] + out[9] * out[9])
     for i in range(6, 10):
-        x[i] = x[i] / n
-    return x, x[2], x[DRUM_ANGLE], x[DRUM_RATE], omega_before
+        out[i] = out[i] / n
+    for i in range(N_STATES):
+        x[i] = out[i]
+    return omega_before
+
+
+#: What :func:`advance_kernel` stopped at: all steps done; a step that ended at or below
+#: the gear's height (integrated and normalised, its ground contact, drum projection and
+#: time left to the caller); the wind's noise block used up (that step not begun).
+ADVANCE_DONE, ADVANCE_GROUND, ADVANCE_NOISE = 0, 1, 2
+
+
+@njit
+def advance_kernel(x: np.ndarray, t_s: float, dt: float, n: int, p: np.ndarray,
+                   c0: float, c1: float, c2: float, c3: float, armed: bool,
+                   speed_min: float, speed_max: float, setpoints: np.ndarray,
+                   winder_cmd_n_m: float, winder_enabled: bool, wind: np.ndarray,
+                   warm: np.ndarray, wind_varies: bool, wind_p: np.ndarray,
+                   gusts: np.ndarray, wind_s: np.ndarray, noise: np.ndarray,
+                   noise_next: np.ndarray) -> tuple[int, int, float, float]:
+    """Up to ``n`` plant steps of ``dt`` [s] from time ``t_s`` [s] with the inputs held,
+    ``x`` updated in place. The rotor commands ``c0..c3`` in [0, 1] (and ``armed``) set the
+    rotors' speed set-points (:func:`tuavdefs.airframe.rotor_speed_setpoints` for the
+    speed range [``speed_min``, ``speed_max``] [rad/s], into ``setpoints``); each step
+    samples the wind (when it varies:
+    :func:`sitl.wind.wind_kernel` on the model's packed state, into ``wind``), takes
+    :func:`_rk4_step`, then projects the drum's angle and rate (brake, hard stops:
+    :meth:`sitl.winder.WinderModel.project`). Returns (steps completed, why it stopped
+    (``ADVANCE_*``), the time after them [s], the drum rate before a step that ended on
+    the ground [rad/s])."""
+    rotor_speed_setpoints(setpoints, c0, c1, c2, c3, armed, speed_min, speed_max)
+    scratch = np.empty((6, N_STATES))
+    braked = not winder_enabled
+    ground = p[P_GEAR] + GROUND_EPS_M
+    for i in range(n):
+        if wind_varies and not wind_kernel(wind_p, gusts, wind_s, noise, noise_next, t_s,
+                                           x[2], x[3], x[4], x[5], wind):
+            return i, ADVANCE_NOISE, t_s, 0.0
+        omega_before = _rk4_step(x, scratch, dt, p, setpoints, winder_cmd_n_m,
+                                 winder_enabled, wind, warm)
+        if x[2] <= ground:
+            return i, ADVANCE_GROUND, t_s, omega_before
+        x[DRUM_ANGLE], x[DRUM_RATE] = drum_projection(p, x[DRUM_ANGLE], x[DRUM_RATE],
+                                                      omega_before, braked)
+        t_s += dt
+    return n, ADVANCE_DONE, t_s, 0.0
+
+
+@njit
+def _truth_kernel(x: np.ndarray, p: np.ndarray, ea_n: float, w_n_per_m: float, hf0: float,
+                  vf0: float) -> tuple:
+    """:func:`sitl.tether.tether_forces_kernel` at the state ``x`` (the paid-out length
+    from its drum angle, as :attr:`Plant.tether_length_m`); its last field (converged)
+    is False also for a state the tether cannot take (non-finite, below the exit)."""
+    px, py, pz, length = x[0], x[1], x[2], p[P_RW] * x[DRUM_ANGLE]
+    if not (-math.inf < px < math.inf and -math.inf < py < math.inf
+            and 0.0 <= pz < math.inf and 0.0 < length < math.inf):
+        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0.0,
+                False, False)
+    return tether_forces_kernel(px, py, pz, length, ea_n, w_n_per_m, hf0, vf0)
 
 
 class PlantInputs(NamedTuple):
@@ -172,56 +234,65 @@ class Plant:
         if self.x.shape != (N_STATES,) or not np.all(np.isfinite(self.x)):
             raise ValueError(f"state must be {N_STATES} finite floats")
         self.wind_m_s: tuple[float, float, float] = tuple(self.params.wind.steady_m_s)
-        # what step hands the kernel: the wind, and the rotor set-points with the commands
-        # they were computed for
-        self._wind_held = self.wind_m_s
-        self._wind = np.array(self._wind_held, dtype=float)
+        # what the kernel is handed besides the state: the wind at the UAV, the rotors'
+        # speed set-points, the wind model's packed state
+        self._wind = np.array(self.wind_m_s, dtype=float)
         self._speed_min = self.params.vehicle.rotor_speed_min_rad_s
         self._speed_max = self.params.vehicle.rotor_speed_max_rad_s
         self._setpoints = np.zeros(4)
-        self._held_commands: tuple[float, ...] | None = None
-        self._held_armed: object = None
-        if JIT:  # load (or compile) step's machine code now, not in the first step
-            m = self.model
-            _rk4_step(self.x.copy(), float(dt_s), m.p, self._setpoints.copy(), 0.0, False,
-                      self._wind.copy(), m.warm.copy())
-            rotor_speed_setpoints(self._setpoints.copy(), 0.0, 0.0, 0.0, 0.0, False,
-                                  self._speed_min, self._speed_max)
+        # load (or compile) the kernels' machine code now, not in the first step, and call
+        # it without numba's dispatch (the arguments' types never change)
+        m = self.model
+        self._advance = entry_point(advance_kernel, self.x, 0.0, float(dt_s), 1, m.p, 0.0,
+                                    0.0, 0.0, 0.0, False, self._speed_min, self._speed_max,
+                                    self._setpoints, 0.0, False, self._wind, m.warm, False,
+                                    *self.wind.kernel_args)
+        tether = m.tether
+        self._truth = entry_point(_truth_kernel, self.x, m.p, tether.ea_n, tether.w_n_per_m,
+                                  0.0, 0.0)
 
     def step(self, u: PlantInputs) -> None:
         """Advance the plant by one step of ``dt_s`` with inputs ``u``."""
-        x = self.x
-        if self.wind.constant:  # sample would return the steady wind and change nothing
-            wind = self.wind.steady_m_s
-        else:
-            _, _, z, vx, vy, vz = x[:6].tolist()
-            wind = self.wind.sample(self.t_s, z, (vx, vy, vz))
-        if wind != self._wind_held:
-            self._wind[0], self._wind[1], self._wind[2] = self._wind_held = wind
-        self.wind_m_s = wind
-        cmds, armed = u.rotor_commands, u.armed
-        if cmds is not self._held_commands or armed is not self._held_armed:
-            # the set-points (PlantModel.rotor_setpoints) change only with the commands
-            c0, c1, c2, c3 = cmds
-            rotor_speed_setpoints(self._setpoints, c0, c1, c2, c3, bool(armed),
-                                  self._speed_min, self._speed_max)
-            # a mutable sequence could change in place: only tuples are remembered
-            self._held_commands = cmds if type(cmds) is tuple else None
-            self._held_armed = armed
-        m = self.model
-        x, z, theta, omega, omega_before = _rk4_step(
-            x, self.dt_s, m.p, self._setpoints, float(u.winder_torque_n_m),
-            bool(u.winder_enabled), self._wind, m.warm)
-        # the constraints (the quaternion's norm is restored already): ground contact, then
-        # the drum's brake and hard stops
-        if z <= m.gear + GROUND_EPS_M:
-            self._ground(x)
-        theta_p, omega_p = m.winder.project(theta, omega, omega_before,
-                                            not u.winder_enabled)
-        if theta_p is not theta or omega_p is not omega:
-            x[DRUM_ANGLE], x[DRUM_RATE] = theta_p, omega_p
+        self.advance(u, 1)
+
+    def advance(self, u: PlantInputs, n: int) -> None:
+        """Advance the plant by ``n`` steps of ``dt_s`` with inputs ``u`` held: the same as
+        ``n`` calls of :meth:`step`, to the bit, in one compiled call (the wind sampled at
+        every step; the interpreter is back only for a new block of the wind's random
+        draws and for ground contact)."""
+        if n <= 0:
+            return
+        c0, c1, c2, c3, armed, command, enabled = *u.rotor_commands, *u[1:]
+        m, dt, wind = self.model, self.dt_s, self.wind
+        varies = not wind.constant
+        x = np.array(self.x, dtype=float)   # a new array each call, as the kernel wants it
+        t = self.t_s
+        while True:
+            # (the entry point converts the numbers to the kernel's float and bool)
+            done, why, t, omega_before = self._advance(
+                x, t, dt, n, m.p, c0, c1, c2, c3, armed, self._speed_min, self._speed_max,
+                self._setpoints, command, enabled, self._wind, m.warm, varies,
+                *wind.kernel_args)
+            if why == ADVANCE_DONE:
+                break
+            n -= done
+            if why == ADVANCE_NOISE:
+                wind.refill()
+            else:
+                # the step ended at or below the gear: ground contact, then the drum
+                self._ground(x)
+                x[DRUM_ANGLE], x[DRUM_RATE] = m.winder.project(
+                    float(x[DRUM_ANGLE]), float(x[DRUM_RATE]), omega_before, not enabled)
+                t += dt
+                n -= 1
+                if not n:
+                    break
         self.x = x
-        self.t_s += self.dt_s
+        self.t_s = t
+        if varies:
+            self.wind_m_s = tuple(self._wind.tolist())  # type: ignore[assignment]
+        else:  # what sample returns for a constant wind
+            self.wind_m_s = wind.steady_m_s
 
     def _ground(self, x: np.ndarray) -> None:
         """Ground contact after a step that ended at or below the gear's height."""
@@ -291,10 +362,15 @@ class Plant:
         return float(self.x[DRUM_RATE])
 
     def tether_forces(self) -> TetherForces:
-        """The tether's forces at the current state."""
-        x = self.x
-        return self.model.tether.forces(float(x[0]), float(x[1]), float(x[2]),
-                                        self.tether_length_m)
+        """The tether's forces at the current state (:meth:`sitl.tether.Tether.forces`,
+        warm-started from its last solution)."""
+        tether = self.model.tether
+        r = self._truth(self.x, self.model.p, tether.ea_n, tether.w_n_per_m, tether._hf0,
+                        tether._vf0)
+        if not r[-1]:   # an invalid state or no convergence: forces() raises, saying which
+            x = self.x
+            return tether.forces(float(x[0]), float(x[1]), float(x[2]), self.tether_length_m)
+        return tether.accept(r)
 
     def energy_j(self) -> float:
         """Kinetic plus gravitational energy of the UAV (reference: ground) [J]."""

@@ -20,7 +20,11 @@ counts an overrun.
 
 The winder's inputs are not carried by this link (the winder is driven over CAN by another
 process): the caller sets :attr:`SimLinkServer.winder_inputs` between steps, for instance
-from ``on_step``, which is called after every control period.
+from ``on_step``, which is called once for every state a control period reaches, before
+the next period's physics steps: in lockstep just after the batch describing that state
+has gone out (so that the caller's work, such as the winder's CAN traffic, overlaps the
+companion's), in real time once the answer is in (so that what the caller received while
+waiting, such as a torque command, applies as early as possible).
 
 Malformed, truncated and corrupted frames are counted and dropped; a disconnect of the
 companion, ``stop_event`` or ``max_sim_time_s`` ends :meth:`SimLinkServer.serve` with a
@@ -35,11 +39,12 @@ import select
 import socket
 import threading
 import time
-from collections.abc import Callable
+from array import array
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from sitl.plant import POS, RATES, VEL, Plant, PlantInputs
+from sitl.plant import POS, QUAT, RATES, VEL, Plant, PlantInputs
 from sitl.sensors import (
     ISA_RHO0_KG_M3,
     SensorNoise,
@@ -52,6 +57,16 @@ from tuavdefs import simlink as sl
 
 #: How often a waiting loop looks at ``stop_event`` [s].
 _POLL_S = 0.05
+#: Longest a real-time wait spins before a batch's due time [s].
+_SPIN_MAX_S = 0.001
+
+
+def _quantile(sorted_values: Sequence[float], q: float) -> float:
+    """The ``q`` quantile (nearest rank) of ascending values; NaN for none."""
+    if not sorted_values:
+        return math.nan
+    k = min(len(sorted_values) - 1, max(0, math.ceil(q * len(sorted_values)) - 1))
+    return float(sorted_values[k])
 
 
 class WinderInputs(NamedTuple):
@@ -77,7 +92,12 @@ class ServeSummary:
     dropped malformed input; ``late_answers``: answers to an earlier period (real time);
     ``ignored_messages``: other messages and answers that were not expected (lockstep);
     ``pacing``: "lockstep" or "real-time"; ``end_reason``: "disconnected", "stopped",
-    "max_sim_time" or "no_client".
+    "max_sim_time" or "no_client". In real time, the pacing's statistics [s]: the period
+    jitter |interval between two batches - T| (``jitter_p50_s``, ``jitter_p99_s``,
+    ``jitter_max_s``) and how late a batch went out after its due time
+    (``lateness_p99_s``, ``lateness_max_s``), and the deadlines missed
+    (``missed_in_service``) of the ``periods_in_service``: all counted from the companion's
+    first answer on (before it the companion is still starting); NaN/0 in lockstep.
     """
 
     steps: int
@@ -91,6 +111,20 @@ class ServeSummary:
     ignored_messages: int
     pacing: str
     end_reason: str
+    jitter_p50_s: float = math.nan
+    jitter_p99_s: float = math.nan
+    jitter_max_s: float = math.nan
+    lateness_p99_s: float = math.nan
+    lateness_max_s: float = math.nan
+    periods_in_service: int = 0
+    missed_in_service: int = 0
+
+    @property
+    def missed_fraction(self) -> float:
+        """Missed deadlines per control period once the companion had answered (real
+        time)."""
+        return (self.missed_in_service / self.periods_in_service if self.periods_in_service
+                else 0.0)
 
     @property
     def steps_per_s(self) -> float:
@@ -150,6 +184,9 @@ class SimLinkServer:
         self.gps_period_us = sl.control_period_us(gps_rate_hz)
         self.home = tuple(float(v) for v in home)
         self.real_time = bool(real_time)
+        #: In real time, the wait for a batch's due time ends awake, spinning for this long
+        #: [s]: an eighth of the period, at most 1 ms.
+        self.spin_s = min(_SPIN_MAX_S, self.period_us * 1e-6 / 8.0)
         #: Lockstep paced at this many times real time (None: as fast as possible).
         self.speedup = None if real_time or speedup is None or math.isinf(speedup) \
             else float(speedup)
@@ -229,6 +266,13 @@ class SimLinkServer:
                      else math.ceil(max_sim_time_s * 1e6 / self.period_us - 1e-9))
         reason = "disconnected"
         sched0 = wall0       # wall time of period 0's batch (real time)
+        pending = False      # on_step is due for the state the last period reached
+        # real time: the wall time between batches, and each batch's time after its due time
+        intervals: array[float] = array("d")
+        lateness: array[float] = array("d")
+        last_sent: float | None = None
+        in_service = False
+        service_steps = service_missed = 0
         try:
             while True:
                 if stop.is_set():
@@ -259,30 +303,67 @@ class SimLinkServer:
                             # fell behind (a slow step): resume the pace, don't sprint
                             sched0 = now - self.steps * self.period_us * 1e-6 / self.speedup
                 self._send_batch(t_us)
+                if self.real_time and in_service:
+                    sent = time.monotonic()
+                    if last_sent is not None:
+                        intervals.append(sent - last_sent)
+                    lateness.append(sent - due)
+                    last_sent = sent
+                if pending and not self.real_time:
+                    # lockstep: the caller's work for the state just reached (the winder's
+                    # CAN traffic, its wait for the ground station's answer, the truth log)
+                    # runs while the companion computes its answer, off the critical path
+                    pending = False
+                    self.on_step(self)  # type: ignore[misc]
                 answered, n_late, n_ignored = self._wait_answer(t_us, deadline, stop)
+                if pending:
+                    # real time: just before the physics steps, so that whatever the
+                    # caller received meanwhile (a torque command) applies from them on
+                    pending = False
+                    self.on_step(self)  # type: ignore[misc]
                 late += n_late
                 ignored += n_ignored
                 if not answered:
                     missed += 1
+                if in_service:
+                    service_steps += 1
+                    service_missed += not answered
+                # the pacing's statistics start once the companion has answered (before
+                # that it is still starting up)
+                in_service = in_service or answered or n_late > 0
                 self._advance()
                 self.steps += 1
-                if self.on_step is not None:
-                    self.on_step(self)
+                pending = self.on_step is not None
         except _DisconnectedError:
             reason = "disconnected"
         except _StoppedError:
             reason = "stopped"
         finally:
-            self._close_client()
-        return self._summary(time.monotonic() - wall0, missed, overruns, late, ignored, reason)
+            try:
+                if pending:
+                    self.on_step(self)  # type: ignore[misc]
+            finally:
+                self._close_client()
+        return self._summary(time.monotonic() - wall0, missed, overruns, late, ignored, reason,
+                             intervals, lateness, service_steps, service_missed)
 
     def _summary(self, wall: float, missed: int, overruns: int, late: int, ignored: int,
-                 reason: str) -> ServeSummary:
+                 reason: str, intervals: Sequence[float] = (),
+                 lateness: Sequence[float] = (), service_steps: int = 0,
+                 service_missed: int = 0) -> ServeSummary:
+        period = self.period_us * 1e-6
+        jitter = sorted(abs(d - period) for d in intervals)
+        behind = sorted(lateness)
         return ServeSummary(
-            steps=self.steps, sim_time_s=self.steps * self.period_us * 1e-6, wall_time_s=wall,
+            steps=self.steps, sim_time_s=self.steps * period, wall_time_s=wall,
             missed_deadlines=missed, overruns=overruns, bad_frames=self._parser.bad_frames,
             bad_bytes=self._parser.bad_bytes, late_answers=late, ignored_messages=ignored,
-            pacing=self.pacing, end_reason=reason)
+            pacing=self.pacing, end_reason=reason,
+            jitter_p50_s=_quantile(jitter, 0.5), jitter_p99_s=_quantile(jitter, 0.99),
+            jitter_max_s=jitter[-1] if jitter else math.nan,
+            lateness_p99_s=_quantile(behind, 0.99),
+            lateness_max_s=behind[-1] if behind else math.nan,
+            periods_in_service=service_steps, missed_in_service=service_missed)
 
     def _accept(self, stop: threading.Event, timeout_s: float | None) -> bool:
         end = None if timeout_s is None else time.monotonic() + timeout_s
@@ -299,22 +380,32 @@ class SimLinkServer:
                 return True
         return False
 
-    @staticmethod
-    def _sleep_until(t: float, stop: threading.Event) -> None:
+    def _sleep_until(self, t: float, stop: threading.Event) -> None:
+        """Wait until wall time ``t`` [s]: sleep to :attr:`spin_s` before it, then spin.
+
+        A sleeping process is woken by the scheduler, which on a busy machine first lets the
+        task on the CPU finish its slice (up to a few milliseconds): the last stretch is
+        spent awake, so the batch goes out on time whenever the process holds a CPU then.
+        """
+        spin = self.spin_s
         while True:
-            left = t - time.monotonic()
+            now = time.monotonic()
+            left = t - now
             if left <= 0 or stop.is_set():
                 return
-            time.sleep(min(left, _POLL_S))
+            if left <= spin:
+                while time.monotonic() < t:
+                    pass
+                return
+            time.sleep(min(left - spin, _POLL_S))
 
     def _send_batch(self, t_us: int) -> None:
         """HIL_GPS (when due), HIL_STATE_QUATERNION and HIL_SENSOR for the current state."""
         p = self.plant
         dt = self.period_us * 1e-6
-        pos = tuple(float(v) for v in p.x[POS])
-        vel = tuple(float(v) for v in p.x[VEL])
-        quat = p.quaternion
-        rates = tuple(float(v) for v in p.x[RATES])
+        x = p.x.tolist()
+        pos, vel, quat, rates = (tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]),
+                                 tuple(x[RATES]))
         f_flu = plant_specific_force_flu(p)
         alt_amsl = self.home[2] + pos[2]
         tas = airspeed_m_s(p)
@@ -401,5 +492,4 @@ class SimLinkServer:
         u = PlantInputs(rotor_commands=self.rotor_commands, armed=self.armed,
                         winder_torque_n_m=float(w.torque_n_m), winder_enabled=bool(w.enabled))
         self.last_inputs = u
-        for _ in range(self.physics_steps):
-            self.plant.step(u)
+        self.plant.advance(u, self.physics_steps)

@@ -13,15 +13,20 @@ from typing import NamedTuple
 
 import numpy as np
 
+from sitl._jit import njit
 from sitl.catenary import (
+    REGIMES,
+    CatenaryConvergenceError,
     CatenaryInfo,
     CatenaryInputError,
-    catenary_end_forces,
+    _solve,
     catenary_profile,
 )
+from sitl.pymath import hypot2
+from tuavdefs.jit import entry_point
 from tuavdefs.params import TetherParams
 
-__all__ = ["Tether", "TetherForces"]
+__all__ = ["Tether", "TetherForces", "tether_forces_kernel"]
 
 Vec3 = tuple[float, float, float]
 
@@ -60,6 +65,10 @@ class Tether:
         self._hf0 = 0.0
         self._vf0 = 0.0
         self.last_info: CatenaryInfo | None = None
+        # the solve's machine code, loaded now and called without numba's dispatch (its
+        # arguments are always floats)
+        self._solve = entry_point(tether_forces_kernel, 1.0, 0.0, 1.0, 2.0, self.ea_n,
+                                  self.w_n_per_m, 0.0, 0.0)
 
     def reset_warm_start(self) -> None:
         """Forget the previous solution: the next solve starts cold."""
@@ -97,19 +106,29 @@ class Tether:
         Raises :class:`~sitl.catenary.CatenaryInputError` for non-finite coordinates, z_m < 0
         or length_m <= 0.
         """
-        span, ux, uy = self._geometry(x_m, y_m, z_m, length_m)
-        fah, fav, fbh, fbv, info = catenary_end_forces(
-            span, z_m, length_m, self.ea_n, self.w_n_per_m, self._hf0, self._vf0)
-        self._hf0 = info.hf_n
-        self._vf0 = info.vf_n
+        if not (-math.inf < x_m < math.inf and -math.inf < y_m < math.inf
+                and 0.0 <= z_m < math.inf and 0.0 < length_m < math.inf):
+            self._geometry(x_m, y_m, z_m, length_m)   # raises, naming the bad argument
+        r = self._solve(float(x_m), float(y_m), float(z_m), float(length_m), self.ea_n,
+                        self.w_n_per_m, self._hf0, self._vf0)
+        if not r[-1]:
+            span = math.hypot(x_m, y_m)
+            raise CatenaryConvergenceError(
+                f"catenary did not converge: span_m={span!r}, height_m={z_m!r}, "
+                f"length_m={length_m!r}, ea_n={self.ea_n!r}, w_n_per_m={self.w_n_per_m!r}, "
+                f"hf0={self._hf0!r}, vf0={self._vf0!r}")
+        return self.accept(r)
+
+    def accept(self, r: tuple) -> TetherForces:
+        """The :class:`TetherForces` of a converged :func:`tether_forces_kernel` result
+        (computed from this tether's warm start), which becomes the next warm start."""
+        (ux_n, uy_n, uz_n, ex_n, ey_n, ez_n, drum_n, top_n, H, V, HA, VA, lbot, reg, it,
+         low, warm, _) = r
+        info = CatenaryInfo(H, V, HA, VA, lbot, REGIMES[reg], it, low, warm)
+        self._hf0 = H
+        self._vf0 = V
         self.last_info = info
-        return TetherForces(
-            (fbh * ux, fbh * uy, fbv),
-            (fah * ux, fah * uy, fav),
-            math.hypot(fah, fav),
-            math.hypot(fbh, fbv),
-            info,
-        )
+        return TetherForces((ux_n, uy_n, uz_n), (ex_n, ey_n, ez_n), drum_n, top_n, info)
 
     def shape(self, x_m: float, y_m: float, z_m: float, length_m: float,
               n_points: int = 50) -> np.ndarray:
@@ -120,3 +139,29 @@ class Tether:
         s, z = catenary_profile(span, z_m, length_m, self.ea_n, self.w_n_per_m, n_points,
                                 self._hf0, self._vf0)
         return np.column_stack((s * ux, s * uy, z))
+
+
+#: Relative Newton step at which a solve stops (catenary_end_forces' default).
+_TOL = 1e-8
+
+
+@njit
+def tether_forces_kernel(x_m: float, y_m: float, z_m: float, length_m: float, ea_n: float,
+                   w_n_per_m: float, hf0: float, vf0: float) -> tuple:
+    """:meth:`Tether.forces` on valid inputs, in one compiled call: the force on the UAV
+    (x, y, z) and on the exit (x, y, z) [N], the drum and top tensions [N], then
+    :func:`sitl.catenary._solve`'s results (H, V, HA, VA [N], length on the ground [m],
+    regime, iterations, lowest point [m], warm started, converged). The same arithmetic as
+    :func:`sitl.catenary.catenary_end_forces` and CPython's ``math.hypot``
+    (:mod:`sitl.pymath`), so the same bits."""
+    span = hypot2(x_m, y_m)
+    if span > 0.0:
+        ux = x_m / span
+        uy = y_m / span
+    else:
+        span, ux, uy = 0.0, 0.0, 0.0
+    H, V, HA, VA, lbot, reg, it, low, warm, ok = _solve(span, z_m, length_m, ea_n,
+                                                        w_n_per_m, hf0, vf0, _TOL)
+    fah, fav, fbh, fbv = HA, VA, -H, -V
+    return (fbh * ux, fbh * uy, fbv, fah * ux, fah * uy, fav, hypot2(fah, fav),
+            hypot2(fbh, fbv), H, V, HA, VA, lbot, reg, it, low, warm, ok)

@@ -41,6 +41,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from sitl._jit import njit
+from sitl.pymath import hypot3
 from tuavdefs.params import WindParams
 
 __all__ = [
@@ -74,8 +76,27 @@ _W1, _W2 = _SQRT3, 1.0 - _SQRT3
 _P11, _P21, _P22 = math.sqrt(0.5), math.sqrt(2.0) / 4.0, 1.0 / (2.0 * math.sqrt(2.0))
 
 
+@njit
 def _clamped_altitude_ft(altitude_m: float) -> float:
-    return min(max(float(altitude_m), MIN_ALTITUDE_M), MAX_ALTITUDE_M) / FT_M
+    """``altitude_m`` [m] clamped to [MIN_ALTITUDE_M, MAX_ALTITUDE_M], in feet."""
+    h = MIN_ALTITUDE_M if altitude_m < MIN_ALTITUDE_M else altitude_m   # max(., MIN)
+    h = MAX_ALTITUDE_M if h > MAX_ALTITUDE_M else h                    # min(., MAX)
+    return h / FT_M
+
+
+@njit
+def _scales_kernel(altitude_m: float) -> tuple[float, float]:
+    """(L_u = L_v, L_w) [m] of :func:`dryden_length_scales_m`."""
+    h = _clamped_altitude_ft(altitude_m)
+    return h / (0.177 + 0.000823 * h) ** 1.2 * FT_M, h * FT_M
+
+
+@njit
+def _sigmas_kernel(altitude_m: float, w20_m_s: float) -> tuple[float, float]:
+    """(sigma_u = sigma_v, sigma_w) [m/s] of :func:`dryden_sigmas_m_s`."""
+    h = _clamped_altitude_ft(altitude_m)
+    s_w = 0.1 * w20_m_s
+    return s_w / (0.177 + 0.000823 * h) ** 0.4, s_w
 
 
 def dryden_length_scales_m(altitude_m: float) -> tuple[float, float, float]:
@@ -84,9 +105,8 @@ def dryden_length_scales_m(altitude_m: float) -> tuple[float, float, float]:
     ``altitude_m`` [m] is clamped to [MIN_ALTITUDE_M, MAX_ALTITUDE_M] (10 ft to 1000 ft).
     In feet: ``L_w = h``, ``L_u = L_v = h / (0.177 + 0.000823 h)^1.2``.
     """
-    h = _clamped_altitude_ft(altitude_m)
-    l_uv = h / (0.177 + 0.000823 * h) ** 1.2 * FT_M
-    return (l_uv, l_uv, h * FT_M)
+    l_uv, l_w = _scales_kernel(float(altitude_m))
+    return (l_uv, l_uv, l_w)
 
 
 def dryden_sigmas_m_s(altitude_m: float, w20_m_s: float) -> tuple[float, float, float]:
@@ -96,12 +116,11 @@ def dryden_sigmas_m_s(altitude_m: float, w20_m_s: float) -> tuple[float, float, 
     the mean wind speed at 20 ft. ``sigma_w = 0.1 W20``,
     ``sigma_u = sigma_v = sigma_w / (0.177 + 0.000823 h)^0.4`` (h in ft).
     """
-    h = _clamped_altitude_ft(altitude_m)
-    s_w = 0.1 * float(w20_m_s)
-    s_uv = s_w / (0.177 + 0.000823 * h) ** 0.4
+    s_uv, s_w = _sigmas_kernel(float(altitude_m), float(w20_m_s))
     return (s_uv, s_uv, s_w)
 
 
+@njit
 def _j_integral(k: int, y: float) -> float:
     """``integral_0^1 s^k exp(-y s) ds`` for k in 0, 1, 2 and y >= 0, without cancellation."""
     if y < 1.0:
@@ -121,11 +140,13 @@ def _j_integral(k: int, y: float) -> float:
     return (2.0 - e * (2.0 + y * (2.0 + y))) / (y * y * y)
 
 
+@njit
 def _first_order_coeffs(x: float) -> tuple[float, float]:
     """``(a, b)`` of ``z' = a z + b n`` for a step of ``x = dt / T``."""
     return math.exp(-x), math.sqrt(-math.expm1(-2.0 * x))
 
 
+@njit
 def _second_order_coeffs(x: float) -> tuple[float, float, float, float, float]:
     """``(a, ax, c11, c21, c22)`` of ``z1' = a z1 + c11 n1``,
     ``z2' = a z2 + ax z1 + c21 n1 + c22 n2`` for a step of ``x = dt / T``."""
@@ -135,8 +156,98 @@ def _second_order_coeffs(x: float) -> tuple[float, float, float, float, float]:
     q22 = x * x * x * _j_integral(2, 2.0 * x)
     c11 = math.sqrt(q11)
     c21 = q12 / c11
-    c22 = math.sqrt(max(q22 - c21 * c21, 0.0))
+    d = q22 - c21 * c21
+    c22 = math.sqrt(0.0 if d < 0.0 else d)     # max(d, 0.0)
     return a, a * x, c11, c21, c22
+
+
+# The model's packed parameters (WindModel._wp) and state (WindModel._ws), as the compiled
+# step reads them; the gusts are rows (start, duration, end, amplitude x/2, y/2, z/2).
+WP_STEADY, WP_TURBULENT, WP_W20, WP_DIR, WP_DT = 0, 3, 4, 5, 7
+N_WIND_PARAMS = 8
+(WS_ZU, WS_ZV1, WS_ZV2, WS_ZW1, WS_ZW2, WS_H_REF, WS_V_REF, WS_SIG_U, WS_SIG_W, WS_CU, WS_CV,
+ WS_CW, WS_TURB_XYZ, WS_TURB_UVW) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 16, 21, 24)
+N_WIND_STATES = 27
+
+
+@njit
+def _set_coeffs(wp: np.ndarray, ws: np.ndarray, h_m: float, speed_m_s: float) -> None:
+    """The filters' coefficients for altitude ``h_m`` [m] and passing speed [m/s]."""
+    ws[WS_H_REF] = h_m
+    ws[WS_V_REF] = speed_m_s
+    l_u, l_w = _scales_kernel(h_m)
+    ws[WS_SIG_U], ws[WS_SIG_W] = _sigmas_kernel(h_m, wp[WP_W20])
+    dt = wp[WP_DT]
+    x_uv = dt * speed_m_s / l_u
+    ws[WS_CU], ws[WS_CU + 1] = _first_order_coeffs(x_uv)
+    a, ax, c11, c21, c22 = _second_order_coeffs(x_uv)
+    ws[WS_CV], ws[WS_CV + 1], ws[WS_CV + 2], ws[WS_CV + 3], ws[WS_CV + 4] = (
+        a, ax, c11, c21, c22)
+    a, ax, c11, c21, c22 = _second_order_coeffs(dt * speed_m_s / l_w)
+    ws[WS_CW], ws[WS_CW + 1], ws[WS_CW + 2], ws[WS_CW + 3], ws[WS_CW + 4] = (
+        a, ax, c11, c21, c22)
+
+
+@njit
+def wind_kernel(wp: np.ndarray, gusts: np.ndarray, ws: np.ndarray, noise: np.ndarray,
+                noise_next: np.ndarray, t_s: float, altitude_m: float, vx: float,
+                vy: float, vz: float, out: np.ndarray) -> bool:
+    """:meth:`WindModel.sample` on the packed parameters and state: writes the air velocity
+    (x, y, z) [m/s] into ``out`` and advances the turbulence by one step, drawing five
+    standard normals from ``noise`` at ``noise_next[0]``. Returns False, having changed
+    nothing, when the turbulence needs draws and ``noise`` has fewer than five left."""
+    wx, wy, wz = wp[WP_STEADY], wp[WP_STEADY + 1], wp[WP_STEADY + 2]
+    if wp[WP_TURBULENT] != 0.0:
+        k = noise_next[0]
+        if k + 5 > noise.size:
+            return False
+        speed = hypot3(wx - vx, wy - vy, wz - vz)
+        if speed < MIN_PASSING_SPEED_M_S:
+            speed = MIN_PASSING_SPEED_M_S
+        h = altitude_m
+        h = MIN_ALTITUDE_M if h < MIN_ALTITUDE_M else (MAX_ALTITUDE_M if h > MAX_ALTITUDE_M
+                                                       else h)
+        v_ref, h_ref = ws[WS_V_REF], ws[WS_H_REF]
+        if (abs(speed - v_ref) > COEFF_RTOL * v_ref
+                or abs(h - h_ref) > COEFF_RTOL * h_ref):
+            _set_coeffs(wp, ws, h, speed)
+        # the current (u, v, w), then the filters advanced by one step
+        zu, zv1, zv2 = ws[WS_ZU], ws[WS_ZV1], ws[WS_ZV2]
+        zw1, zw2 = ws[WS_ZW1], ws[WS_ZW2]
+        s_uv, s_w = ws[WS_SIG_U], ws[WS_SIG_W]
+        tu = s_uv * zu
+        tv = s_uv * (_W1 * zv1 + _W2 * zv2)
+        tw = s_w * (_W1 * zw1 + _W2 * zw2)
+        n0, n1, n2, n3, n4 = noise[k], noise[k + 1], noise[k + 2], noise[k + 3], noise[k + 4]
+        noise_next[0] = k + 5
+        ws[WS_ZU] = ws[WS_CU] * zu + ws[WS_CU + 1] * n0
+        a, ax, c11, c21, c22 = (ws[WS_CV], ws[WS_CV + 1], ws[WS_CV + 2], ws[WS_CV + 3],
+                                ws[WS_CV + 4])
+        ws[WS_ZV1] = a * zv1 + c11 * n1
+        ws[WS_ZV2] = a * zv2 + ax * zv1 + c21 * n1 + c22 * n2
+        a, ax, c11, c21, c22 = (ws[WS_CW], ws[WS_CW + 1], ws[WS_CW + 2], ws[WS_CW + 3],
+                                ws[WS_CW + 4])
+        ws[WS_ZW1] = a * zw1 + c11 * n3
+        ws[WS_ZW2] = a * zw2 + ax * zw1 + c21 * n3 + c22 * n4
+        cx, cy = wp[WP_DIR], wp[WP_DIR + 1]
+        tx = tu * cx - tv * cy
+        ty = tu * cy + tv * cx
+        ws[WS_TURB_UVW], ws[WS_TURB_UVW + 1], ws[WS_TURB_UVW + 2] = tu, tv, tw
+        ws[WS_TURB_XYZ], ws[WS_TURB_XYZ + 1], ws[WS_TURB_XYZ + 2] = tx, ty, tw
+        wx += tx
+        wy += ty
+        wz += tw
+    for i in range(gusts.shape[0]):
+        t0, dur, t1 = gusts[i, 0], gusts[i, 1], gusts[i, 2]
+        if t0 <= t_s <= t1:
+            f = 1.0 - math.cos(2.0 * math.pi * (t_s - t0) / dur)
+            wx += gusts[i, 3] * f
+            wy += gusts[i, 4] * f
+            wz += gusts[i, 5] * f
+    out[0] = wx
+    out[1] = wy
+    out[2] = wz
+    return True
 
 
 class WindModel:
@@ -167,6 +278,15 @@ class WindModel:
             (float(g.start_s), float(g.duration_s), float(g.start_s + g.duration_s),
              *(0.5 * float(c) for c in g.amplitude_m_s))
             for g in params.gusts)
+        self._gusts_array = np.array(self._gusts, dtype=float).reshape(len(self._gusts), 6)
+        wp = np.zeros(N_WIND_PARAMS)
+        wp[WP_STEADY:WP_STEADY + 3] = self._steady
+        wp[WP_TURBULENT] = 1.0 if self._turbulent else 0.0
+        wp[WP_W20] = self._w20
+        wp[WP_DIR:WP_DIR + 2] = self._dir
+        wp[WP_DT] = self._dt
+        self._wp = wp
+        self._out = np.zeros(3)
         self.reset()
 
     # -- public API ---------------------------------------------------------------------
@@ -200,28 +320,29 @@ class WindModel:
     @property
     def turbulence_m_s(self) -> tuple[float, float, float]:
         """Turbulence part (x, y, z) of the last :meth:`sample` result; zeros before [m/s]."""
-        return self._turb_xyz
+        return tuple(self._ws[WS_TURB_XYZ:WS_TURB_XYZ + 3].tolist())  # type: ignore[return-value]
 
     @property
     def turbulence_uvw_m_s(self) -> tuple[float, float, float]:
         """The same turbulence in the Dryden axes (u along the mean wind, v left, w up) [m/s]."""
-        return self._turb_uvw
+        return tuple(self._ws[WS_TURB_UVW:WS_TURB_UVW + 3].tolist())  # type: ignore[return-value]
 
     def reset(self) -> None:
         """Restart: same state (and thus the same future sequence) as a fresh object."""
         self._rng = np.random.default_rng(self._params.seed)
-        self._noise: list[float] = []
-        self._k = 0
-        self._turb_xyz = (0.0, 0.0, 0.0)
-        self._turb_uvw = (0.0, 0.0, 0.0)
-        # Zero references force a coefficient computation on the first sample.
-        self._h_ref = 0.0
-        self._v_ref = 0.0
+        self._noise = np.zeros(0)
+        self._noise_next = np.zeros(1, dtype=np.int64)
+        # zero references (h_ref, v_ref) force a coefficient computation on the first sample
+        self._ws = np.zeros(N_WIND_STATES)
+        self._bind()
         if self._turbulent:
-            n0, n1, n2, n3, n4 = self._draw5()
-            self._zu = n0
-            self._zv1, self._zv2 = _P11 * n1, _P21 * n1 + _P22 * n2
-            self._zw1, self._zw2 = _P11 * n3, _P21 * n3 + _P22 * n4
+            self.refill()
+            n0, n1, n2, n3, n4 = self._noise[0:5].tolist()
+            self._noise_next[0] = 5
+            ws = self._ws
+            ws[WS_ZU] = n0
+            ws[WS_ZV1], ws[WS_ZV2] = _P11 * n1, _P21 * n1 + _P22 * n2
+            ws[WS_ZW1], ws[WS_ZW2] = _P11 * n3, _P21 * n3 + _P22 * n4
 
     def sample(self, t_s: float, altitude_m: float,
                vehicle_velocity_m_s: Sequence[float]) -> tuple[float, float, float]:
@@ -234,67 +355,23 @@ class WindModel:
         """
         if not (self._turbulent or self._gusts):  # constant: the same answer, faster
             return self._steady
-        wx, wy, wz = self._steady
-        if self._turbulent:
-            vx, vy, vz = vehicle_velocity_m_s
-            speed = math.hypot(wx - vx, wy - vy, wz - vz)
-            if speed < MIN_PASSING_SPEED_M_S:
-                speed = MIN_PASSING_SPEED_M_S
-            h = float(altitude_m)
-            h = MIN_ALTITUDE_M if h < MIN_ALTITUDE_M else min(h, MAX_ALTITUDE_M)
-            if (abs(speed - self._v_ref) > COEFF_RTOL * self._v_ref
-                    or abs(h - self._h_ref) > COEFF_RTOL * self._h_ref):
-                self._set_coeffs(h, speed)
-            tu, tv, tw = self._step()
-            cx, cy = self._dir
-            tx = tu * cx - tv * cy
-            ty = tu * cy + tv * cx
-            self._turb_uvw = (tu, tv, tw)
-            self._turb_xyz = (tx, ty, tw)
-            wx += tx
-            wy += ty
-            wz += tw
-        for t0, dur, t1, ax, ay, az in self._gusts:
-            if t0 <= t_s <= t1:
-                f = 1.0 - math.cos(2.0 * math.pi * (t_s - t0) / dur)
-                wx += ax * f
-                wy += ay * f
-                wz += az * f
-        return (wx, wy, wz)
+        vx, vy, vz = vehicle_velocity_m_s
+        out = self._out
+        while not wind_kernel(*self.kernel_args, float(t_s), float(altitude_m), float(vx),
+                              float(vy), float(vz), out):
+            self.refill()
+        return tuple(out.tolist())  # type: ignore[return-value]
 
-    # -- internals ----------------------------------------------------------------------
+    def _bind(self) -> None:
+        #: What :func:`wind_kernel` takes before the time: the packed parameters, the
+        #: gusts, the state, the noise block and the index of its next draw (the arrays are
+        #: updated in place; the tuple is renewed when one is replaced).
+        self.kernel_args: tuple[np.ndarray, ...] = (self._wp, self._gusts_array, self._ws,
+                                                    self._noise, self._noise_next)
 
-    def _draw5(self) -> tuple[float, float, float, float, float]:
-        k = self._k
-        if k + 5 > len(self._noise):
-            # Drawing in blocks keeps the per-sample cost to a few list look-ups.
-            self._noise = self._rng.standard_normal(5 * _NOISE_BLOCK_STEPS).tolist()
-            k = 0
-        self._k = k + 5
-        n = self._noise
-        return n[k], n[k + 1], n[k + 2], n[k + 3], n[k + 4]
-
-    def _set_coeffs(self, h_m: float, speed_m_s: float) -> None:
-        self._h_ref, self._v_ref = h_m, speed_m_s
-        l_u, _, l_w = dryden_length_scales_m(h_m)
-        self._sig_u, _, self._sig_w = dryden_sigmas_m_s(h_m, self._w20)
-        x_uv = self._dt * speed_m_s / l_u
-        self._cu = _first_order_coeffs(x_uv)
-        self._cv = _second_order_coeffs(x_uv)
-        self._cw = _second_order_coeffs(self._dt * speed_m_s / l_w)
-
-    def _step(self) -> tuple[float, float, float]:
-        """Current (u, v, w) [m/s], then advance the filter states by one step."""
-        zu, zv1, zv2, zw1, zw2 = self._zu, self._zv1, self._zv2, self._zw1, self._zw2
-        s_uv, s_w = self._sig_u, self._sig_w
-        out = (s_uv * zu, s_uv * (_W1 * zv1 + _W2 * zv2), s_w * (_W1 * zw1 + _W2 * zw2))
-        n0, n1, n2, n3, n4 = self._draw5()
-        a, b = self._cu
-        self._zu = a * zu + b * n0
-        a, ax, c11, c21, c22 = self._cv
-        self._zv1 = a * zv1 + c11 * n1
-        self._zv2 = a * zv2 + ax * zv1 + c21 * n1 + c22 * n2
-        a, ax, c11, c21, c22 = self._cw
-        self._zw1 = a * zw1 + c11 * n3
-        self._zw2 = a * zw2 + ax * zw1 + c21 * n3 + c22 * n4
-        return out
+    def refill(self) -> None:
+        """A fresh block of standard normal draws (when the kernel has used up the last)."""
+        # drawing in blocks keeps the per-sample cost to a few look-ups
+        self._noise = self._rng.standard_normal(5 * _NOISE_BLOCK_STEPS)
+        self._noise_next[0] = 0
+        self._bind()

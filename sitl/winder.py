@@ -23,6 +23,7 @@ from sitl.kernel import (
     STOPPED_RAD_S,
     drum_acceleration,
     drum_inertia,
+    drum_projection,
     motor_torque,
     pack_params,
 )
@@ -72,12 +73,7 @@ class WinderModel:
                 ) -> tuple[float, float]:
         """Constraints applied after an integration step: hard stops, and the brake's
         sticking when the rate crossed zero during the step."""
-        if braked and omega_before != 0.0 and (omega > 0.0) != (omega_before > 0.0):
-            omega = 0.0
-        if theta < self.theta_min:
-            theta, omega = self.theta_min, max(omega, 0.0)
-        elif theta > self.theta_max:
-            theta, omega = self.theta_max, min(omega, 0.0)
-        return theta, omega
+        return drum_projection(self._packed, float(theta), float(omega), float(omega_before),
+                               bool(braked))
 
 

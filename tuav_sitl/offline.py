@@ -10,6 +10,7 @@ and velocity from telemetry.
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 import struct
@@ -27,12 +28,13 @@ from companion.trajectory import (
     GotoItem,
     Hold,
     RefSample,
+    Sequence,
     SequenceBuilder,
     WaypointFollower,
 )
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
-from sitl.plant import POS, QUAT, RATES, VEL, Plant, PlantInputs
+from sitl.plant import DRUM_ANGLE, DRUM_RATE, POS, QUAT, RATES, VEL, Plant, PlantInputs
 from sitl.trim import hover_trim
 from tuav_sitl.scenario import ScenarioParams
 from tuavdefs.frames import quat_to_euler, wrap_pi
@@ -105,6 +107,8 @@ class Reference:
     """The scenario's reference: a trajectory, or the waypoint mission logic."""
 
     def __init__(self, sc: ScenarioParams) -> None:
+        #: the trajectory segment last sampled, with the times [from, to) it covers
+        self._segment: tuple[float, float, Any] = (math.inf, -math.inf, None)
         tr = sc.trajectory
         start = tuple(sc.initial.position_m)
         yaw = sc.initial.yaw_rad
@@ -141,7 +145,10 @@ class Reference:
                vel: tuple[float, float, float]) -> RefSample:
         """The reference at ``t`` [s] for the vehicle at ``pos`` [m]."""
         if self.follower is None:
-            return self.traj.sample(t)
+            lo, hi, segment = self._segment
+            if not lo <= t < hi:
+                self._segment = lo, hi, segment = _active_segment(self.traj, t)
+            return segment.sample(t)
         if not self._started:
             if t < self._start_s:
                 return self.traj.sample(t)
@@ -154,6 +161,21 @@ class Reference:
         if self.follower is None:
             return []
         return [(e.kind, e.index, e.t_s) for e in self.follower.pop_events()]
+
+
+def _active_segment(traj: Any, t: float) -> tuple[float, float, Any]:
+    """(from [s], to [s], segment): what ``traj.sample`` samples at ``t`` and the times
+    for which it samples the same. A :class:`companion.trajectory.Sequence` samples its
+    segment that started last at or before ``t`` (the first before it starts, the last
+    after it ends); anything else is one segment for all times."""
+    segments = getattr(traj, "segments", None)
+    if not isinstance(traj, Sequence) or not segments:
+        return -math.inf, math.inf, traj
+    starts = [s.start_s for s in segments]
+    i = min(max(bisect.bisect_right(starts, t) - 1, 0), len(segments) - 1)
+    lo = starts[i] if i > 0 else -math.inf
+    hi = starts[i + 1] if i + 1 < len(starts) else math.inf
+    return lo, hi, segments[i]
 
 
 class OfflineRunner:
@@ -194,50 +216,64 @@ class OfflineRunner:
         log = _Log(n_log, SERIES)
         bar = ProgressBar(sc.duration_s, progress)
         inputs = PlantInputs()
-        winder_torque, winder_lyap, lbar = 0.0, 0.0, (0.0, 0.0)
+        winder_torque, winder_lyap, lbar_m, lbar_rate = 0.0, 0.0, 0.0, 0.0
         flight.winch_report(0.0, plant.tether_length_m, 0.0,
                             plant.tether_forces().drum_tension_n)
         events: list[tuple[str, int, float]] = []
+        sample, follower = reference.sample, reference.follower
+        advance, tether_forces = plant.advance, plant.tether_forces
+        update, add_row = flight.update, log.add
         wall0 = time.perf_counter()
-        for k in range(n_steps + 1):
+        k = 0
+        while True:
             t = k * dt
             fresh = k % n_wind == 0
             if fresh:
                 # ground station: encoder, load cell and the UAV's telemetry
-                drum_tension = plant.tether_forces().drum_tension_n
+                drum_tension = tether_forces().drum_tension_n
                 x = plant.x.tolist()
-                ws = winder_host.update(plant.tether_length_m, plant.drum_rate_rad_s,
-                                        drum_tension, tuple(x[POS]), tuple(x[VEL]))
+                length, drum_rate = r_w * x[DRUM_ANGLE], x[DRUM_RATE]
+                ws = winder_host.update(length, drum_rate, drum_tension, tuple(x[POS]),
+                                        tuple(x[VEL]))
                 winder_torque, winder_lyap = ws.torque_n_m, ws.command.lyapunov
-                lbar = (ws.lbar_m, ws.lbar_rate_m_s)
+                lbar_m, lbar_rate = ws.lbar_m, ws.lbar_rate_m_s
                 # ... and the winch's report reaches the companion
-                flight.winch_report(t, plant.tether_length_m, plant.drum_rate_rad_s * r_w,
-                                    drum_tension)
+                flight.winch_report(t, length, drum_rate * r_w, drum_tension)
             if k % n_ctrl == 0:
-                state = self._vehicle_state()
-                ref = reference.sample(t, state.pos_m, state.vel_m_s)
-                events.extend(reference.events())
-                fs = flight.update(t, state, ref)
+                x = plant.x.tolist()
+                state = VehicleState(tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]),
+                                     tuple(x[RATES]))
+                pos, vel = state.pos_m, state.vel_m_s
+                ref = sample(t, pos, vel)
+                if follower is not None:
+                    events.extend(reference.events())
+                fs = update(t, state, ref)
                 po, ao = fs.position, fs.attitude
                 inputs = PlantInputs(fs.rotor_commands, True, winder_torque, True)
-                truth = plant.tether_forces()
+                truth = tether_forces()
                 info = truth.info
-                log.add((t, *state.pos_m, *state.vel_m_s, *ref.pos_m, *ref.vel_m_s,
-                         *quat_to_euler(state.quat), *ao.attitude_cmd_rad, *po.attitude_rad,
-                         *state.rates_rad_s, po.thrust_n, *ao.torque_n_m, *fs.rotor_commands,
-                         fs.mixer_saturated, po.saturated, *po.disturbance_m_s2,
-                         po.lyapunov, ao.lyapunov, winder_lyap, po.lyapunov_raw,
-                         ao.lyapunov_raw, plant.tether_length_m, lbar[0], lbar[1], fresh,
-                         plant.drum_rate_rad_s, winder_torque, truth.drum_tension_n,
-                         truth.top_tension_n, int(info.regime), info.lowest_point_height_m,
-                         *plant.wind_m_s, *truth.on_uav_n, *fs.tether_force_est_n))
+                add_row(t, *pos, *vel, *ref.pos_m, *ref.vel_m_s, *quat_to_euler(state.quat),
+                        *ao.attitude_cmd_rad, *po.attitude_rad, *state.rates_rad_s,
+                        po.thrust_n, *ao.torque_n_m, *fs.rotor_commands, fs.mixer_saturated,
+                        po.saturated, *po.disturbance_m_s2, po.lyapunov, ao.lyapunov,
+                        winder_lyap, po.lyapunov_raw, ao.lyapunov_raw, r_w * x[DRUM_ANGLE],
+                        lbar_m, lbar_rate, fresh, x[DRUM_RATE], winder_torque,
+                        truth.drum_tension_n, truth.top_tension_n, int(info.regime),
+                        info.lowest_point_height_m, *plant.wind_m_s, *truth.on_uav_n,
+                        *fs.tether_force_est_n)
                 bar.update(t)
                 if on_sample is not None:
                     on_sample(t)
-            elif fresh:
-                inputs = inputs._replace(winder_torque_n_m=winder_torque)
-            if k < n_steps:
-                plant.step(inputs)
+            elif fresh:   # the winder's new torque, the rotors' commands held
+                inputs = PlantInputs(inputs.rotor_commands, inputs.armed, winder_torque,
+                                     inputs.winder_enabled)
+            if k >= n_steps:
+                break
+            # the plant runs with the inputs held up to the next control or winder step, in
+            # one compiled call
+            nxt = min(k - k % n_ctrl + n_ctrl, k - k % n_wind + n_wind, n_steps)
+            advance(inputs, nxt - k)
+            k = nxt
         wall = time.perf_counter() - wall0
         bar.close()
         series = log.arrays()
@@ -248,32 +284,40 @@ class OfflineRunner:
 
 
 class _Log:
-    """The time series: rows of :data:`SERIES` packed as doubles as they come (at most
-    ``n``), split into columns at the end."""
+    """The time series: rows of :data:`SERIES` packed as doubles as they come into a buffer
+    of ``n`` rows allocated up front (later rows are dropped), split into columns at the
+    end."""
 
     def __init__(self, n: int, columns: tuple[tuple[str, int], ...]) -> None:
         self.n = n
         self.i = 0
         self.columns = columns
         self.width = sum(max(w, 1) for _, w in columns)
-        self._pack = struct.Struct(f"{self.width}d").pack
-        self._rows: list[bytes] = []
+        packer = struct.Struct(f"{self.width}d")
+        self._pack_into = packer.pack_into
+        self._row_bytes = packer.size
+        self._data = np.empty((n, self.width))
+        self._buffer = memoryview(self._data).cast("B")
 
-    def add(self, row: tuple[Any, ...]) -> None:
+    def add(self, *row: Any) -> None:
         """One row: the columns' values in order, vectors flattened (bools count 0/1)."""
-        if self.i >= self.n:
+        i = self.i
+        if i >= self.n:
             return
-        self._rows.append(self._pack(*row))
-        self.i += 1
+        self._pack_into(self._buffer, i * self._row_bytes, *row)
+        self.i = i + 1
 
     def arrays(self) -> dict[str, np.ndarray]:
+        """The columns: 1-D arrays for scalars, (rows, width) arrays for vectors."""
         if not self.i:
             return {}
-        data = np.frombuffer(b"".join(self._rows), dtype=float).reshape(self.i, self.width)
+        # one pass over the rows; the columns are views of the result (a vector's
+        # (rows, width) view is column-major)
+        cols = np.ascontiguousarray(self._data[:self.i].T)
         out: dict[str, np.ndarray] = {}
         j = 0
         for name, w in self.columns:
-            out[name] = data[:, j].copy() if w == 0 else data[:, j:j + w].copy()
+            out[name] = cols[j] if w == 0 else cols[j:j + w].T
             j += max(w, 1)
         return out
 

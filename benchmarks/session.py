@@ -1,0 +1,99 @@
+"""The benchmarks that need the processes and the CAN bus, run inside one private network
+namespace by ``python -m benchmarks``: ``python -m benchmarks.session WORK [--quick]``.
+
+- the three-process stack in lockstep: simulated s per wall s, each process's CPU time,
+  and where each process's time goes (cProfile from the flight's start to its end, by
+  category);
+- real time at 250 Hz and 500 Hz with every core also running a busy loop: the plant's
+  pacing (period jitter, late batches) and the companion's missed deadlines;
+- the latency of a ``Set_Input_Torque`` frame to the plant steps that apply it.
+
+Prints one JSON line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pstats
+import re
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from benchmarks import latency, stack
+
+#: The plant's summary of a real-time run (sitl/__main__.py's last line).
+_NUM = r"([\d.]+|nan)"
+_PACING = re.compile(
+    rf"period jitter p50 {_NUM} ms, p99 {_NUM} ms, max {_NUM} ms, batches late p99 "
+    rf"{_NUM} ms, missed deadlines {_NUM} % of (\d+) periods")
+
+
+def lockstep(work: Path, quick: bool) -> dict:
+    """The stack in lockstep: speed and CPU, then where the time goes (a second run, every
+    process under cProfile from the flight's start to its end)."""
+    duration = 1.0 if quick else 10.0
+    run = stack.run_stack(work / "lockstep", duration)
+    out: dict = {"sim_s": run.sim_s, "wall_s": run.wall_s, "rtf": run.real_time_factor,
+                 "cpu_s": {k: v.cpu_s for k, v in run.processes.items()},
+                 "exit": {k: v.exit_code for k, v in run.processes.items()}}
+    prof = stack.run_stack(work / "profile", duration, profile=True)
+    out["profiled_rtf"] = prof.real_time_factor
+    out["profiled_sim_s"] = prof.sim_s
+    out["shares"], out["profiled_s"] = {}, {}
+    for name in stack.PROCESSES:
+        path = work / "profile" / f"{name}.prof"
+        out["shares"][name] = prof.processes[name].shares
+        out["profiled_s"][name] = pstats.Stats(str(path)).total_tt  # type: ignore[attr-defined]
+    return out
+
+
+def real_time(work: Path, quick: bool, rate_hz: float) -> dict:
+    """Real time at ``rate_hz`` [Hz] with a busy loop per core (started when the companion
+    connects, so that the processes start as they would)."""
+    loads: list = []
+    try:
+        run = stack.run_stack(
+            work / f"realtime-{rate_hz:.0f}", 2.0 if quick else 10.0, real_time=True,
+            control_rate_hz=rate_hz,
+            on_connected=lambda: loads.extend(stack.busy_loads(os.cpu_count() or 2)))
+    finally:
+        for p in loads:
+            p.kill()
+            p.wait()
+    line = run.processes["plant"].log.strip().splitlines()[-1] if run.processes[
+        "plant"].log.strip() else ""
+    m = _PACING.search(line)
+    if not m:
+        return {"error": line[-300:]}
+    p50, p99, mx, late99, missed, periods = m.groups()
+    return {"jitter_p50_ms": float(p50), "jitter_p99_ms": float(p99),
+            "jitter_max_ms": float(mx), "late_p99_ms": float(late99),
+            "missed_percent": float(missed), "periods": int(periods), "loads": len(loads)}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the process benchmarks; print one JSON line."""
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.session", description=__doc__)
+    ap.add_argument("work", help="folder for logs and profiles")
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args(argv)
+    work = Path(args.work)
+    out: dict = {}
+    for name, fn in (("lockstep", lambda: lockstep(work, args.quick)),
+                     ("realtime_250", lambda: real_time(work, args.quick, 250.0)),
+                     ("realtime_500", lambda: real_time(work, args.quick, 500.0)),
+                     ("latency", lambda: latency.measure(work / "latency",
+                                                         1.0 if args.quick else 5.0))):
+        try:
+            out[name] = fn()
+        except Exception as exc:  # noqa: BLE001 - one failed benchmark must not hide the rest
+            out[name] = {"error": f"{type(exc).__name__}: {exc}"[-300:]}
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
