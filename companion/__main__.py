@@ -125,6 +125,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:
         print(f"companion: cannot listen: {exc.strerror} ({exc})", file=sys.stderr)
         return 1
+    # the controllers (and their compiled code) are ready before the plant's clock starts
+    g = params.environment.gravity_m_s2
+    veh = params.vehicle
+    flight = FlightController(gains, veh, params.tether, g)
+    nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m)
     host, _, port = args.sim.rpartition(":")
     client = SimLinkClient(host, int(port), tuple(args.home))
     try:
@@ -132,10 +137,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except TimeoutError as exc:
         print(f"companion: {exc}", file=sys.stderr)
         return 1
-    g = params.environment.gravity_m_s2
-    veh = params.vehicle
-    flight = FlightController(gains, veh, params.tether, g)
-    nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m)
 
     def set_gains(new: FlightControlParams) -> None:
         flight.set_gains(new)
@@ -209,13 +210,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                         if why is not None:
                             print(f"companion: --goto refused: {why}", flush=True)
                 autopilot.armed_changed()
-            autopilot.service(Telemetry(t, state.pos_m, state.vel_m_s, state.quat,
-                                        state.rates_rad_s, throttle))
-            if nav.armed and not was_armed:
-                autopilot.armed_changed()
-            was_armed = nav.armed
-            if components is not None:
-                components.send_position(t, state.pos_m, state.vel_m_s)
             ref, motors = nav.step(t, state.pos_m, state.vel_m_s, yaw, dt)
             if motors == "fly" and ref is not None:
                 if not was_flying:
@@ -227,7 +221,16 @@ def main(argv: Sequence[str] | None = None) -> int:
                 cmds = (0.0, 0.0, 0.0, 0.0)
             armed = motors != "off"
             client.send_actuators(sim.time_usec, cmds, armed=armed)
+            # the answer is out (in lockstep the plant waits for it); now the ground
+            # stations and the winch: what they ask applies from the next period
             throttle = sum(cmds) / 4.0 if armed else 0.0
+            autopilot.service(Telemetry(t, state.pos_m, state.vel_m_s, state.quat,
+                                        state.rates_rad_s, throttle))
+            if nav.armed and not was_armed:
+                autopilot.armed_changed()
+            was_armed = nav.armed
+            if components is not None:
+                components.send_position(t, state.pos_m, state.vel_m_s)
             steps += 1
     except ConnectionError:
         pass

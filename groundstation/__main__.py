@@ -102,6 +102,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         while not stop.is_set():
             if args.duration is not None and time.monotonic() - start > args.duration:
                 break
+            # the bus first: each encoder frame is answered before anything else is done
+            # (in lockstep the plant waits for that answer); then the MAVLink side
+            rx = link.recv(timeout_s=0.01)
+            while rx is not None:
+                emit(winch.on_frame(time.monotonic(), rx.arbitration_id, rx.data,
+                                    rx.is_remote))
+                rx = link.recv(timeout_s=0.0)
+            now = time.monotonic()
+            emit(winch.poll(now))
             if mav is not None:
                 mav.poll()
                 winch.set_uav(mav.uav_state())
@@ -112,11 +121,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                     mav.command_ack(reply.command, reply.result, reply.target_system,
                                     reply.target_component)
                     emit(WinchOutput(notices=list(reply.notices)))
-            rx = link.recv(timeout_s=0.01)
-            now = time.monotonic()
-            if rx is not None:
-                emit(winch.on_frame(now, rx.arbitration_id, rx.data, rx.is_remote))
-            emit(winch.poll(now))
             if winch.lost != was_lost:      # the log lines of the stream itself
                 was_lost = winch.lost
                 print(f"groundstation: encoder frames {'lost' if was_lost else 'back'}",
