@@ -101,6 +101,7 @@ _MSG_IDS = {name: getattr(M, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_RATES
 _MSG_NAMES = {v: k for k, v in _MSG_IDS.items()}
 
 _WINCH_ACK_TIMEOUT_S = 0.4
+_INT32_MAX = 2**31 - 1
 
 
 class Telemetry(NamedTuple):
@@ -331,10 +332,15 @@ class Autopilot:
             alt = p[6]
             if frame is not None and frame in _GLOBAL_FRAMES and _GLOBAL_FRAMES[frame] == "amsl":
                 alt = alt - self.origin[2]
-            why = nav.takeoff(alt) if _finite(alt) else "Takeoff: altitude is not a number"
-            result = M.MAV_RESULT_ACCEPTED if why is None else (
-                M.MAV_RESULT_DENIED if "reach" in why or "number" in why or "ground" in why
-                else M.MAV_RESULT_FAILED)
+            here = self._pos()
+            if not (_finite(alt) and alt > 0.0):
+                why, result = f"Takeoff: bad altitude {alt}", M.MAV_RESULT_DENIED
+            elif (bad := nav.check_target((here[0], here[1], alt))) is not None:
+                why, result = f"Takeoff: {bad}", M.MAV_RESULT_DENIED
+            else:
+                # refused only for the vehicle's state (mode, arming, already flying)
+                why = nav.takeoff(alt)
+                result = M.MAV_RESULT_ACCEPTED if why is None else M.MAV_RESULT_FAILED
         elif cmd == M.MAV_CMD_NAV_LAND:
             why = nav.set_mode(FlightMode.LAND)
             result = M.MAV_RESULT_ACCEPTED if why is None else M.MAV_RESULT_FAILED
@@ -667,7 +673,8 @@ class Autopilot:
             raise _ItemError(M.MAV_MISSION_INVALID_PARAM7, "altitude is not a number")
         xy: tuple[float, float] | None = None
         z = self._global_to_local(lat, lon, it.z, frame)[2]
-        if it.x != 0 or it.y != 0:
+        # latitude = longitude = 0, or INT32_MAX ("unset"): where the vehicle is then
+        if (it.x != 0 or it.y != 0) and _INT32_MAX not in (it.x, it.y):
             x, y, _ = self._global_to_local(lat, lon, it.z, frame)
             xy = (x, y)
         if kind == "land":

@@ -57,7 +57,9 @@ class ComponentServer:
         """LOCAL_POSITION_NED at ``component_link.POSITION_RATE_HZ`` of simulated time."""
         if self.conn is None or t_s < self._next_position_s:
             return
-        self._next_position_s = t_s + 1.0 / cl.POSITION_RATE_HZ
+        period = 1.0 / cl.POSITION_RATE_HZ
+        # on the rate on average, whatever the control period
+        self._next_position_s = max(self._next_position_s + period, t_s)
         n = enu_to_ned(pos_enu)
         v = enu_to_ned(vel_enu)
         msg = self.mav.local_position_ned_encode(int(t_s * 1000), *n, *v)

@@ -113,7 +113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             emit(winch.poll(now))
             if mav is not None:
                 mav.poll()
-                winch.set_uav(mav.uav_state())
+                winch.set_uav(mav.uav_state(), mav.uav_state_time_ms())
                 for req in mav.take_commands():
                     reply = winch.command(req, time.monotonic())
                     if reply is None:

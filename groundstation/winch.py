@@ -135,6 +135,9 @@ class WinchParams(Params):
     duplicate_window_s: float = quantity(
         3.0, "s", "a retransmitted COMMAND_LONG within this [wall] is acknowledged again, "
         "not executed again", ge=0)
+    max_extrapolation_s: float = quantity(
+        0.1, "s", "the UAV's reported position is carried forward by its velocity to the "
+        "winch's sample time over gaps up to this", ge=0)
 
 
 class Notice(NamedTuple):
@@ -262,6 +265,8 @@ class Winch:
         self.voltage_v = math.nan
         self.current_a = math.nan
         self.uav: UavState | None = None
+        self.uav_time_ms: int | None = None
+        self.sample_time_ms: int | None = None
         # reference of modes 1, 2, 6 and of RELAXED without a UAV position
         self.ref_m = math.nan
         self.ref_rate_m_s = 0.0
@@ -280,14 +285,32 @@ class Winch:
 
     # ------------------------------------------------------------------------ inputs
 
-    def set_uav(self, state: UavState | None) -> None:
+    def set_uav(self, state: UavState | None, time_ms: int | None = None) -> None:
         """The UAV's latest (position [m], velocity [m/s]), z-up frame with the origin at
-        the winder's exit; ignored if None or not finite."""
+        the winder's exit, and the vehicle's time of it [ms] if known; ignored if None or
+        not finite."""
         if state is None:
             return
         (px, py, pz), (vx, vy, vz) = state
         if _finite(px, py, pz, vx, vy, vz):
             self.uav = ((px, py, pz), (vx, vy, vz))
+            self.uav_time_ms = time_ms
+
+    def uav_now(self) -> UavState | None:
+        """The UAV's state carried forward by its velocity to the winch's sample time
+        (Winch_Tension's Sample_Time, the same clock as the vehicle's time_boot_ms in the
+        simulator), when both times are known and the gap is between 0 and
+        ``max_extrapolation_s``; otherwise as last reported."""
+        if self.uav is None or self.uav_time_ms is None or self.sample_time_ms is None:
+            return self.uav
+        gap_ms = (self.sample_time_ms - self.uav_time_ms) & 0xFFFF
+        if gap_ms >= 0x8000:
+            gap_ms -= 0x10000                 # modulo 65.536 s: the nearer of the two
+        gap = gap_ms * 1e-3
+        if not 0.0 < gap <= self.p.max_extrapolation_s:
+            return self.uav
+        (px, py, pz), (vx, vy, vz) = self.uav
+        return ((px + vx * gap, py + vy * gap, pz + vz * gap), (vx, vy, vz))
 
     @property
     def braked(self) -> bool:
@@ -345,6 +368,7 @@ class Winch:
                 self.sensor_length_m, self.sensor_speed_m_s = wl.length_m, wl.speed_m_s
         elif cmd == cp.SensorCmd.WINCH_TENSION:
             wt = cp.decode_winch_tension(data)
+            self.sample_time_ms = wt.sample_time_ms
             self.sensor_brake = wt.brake_engaged
             if _finite(wt.tension_n):
                 self.tension_n = wt.tension_n
@@ -427,8 +451,9 @@ class Winch:
         tension = self.tension_n if math.isfinite(self.tension_n) else 0.0
         length, omega = self.length_m, self.omega_rad_s
         if self.mode == WinchMode.RELAXED:
-            if self.uav is not None:
-                pos, vel = self.uav
+            uav = self.uav_now()
+            if uav is not None:
+                pos, vel = uav
                 step = self.host.update(length, omega, tension, pos, vel)
                 self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
                 torque = step.torque_n_m

@@ -32,6 +32,7 @@ class WinchLinkClient:
         self._addr = (host, int(port))
         self._deadline = time.monotonic() + connect_timeout_s
         self._state: tuple[Vec3, Vec3] | None = None
+        self._state_ms: int | None = None
         self._last_heartbeat = 0.0
         self._commands: list[CommandRequest] = []
         self.bad_frames = 0
@@ -73,6 +74,7 @@ class WinchLinkClient:
                 kind = m.get_type()
                 if kind == "LOCAL_POSITION_NED":
                     self._state = (ned_to_enu((m.x, m.y, m.z)), ned_to_enu((m.vx, m.vy, m.vz)))
+                    self._state_ms = int(m.time_boot_ms)
                 elif kind in ("COMMAND_LONG", "COMMAND_INT"):
                     self._commands.append(CommandRequest(
                         m.command, m.target_system, m.target_component, m.get_srcSystem(),
@@ -84,6 +86,10 @@ class WinchLinkClient:
             self._send(self.mav.heartbeat_encode(
                 mavlink2.MAV_TYPE_WINCH, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0,
                 mavlink2.MAV_STATE_ACTIVE))
+
+    def uav_state_time_ms(self) -> int | None:
+        """The vehicle's time [ms] (time_boot_ms: simulated time) of :meth:`uav_state`."""
+        return self._state_ms
 
     def uav_state(self) -> tuple[Vec3, Vec3] | None:
         """The latest (position [m], velocity [m/s]) of the UAV, z-up frame, or None."""

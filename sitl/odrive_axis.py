@@ -436,7 +436,8 @@ class WinchSensors:
                                 encode_winch_length(_to_f32(length_m),
                                                     _to_f32(speed_m_s)), False))
             frames.append(Frame(frame_id(self.node_id, SensorCmd.WINCH_TENSION),
-                                encode_winch_tension(_to_f32(tension_n), brake_engaged),
+                                encode_winch_tension(_to_f32(tension_n), brake_engaged,
+                                                     round(t_s * 1000.0) & 0xFFFF),
                                 False))
         if self._hb_schedule.due(t_s):
             healthy = self.load_cell_healthy and math.isfinite(tension_n)

@@ -98,13 +98,15 @@ class WinderCanNode:
         if any(split_id(f.arbitration_id)[1] == Cmd.GET_ENCODER_ESTIMATES and not f.is_remote
                for f in frames):
             self._awaiting = True
-        self._send(frames)
         tf = p.tether_forces()
         wm = p.model.winder
+        # the winch's sensor frames of this instant go first: a host answering the encoder
+        # frame at once then knows the tension and the sample time that go with it
         self._send(self.sensors.tick(
             t_s, p.tether_length_m, omega * p.params.winder.drum_radius_m,
             tf.drum_tension_n, not self.axis.enabled,
             theta <= wm.theta_min + 1e-9, theta >= wm.theta_max - 1e-9))
+        self._send(frames)
         self.await_host(t_s)
         return self.axis.torque_command_nm, self.axis.enabled
 

@@ -1,7 +1,9 @@
 """The benchmarks are not tests; this runs each once in a tiny configuration so they keep
 working (speed is never asserted). The process benchmarks need a private network
-namespace (root); without one they print a skip note, which is checked instead."""
+namespace (root); without one they print a skip note, which is checked instead. The
+command-latency benchmark (plant + companion over TCP) needs none and always runs."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -23,17 +25,31 @@ def test_benchmarks_run_quick():
                 "offline closed loop (circle)", "share: plant physics (Plant.advance)",
                 "share: flight controller (FlightController.update)",
                 "share: winder host (WinderHost.update)",
-                "three-process lockstep stack", "real time 250 Hz, both cores busy",
-                "real time 500 Hz, both cores busy", "Set_Input_Torque -> applied",
-                "COMMAND_LONG -> COMMAND_ACK"):
+                "three-process lockstep stack (scripted mission)",
+                "real time 250 Hz, both cores busy", "real time 500 Hz, both cores busy",
+                "Set_Input_Torque -> applied",
+                "COMMAND_LONG -> COMMAND_ACK, real time 250 Hz, p50",
+                "COMMAND_LONG -> COMMAND_ACK, lockstep, p50"):
         assert row in out, row
     assert "faster than MoorPy" in out
     assert "goal >= 100x" in out and "goal >= 20x" in out or "skipped" in out
-    assert "needs the ground-station endpoints (issue 4)" in out
+    # the command latency: every command answered, in both modes
+    cmd_rows = [ln for ln in out.splitlines() if ln.startswith("COMMAND_LONG -> COMMAND_ACK")]
+    assert len(cmd_rows) == 2, out
+    for ln in cmd_rows:
+        assert re.search(r"\d ms, max [\d.]+ ms over 30 commands;", ln), ln
+        assert "failed" not in ln and "unanswered" not in ln, ln
     if netns_available():
         for row in ("where the time goes: plant", "where the time goes: companion",
-                    "where the time goes: groundstation"):
+                    "where the time goes: groundstation",
+                    "where the time goes: mission client (pymavlink)"):
             assert row in out, row
+        # the scripted mission (its --short hop) was flown to the end, over MAVLink TCP
+        stack_row = next(ln for ln in out.splitlines()
+                         if ln.startswith("three-process lockstep stack"))
+        assert "examples/fly_mission.py --short over MAVLink TCP" in stack_row, stack_row
+        assert "landed and disarmed; items reached: [1, 2, 3]" in stack_row, stack_row
+        assert "mission client (pymavlink)" in stack_row, stack_row
         assert "failed" not in out, out
     else:
         assert "skipped: needs root" in out

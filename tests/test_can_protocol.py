@@ -132,6 +132,9 @@ def test_known_payloads():
     assert cp.encode_set_controller_mode(1, 6) == struct.pack("<II", 1, 6)
     assert cp.decode_winch_heartbeat(bytes([0b1011, 7])) == (True, True, False, True, 7)
     assert cp.encode_winch_tension(10.0, True) == struct.pack("<f", 10.0) + b"\x01\x00\x00\x00"
+    assert cp.encode_winch_tension(10.0, False, 70_000) == (
+        struct.pack("<fBHx", 10.0, 0, 70_000 - 65_536))           # the clock wraps
+    assert cp.decode_winch_tension(cp.encode_winch_tension(1.5, True, 1234)) == (1.5, True, 1234)
     length, speed = cp.decode_winch_length(cp.encode_winch_length(12.25, -0.5))
     assert (length, speed) == (12.25, -0.5)
 

@@ -78,8 +78,10 @@ def test_the_paid_out_length_follows_lbar_and_the_tether_is_never_taut(e2e):
     flying = (armed == 1) & (pos[:, 2] > 0.5)
     assert flying.sum() > 1000
     err = length[flying] - _lbar(pos[flying])
-    assert np.sqrt(np.mean(err**2)) < 0.02                # as the offline runner
-    assert np.max(np.abs(err)) < 0.10
+    # measured 1.5 mm RMSE, 5 mm at most: the ground station carries the UAV's reported
+    # position forward to the winch's sample time, as the offline runner has it at once
+    assert np.sqrt(np.mean(err**2)) < 0.005
+    assert np.max(np.abs(err)) < 0.02
     assert pos[:, 2].max() > 11.5                       # it really flew the mission
 
 

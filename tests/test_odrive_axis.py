@@ -388,8 +388,9 @@ def test_winch_sensor_frames():
     assert {k: len(v) for k, v in by_id.items()} == {0x602: 100, 0x603: 100, 0x601: 10}
     assert by_id[0x602][0] == {"Line_Length": 10.0, "Line_Speed": 1.0}
     assert by_id[0x602][-1]["Line_Length"] == f32(10.99)
-    assert by_id[0x603][0] == {"Tension": 80.0, "Brake_Engaged": 0}
+    assert by_id[0x603][0] == {"Tension": 80.0, "Brake_Engaged": 0, "Sample_Time": 0}
     assert by_id[0x603][-1]["Brake_Engaged"] == 1
+    assert [m["Sample_Time"] for m in by_id[0x603]] == [10 * k for k in range(100)]
     hb = by_id[0x601]
     assert [h["Counter"] for h in hb] == list(range(10))
     assert hb[0] == {"Brake_Engaged": 0, "Load_Cell_Healthy": 1, "At_Full_Stop": 0,

@@ -59,6 +59,9 @@ def test_vehicle_tether_winder_files_replace_their_groups(tmp_path):
     assert exc.value.field == "winder.drum_radius_m"
 
 
-def test_every_port_moves_by_ten_per_instance():
+def test_every_port_moves_per_instance():
     assert tuple(ports_for(0)) == (4560, 5762, 5760, 14550, 14540)
-    assert tuple(ports_for(3)) == (4590, 5792, 5790, 14580, 14570)
+    assert tuple(ports_for(3)) == (4590, 5792, 5790, 14580, 14543)
+    # no instance's API port is another's ground-station port
+    gcs = {ports_for(i).udp_gcs for i in range(10)}
+    assert not gcs & {ports_for(i).udp_api for i in range(10)}

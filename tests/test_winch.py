@@ -575,3 +575,18 @@ def test_closed_loop_encoder_loss_brakes_and_recovers():
     assert b.axis.enabled and b.axis.active_errors == 0
     assert b.omega * R_W == pytest.approx(0.2, abs=0.02)        # the rate mode resumed
     assert b.length > held + 0.1
+
+
+def test_the_uav_position_is_carried_to_the_winch_sample_time():
+    w = make_winch()
+    state = ((3.0, 4.0, 10.0), (2.0, -1.0, 0.5))
+    w.set_uav(state, time_ms=65_530)
+    assert w.uav_now() == state                     # no sample time yet: as reported
+    w.on_frame(0.0, cp.frame_id(cp.WINCH_SENSOR_NODE_ID_DEFAULT, cp.SensorCmd.WINCH_TENSION),
+               cp.encode_winch_tension(9.0, False, 65_530 + 40))   # 40 ms later, wrapped
+    (px, py, pz), vel = w.uav_now()
+    assert (px, py, pz) == pytest.approx((3.08, 3.96, 10.02)) and vel == state[1]
+    w.set_uav(state, time_ms=100)                   # newer than the sample: as reported
+    assert w.uav_now() == state
+    w.set_uav(state, time_ms=65_530 + 40 - 500)     # too old to carry forward
+    assert w.uav_now() == state

@@ -97,8 +97,9 @@ class Stack:
         """Start a process that needs no readiness check (its output goes to its log)."""
         log = open(self.run_dir / f"{name}.log", "w")  # noqa: SIM115
         self.logs[name] = log
-        self.recorders[name] = subprocess.Popen([sys.executable, *args], stdout=log,
-                                                stderr=subprocess.STDOUT,
+        # its frames go to the file it is given; its log keeps what it says on stderr
+        self.recorders[name] = subprocess.Popen([sys.executable, *args],
+                                                stdout=subprocess.DEVNULL, stderr=log,
                                                 start_new_session=True)
 
     def echo_new(self) -> None:
@@ -206,6 +207,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="when starting in the air, fly here [m] at once")
     ap.add_argument("--duration", type=float, default=None,
                     help="stop after [s] of simulated time")
+    ap.add_argument("--parm", default=None, metavar="FILE",
+                    help="start the companion with these ground-station parameters (.parm, "
+                         "e.g. a previous run's companion.parm or MAVProxy's 'param save')")
     ap.add_argument("--logdir", default="runs", help="where run folders go")
     ap.add_argument("--instance", type=int, default=0,
                     help="offset every port (by 10 per instance) to run stacks side by side")
@@ -251,10 +255,13 @@ class Ports(NamedTuple):
 
 
 def ports_for(instance: int) -> Ports:
-    """ArduPilot's convention: every port moves by 10 per instance."""
+    """ArduPilot's convention: every port moves by 10 per instance; except the API port,
+    which moves by 1 as PX4's does (14540 + I), so that it never lands on another
+    instance's ground-station port."""
     k = INSTANCE_PORT_STEP * instance
     return Ports(sl.SIM_PORT_DEFAULT + k, cl.COMPONENT_PORT_DEFAULT + k,
-                 GCS_TCP_PORT_DEFAULT + k, UDP_GCS_PORT_DEFAULT + k, UDP_API_PORT_DEFAULT + k)
+                 GCS_TCP_PORT_DEFAULT + k, UDP_GCS_PORT_DEFAULT + k,
+                 UDP_API_PORT_DEFAULT + instance)
 
 
 def run_up(args: argparse.Namespace) -> int:
@@ -277,6 +284,12 @@ def run_up(args: argparse.Namespace) -> int:
     from tuav_sitl.offline import _to_toml  # the same writer as the offline runner's
 
     (run_dir / "params.toml").write_text(_to_toml(to_dict(params)))
+    if args.parm is not None:
+        try:
+            (run_dir / "companion.parm").write_text(Path(args.parm).read_text())
+        except OSError as exc:
+            print(f"tuav-sitl up: --parm: {exc}", file=sys.stderr)
+            return 2
     can = _can_spec(args.can, args.instance)
     home = [str(v) for v in args.home]
     common = ["--params", str(run_dir / "params.toml")]

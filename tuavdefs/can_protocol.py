@@ -415,6 +415,8 @@ class WinchTension(NamedTuple):
 
     tension_n: float
     brake_engaged: bool
+    sample_time_ms: int = 0
+    """The winch's clock when it sampled [ms], modulo 65536 (the simulator's time)."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -591,17 +593,20 @@ def decode_winch_length(data: bytes) -> WinchLength:
     return WinchLength(*struct.unpack_from("<ff", data))
 
 
-def encode_winch_tension(tension_n: float, brake_engaged: bool) -> bytes:
+def encode_winch_tension(tension_n: float, brake_engaged: bool,
+                         sample_time_ms: int = 0) -> bytes:
     """Winch_Tension payload (8 bytes): f32 Tension [N] at the drum, u8 Brake_Engaged,
-    3 zero pad bytes."""
-    return _pack("Winch_Tension", "<fB3x", _f32(tension_n), 1 if brake_engaged else 0)
+    u16 Sample_Time [ms] (the winch's clock modulo 65536, so a host can tell how old other
+    data are against it), 1 zero pad byte."""
+    return _pack("Winch_Tension", "<fBHx", _f32(tension_n), 1 if brake_engaged else 0,
+                 int(sample_time_ms) & 0xFFFF)
 
 
 def decode_winch_tension(data: bytes) -> WinchTension:
-    """Decode Winch_Tension (5..8 bytes)."""
-    data = _check_len("Winch_Tension", data, 5)
-    tension, brake = struct.unpack_from("<fB", data)
-    return WinchTension(tension, bool(brake))
+    """Decode Winch_Tension (7..8 bytes)."""
+    data = _check_len("Winch_Tension", data, 7)
+    tension, brake, stamp = struct.unpack_from("<fBH", data)
+    return WinchTension(tension, bool(brake), stamp)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -684,7 +689,8 @@ MESSAGES: tuple[MessageSpec, ...] = (
     _spec("Winch_Length", SensorCmd.WINCH_LENGTH, "sensor", "sensor->host", 8, 0.01, False,
           ("Line_Length", "Line_Speed"), 8, encode_winch_length, decode_winch_length),
     _spec("Winch_Tension", SensorCmd.WINCH_TENSION, "sensor", "sensor->host", 8, 0.01, False,
-          ("Tension", "Brake_Engaged"), 5, encode_winch_tension, decode_winch_tension),
+          ("Tension", "Brake_Engaged", "Sample_Time"), 7, encode_winch_tension,
+          decode_winch_tension),
 )
 """Every frame on the winder bus. Axis frames are ``frame_id(axis_node, cmd_id)``, sensor
 frames ``frame_id(sensor_node, cmd_id)``."""

@@ -2,7 +2,7 @@
 components, here the ground station's winch.
 
 The companion listens on TCP 127.0.0.1:5762 (ArduPilot SITL's second serial port) and sends
-the UAV's ``LOCAL_POSITION_NED`` (50 Hz of simulated time); the winch component (system 1,
+the UAV's ``LOCAL_POSITION_NED`` (100 Hz of simulated time); the winch component (system 1,
 component 169 ``MAV_COMP_ID_WINCH``) sends ``WINCH_STATUS`` and a ``HEARTBEAT`` with
 autopilot ``MAV_AUTOPILOT_INVALID`` and type ``MAV_TYPE_WINCH`` so that ground stations do
 not take it for a second vehicle. MAVLink 2.
@@ -16,7 +16,7 @@ COMPONENT_PORT_DEFAULT = 5762
 SYSTEM_ID = 1
 AUTOPILOT_COMPONENT_ID = 1
 WINCH_COMPONENT_ID = mavlink2.MAV_COMP_ID_WINCH          # 169
-POSITION_RATE_HZ = 50.0
+POSITION_RATE_HZ = 100.0
 
 
 def winch_status_flags(brake_engaged: bool, moving: bool, healthy: bool = True) -> int:
