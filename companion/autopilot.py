@@ -305,7 +305,15 @@ class Autopilot:
 
     def _command(self, peer: Peer, msg: Any, cmd: int, p: list[float],
                  frame: int | None) -> None:
-        """Run one command and answer it with one COMMAND_ACK."""
+        """Run one command and answer it with one COMMAND_ACK, whatever happens."""
+        try:
+            self._run_command(peer, msg, cmd, p, frame)
+        except Exception as exc:  # noqa: BLE001 - the sender still gets its answer
+            self.log(f"command {cmd} failed: {exc!r}")
+            self._ack(peer, msg, cmd, M.MAV_RESULT_FAILED)
+
+    def _run_command(self, peer: Peer, msg: Any, cmd: int, p: list[float],
+                     frame: int | None) -> None:
         self.counters["commands"] += 1
         nav = self.nav
         result = M.MAV_RESULT_ACCEPTED
