@@ -5,10 +5,12 @@ Machines here are noisy, so each figure that has a reference is measured against
 the same run, interleaved, and reported as a ratio of medians. ``--quick`` runs each
 benchmark once in a tiny configuration (the test suite does this to keep them working).
 
-The benchmarks of the three processes (lockstep stack, real-time pacing under load, torque
-latency) run in a private network namespace (``benchmarks/session.py``): the CAN bus is
-IPv4 multicast, which must not leave the host. Without root they are skipped with a note.
-Each goal of docs/performance.md is printed beside its measurement.
+The benchmarks of the three processes (the lockstep stack flying the scripted MAVLink
+mission, real-time pacing under load, torque latency) run in a private network namespace
+(``benchmarks/session.py``): the CAN bus is IPv4 multicast, which must not leave the host.
+Without root they are skipped with a note. The COMMAND_LONG -> COMMAND_ACK latency
+(``benchmarks/command_latency.py``: plant and companion, no CAN, TCP on 127.0.0.1) needs no
+namespace. Each goal of docs/performance.md is printed beside its measurement.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from benchmarks.machine import Load, LoadMeter
 
 
 @dataclass
@@ -231,22 +235,51 @@ def bench_offline(quick: bool) -> list[Row]:
     return rows
 
 
-#: Rows that wait for parts still being built.
-NOT_YET = [
-    ("COMMAND_LONG -> COMMAND_ACK latency", "needs the ground-station endpoints (issue 4)"),
-]
+def bench_command_latency(quick: bool) -> list[Row]:
+    """COMMAND_LONG -> COMMAND_ACK over the companion's MAVLink TCP endpoint, p50 and p99
+    [ms]: in real time at 250 Hz, then in lockstep as fast as the two processes go."""
+    import tempfile
+    from pathlib import Path
+
+    from benchmarks import command_latency
+
+    n = 30 if quick else 300
+    rows: list[Row] = []
+    with tempfile.TemporaryDirectory(prefix="tuav-bench-cmd-") as work:
+        for real_time, label in ((True, "real time 250 Hz"), (False, "lockstep")):
+            name = f"COMMAND_LONG -> COMMAND_ACK, {label}, p50"
+            try:
+                res = command_latency.measure(Path(work) / label.split()[0], n, real_time)
+            except Exception as exc:  # noqa: BLE001 - reported in the table
+                rows.append(Row(name, math.nan, "", note=f"failed: {type(exc).__name__}: "
+                                f"{exc}"[-300:]))
+                continue
+            lost = (f"; {res['unanswered']} unanswered, {res['refused']} refused"
+                    if res["unanswered"] or res["refused"] else "")
+            rows.append(Row(
+                name, 1e3 * res["p50_s"], "ms",
+                note=f"p99 {1e3 * res['p99_s']:.2f} ms, max {1e3 * res['max_s']:.2f} ms over "
+                     f"{res['n']} commands{lost}; DO_CHANGE_SPEED to the companion's TCP "
+                     f"endpoint, pymavlink, one at a time; plant + companion, "
+                     f"{res['sim_s'] / res['wall_s']:.1f}x real time",
+                goal="measured, no goal"))
+    return rows
+
+
+#: How the process rows name the processes.
+_PROCESS_LABELS = {"client": "mission client (pymavlink)"}
 
 
 def _proc_rows_skipped(why: str) -> list[Row]:
     return [Row(name, math.nan, "", note=f"skipped: {why}") for name in (
-        "three-process lockstep stack", "real time 250 Hz, both cores busy",
+        "three-process lockstep stack (scripted mission)", "real time 250 Hz, both cores busy",
         "real time 500 Hz, both cores busy", "Set_Input_Torque -> applied in the plant")]
 
 
 def bench_processes(quick: bool) -> list[Row]:
     """The three processes over their links, in a private network namespace
-    (``benchmarks/session.py``): lockstep speed and where the time goes, real-time pacing
-    under load, torque-command latency."""
+    (``benchmarks/session.py``): lockstep speed flying the scripted MAVLink mission and
+    where the time goes, real-time pacing under load, torque-command latency."""
     import json
     import tempfile
     from pathlib import Path
@@ -266,22 +299,28 @@ def bench_processes(quick: bool) -> list[Row]:
     out = json.loads(res.stdout.strip().splitlines()[-1])
     rows: list[Row] = []
     ls = out.get("lockstep", {})
+    stack_name = "three-process lockstep stack (scripted mission)"
     if "rtf" in ls:
         cpu = ls["cpu_s"]
         rows.append(Row(
-            "three-process lockstep stack", ls["rtf"], "sim s / wall s",
-            note=f"goto flight, {ls['sim_s']:.0f} s simulated in {ls['wall_s']:.2f} s; CPU "
-                 + ", ".join(f"{k} {v:.2f} s" for k, v in cpu.items()),
+            stack_name, ls["rtf"], "sim s / wall s",
+            note=f"{ls['flight']} over MAVLink TCP, from the ground: "
+                 f"{ls['sim_s']:.0f} s simulated in "
+                 f"{ls['wall_s']:.2f} s; {ls['mission']}; CPU (per control period) "
+                 + ", ".join(f"{_PROCESS_LABELS.get(k, k)} {v:.2f} s "
+                             f"({v / (ls['sim_s'] * 250.0) * 1e6:.0f} us)"
+                             for k, v in cpu.items()),
             goal=f">= 20x: {'met' if ls['rtf'] >= 20.0 else 'NOT met'}"))
         for name, shares in ls["shares"].items():
             per_period_us = (ls["profiled_s"][name] / ls["profiled_sim_s"] * 1e6 / 250.0)
             rows.append(Row(
-                f"  where the time goes: {name}", per_period_us, "us / period (prof.)",
+                f"  where the time goes: {_PROCESS_LABELS.get(name, name)}", per_period_us,
+                "us / period (prof.)",
                 note=", ".join(f"{k} {100 * v:.0f}%" for k, v in sorted(
-                    shares.items(), key=lambda kv: -kv[1]) if v >= 0.005)))
+                    shares.items(), key=lambda kv: -kv[1]) if v >= 0.005)
+                + (f"; profiled run {ls['profiled_rtf']:.2f}x" if name == "plant" else "")))
     else:
-        rows.append(Row("three-process lockstep stack", math.nan, "",
-                        note=f"failed: {ls.get('error', '?')}"))
+        rows.append(Row(stack_name, math.nan, "", note=f"failed: {ls.get('error', '?')}"))
     for rate in (250, 500):
         rt = out.get(f"realtime_{rate}", {})
         name = f"real time {rate} Hz, both cores busy: period jitter p99"
@@ -314,14 +353,20 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__)
     ap.add_argument("--quick", action="store_true", help="tiny configuration, for tests")
     ap.add_argument("--no-processes", action="store_true",
-                    help="skip the benchmarks of the three processes")
+                    help="skip the benchmarks that start the processes (the stack, real "
+                         "time, the torque and command latencies)")
     args = ap.parse_args(argv)
     rows: list[Row] = []
     benches = [bench_tether, bench_plant_step, bench_offline]
     if not args.no_processes:
-        benches.append(bench_processes)
+        benches += [bench_processes, bench_command_latency]
+    loads: list[tuple[str, Load]] = []
+    total = LoadMeter()
     for bench in benches:
+        meter = LoadMeter()
         rows.extend(bench(args.quick))
+        loads.append((bench.__name__.removeprefix("bench_").replace("_", " "), meter.load()))
+    whole = total.load()
     print(f"tuav-sitl benchmarks{' (quick)' if args.quick else ''}: "
           f"{platform.python_implementation()} {platform.python_version()}, "
           f"{platform.machine()}, {os.cpu_count()} cores")
@@ -332,8 +377,11 @@ def main(argv: list[str] | None = None) -> int:
                                       else "") if x)
         value = f"{r.value:12.4g}" if math.isfinite(r.value) else f"{'-':>12s}"
         print(f"{r.name:56s} {value} {r.unit:16s} {ref}  {extra}")
-    for name, why in NOT_YET:
-        print(f"{name:56s} {'-':>12s} {'':16s} {'':10s}  {why}")
+    print(f"the rest of the machine meanwhile (benchmarks/machine.py): other processes "
+          f"{whole.other_s:.1f} s of CPU in {whole.wall_s:.0f} s "
+          f"({100 * whole.other_fraction:.0f} % of the cores), host steal "
+          f"{100 * whole.steal_fraction:.0f} %; other processes by benchmark: "
+          + ", ".join(f"{name} {100 * load.other_fraction:.0f} %" for name, load in loads))
     return 0
 
 

@@ -1,11 +1,13 @@
 """The benchmarks that need the processes and the CAN bus, run inside one private network
 namespace by ``python -m benchmarks``: ``python -m benchmarks.session WORK [--quick]``.
 
-- the three-process stack in lockstep: simulated s per wall s, each process's CPU time,
-  and where each process's time goes (cProfile from the flight's start to its end, by
-  category);
+- the three-process stack in lockstep flying the scripted MAVLink mission
+  (``examples/fly_mission.py`` from the ground; ``--quick``: its ``--short`` hop):
+  simulated s per wall s, each process's CPU time, and where each process's time goes
+  (cProfile from the flight's start to its end, by category);
 - real time at 250 Hz and 500 Hz with every core also running a busy loop: the plant's
-  pacing (period jitter, late batches) and the companion's missed deadlines;
+  pacing (period jitter, late batches) and the companion's missed deadlines (the goto
+  flight from hover trim for a fixed time: in real time the mission would take its 86 s);
 - the latency of a ``Set_Input_Torque`` frame to the plant steps that apply it.
 
 Prints one JSON line.
@@ -31,33 +33,49 @@ _PACING = re.compile(
     rf"{_NUM} ms, missed deadlines {_NUM} % of (\d+) periods")
 
 
+def _mission_outcome(client_log: str) -> str:
+    """The mission client's last line (``landed and disarmed; items reached: [...]``), or
+    its last words if it failed."""
+    lines = client_log.strip().splitlines()
+    return lines[-1][-200:] if lines else "no output"
+
+
 def lockstep(work: Path, quick: bool) -> dict:
-    """The stack in lockstep: speed and CPU, then where the time goes (a second run, every
-    process under cProfile from the flight's start to its end)."""
-    duration = 1.0 if quick else 10.0
-    run = stack.run_stack(work / "lockstep", duration)
-    out: dict = {"sim_s": run.sim_s, "wall_s": run.wall_s, "rtf": run.real_time_factor,
+    """The stack in lockstep flying the scripted mission: speed and CPU, then where the time
+    goes (a second run, every process under cProfile from the flight's start to its end)."""
+    flight = stack.mission_flight(short=quick)
+    run = stack.run_stack(work / "lockstep", flight=flight)
+    client = run.processes["client"]
+    out: dict = {"flight": f"{stack.MISSION_SCRIPT}{' --short' if quick else ''}",
+                 "sim_s": run.sim_s, "wall_s": run.wall_s, "rtf": run.real_time_factor,
                  "cpu_s": {k: v.cpu_s for k, v in run.processes.items()},
-                 "exit": {k: v.exit_code for k, v in run.processes.items()}}
-    prof = stack.run_stack(work / "profile", duration, profile=True)
+                 "exit": {k: v.exit_code for k, v in run.processes.items()},
+                 "mission": _mission_outcome(client.log)}
+    if client.exit_code != 0:
+        raise RuntimeError(f"the mission client failed ({client.exit_code}): "
+                           f"{client.log[-300:]}")
+    prof = stack.run_stack(work / "profile", flight=flight, profile=True)
     out["profiled_rtf"] = prof.real_time_factor
     out["profiled_sim_s"] = prof.sim_s
+    out["profiled_mission"] = _mission_outcome(prof.processes["client"].log)
     out["shares"], out["profiled_s"] = {}, {}
-    for name in stack.PROCESSES:
+    for name in (*stack.PROCESSES, "client"):
         path = work / "profile" / f"{name}.prof"
         out["shares"][name] = prof.processes[name].shares
         out["profiled_s"][name] = pstats.Stats(str(path)).total_tt  # type: ignore[attr-defined]
     return out
 
 
-def real_time(work: Path, quick: bool, rate_hz: float) -> dict:
+def real_time(work: Path, quick: bool, rate_hz: float, priority: str | None = None) -> dict:
     """Real time at ``rate_hz`` [Hz] with a busy loop per core (started when the companion
-    connects, so that the processes start as they would)."""
+    connects, so that the processes start as they would); ``priority``: scheduling given to
+    the three processes (:data:`benchmarks.stack.PRIORITIES`; None: as they start)."""
     loads: list = []
     try:
         run = stack.run_stack(
-            work / f"realtime-{rate_hz:.0f}", 2.0 if quick else 10.0, real_time=True,
-            control_rate_hz=rate_hz,
+            work / f"realtime-{rate_hz:.0f}", 2.0 if quick else 10.0,
+            flight=stack.goto_flight(), real_time=True,
+            control_rate_hz=rate_hz, priority=priority,
             on_connected=lambda: loads.extend(stack.busy_loads(os.cpu_count() or 2)))
     finally:
         for p in loads:
@@ -79,14 +97,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.session", description=__doc__)
     ap.add_argument("work", help="folder for logs and profiles")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--only", action="append", default=None,
+                    choices=("lockstep", "realtime_250", "realtime_500", "latency"),
+                    help="run only these (repeatable)")
+    ap.add_argument("--priority", choices=stack.PRIORITIES, default=None,
+                    help="experiment: give the processes of the real-time runs this "
+                         "scheduling (fifo, nice: root; slice: Linux 6.12+)")
     args = ap.parse_args(argv)
     work = Path(args.work)
     out: dict = {}
     for name, fn in (("lockstep", lambda: lockstep(work, args.quick)),
-                     ("realtime_250", lambda: real_time(work, args.quick, 250.0)),
-                     ("realtime_500", lambda: real_time(work, args.quick, 500.0)),
+                     ("realtime_250", lambda: real_time(work, args.quick, 250.0,
+                                                        args.priority)),
+                     ("realtime_500", lambda: real_time(work, args.quick, 500.0,
+                                                        args.priority)),
                      ("latency", lambda: latency.measure(work / "latency",
                                                          1.0 if args.quick else 5.0))):
+        if args.only and name not in args.only:
+            continue
         try:
             out[name] = fn()
         except Exception as exc:  # noqa: BLE001 - one failed benchmark must not hide the rest

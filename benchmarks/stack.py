@@ -2,12 +2,23 @@
 
 Starts the plant, the ground station and the companion as ``tuav-sitl up --speedup max``
 does (lockstep, the winder on a udp_multicast CAN bus, the component link between companion
-and winch), flies one flight (:func:`goto_flight`: the companion flies to a goal, until the
-scripted MAVLink mission replaces it), and reports simulated seconds per wall second from
-the plant's own summary and each process's CPU time. With ``--profile`` every process runs
-under cProfile (``python -m benchmarks.profiled FILE -m ...``, which is ``python -m
-cProfile -o FILE -m ...`` profiling only from the flight's start, signalled when the
-companion has connected, to its end; each process exits normally: the plant at
+and winch) and flies one flight (:class:`Flight`):
+
+- :func:`mission_flight` (the benchmark's): the UAV rests on its gear at (2, 0, 0) m; once
+  the companion has connected to the plant, ``examples/fly_mission.py`` connects to the
+  companion's MAVLink TCP endpoint and flies its scripted mission (GUIDED, arm, take-off
+  to 10 m, a loiter-turns circle and three waypoints in AUTO, land, disarm: about 86 s of
+  simulated time; ``--short`` for a 2 m hop). When the script exits, the plant is stopped
+  with SIGTERM and prints its summary.
+- :func:`goto_flight` (the real-time runs): the UAV starts in hover trim and the companion
+  flies to a goal; the plant stops at ``--duration``.
+
+It reports simulated seconds per wall second from the plant's own summary and each
+process's CPU time (the mission client's too). With ``--profile`` every process runs under
+cProfile (``python -m benchmarks.profiled FILE -m ...``, which is ``python -m cProfile -o
+FILE -m ...`` profiling only from the flight's start, signalled when the companion has
+connected (the client: when it has connected to the vehicle), to its end; each process
+exits normally: the client when its mission is over, the plant on SIGTERM or at
 ``--duration``, the companion when the plant closes the link, the ground station on
 SIGTERM), and the profiles are aggregated by category (:data:`CATEGORIES`).
 
@@ -105,10 +116,48 @@ def profile_shares(path: Path) -> dict[str, float]:
     return {k: v / total for k, v in by_cat.items()}
 
 
-def goto_flight(goal_m: Sequence[float] = GOAL_M) -> list[str]:
-    """The companion's arguments for the benchmark's flight: fly to ``goal_m`` [m] and
-    hold. The one function to replace by a scripted MAVLink mission."""
-    return ["--goto", *map(str, goal_m)]
+@dataclass(frozen=True)
+class Flight:
+    """What a run of the stack flies.
+
+    ``start_m``: where the plant starts the UAV [m], z-up frame (in hover trim, or resting
+    on its gear if the height is 0); ``companion_args``: the companion's extra arguments;
+    ``client``: if not empty, the command line (after the Python interpreter) of a MAVLink
+    client started once the companion has connected, ``{port}`` standing for the companion's
+    MAVLink TCP port; the flight ends when it exits (the plant is then stopped). Without a
+    client the plant stops at the run's duration. ``client_ready``: text the client prints
+    when it has connected to the vehicle (its profile starts there)."""
+
+    name: str
+    start_m: tuple[float, float, float]
+    companion_args: tuple[str, ...] = ()
+    client: tuple[str, ...] = ()
+    client_ready: str = ""
+
+
+def goto_flight(goal_m: Sequence[float] = GOAL_M) -> Flight:
+    """From hover trim at :data:`START_M`, the companion flies to ``goal_m`` [m] and holds
+    (``--goto``); the real-time runs fly this, for a fixed duration."""
+    return Flight("goto", START_M, ("--goto", *map(str, goal_m)))
+
+
+#: Where the mission flight starts [m]: on the ground, resting on the gear.
+MISSION_START_M = (2.0, 0.0, 0.0)
+#: The scripted mission: the example pymavlink script, relative to the repository root.
+MISSION_SCRIPT = "examples/fly_mission.py"
+#: The mission client's own time limit [s] of wall time.
+MISSION_TIMEOUT_S = 900.0
+
+
+def mission_flight(short: bool = False) -> Flight:
+    """The benchmark's flight: from the ground, ``examples/fly_mission.py`` flies its
+    scripted mission over the companion's MAVLink TCP endpoint (``short``: its ``--short``
+    hop, take-off to 2 m, one waypoint, land). The companion listens on any free TCP port
+    and pushes no UDP."""
+    return Flight("mission", MISSION_START_M, ("--gcs-tcp", "0", "--gcs-udp", "none"),
+                  (MISSION_SCRIPT, "--connect", "tcp:127.0.0.1:{port}", "--timeout",
+                   str(MISSION_TIMEOUT_S), *(("--short",) if short else ())),
+                  client_ready="connected to system")
 
 
 @dataclass
@@ -125,9 +174,11 @@ class ProcessResult:
 
 @dataclass
 class StackResult:
-    """A run of the stack: simulated [s] and wall [s] time from the plant's summary, and
-    the processes'."""
+    """A run of the stack: the flight's name, simulated [s] and wall [s] time from the
+    plant's summary, and the processes' (with the mission client's, ``"client"``, if the
+    flight has one)."""
 
+    flight: str
     sim_s: float
     wall_s: float
     processes: dict[str, ProcessResult]
@@ -180,21 +231,75 @@ def _reap(proc: subprocess.Popen, timeout_s: float) -> tuple[int, float]:
         time.sleep(0.01)
 
 
+#: Scheduling the stack's processes can be given (``priority`` of :func:`run_stack`), for
+#: experiments: ``fifo``: SCHED_FIFO priority 10 (root, or CAP_SYS_NICE / RLIMIT_RTPRIO);
+#: ``nice``: nice -10 (the same); ``slice``: a 0.1 ms EEVDF slice (``sched_setattr``
+#: ``sched_runtime`` of a SCHED_OTHER task, Linux 6.12 and later, unprivileged), which lets
+#: a woken process preempt a task running a longer slice.
+PRIORITIES = ("fifo", "nice", "slice")
+#: The requested slice of ``slice`` [ns].
+SLICE_NS = 100_000
+_SYS_SCHED_SETATTR = {"x86_64": 314, "aarch64": 274}
+
+
+def _set_slice(tid: int, slice_ns: int) -> None:
+    """Ask for an EEVDF slice of ``slice_ns`` [ns] for thread ``tid`` (SCHED_OTHER, nice 0)."""
+    import ctypes
+    import platform
+    import struct
+
+    number = _SYS_SCHED_SETATTR.get(platform.machine())
+    if number is None:
+        raise OSError(f"sched_setattr: unknown system call number on {platform.machine()}")
+    # struct sched_attr (SCHED_ATTR_SIZE_VER1, 56 bytes): size, policy, flags, nice,
+    # priority, runtime, deadline, period, util_min, util_max
+    attr = ctypes.create_string_buffer(struct.pack("IIQiIQQQII", 56, 0, 0, 0, 0, slice_ns,
+                                                   0, 0, 0, 0))
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.syscall(number, tid, attr, 0) != 0:
+        err = ctypes.get_errno()
+        raise OSError(err, f"sched_setattr: {os.strerror(err)}")
+
+
+def set_priority(pid: int, how: str) -> None:
+    """Give every thread of process ``pid`` the scheduling ``how`` (:data:`PRIORITIES`)."""
+    for tid in map(int, os.listdir(f"/proc/{pid}/task")):
+        if how == "fifo":
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(10))
+        elif how == "nice":
+            os.setpriority(os.PRIO_PROCESS, tid, -10)
+        elif how == "slice":
+            _set_slice(tid, SLICE_NS)
+        else:
+            raise ValueError(f"unknown priority {how!r}")
+
+
 def busy_loads(n: int) -> list[subprocess.Popen]:
     """``n`` processes that spin on a CPU each (the second load of the real-time runs)."""
     return [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
 
 
-def run_stack(work: Path, duration_s: float,
-              flight: Callable[[], list[str]] = goto_flight, profile: bool = False,
-              real_time: bool = False, control_rate_hz: float = 250.0,
-              plant_extra: Sequence[str] = (),
+def _profiled(work: Path, name: str, profile: bool) -> list[str]:
+    """The interpreter arguments that run a process under :mod:`benchmarks.profiled`."""
+    return ["-m", "benchmarks.profiled", str(work / f"{name}.prof")] if profile else []
+
+
+def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None = None,
+              profile: bool = False, real_time: bool = False,
+              control_rate_hz: float = 250.0, plant_extra: Sequence[str] = (),
+              priority: str | None = None,
               on_connected: Callable[[], object] | None = None) -> StackResult:
-    """Run the three processes for ``duration_s`` [s] of simulated time in ``work`` (logs,
-    profiles, truth series) and return what they did: in lockstep, or paced by the wall
-    clock (``real_time``), at ``control_rate_hz`` [Hz] (the companion's gains get the same
-    rate). ``on_connected`` is called when the companion has connected to the plant (the
-    flight begins)."""
+    """Run the three processes in ``work`` (logs, profiles, truth series) and return what
+    they did: in lockstep, or paced by the wall clock (``real_time``), at
+    ``control_rate_hz`` [Hz] (the companion's gains get the same rate), flying ``flight``
+    (default :func:`goto_flight`). The plant stops after ``duration_s`` [s] of simulated
+    time without a client, and once the flight's client has exited with one (then without
+    a duration). ``priority`` (:data:`PRIORITIES`) is given to the three processes when the
+    companion has connected; ``on_connected`` is called then too (the flight begins)."""
+    flight = flight if flight is not None else goto_flight()
+    if (duration_s is None) == (not flight.client):
+        raise ValueError("a flight without a client needs a duration; one with a client "
+                         "ends with it")
     work.mkdir(parents=True, exist_ok=True)
     sim_port, comp_port = _free_port(), _free_port()
     can = "udp_multicast"
@@ -205,14 +310,15 @@ def run_stack(work: Path, duration_s: float,
         gains = ["--gains", str(work / "gains.toml")]
     commands = {
         "plant": ["-m", "sitl", "--port", str(sim_port), "--can", can, "--position",
-                  *map(str, START_M), "--duration", str(duration_s),
+                  *map(str, flight.start_m),
+                  *(["--duration", str(duration_s)] if duration_s is not None else []),
                   "--control-rate", str(float(control_rate_hz)),
                   "--truth-log", str(work / "truth.csv"),
                   *(["--real-time"] if real_time else []), *plant_extra],
         "groundstation": ["-m", "groundstation", "--can", can, "--mavlink",
                           f"127.0.0.1:{comp_port}"],
         "companion": ["-m", "companion", "--sim", f"127.0.0.1:{sim_port}",
-                      "--component-port", str(comp_port), *gains, *flight()],
+                      "--component-port", str(comp_port), *gains, *flight.companion_args],
     }
     ready = {"plant": "listening on", "groundstation": "groundstation: CAN",
              "companion": None}
@@ -220,27 +326,51 @@ def run_stack(work: Path, duration_s: float,
     logs: dict[str, Path] = {}
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]))
+    results: dict[str, ProcessResult] = {}
     try:
         for name in PROCESSES:
             logs[name] = work / f"{name}.log"
-            prof = (["-m", "benchmarks.profiled", str(work / f"{name}.prof")] if profile
-                    else [])
             with open(logs[name], "w") as log:
-                procs[name] = subprocess.Popen([py, *prof, *commands[name]], cwd=ROOT,
-                                               stdout=log, stderr=subprocess.STDOUT, env=env)
+                procs[name] = subprocess.Popen([py, *_profiled(work, name, profile),
+                                                *commands[name]], cwd=ROOT, stdout=log,
+                                               stderr=subprocess.STDOUT, env=env)
             if ready[name]:
                 _wait_ready(procs[name], logs[name], ready[name])
         # the flight starts when the companion connects: each process's CPU time so far
         # (start-up) is left out of its figure
         _wait_ready(procs["companion"], logs["companion"], "companion: connected")
         start_cpu = {name: _cpu_s(p.pid) for name, p in procs.items()}
+        if priority is not None:
+            for p in procs.values():
+                set_priority(p.pid, priority)
         if profile:   # the flight begins: profile from here (benchmarks.profiled)
             for p in procs.values():
                 p.send_signal(signal.SIGUSR1)
         if on_connected is not None:
             on_connected()
-        results: dict[str, ProcessResult] = {}
-        code, cpu = _reap(procs["plant"], 60.0 + 50.0 * duration_s)
+        if flight.client:
+            m = re.search(r"MAVLink on tcp:127\.0\.0\.1:(\d+)", logs["companion"].read_text())
+            if m is None:
+                raise RuntimeError("the companion has no MAVLink TCP endpoint")
+            args = [a.replace("{port}", m.group(1)) for a in flight.client]
+            logs["client"] = work / "client.log"
+            with open(logs["client"], "w") as log:
+                procs["client"] = subprocess.Popen(
+                    [py, *_profiled(work, "client", profile), *args], cwd=ROOT, stdout=log,
+                    stderr=subprocess.STDOUT, env=dict(env, PYTHONUNBUFFERED="1"))
+            # its start-up (imports) is left out of its figure, as the others'
+            _wait_ready(procs["client"], logs["client"], flight.client_ready)
+            start_cpu["client"] = _cpu_s(procs["client"].pid)
+            if profile:
+                procs["client"].send_signal(signal.SIGUSR1)
+            code, cpu = _reap(procs["client"], MISSION_TIMEOUT_S + 60.0)
+            results["client"] = ProcessResult(code, cpu - start_cpu["client"], "")
+            procs["plant"].send_signal(signal.SIGTERM)   # it prints its summary and exits
+            plant_budget_s = 60.0
+        else:
+            assert duration_s is not None
+            plant_budget_s = 60.0 + 50.0 * duration_s
+        code, cpu = _reap(procs["plant"], plant_budget_s)
         if profile and procs["groundstation"].poll() is None:
             procs["groundstation"].send_signal(signal.SIGUSR2)   # the flight is over
         results["plant"] = ProcessResult(code, cpu - start_cpu["plant"], "")
@@ -254,23 +384,31 @@ def run_stack(work: Path, duration_s: float,
             if p.returncode is None and p.poll() is None:
                 p.kill()
                 p.wait()
+    results = {k: results[k] for k in (*PROCESSES, "client") if k in results}
     for name, r in results.items():
         r.log = logs[name].read_text()
         if profile and (work / f"{name}.prof").is_file():
             r.shares = profile_shares(work / f"{name}.prof")
     m = re.search(r"([\d.]+) s simulated in ([\d.]+) s", results["plant"].log)
     sim_s, wall_s = (float(m.group(1)), float(m.group(2))) if m else (float("nan"),) * 2
-    return StackResult(sim_s, wall_s, results)
+    return StackResult(flight.name, sim_s, wall_s, results)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the stack (inside a private network namespace) and print one JSON line."""
     ap = argparse.ArgumentParser(prog="python -m benchmarks.stack", description=__doc__)
     ap.add_argument("work", help="folder for the logs and profiles")
-    ap.add_argument("--duration", type=float, default=10.0, help="simulated seconds [s]")
+    ap.add_argument("--flight", choices=("mission", "short-mission", "goto"),
+                    default="mission", help="the scripted mission (default), its --short "
+                    "hop, or --goto from hover trim for --duration")
+    ap.add_argument("--duration", type=float, default=None,
+                    help="goto: stop the plant after [s] of simulated time (default 10 s)")
     ap.add_argument("--profile", action="store_true", help="run every process under cProfile")
     args = ap.parse_args(argv)
-    res = run_stack(Path(args.work), args.duration, profile=args.profile)
+    flight = goto_flight() if args.flight == "goto" else mission_flight(
+        args.flight == "short-mission")
+    duration = None if flight.client else args.duration or 10.0
+    res = run_stack(Path(args.work), duration, flight, profile=args.profile)
     out = asdict(res)
     out["real_time_factor"] = res.real_time_factor
     print(json.dumps(out))

@@ -32,6 +32,7 @@ def test_benchmarks_run_quick():
                 "COMMAND_LONG -> COMMAND_ACK, lockstep, p50"):
         assert row in out, row
     assert "faster than MoorPy" in out
+    assert "the rest of the machine meanwhile" in out and "host steal" in out
     assert "goal >= 100x" in out and "goal >= 20x" in out or "skipped" in out
     # the command latency: every command answered, in both modes
     cmd_rows = [ln for ln in out.splitlines() if ln.startswith("COMMAND_LONG -> COMMAND_ACK")]
@@ -53,3 +54,30 @@ def test_benchmarks_run_quick():
         assert "failed" not in out, out
     else:
         assert "skipped: needs root" in out
+
+
+def test_priority_experiments_apply():
+    """The scheduling the real-time experiments can give the processes
+    (``python -m benchmarks.session --priority``) is applied to every thread."""
+    import os
+
+    import pytest
+
+    from benchmarks.stack import set_priority
+
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        try:
+            set_priority(child.pid, "slice")   # unprivileged, Linux 6.12 and later
+        except OSError as exc:
+            pytest.skip(f"no custom EEVDF slices here: {exc}")
+        if os.geteuid() == 0:
+            set_priority(child.pid, "nice")
+            assert os.getpriority(os.PRIO_PROCESS, child.pid) == -10
+            set_priority(child.pid, "fifo")
+            assert os.sched_getscheduler(child.pid) == os.SCHED_FIFO
+        with pytest.raises(ValueError):
+            set_priority(child.pid, "turbo")
+    finally:
+        child.kill()
+        child.wait()
