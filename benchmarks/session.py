@@ -89,7 +89,8 @@ def real_time(work: Path, quick: bool, rate_hz: float, priority: str | None = No
     p50, p99, mx, late99, missed, periods = m.groups()
     return {"jitter_p50_ms": float(p50), "jitter_p99_ms": float(p99),
             "jitter_max_ms": float(mx), "late_p99_ms": float(late99),
-            "missed_percent": float(missed), "periods": int(periods), "loads": len(loads)}
+            "missed_percent": float(missed), "periods": int(periods), "loads": len(loads),
+            "priority": priority or "normal"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -98,7 +99,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("work", help="folder for logs and profiles")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", action="append", default=None,
-                    choices=("lockstep", "realtime_250", "realtime_500", "latency"),
+                    choices=("lockstep", "realtime_250", "realtime_500",
+                             "realtime_250_normal", "latency"),
                     help="run only these (repeatable)")
     ap.add_argument("--priority", choices=stack.PRIORITIES, default=None,
                     help="experiment: give the processes of the real-time runs this "
@@ -106,11 +108,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(argv)
     work = Path(args.work)
     out: dict = {}
+    # the real-time runs get the scheduling tuav-sitl up gives (SCHED_FIFO where
+    # permitted), and one run at 250 Hz as the processes start, for comparison
+    prio = args.priority or ("fifo" if os.geteuid() == 0 else None)
     for name, fn in (("lockstep", lambda: lockstep(work, args.quick)),
-                     ("realtime_250", lambda: real_time(work, args.quick, 250.0,
-                                                        args.priority)),
-                     ("realtime_500", lambda: real_time(work, args.quick, 500.0,
-                                                        args.priority)),
+                     ("realtime_250", lambda: real_time(work, args.quick, 250.0, prio)),
+                     ("realtime_500", lambda: real_time(work, args.quick, 500.0, prio)),
+                     ("realtime_250_normal", lambda: real_time(work, args.quick, 250.0,
+                                                               None)),
                      ("latency", lambda: latency.measure(work / "latency",
                                                          1.0 if args.quick else 5.0))):
         if args.only and name not in args.only:

@@ -43,6 +43,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from tuav_sitl.realtime import RT_PRIORITY
+
 ROOT = Path(__file__).resolve().parents[1]
 
 #: How long a process may take to say it is ready [s].
@@ -264,8 +266,8 @@ def _set_slice(tid: int, slice_ns: int) -> None:
 def set_priority(pid: int, how: str) -> None:
     """Give every thread of process ``pid`` the scheduling ``how`` (:data:`PRIORITIES`)."""
     for tid in map(int, os.listdir(f"/proc/{pid}/task")):
-        if how == "fifo":
-            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(10))
+        if how == "fifo":    # what tuav-sitl up gives in real time (tuav_sitl/realtime.py)
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
         elif how == "nice":
             os.setpriority(os.PRIO_PROCESS, tid, -10)
         elif how == "slice":

@@ -27,6 +27,7 @@ def test_benchmarks_run_quick():
                 "share: winder host (WinderHost.update)",
                 "three-process lockstep stack (scripted mission)",
                 "real time 250 Hz, both cores busy", "real time 500 Hz, both cores busy",
+                "real time 250 Hz, both cores busy (normal scheduling)",
                 "Set_Input_Torque -> applied",
                 "COMMAND_LONG -> COMMAND_ACK, real time 250 Hz, p50",
                 "COMMAND_LONG -> COMMAND_ACK, lockstep, p50"):

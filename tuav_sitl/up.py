@@ -213,6 +213,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--logdir", default="runs", help="where run folders go")
     ap.add_argument("--instance", type=int, default=0,
                     help="offset every port (by 10 per instance) to run stacks side by side")
+    ap.add_argument("--no-rt-priority", action="store_true",
+                    help="in real time, leave the processes at normal scheduling (by "
+                         "default they get SCHED_FIFO where permitted)")
     out = ap.add_mutually_exclusive_group()
     out.add_argument("--headless", action="store_true",
                      help="print only errors and the log folder (no banner, no status)")
@@ -325,8 +328,17 @@ def run_up(args: argparse.Namespace) -> int:
         stack.start("plant", plant_args, "listening on")
         stack.start("groundstation", gs_args, "groundstation: CAN")
         stack.start("companion", comp_args, "companion: connected")
+        sched = "normal"
+        if speedup == 1.0 and not args.no_rt_priority:
+            from tuav_sitl.realtime import RT_PRIORITY, set_real_time
+
+            why = None
+            for name in ("plant", "companion", "groundstation"):
+                why = set_real_time(stack.procs[name].pid) or why
+            sched = (f"SCHED_FIFO priority {RT_PRIORITY}" if why is None
+                     else f"normal (SCHED_FIFO {why}; jitter may exceed 2 ms under load)")
         if not args.headless:
-            print(_banner(run_dir, ports, can, args, speedup), flush=True)
+            print(_banner(run_dir, ports, can, args, speedup, sched), flush=True)
         while stopping["signal"] is None:
             stack.echo_new()
             ended = stack.first_exit()
@@ -354,7 +366,7 @@ def run_up(args: argparse.Namespace) -> int:
 
 
 def _banner(run_dir: Path, ports: Ports, can: str, args: argparse.Namespace,
-            speedup: float) -> str:
+            speedup: float, sched: str = "normal") -> str:
     interface, channel = resolve_spec(can)
     watch = (f"candump {channel}   (or: tuav-sitl candump --can {interface}:{channel})"
              if interface == "socketcan" else
@@ -373,7 +385,7 @@ def _banner(run_dir: Path, ports: Ports, can: str, args: argparse.Namespace,
         f"  component link (companion <-> winch): tcp:127.0.0.1:{ports.component}",
         f"  winder CAN bus: {interface}:{channel}   watch it: {watch}",
         f"  home: {lat:.7f}, {lon:.7f}, {alt:.1f} m AMSL (the winder)",
-        f"  clock: {clock}",
+        f"  clock: {clock}" + (f"; scheduling: {sched}" if speedup == 1.0 else ""),
         f"  logs: {run_dir} (flight.tlog, can.log, truth.csv, a log per process)",
         "  Ctrl-C stops all three.",
     ])
