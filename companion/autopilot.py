@@ -153,6 +153,8 @@ class Autopilot:
         self._winch_pending: list[tuple[float, Peer, int, int, int]] = []
         self.counters = {"commands": 0, "unsupported": 0, "rejected_targets": 0}
         self._home_sent = False
+        self._streams_due = -math.inf     # earliest next message due on any link [s]
+        self._streams_links = 0
 
     # ----- sending helpers
 
@@ -495,6 +497,7 @@ class Autopilot:
             return M.MAV_RESULT_UNSUPPORTED if int(msg_id) != M.MAVLINK_MSG_ID_HEARTBEAT \
                 else M.MAV_RESULT_ACCEPTED
         sched = self._link(peer).schedule
+        self._streams_due = -math.inf
         if interval_us < 0:
             sched[name] = [0.0, math.inf]
         else:
@@ -508,6 +511,7 @@ class Autopilot:
                   else [msg.req_stream_id])
         rate = msg.req_message_rate if msg.start_stop else 0
         sched = self._link(peer).schedule
+        self._streams_due = -math.inf
         t = self._telem.t_s if self._telem else 0.0
         for g in groups:
             for name in STREAM_GROUPS.get(g, ()):
@@ -769,22 +773,27 @@ class Autopilot:
 
     def _streams(self, t: float) -> None:
         links = self.io.links()
+        if t < self._streams_due and len(links) == self._streams_links:
+            return      # nothing due on any link (most control periods)
         built: dict[str, bytes] = {}
+        next_due = math.inf
         for peer in links:
             st = self._link(peer)
             for name, entry in st.schedule.items():
                 interval, due = entry
-                if interval <= 0.0 or t < due:
+                if interval <= 0.0:
                     continue
-                entry[1] = max(due + interval, t) if t - due < interval else t + interval
-                if name == "HOME_POSITION" and self.nav.home_m is None:
-                    continue
-                data = built.get(name)
-                if data is None:
-                    data = built[name] = self.io.pack(self._build(name, self._telem))
-                self.io.send_bytes(data, peer)
+                if t >= due:
+                    entry[1] = max(due + interval, t) if t - due < interval else t + interval
+                    if not (name == "HOME_POSITION" and self.nav.home_m is None):
+                        data = built.get(name)
+                        if data is None:
+                            data = built[name] = self.io.pack(self._build(name, self._telem))
+                        self.io.send_bytes(data, peer)
+                next_due = min(next_due, entry[1])
         for gone in [p for p in self._links if p not in links]:
             del self._links[gone]
+        self._streams_due, self._streams_links = next_due, len(links)
 
     def _build(self, name: str, tm: Telemetry) -> Any:
         boot_ms = int(tm.t_s * 1000) & 0xFFFFFFFF
