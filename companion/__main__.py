@@ -138,9 +138,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"companion: {exc}", file=sys.stderr)
         return 1
 
-    def set_gains(new: FlightControlParams) -> None:
-        flight.set_gains(new)
-
     def set_nav(new: NavigationParams) -> None:
         nav.p = new
 
@@ -150,7 +147,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return "CTL_RATE_HZ is read-only: the plant sets the control rate"
 
     defs = [d if d.name != "CTL_RATE_HZ" else dataclasses.replace(d, set=read_only_rate)
-            for d in params_to_defs(gains, GAIN_NAMES, set_gains)]
+            for d in params_to_defs(gains, GAIN_NAMES, flight.set_gains)]
     defs += params_to_defs(nav_params, NAV_NAMES, set_nav)
     autopilot = Autopilot(endpoints, nav, tuple(args.home), defs,
                           param_file=Path(args.param_file) if args.param_file else None,
@@ -243,7 +240,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             components.close()
     if stop["signal"] is not None:
         reason = "stopped"
-    print(f"companion: {reason} after {steps} control periods; "
+    c = autopilot.counters
+    print(f"companion: {reason} after {steps} control periods; {c['commands']} commands "
+          f"({c['unsupported']} unsupported), {c['rejected_targets']} targets refused; "
           f"{endpoints.bad_frames} bad MAVLink frames dropped", flush=True)
     return 0
 

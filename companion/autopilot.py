@@ -101,6 +101,10 @@ _MSG_IDS = {name: getattr(M, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_RATES
 _MSG_NAMES = {v: k for k, v in _MSG_IDS.items()}
 
 _WINCH_ACK_TIMEOUT_S = 0.4
+_POS_IGNORE = (M.POSITION_TARGET_TYPEMASK_X_IGNORE | M.POSITION_TARGET_TYPEMASK_Y_IGNORE
+               | M.POSITION_TARGET_TYPEMASK_Z_IGNORE)
+_VEL_IGNORE = (M.POSITION_TARGET_TYPEMASK_VX_IGNORE | M.POSITION_TARGET_TYPEMASK_VY_IGNORE
+               | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
 _INT32_MAX = 2**31 - 1
 
 
@@ -151,8 +155,8 @@ class Autopilot:
         self._last_hb_wall = -math.inf
         self._statustext_id = 0
         self._winch_pending: list[tuple[float, Peer, int, int, int]] = []
+        self._winch_sink: Callable[[Any], None] | None = None
         self.counters = {"commands": 0, "unsupported": 0, "rejected_targets": 0}
-        self._home_sent = False
         self._streams_due = -math.inf     # earliest next message due on any link [s]
         self._streams_links = 0
 
@@ -275,8 +279,6 @@ class Autopilot:
             else:
                 keep.append(entry)
         self._winch_pending = keep
-
-    _winch_sink: Callable[[Any], None] | None = None
 
     def on_winch_status(self, sink: Callable[[Any], None]) -> None:
         """Call ``sink(msg)`` with every WINCH_STATUS the winch sends."""
@@ -611,16 +613,8 @@ class Autopilot:
     def _guided_target(self, mask: int, pos: Vec3, vel: Vec3, yaw_ned: float,
                        yaw_rate_ned: float) -> None:
         nav = self.nav
-        pos_ignored = mask & (M.POSITION_TARGET_TYPEMASK_X_IGNORE
-                              | M.POSITION_TARGET_TYPEMASK_Y_IGNORE
-                              | M.POSITION_TARGET_TYPEMASK_Z_IGNORE) == (
-            M.POSITION_TARGET_TYPEMASK_X_IGNORE | M.POSITION_TARGET_TYPEMASK_Y_IGNORE
-            | M.POSITION_TARGET_TYPEMASK_Z_IGNORE)
-        vel_ignored = mask & (M.POSITION_TARGET_TYPEMASK_VX_IGNORE
-                              | M.POSITION_TARGET_TYPEMASK_VY_IGNORE
-                              | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE) == (
-            M.POSITION_TARGET_TYPEMASK_VX_IGNORE | M.POSITION_TARGET_TYPEMASK_VY_IGNORE
-            | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
+        pos_ignored = mask & _POS_IGNORE == _POS_IGNORE
+        vel_ignored = mask & _VEL_IGNORE == _VEL_IGNORE
         yaw = None if mask & M.POSITION_TARGET_TYPEMASK_YAW_IGNORE or not _finite(yaw_ned) \
             else yaw_ned_to_enu(yaw_ned)
         yaw_rate = None if mask & M.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE \
@@ -799,7 +793,7 @@ class Autopilot:
         boot_ms = int(tm.t_s * 1000) & 0xFFFFFFFF
         if name == "ATTITUDE":
             q = quat_enu_flu_to_ned_frd(tm.quat)
-            roll, pitch, yaw = _euler_ned(q)
+            roll, pitch, yaw = quat_to_euler(q)   # ZYX angles of body FRD in NED
             p, q_, r = flu_to_frd(tm.rates_rad_s)
             return M.MAVLink_attitude_message(boot_ms, roll, pitch, yaw, p, q_, r)
         if name == "LOCAL_POSITION_NED":
@@ -908,7 +902,3 @@ def _finite(x: Any) -> bool:
 def _i16(x: float) -> int:
     return max(-32768, min(32767, round(x)))
 
-
-def _euler_ned(q: tuple[float, float, float, float]) -> Vec3:
-    """Roll, pitch, yaw [rad] (ZYX) of a body-FRD-to-NED quaternion."""
-    return quat_to_euler(q)

@@ -145,9 +145,6 @@ class NavCommand:
     speed_m_s: float | None = None
 
 
-NAV_KINDS = ("takeoff", "waypoint", "loiter_turns", "land", "rtl", "speed")
-
-
 class NavEvent:
     """Event kinds the navigator reports (:meth:`Navigator.pop_events`)."""
 
@@ -157,7 +154,6 @@ class NavEvent:
     TAKEOFF_DONE = "takeoff_done"
     LANDED = "landed"
     DISARMED = "disarmed"
-    MODE = "mode"                # the navigator changed mode by itself (e.g. failsafe)
     ERROR = "error"              # a plan could not be flown; holding instead (text)
 
 
@@ -239,6 +235,7 @@ class Navigator:
         self._leg: _Leg | None = None
         self._legs: list[_Leg] = []
         self._vel: _VelocityRef | None = None
+        self._vel_deadline = math.inf      # a velocity target stops after this [s]
         self._ref: RefSample | None = None
         self._t = 0.0
         self._armed_on_ground_since: float | None = None
@@ -553,7 +550,7 @@ class Navigator:
 
     def _advance(self, t: float, dt: float) -> RefSample:
         if self._vel is not None:
-            if t > getattr(self, "_vel_deadline", math.inf):
+            if t > self._vel_deadline:
                 self._vel.cmd = _ZERO3
             return self._vel.step(dt)
         if self._leg is None:
@@ -574,7 +571,7 @@ class Navigator:
             self._emit(NavEvent.TAKEOFF_DONE)
         if self._legs:
             self._leg = self._legs.pop(0)
-            self._restart(self._leg, t)
+            self._start_leg(self._leg, self._leg.item)
             return
         if leg.tag in ("rtl_home", "land_approach"):
             item = leg.item
@@ -621,9 +618,6 @@ class Navigator:
         leg.follower.pop_events()
         leg.item = item
         self._leg = leg
-
-    def _restart(self, leg: _Leg, t: float) -> None:
-        self._start_leg(leg, leg.item)
 
     def _queue(self, legs: list[tuple[_Leg, GotoItem | CircleItem]]) -> None:
         """Fly these legs in order, the first from the current reference."""
