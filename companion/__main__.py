@@ -44,7 +44,7 @@ from tuavdefs import component_link as cl
 from tuavdefs import simlink as sl
 from tuavdefs.frames import quat_to_euler
 from tuavdefs.params import SystemParams
-from tuavdefs.paramspec import ParameterError, load_toml
+from tuavdefs.paramspec import load_option
 
 #: Ground-station names of the flight-control gains (SI units; docs/protocols.md).
 GAIN_NAMES = {
@@ -105,16 +105,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the companion process; returns the exit code."""
     args = build_parser().parse_args(argv)
-    try:
-        params = SystemParams() if args.params is None else load_toml(SystemParams,
-                                                                       Path(args.params))
-        gains = (FlightControlParams() if args.gains is None
-                 else load_toml(FlightControlParams, Path(args.gains)))
-        nav_params = (NavigationParams() if args.nav is None
-                      else load_toml(NavigationParams, Path(args.nav)))
-    except ParameterError as exc:
-        print(f"companion: bad parameter: {exc}", file=sys.stderr)
-        return 2
+    params = load_option(SystemParams, args.params, "companion")
+    gains = load_option(FlightControlParams, args.gains, "companion")
+    nav_params = load_option(NavigationParams, args.nav, "companion")
     udp = ([] if args.gcs_udp == ["none"] else
            [_address(a) for a in args.gcs_udp] if args.gcs_udp else
            [("127.0.0.1", UDP_GCS_PORT_DEFAULT), ("127.0.0.1", UDP_API_PORT_DEFAULT)])

@@ -27,7 +27,6 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
-from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -40,7 +39,7 @@ from tuavdefs import can_protocol as cp
 from tuavdefs.canbus import CanBusError, CanLink
 from tuavdefs.component_link import COMPONENT_PORT_DEFAULT
 from tuavdefs.params import SystemParams
-from tuavdefs.paramspec import ParameterError, load_toml
+from tuavdefs.paramspec import load_option
 
 __all__ = ["ENCODER_TIMEOUT_S", "build_parser", "main"]
 
@@ -61,12 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ground-station process; returns the exit code."""
     args = build_parser().parse_args(argv)
-    try:
-        params = SystemParams() if args.params is None else load_toml(SystemParams,
-                                                                       Path(args.params))
-    except ParameterError as exc:
-        print(f"groundstation: bad parameter: {exc}", file=sys.stderr)
-        return 2
+    params = load_option(SystemParams, args.params, "groundstation")
     try:
         link = CanLink(args.can)
     except CanBusError as exc:

@@ -16,7 +16,6 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
-from pathlib import Path
 from typing import TextIO
 
 from sitl.plant import Plant, initial_state
@@ -28,7 +27,7 @@ from tuavdefs import simlink as sl
 from tuavdefs.canbus import CanBusError, CanLink
 from tuavdefs.frames import quat_to_euler
 from tuavdefs.params import SystemParams
-from tuavdefs.paramspec import ParameterError, load_toml
+from tuavdefs.paramspec import load_option
 
 TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "roll_rad",
                  "pitch_rad", "yaw_rad", "tether_length_m", "drum_rate_rad_s", "armed",
@@ -97,12 +96,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the plant process; returns the exit code."""
     args = build_parser().parse_args(argv)
     real_time = args.real_time or args.speedup == 1.0
-    try:
-        params = SystemParams() if args.params is None else load_toml(SystemParams,
-                                                                       Path(args.params))
-    except ParameterError as exc:
-        print(f"plant: bad parameter: {exc}", file=sys.stderr)
-        return 2
+    params = load_option(SystemParams, args.params, "plant")
     pos = tuple(args.position)
     gear = params.vehicle.gear_height_m
     if pos[2] <= gear:

@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import tomllib
 import typing
 from pathlib import Path
 from typing import Any, Self
 
-__all__ = ["ParameterError", "Params", "quantity", "load_toml", "to_dict", "describe"]
+__all__ = ["ParameterError", "Params", "quantity", "load_toml", "load_option", "to_dict",
+           "describe"]
 
 
 class ParameterError(ValueError):
@@ -185,6 +187,17 @@ def load_toml(cls: type[Params], path: str | Path, table: str | None = None) -> 
             raise ParameterError(table, f"table missing from {path}")
         data = data[table]
     return cls.from_dict(data, prefix=prefix)
+
+
+def load_option(cls: type[Params], path: str | None, prog: str) -> Params:
+    """A process's parameter option: ``cls()`` (the defaults) when ``path`` is None, else
+    the TOML file. A bad parameter prints ``PROG: bad parameter: FIELD: why`` on stderr and
+    exits with code 2, as every process of the stack does."""
+    try:
+        return cls() if path is None else load_toml(cls, Path(path))
+    except ParameterError as exc:
+        print(f"{prog}: bad parameter: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 def to_dict(params: Params) -> dict[str, Any]:
