@@ -3,15 +3,11 @@ one-call step equals its components stepped one by one, the L-bar bisection that
 with a Newton root equals the bisection that evaluates every midpoint, and the compiled
 closed loop equals the interpreted one (TUAV_NO_JIT=1)."""
 
-import json
 import math
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from jit_util import run_script
 
 from companion.flight_controller import FlightController, VehicleState
 from companion.gains import FlightControlParams
@@ -23,7 +19,6 @@ from groundstation.winder_host import WinderHost
 from tuavdefs.frames import euler_to_quat, quat_to_euler, quat_to_matrix
 from tuavdefs.params import SystemParams
 
-ROOT = Path(__file__).resolve().parents[1]
 RNG = np.random.default_rng(20261122)
 
 
@@ -110,13 +105,7 @@ print(json.dumps({"jit": jit.JIT, **{k: s[k].tolist() for k in
 
 
 def _run(no_jit: bool) -> dict:
-    env = dict(os.environ)
-    env.pop("TUAV_NO_JIT", None)
-    if no_jit:
-        env["TUAV_NO_JIT"] = "1"
-    res = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, env=env,
-                         capture_output=True, text=True, timeout=600, check=True)
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    return run_script(SCRIPT, no_jit, 600)
 
 
 def test_compiled_and_interpreted_closed_loops_agree():

@@ -1,14 +1,9 @@
 """The compiled kernel and the same code interpreted (TUAV_NO_JIT=1) are one model."""
 
-import json
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
+from jit_util import run_script
 
-ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = """
 import json
 import numpy as np
@@ -29,13 +24,7 @@ print(json.dumps({"jit": _jit.JIT, "x": plant.x.tolist()}))
 
 
 def _run(no_jit: bool) -> dict:
-    env = dict(os.environ)
-    env.pop("TUAV_NO_JIT", None)
-    if no_jit:
-        env["TUAV_NO_JIT"] = "1"
-    res = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, env=env,
-                         capture_output=True, text=True, timeout=300, check=True)
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    return run_script(SCRIPT, no_jit, 300)
 
 
 def test_compiled_and_interpreted_kernels_agree():

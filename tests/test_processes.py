@@ -1,25 +1,20 @@
 """The plant and companion as separate OS processes over the real simulator link."""
 
 import csv
-import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+from gcs_util import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 GOAL = (5.0, 1.0, 11.0)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 def _fly(tmp: Path, duration: float = 12.0) -> tuple[np.ndarray, str, str]:
-    port = _free_port()
+    port = free_port()
     log = tmp / "truth.csv"
     plant = subprocess.Popen(
         [sys.executable, "-m", "sitl", "--port", str(port), "--duration", str(duration),
@@ -64,7 +59,7 @@ def test_companion_flies_the_plant_in_lockstep(tmp_path):
 
 
 def test_plant_without_a_companion_gives_up_cleanly():
-    port = _free_port()
+    port = free_port()
     res = subprocess.run([sys.executable, "-m", "sitl", "--port", str(port),
                           "--accept-timeout", "0.5"], cwd=ROOT, capture_output=True,
                          text=True, timeout=120)
@@ -83,7 +78,7 @@ def test_processes_reject_bad_parameters_by_name(tmp_path):
 
 
 def test_speedup_paces_lockstep(tmp_path):
-    port = _free_port()
+    port = free_port()
     plant = subprocess.Popen(
         [sys.executable, "-m", "sitl", "--port", str(port), "--duration", "1.0",
          "--speedup", "20", "--no-noise", "--position", "4", "0", "10"],

@@ -4,7 +4,6 @@ one JSON line of observations for tests/test_can_bus.py to judge."""
 
 import json
 import math
-import socket
 import subprocess
 import sys
 import time
@@ -12,6 +11,7 @@ from pathlib import Path
 
 import cantools
 
+from tests.gcs_util import free_port
 from tuavdefs import can_protocol as cp
 from tuavdefs.canbus import CanLink
 
@@ -19,11 +19,6 @@ ROOT = Path(__file__).resolve().parents[2]
 AX = cp.AXIS_NODE_ID_DEFAULT
 SN = cp.WINCH_SENSOR_NODE_ID_DEFAULT
 
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Host:

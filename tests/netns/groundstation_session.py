@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -26,6 +25,7 @@ from pymavlink.dialects.v20 import common as mavlink2  # noqa: E402
 
 from sitl.odrive_axis import OdriveAxis, WinchSensors  # noqa: E402
 from sitl.winder import WinderModel  # noqa: E402
+from tests.gcs_util import free_port
 from tuavdefs import can_protocol as cp  # noqa: E402
 from tuavdefs import component_link as cl  # noqa: E402
 from tuavdefs.canbus import CanLink  # noqa: E402
@@ -39,11 +39,6 @@ TENSION_N = 5.0
 ENC_ID = cp.frame_id(cp.AXIS_NODE_ID_DEFAULT, cp.Cmd.GET_ENCODER_ESTIMATES)
 NAN = math.nan
 
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Winder:

@@ -21,6 +21,8 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from tests.gcs_util import free_port
+
 ROOT = Path(__file__).resolve().parents[2]
 POSITION = (8.0, 3.0, 14.0)
 TETHER_M = 17.0
@@ -35,11 +37,6 @@ SCRIPT = [
     (16.0, "relax2", "int", 169, (0, 0, NAN, NAN)),
 ]
 
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def connect(port: int, timeout_s: float) -> socket.socket:

@@ -5,19 +5,15 @@ line for tests/test_three_processes.py."""
 
 import csv
 import json
-import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from tests.gcs_util import free_port
+
 ROOT = Path(__file__).resolve().parents[2]
 
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def main() -> int:
