@@ -213,8 +213,7 @@ class MavlinkEndpoints:
             msgs = []
         self.bad_frames += p.total_receive_errors - before
         for m in msgs:
-            if m.get_type() == "BAD_DATA":
-                self.bad_frames += 1
+            if m.get_type() == "BAD_DATA":   # already in the parser's error count
                 continue
             if self.tlog is not None:
                 self.tlog.write(m.get_msgbuf())
