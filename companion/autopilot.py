@@ -403,6 +403,9 @@ class Autopilot:
             self.counters["unsupported"] += 1
             result = M.MAV_RESULT_UNSUPPORTED
         self._ack(peer, msg, cmd, result)
+        if result == M.MAV_RESULT_DENIED and cmd in (M.MAV_CMD_DO_REPOSITION,
+                                                     M.MAV_CMD_NAV_TAKEOFF):
+            self.counters["rejected_targets"] += 1     # NaN, below ground, out of reach
         if why is not None:
             self.statustext(M.MAV_SEVERITY_WARNING if result != M.MAV_RESULT_ACCEPTED
                             else M.MAV_SEVERITY_INFO, why)
@@ -436,7 +439,6 @@ class Autopilot:
             target = (target[0], target[1], ref.pos_m[2] if ref else self._pos()[2])
         why = nav.check_target(target)
         if why is not None:
-            self.counters["rejected_targets"] += 1
             return f"Reposition: {why}", M.MAV_RESULT_DENIED
         if not nav.flying:
             return "Reposition: not flying", M.MAV_RESULT_FAILED
