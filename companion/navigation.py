@@ -162,14 +162,14 @@ class NavEvent:
 class _Leg:
     """A planned movement: a WaypointFollower over one item, optionally open-ended."""
 
-    def __init__(self, follower: WaypointFollower, landing: bool = False,
-                 seq: int | None = None, tag: str = "") -> None:
+    def __init__(self, follower: WaypointFollower, item: GotoItem | CircleItem,
+                 landing: bool = False, seq: int | None = None, tag: str = "") -> None:
         self.follower = follower
+        self.item = item
         self.landing = landing
         self.seq = seq
         self.tag = tag
         self.finished = False
-        self.item: GotoItem | CircleItem | None = None
 
 
 class _VelocityRef:
@@ -571,7 +571,7 @@ class Navigator:
             self._emit(NavEvent.TAKEOFF_DONE)
         if self._legs:
             self._leg = self._legs.pop(0)
-            self._start_leg(self._leg, self._leg.item)
+            self._start_leg(self._leg)
             return
         if leg.tag in ("rtl_home", "land_approach"):
             item = leg.item
@@ -611,52 +611,48 @@ class Navigator:
                                 accept if accept is not None else self.p.acceptance_radius_m,
                                 hold_s)
 
-    def _start_leg(self, leg: _Leg, item: GotoItem | CircleItem) -> None:
+    def _start_leg(self, leg: _Leg) -> None:
         ref = self._current_ref()
-        leg.follower.start(self._t, ref.pos_m, ref.vel_m_s, [item], current_yaw=ref.yaw_rad,
-                           current_acc=ref.acc_m_s2)
+        leg.follower.start(self._t, ref.pos_m, ref.vel_m_s, [leg.item],
+                           current_yaw=ref.yaw_rad, current_acc=ref.acc_m_s2)
         leg.follower.pop_events()
-        leg.item = item
         self._leg = leg
 
-    def _queue(self, legs: list[tuple[_Leg, GotoItem | CircleItem]]) -> None:
+    def _queue(self, legs: list[_Leg]) -> None:
         """Fly these legs in order, the first from the current reference."""
-        for leg, item in legs:
-            leg.item = item
-        first, item = legs[0]
-        self._legs = [leg for leg, _ in legs[1:]]
-        self._start_leg(first, item)
+        self._legs = legs[1:]
+        self._start_leg(legs[0])
 
     def _hold(self) -> None:
         ref = self._current_ref()
         self._vel = None
-        self._queue([(_Leg(self._follower(self.speed_m_s), tag="hold"),
-                      GotoItem(_stop_point(ref, self.p.acc_m_s2), ref.yaw_rad))])
+        self._queue([_Leg(self._follower(self.speed_m_s),
+                          GotoItem(_stop_point(ref, self.p.acc_m_s2), ref.yaw_rad), tag="hold")])
 
     def _fly_to(self, pos: Vec3, yaw: float | None) -> None:
-        leg = _Leg(self._follower(self.speed_m_s), tag="goto")
-        self._queue([(leg, GotoItem(tuple(pos), yaw))])
+        self._queue([_Leg(self._follower(self.speed_m_s), GotoItem(tuple(pos), yaw),
+                          tag="goto")])
 
     def _takeoff(self, target: Vec3, seq: int | None = None) -> None:
         self.landed = False
         self._armed_on_ground_since = None
         self._ref = RefSample(self._pos, _ZERO3, _ZERO3, _ZERO3, self._yaw, 0.0)
         tag = "mission" if seq is not None else "takeoff"
-        leg = _Leg(self._follower(self.p.speed_up_m_s, self.p.takeoff_accept_m), seq=seq,
-                   tag=tag)
-        self._queue([(leg, GotoItem(target, None))])
+        self._queue([_Leg(self._follower(self.p.speed_up_m_s, self.p.takeoff_accept_m),
+                          GotoItem(target, None), seq=seq, tag=tag)])
 
     def _landing_legs(self, xy: tuple[float, float], seq: int | None = None
-                      ) -> list[tuple[_Leg, GotoItem]]:
+                      ) -> list[_Leg]:
         ref = self._current_ref()
-        legs: list[tuple[_Leg, GotoItem]] = []
+        legs: list[_Leg] = []
         low = self.gear_height_m + self.p.land_alt_low_m
         if ref.pos_m[2] > low + 0.5:
-            legs.append((_Leg(self._follower(self.p.speed_down_m_s, 1.0), seq=seq,
-                              tag="land_high"), GotoItem((xy[0], xy[1], low), None)))
+            legs.append(_Leg(self._follower(self.p.speed_down_m_s, 1.0),
+                             GotoItem((xy[0], xy[1], low), None), seq=seq, tag="land_high"))
         # the final descent aims below the ground: the land detector ends it
-        legs.append((_Leg(self._follower(self.p.land_speed_m_s), landing=True, seq=seq,
-                          tag="land"), GotoItem((xy[0], xy[1], -1.0), None)))
+        legs.append(_Leg(self._follower(self.p.land_speed_m_s),
+                         GotoItem((xy[0], xy[1], -1.0), None), landing=True, seq=seq,
+                         tag="land"))
         return legs
 
     def _land_here(self, seq: int | None = None) -> None:
@@ -669,13 +665,14 @@ class Navigator:
         ref = self._current_ref()
         home = self.home_m if self.home_m is not None else (0.0, 0.0, 0.0)
         alt = max(ref.pos_m[2], self.gear_height_m + self.p.rtl_alt_m)
-        legs: list[tuple[_Leg, GotoItem]] = []
+        legs: list[_Leg] = []
         stop = _stop_point(ref, self.p.acc_m_s2)
         if alt > stop[2] + 0.5:
-            legs.append((_Leg(self._follower(self.p.speed_up_m_s), seq=seq, tag="rtl_climb"),
-                         GotoItem((stop[0], stop[1], alt), None)))
-        legs.append((_Leg(self._follower(self.speed_m_s, hold_s=self.p.rtl_loiter_s),
-                          seq=seq, tag="rtl_home"), GotoItem((home[0], home[1], alt), None)))
+            legs.append(_Leg(self._follower(self.p.speed_up_m_s),
+                             GotoItem((stop[0], stop[1], alt), None), seq=seq,
+                             tag="rtl_climb"))
+        legs.append(_Leg(self._follower(self.speed_m_s, hold_s=self.p.rtl_loiter_s),
+                         GotoItem((home[0], home[1], alt), None), seq=seq, tag="rtl_home"))
         self._vel = None
         self._queue(legs)
 
@@ -732,15 +729,14 @@ class Navigator:
             else:
                 # already flying: ArduCopter climbs to the altitude if below it
                 ref = self._current_ref()
-                leg = _Leg(self._follower(self.p.speed_up_m_s, self.p.takeoff_accept_m),
-                           seq=c.seq, tag="mission")
-                self._queue([(leg, GotoItem((ref.pos_m[0], ref.pos_m[1],
-                                             max(z, ref.pos_m[2])), None))])
+                self._queue([_Leg(self._follower(self.p.speed_up_m_s,
+                                                 self.p.takeoff_accept_m),
+                                  GotoItem((ref.pos_m[0], ref.pos_m[1], max(z, ref.pos_m[2])),
+                                           None), seq=c.seq, tag="mission")])
         elif c.kind == "waypoint":
             z = c.z_m if c.z_m is not None else self._current_ref().pos_m[2]
-            leg = _Leg(self._follower(self.speed_m_s, c.accept_m, c.hold_s), seq=c.seq,
-                       tag="mission")
-            self._queue([(leg, GotoItem((xy[0], xy[1], z), None))])
+            self._queue([_Leg(self._follower(self.speed_m_s, c.accept_m, c.hold_s),
+                              GotoItem((xy[0], xy[1], z), None), seq=c.seq, tag="mission")])
         elif c.kind == "loiter_turns":
             z = c.z_m if c.z_m is not None else self._current_ref().pos_m[2]
             radius = abs(c.circle_radius_m)
@@ -750,17 +746,16 @@ class Navigator:
             lead_in = max(5.0, 1.01 * Circle.min_lead_in_s(radius, speed, self.p.acc_m_s2))
             item = CircleItem(xy, radius, z, speed, turns=c.turns, clockwise=c.clockwise,
                               lead_in_s=lead_in)
-            leg = _Leg(self._follower(speed, c.accept_m), seq=c.seq, tag="mission")
-            self._queue([(leg, item)])
+            self._queue([_Leg(self._follower(speed, c.accept_m), item, seq=c.seq,
+                              tag="mission")])
         elif c.kind == "land":
             if c.xy_m is None:
                 self._land_here(seq=c.seq)
             else:
                 ref = self._current_ref()
-                legs: list[tuple[_Leg, GotoItem]] = [(
-                    _Leg(self._follower(self.speed_m_s), seq=c.seq, tag="land_approach"),
-                    GotoItem((xy[0], xy[1], ref.pos_m[2]), None))]
-                self._queue(legs)
+                self._queue([_Leg(self._follower(self.speed_m_s),
+                                  GotoItem((xy[0], xy[1], ref.pos_m[2]), None), seq=c.seq,
+                                  tag="land_approach")])
         elif c.kind == "rtl":
             self._rtl(seq=c.seq)
 
