@@ -3,12 +3,16 @@ so that python-can's udp_multicast bus and every socket stay on this host: joini
 multicast group sends IGMP by the default route, which must not leave the machine. The
 same helper the benchmarks use (``benchmarks/netns.py``)."""
 
+import json
 import sys
+from pathlib import Path
 
 from benchmarks.netns import SETUP, run_in_netns
 from benchmarks.netns import netns_available as _unavailable_because
 
-__all__ = ["PYTHON", "SETUP", "netns_available", "run_in_netns"]
+__all__ = ["PYTHON", "SETUP", "netns_available", "run_in_netns", "run_session"]
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def netns_available() -> bool:
@@ -17,3 +21,11 @@ def netns_available() -> bool:
 
 
 PYTHON = sys.executable
+
+
+def run_session(module: str, *args: str, timeout_s: float) -> dict:
+    """Run ``python -m module args`` (a driver under tests/netns/) from the repository root
+    in a private network namespace; it must succeed and print one JSON line last: that."""
+    res = run_in_netns([PYTHON, "-m", module, *args], timeout_s=timeout_s, cwd=str(ROOT))
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    return json.loads(res.stdout.strip().splitlines()[-1])

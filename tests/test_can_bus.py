@@ -2,16 +2,11 @@
 station) drives the plant's simulated ODrive axis over python-can's udp_multicast bus,
 inside a private network namespace (the suite creates it itself when run as root)."""
 
-import json
-import sys
-from pathlib import Path
 
 import pytest
-from netns_util import netns_available, run_in_netns
+from netns_util import netns_available, run_session
 
 from tuavdefs.can_protocol import ODriveError
-
-ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.skipif(not netns_available(),
                                 reason="needs root (unshare) for a private network namespace")
@@ -19,10 +14,7 @@ pytestmark = pytest.mark.skipif(not netns_available(),
 
 @pytest.fixture(scope="module")
 def session() -> dict:
-    res = run_in_netns([sys.executable, "-m", "tests.netns.can_axis_session"], timeout_s=180,
-                       cwd=str(ROOT))
-    assert res.returncode == 0, res.stdout + res.stderr
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    return run_session("tests.netns.can_axis_session", timeout_s=180)
 
 
 def test_axis_reports_idle_with_the_brake_on_and_streams_at_its_rates(session):

@@ -2,24 +2,16 @@
 between :class:`tuavdefs.canbus.CanLink` and ``can.Bus(interface="udp_multicast")``, and a
 link never sees its own frames (in a private network namespace, as root)."""
 
-import json
-import sys
-from pathlib import Path
 
 import pytest
-from netns_util import netns_available, run_in_netns
-
-ROOT = Path(__file__).resolve().parents[1]
+from netns_util import netns_available, run_session
 
 pytestmark = pytest.mark.skipif(not netns_available(),
                                 reason="needs root (unshare) for a private network namespace")
 
 
 def test_canlink_and_python_can_understand_each_other():
-    res = run_in_netns([sys.executable, "-m", "tests.netns.can_interop_session"],
-                       timeout_s=120, cwd=str(ROOT))
-    assert res.returncode == 0, res.stdout + res.stderr
-    out = json.loads(res.stdout.strip().splitlines()[-1])
+    out = run_session("tests.netns.can_interop_session", timeout_s=120)
     assert out["b"] == [[0x29, "010203", False, False], [0x2A, "00" * 8, True, False],
                         [0x123, "aabb", False, False], [0x1ABCDE, "05", False, True]]
     assert out["a"] == [[0x123, "aabb"], [0x1ABCDE, "05"]]

@@ -1,15 +1,10 @@
 """``tuav-sitl candump`` prints a live bus exactly as can-utils' candump does, and its -L
 output decodes with cantools and the project's DBC."""
 
-import json
 import re
-import sys
-from pathlib import Path
 
 import pytest
-from netns_util import netns_available, run_in_netns
-
-ROOT = Path(__file__).resolve().parents[1]
+from netns_util import netns_available, run_session
 
 pytestmark = pytest.mark.skipif(not netns_available(),
                                 reason="needs root (unshare) for a private network namespace")
@@ -17,10 +12,8 @@ pytestmark = pytest.mark.skipif(not netns_available(),
 
 @pytest.fixture(scope="module")
 def dump(tmp_path_factory) -> dict:
-    res = run_in_netns([sys.executable, "-m", "tests.netns.candump_session",
-                        str(tmp_path_factory.mktemp("dump"))], timeout_s=180, cwd=str(ROOT))
-    assert res.returncode == 0, res.stdout + res.stderr
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    return run_session("tests.netns.candump_session", str(tmp_path_factory.mktemp("dump")),
+                       timeout_s=180)
 
 
 def test_exact_lines(dump):

@@ -6,19 +6,16 @@ straight-line distance, the winch's WINCH_STATUS against L-bar, the CAN capture 
 cantools, the tlog parsed by pymavlink, and Ctrl-C leaving no process behind."""
 
 import csv
-import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from netns_util import netns_available, run_in_netns
+from netns_util import netns_available, run_session
 
 from groundstation.lbar import LBarEstimator, LBarParams
 from tuavdefs.params import SystemParams
 
-ROOT = Path(__file__).resolve().parents[1]
 EARTH_R_M = 6378137.0
 
 pytestmark = pytest.mark.skipif(not netns_available(),
@@ -28,10 +25,7 @@ pytestmark = pytest.mark.skipif(not netns_available(),
 @pytest.fixture(scope="module")
 def e2e(tmp_path_factory) -> dict:
     base = tmp_path_factory.mktemp("e2e")
-    res = run_in_netns([sys.executable, "-m", "tests.netns.e2e_session", str(base)],
-                       timeout_s=600, cwd=str(ROOT))
-    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
-    out = json.loads(res.stdout.strip().splitlines()[-1])
+    out = run_session("tests.netns.e2e_session", str(base), timeout_s=600)
     run = Path(out["run_dir"])
     with open(run / "truth.csv") as f:
         rows = [r for r in csv.DictReader(f) if r.get("rotor4") not in (None, "")]

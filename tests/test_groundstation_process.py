@@ -10,19 +10,15 @@
   the real drum follows the modes, the tether is never taut, lockstep is kept.
 """
 
-import json
 import math
-import sys
-from pathlib import Path
 
 import pytest
-from netns_util import netns_available, run_in_netns
+from netns_util import netns_available, run_session
 from pymavlink.dialects.v20 import common as mavlink2
 
 from groundstation.lbar import LBarEstimator, LBarParams
 from tuavdefs.params import SystemParams
 
-ROOT = Path(__file__).resolve().parents[1]
 ACCEPTED = mavlink2.MAV_RESULT_ACCEPTED
 HEALTHY = mavlink2.MAV_WINCH_STATUS_HEALTHY
 FULLY_RETRACTED = mavlink2.MAV_WINCH_STATUS_FULLY_RETRACTED
@@ -38,10 +34,7 @@ pytestmark = pytest.mark.skipif(not netns_available(),
 
 
 def _session(module: str, *args: str, timeout_s: float = 240) -> dict:
-    res = run_in_netns([sys.executable, "-m", module, *args], timeout_s=timeout_s,
-                       cwd=str(ROOT))
-    assert res.returncode == 0, res.stdout + res.stderr
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    return run_session(module, *args, timeout_s=timeout_s)
 
 
 @pytest.fixture(scope="module")

@@ -2,18 +2,14 @@
 (simulator MAVLink, component MAVLink, CAN on udp_multicast in a private network
 namespace): the UAV flies to a goal and the winder pays out the tether L-bar asks for."""
 
-import json
 import math
-import sys
-from pathlib import Path
 
 import pytest
-from netns_util import netns_available, run_in_netns
+from netns_util import netns_available, run_session
 
 from groundstation.lbar import LBarEstimator, LBarParams
 from tuavdefs.params import SystemParams
 
-ROOT = Path(__file__).resolve().parents[1]
 GOAL = (8.0, 3.0, 14.0)
 
 pytestmark = pytest.mark.skipif(not netns_available(),
@@ -23,10 +19,8 @@ pytestmark = pytest.mark.skipif(not netns_available(),
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory) -> dict:
     out = tmp_path_factory.mktemp("stack")
-    res = run_in_netns([sys.executable, "-m", "tests.netns.three_process_session", str(out),
-                        *map(str, GOAL), "10"], timeout_s=300, cwd=str(ROOT))
-    assert res.returncode == 0, res.stdout + res.stderr
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    return run_session("tests.netns.three_process_session", str(out), *map(str, GOAL), "10",
+                       timeout_s=300)
 
 
 def test_the_uav_reaches_the_goal(flight):

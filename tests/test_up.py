@@ -1,14 +1,9 @@
 """``tuav-sitl up`` starts, supervises and stops the three processes (in a private network
 namespace for the CAN bus)."""
 
-import json
-import sys
-from pathlib import Path
 
 import pytest
-from netns_util import netns_available, run_in_netns
-
-ROOT = Path(__file__).resolve().parents[1]
+from netns_util import netns_available, run_session
 
 pytestmark = pytest.mark.skipif(not netns_available(),
                                 reason="needs root (unshare) for a private network namespace")
@@ -17,10 +12,7 @@ pytestmark = pytest.mark.skipif(not netns_available(),
 @pytest.fixture(scope="module")
 def session(tmp_path_factory) -> dict:
     base = tmp_path_factory.mktemp("up")
-    res = run_in_netns([sys.executable, "-m", "tests.netns.up_session", str(base)],
-                       timeout_s=400, cwd=str(ROOT))
-    assert res.returncode == 0, res.stdout + res.stderr
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    return run_session("tests.netns.up_session", str(base), timeout_s=400)
 
 
 def test_a_run_ends_cleanly_with_its_folder(session):
