@@ -135,6 +135,15 @@ class SimLinkClient:
         """Whether a connection is open."""
         return self._sock is not None
 
+    def fileno(self) -> int:
+        """The link's socket descriptor (for a caller's ``select``); -1 when not connected."""
+        return self._sock.fileno() if self._sock is not None else -1
+
+    def has_buffered_state(self) -> bool:
+        """Whether messages already read from the socket are waiting to be absorbed (a
+        caller's ``select`` on :meth:`fileno` would not show them)."""
+        return bool(self._pending)
+
     @property
     def bad_frames(self) -> int:
         """Malformed frames dropped from the plant's stream."""
