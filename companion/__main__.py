@@ -20,11 +20,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import select
 import signal
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from companion.autopilot import Autopilot, Telemetry
 from companion.component_server import ComponentServer
@@ -66,11 +68,43 @@ NAV_NAMES = {
 }
 #: Wall time without a state from the plant after which the companion gives up [s].
 SIM_SILENCE_S = 30.0
+#: Longest wait for input before the wall-clock duties (heartbeat, timeouts) run [s].
+SELECT_TIMEOUT_S = 0.05
 
 
 def _address(text: str) -> tuple[str, int]:
     host, _, port = text.rpartition(":")
     return (host or "127.0.0.1", int(port))
+
+
+class _Waiter:
+    """Waits for input on the plant's link (descriptor ``sim_fd``) and on sockets that
+    change now and then (the autopilot's), with ``poll``: registered once per change, not
+    converted at every call as ``select`` does."""
+
+    def __init__(self, sim_fd: int) -> None:
+        self.sim_fd = sim_fd
+        self._watched: list | None = None
+        self._poll = select.poll()
+        self._by_fd: dict[int, Any] = {}
+
+    def wait(self, watched: list, timeout_s: float) -> list:
+        """What is readable (or closed) within ``timeout_s`` [s]: ``sim_fd`` and the
+        sockets of ``watched`` (the same list object while they do not change)."""
+        if watched is not self._watched:
+            self._watched = watched
+            self._poll = select.poll()
+            self._by_fd = {self.sim_fd: self.sim_fd}
+            for sock in watched:
+                self._by_fd[sock.fileno()] = sock
+            for fd in self._by_fd:
+                self._poll.register(fd, select.POLLIN)
+        try:
+            events = self._poll.poll(timeout_s * 1000.0)
+        except OSError:
+            return [self.sim_fd]    # as a bare read of the plant would be
+        by_fd = self._by_fd
+        return [by_fd[fd] for fd, _ in events]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -170,11 +204,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     steps = 0
     last_state_wall = time.monotonic()
     reason = "link closed"
+    sim_fd = client.fileno()
+    waiter = _Waiter(sim_fd)
     try:
         while stop["signal"] is None:
-            try:
-                sim = client.receive_state(timeout_s=0.05)
-            except TimeoutError:
+            # one wait for the plant's next batch, the ground stations and the winch
+            buffered = client.has_buffered_state()
+            ready = [] if buffered else waiter.wait(autopilot.selectables(), SELECT_TIMEOUT_S)
+            sim = None
+            if buffered or sim_fd in ready:
+                try:
+                    sim = client.receive_state(timeout_s=SELECT_TIMEOUT_S)
+                except TimeoutError:
+                    sim = None      # the batch did not complete in time
+            if sim is None:
+                # between periods: what they ask applies from the next period
+                if ready:
+                    autopilot.receive(ready)
                 autopilot.service(None)
                 if time.monotonic() - last_state_wall > SIM_SILENCE_S:
                     reason = "no state from the plant"
@@ -213,6 +259,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             client.send_actuators(sim.time_usec, cmds, armed=armed)
             # the answer is out (in lockstep the plant waits for it); now the ground
             # stations and the winch: what they ask applies from the next period
+            if len(ready) > 1:
+                autopilot.receive(ready)
             throttle = sum(cmds) / 4.0 if armed else 0.0
             autopilot.service(Telemetry(t, state.pos_m, state.vel_m_s, state.quat,
                                         state.rates_rad_s, throttle))

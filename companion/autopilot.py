@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -128,7 +128,9 @@ class _LinkState:
 
 
 class Autopilot:
-    """The vehicle's MAVLink side; call :meth:`service` at every control period.
+    """The vehicle's MAVLink side: watch :meth:`selectables` in the control loop's
+    ``select`` and hand what is readable to :meth:`receive`; call :meth:`service` at every
+    control period (and after :meth:`receive` between periods).
 
     ``home`` is the winder's (latitude deg, longitude deg, ground altitude m AMSL);
     ``params`` the parameters ground stations may read and set; ``component`` the
@@ -158,7 +160,10 @@ class Autopilot:
         self._winch_sink: Callable[[Any], None] | None = None
         self.counters = {"commands": 0, "unsupported": 0, "rejected_targets": 0}
         self._streams_due = -math.inf     # earliest next message due on any link [s]
-        self._streams_links = 0
+        self._streams_gen = -1            # the endpoints' links when it was computed
+        self._watch: list[Any] = []
+        self._watch_gen = -1
+        self._watch_comp: Any = None
 
     # ----- sending helpers
 
@@ -184,28 +189,63 @@ class Autopilot:
 
     # ----- the loop
 
-    def service(self, telem: Telemetry | None) -> None:
-        """Handle what arrived, run the navigator's events, send what is due."""
-        if telem is not None:
-            self._telem = telem
-        for peer, msg in self.io.poll(0.0):
+    def selectables(self) -> list[Any]:
+        """The sockets whose input :meth:`receive` takes (the ground stations', the
+        component link's), for the caller's ``select``: the same list object until they
+        change (a client connects or goes); do not modify it."""
+        gen = self.io.generation
+        comp = self.component.selectable if self.component is not None else None
+        if gen != self._watch_gen or comp is not self._watch_comp:
+            self._watch = [*self.io.sockets(), *([comp] if comp is not None else [])]
+            self._watch_gen, self._watch_comp = gen, comp
+        return self._watch
+
+    def receive(self, ready: Iterable[Any]) -> None:
+        """Take the input of the sockets in ``ready`` (found readable by a ``select`` on
+        :meth:`selectables`; other objects in it are ignored): ground-station messages are
+        handled (commands answered) and the winch's routed at once; what they change in
+        flight applies from the next control period. Call :meth:`service` after it."""
+        for peer, msg in self.io.receive(ready):
             try:
                 self.handle(peer, msg)
             except Exception as exc:  # noqa: BLE001 - one bad message must not stop flight
                 self.log(f"error handling {msg.get_type()} from {peer}: {exc!r}")
-        for peer in self.io.pop_closed():
-            self.missions.peer_closed(peer)
-            self.params.peer_closed(peer)
-            self._links.pop(peer, None)
+        comp = self.component
+        if comp is not None and comp.selectable in ready:
+            self._from_winch(comp.poll())
+
+    def service(self, telem: Telemetry | None) -> None:
+        """Send what is due: at every control period with its telemetry, and (with None)
+        after :meth:`receive` or when no period came for a while. Forgets links that
+        closed, runs the protocols' timers and the navigator's events, sends heartbeats
+        and streams, and writes out what slow TCP clients could not take before. Cheap
+        when nothing is due (most periods)."""
+        if telem is not None:
+            self._telem = telem
+        io = self.io
+        if io.closed_pending:
+            for peer in io.pop_closed():
+                self.missions.peer_closed(peer)
+                self.params.peer_closed(peer)
+                self._links.pop(peer, None)
         now_wall = time.monotonic()
         self.missions.tick(now_wall)
         self.params.tick(now_wall)
-        self._service_winch(now_wall)
-        for kind, value in self.nav.pop_events():
-            self._nav_event(kind, value)
-        self._heartbeat(now_wall)
-        if self._telem is not None:
-            self._streams(self._telem.t_s)
+        if self._winch_pending:
+            self._expire_winch(now_wall)
+        if self.nav.has_events:
+            for kind, value in self.nav.pop_events():
+                self._nav_event(kind, value)
+        tm = self._telem
+        t = tm.t_s if tm is not None else -math.inf
+        if now_wall - self._last_hb_wall >= 1.0 or t - self._last_hb_sim >= 1.0:
+            self.send_heartbeat()
+        if tm is not None and (t >= self._streams_due or io.generation != self._streams_gen):
+            self._streams(t)    # something is due on some link (otherwise nothing to do)
+        if io.backlogged:
+            io.flush()
+        if self.component is not None and self.component.backlogged:
+            self.component.flush()
 
     def send_heartbeat(self) -> None:
         """A HEARTBEAT now (after a mode or arming change)."""
@@ -223,11 +263,6 @@ class Autopilot:
         self._last_hb_wall = time.monotonic()
         if self._telem is not None:
             self._last_hb_sim = self._telem.t_s
-
-    def _heartbeat(self, now_wall: float) -> None:
-        t = self._telem.t_s if self._telem is not None else -math.inf
-        if now_wall - self._last_hb_wall >= 1.0 or t - self._last_hb_sim >= 1.0:
-            self.send_heartbeat()
 
     # ----- routing
 
@@ -257,10 +292,11 @@ class Autopilot:
         self.component.send_bytes(msg.get_msgbuf())
         return True
 
-    def _service_winch(self, now_wall: float) -> None:
-        if self.component is None:
-            return
-        for msg in self.component.poll():
+    def _from_winch(self, msgs: list[Any]) -> None:
+        """Route what the winch sent: to every ground station, WINCH_STATUS also to the
+        sink; its answer to a DO_WINCH sent to the autopilot goes back as the
+        autopilot's."""
+        for msg in msgs:
             if msg.get_srcComponent() != cl.WINCH_COMPONENT_ID:
                 continue
             if (msg.get_type() == "COMMAND_ACK" and msg.command == M.MAV_CMD_DO_WINCH
@@ -269,6 +305,9 @@ class Autopilot:
             self.io.send_bytes(msg.get_msgbuf())
             if msg.get_type() == "WINCH_STATUS" and self._winch_sink is not None:
                 self._winch_sink(msg)
+
+    def _expire_winch(self, now_wall: float) -> None:
+        """Fail the DO_WINCH commands the winch has not answered in time."""
         keep = []
         for entry in self._winch_pending:
             t0, peer, sysid, compid, cmd = entry
@@ -768,9 +807,9 @@ class Autopilot:
         return st
 
     def _streams(self, t: float) -> None:
+        """Send the telemetry due at ``t`` [s] on each link; note when the next is due."""
+        gen = self.io.generation
         links = self.io.links()
-        if t < self._streams_due and len(links) == self._streams_links:
-            return      # nothing due on any link (most control periods)
         built: dict[str, bytes] = {}
         next_due = math.inf
         for peer in links:
@@ -789,7 +828,7 @@ class Autopilot:
                 next_due = min(next_due, entry[1])
         for gone in [p for p in self._links if p not in links]:
             del self._links[gone]
-        self._streams_due, self._streams_links = next_due, len(links)
+        self._streams_due, self._streams_gen = next_due, gen
 
     def _build(self, name: str, tm: Telemetry) -> Any:
         boot_ms = int(tm.t_s * 1000) & 0xFFFFFFFF

@@ -3,17 +3,44 @@
 from __future__ import annotations
 
 import socket
+import struct
 
 from pymavlink.dialects.v20 import common as mavlink2
 
 from tuavdefs import component_link as cl
-from tuavdefs.frames import enu_to_ned
 
 Vec3 = tuple[float, float, float]
 
+#: Unsent bytes the component may fall behind by before it counts as gone (~4 minutes of
+#: positions at 100 Hz): writing never blocks the control loop.
+_BACKLOG_BYTES = 1 << 20
+
+_LPN = mavlink2.MAVLink_local_position_ned_message
+_LPN_PAYLOAD: struct.Struct = _LPN.unpacker    # the payload's layout, as pymavlink packs it
+_LPN_CRC_EXTRA = bytes((_LPN.crc_extra,))
+_LPN_ID = (_LPN.id & 0xFFFF, _LPN.id >> 16)
+#: MAVLink 2 header after its magic byte: length, flags x2, seq, system, component, id.
+_HEADER = struct.Struct("<BBBBBBHB")
+_MAGIC = bytes((mavlink2.PROTOCOL_MARKER_V2,))
+_CRC = struct.Struct("<H")
+#: pymavlink's CRC-16/MCRF4XX: its C helper when installed, its own class otherwise.
+_MCRF4XX = getattr(mavlink2, "mcrf4xx", None)
+
+
+def _x25crc(data: bytes) -> int:
+    """The MAVLink checksum of ``data`` (the frame after its magic byte, then the
+    message's CRC extra), as pymavlink computes it."""
+    if _MCRF4XX is not None:
+        return int(_MCRF4XX(data, 0xFFFF))
+    return int(mavlink2.x25crc(data).crc)
+
 
 class ComponentServer:
-    """One component at a time on 127.0.0.1:``port``; never blocks the control loop."""
+    """One component at a time on 127.0.0.1:``port``; never blocks the control loop.
+
+    Input is read when a caller's ``select`` finds :attr:`selectable` readable
+    (:meth:`poll`); output that the component cannot take at once is queued and written
+    by later calls (:meth:`flush`)."""
 
     def __init__(self, port: int = cl.COMPONENT_PORT_DEFAULT, host: str = "127.0.0.1") -> None:
         self.listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -25,10 +52,19 @@ class ComponentServer:
         self.conn: socket.socket | None = None
         self.mav = cl.new_mavlink(cl.AUTOPILOT_COMPONENT_ID)
         self._next_position_s = 0.0
+        self._pending = bytearray()
         self.bad_frames = 0
 
+    @property
+    def selectable(self) -> socket.socket:
+        """The socket to watch for input: the connection, or the listener while no
+        component is connected (it changes when one connects or goes)."""
+        return self.conn if self.conn is not None else self.listener
+
     def poll(self) -> list[mavlink2.MAVLink_message]:
-        """Accept a waiting component and return the messages it sent since the last call."""
+        """Accept a waiting component, or read what it sent: one read, for a call after a
+        ``select`` found :attr:`selectable` readable (otherwise nothing is read). Returns
+        the messages completed."""
         if self.conn is None:
             try:
                 self.conn, _ = self.listener.accept()
@@ -36,22 +72,21 @@ class ComponentServer:
                 return []
             self.conn.setblocking(False)
             self.conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        msgs: list[mavlink2.MAVLink_message] = []
-        while self.conn is not None:
-            try:
-                data = self.conn.recv(65536)
-            except BlockingIOError:
-                break
-            except OSError:
-                data = b""
-            if data == b"":
-                self._drop()
-                break
-            try:
-                msgs.extend(self.mav.parse_buffer(data) or [])
-            except mavlink2.MAVError:
-                self.bad_frames += 1
-        return msgs
+            return []
+        try:
+            data = self.conn.recv(65536)
+        except BlockingIOError:
+            return []
+        except OSError:
+            data = b""
+        if data == b"":
+            self._drop()
+            return []
+        try:
+            return self.mav.parse_buffer(data) or []
+        except mavlink2.MAVError:
+            self.bad_frames += 1
+            return []
 
     def send_position(self, t_s: float, pos_enu: Vec3, vel_enu: Vec3) -> None:
         """LOCAL_POSITION_NED at ``component_link.POSITION_RATE_HZ`` of simulated time."""
@@ -60,10 +95,25 @@ class ComponentServer:
         period = 1.0 / cl.POSITION_RATE_HZ
         # on the rate on average, whatever the control period
         self._next_position_s = max(self._next_position_s + period, t_s)
-        n = enu_to_ned(pos_enu)
-        v = enu_to_ned(vel_enu)
-        msg = self.mav.local_position_ned_encode(int(t_s * 1000), *n, *v)
-        self.send_bytes(msg.pack(self.mav))
+        # NED: (north, east, down) = (y, x, -z) of ENU
+        self.send_bytes(self.pack_position(int(t_s * 1000), pos_enu[1], pos_enu[0],
+                                           -pos_enu[2], vel_enu[1], vel_enu[0], -vel_enu[2]))
+
+    def pack_position(self, time_boot_ms: int, x: float, y: float, z: float, vx: float,
+                      vy: float, vz: float) -> bytes:
+        """The MAVLink 2 frame of LOCAL_POSITION_NED (NED [m], [m/s]) from this link's
+        system and component, byte for byte what pymavlink packs, without building the
+        message object."""
+        mav = self.mav
+        if mav.signing.sign_outgoing:
+            return _LPN(time_boot_ms, x, y, z, vx, vy, vz).pack(mav)
+        payload = _LPN_PAYLOAD.pack(time_boot_ms, x, y, z, vx, vy, vz)
+        n = len(payload)
+        while n > 1 and payload[n - 1] == 0:   # MAVLink 2 drops trailing zero bytes
+            n -= 1
+        body = _HEADER.pack(n, 0, 0, mav.seq, mav.srcSystem, mav.srcComponent,
+                            *_LPN_ID) + payload[:n]
+        return _MAGIC + body + _CRC.pack(_x25crc(body + _LPN_CRC_EXTRA))
 
     @property
     def connected(self) -> bool:
@@ -71,22 +121,52 @@ class ComponentServer:
         return self.conn is not None
 
     def send_bytes(self, data: bytes) -> None:
-        """Write packed frames to the component (forwarded ground-station messages)."""
+        """Write packed frames to the component (positions, forwarded ground-station
+        messages) without blocking: what it cannot take now waits for the next write or
+        :meth:`flush`; a component more than ``_BACKLOG_BYTES`` behind is dropped."""
         if self.conn is None:
             return
+        if self._pending:
+            self._pending += data
+            self.flush()
+            return
+        n = self._write(data)
+        if n is not None and n < len(data):
+            self._pending += data[n:]
+
+    @property
+    def backlogged(self) -> bool:
+        """Whether bytes wait for the component to take them (see :meth:`flush`)."""
+        return bool(self._pending)
+
+    def flush(self) -> None:
+        """Write what waits for the component, as far as it takes it now."""
+        if self.conn is None or not self._pending:
+            return
+        n = self._write(self._pending)
+        if n is None:
+            return
+        del self._pending[:n]
+        if len(self._pending) > _BACKLOG_BYTES:
+            self._drop()
+
+    def _write(self, data: bytes | bytearray) -> int | None:
+        """How many bytes of ``data`` the connection took now; None if it failed (then
+        it is dropped)."""
+        assert self.conn is not None
         try:
-            self.conn.setblocking(True)
-            self.conn.settimeout(0.5)
-            self.conn.sendall(data)
+            return self.conn.send(data)
+        except BlockingIOError:
+            return 0
         except OSError:
             self._drop()
-            return
-        self.conn.setblocking(False)
+            return None
 
     def _drop(self) -> None:
         if self.conn is not None:
             self.conn.close()
         self.conn = None
+        self._pending.clear()
 
     def close(self) -> None:
         """Close the connection and stop listening."""

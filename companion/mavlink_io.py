@@ -109,6 +109,7 @@ class MavlinkEndpoints:
         self.tcp_port = self.listener.getsockname()[1] if self.listener else None
         self._tcp: dict[int, socket.socket] = {}
         self._pending: dict[int, bytearray] = {}
+        self._backlogged: set[int] = set()     # TCP clients with unsent bytes
         self._closed: list[Peer] = []
         self.udp: list[socket.socket] = []
         self.udp_targets: list[Address] = []
@@ -120,6 +121,14 @@ class MavlinkEndpoints:
             self.udp_targets.append((target[0], int(target[1])))
         self._links: dict[Peer, _Link] = {}
         self._udp_peers: list[set[Address]] = [set() for _ in self.udp]
+        # what select() watches and where telemetry goes, rebuilt only when they change
+        self._socks: list[socket.socket] = []
+        self._udp_index: dict[socket.socket, int] = {s: i for i, s in enumerate(self.udp)}
+        self._links_cache: list[Peer] = []
+        self._broadcast: list[list[Address]] = []
+        self.generation = 0
+        """Incremented whenever :meth:`sockets` or :meth:`links` change."""
+        self._changed()
 
     # ----- receiving
 
@@ -130,37 +139,65 @@ class MavlinkEndpoints:
 
     def links(self) -> list[Peer]:
         """Every link telemetry goes to: TCP clients, each UDP push address, and every
-        address that has written to a UDP socket."""
+        address that has written to a UDP socket. The same list object until the links
+        change (see :attr:`generation`); do not modify it."""
+        return self._links_cache
+
+    def sockets(self) -> list[socket.socket]:
+        """The sockets to watch for input (for a caller's ``select``, then
+        :meth:`receive`). The same list object until they change (see
+        :attr:`generation`); do not modify it."""
+        return self._socks
+
+    def _changed(self) -> None:
+        """Rebuild what :meth:`sockets` and :meth:`links` return and the broadcast
+        addresses (a client came or went, a UDP peer wrote for the first time)."""
+        socks = [*self._tcp.values(), *self.udp]
+        if self.listener is not None:
+            socks.append(self.listener)
+        self._socks = socks
         out: list[Peer] = [("tcp", fd) for fd in self._tcp]
         for i, target in enumerate(self.udp_targets):
             out.append(("udp", i, target))
             out.extend(("udp", i, a) for a in self._udp_peers[i] if a != target)
-        return out
-
-    def _sockets(self) -> list[socket.socket]:
-        socks = [*self._tcp.values(), *self.udp]
-        if self.listener is not None:
-            socks.append(self.listener)
-        return socks
+        self._links_cache = out
+        self._broadcast = [list({self.udp_targets[i], *self._udp_peers[i]})
+                           for i in range(len(self.udp))]
+        self.generation += 1
 
     def poll(self, timeout_s: float = 0.0) -> list[tuple[Peer, Any]]:
-        """Messages that arrived, as (peer, message), waiting at most ``timeout_s`` [s]."""
+        """Messages that arrived, as (peer, message), waiting at most ``timeout_s`` [s];
+        also writes out what TCP clients could not take before (:meth:`flush`)."""
         try:
-            ready, _, _ = select.select(self._sockets(), [], [], timeout_s)
+            ready, _, _ = select.select(self._socks, [], [], timeout_s)
         except (OSError, ValueError):
             ready = []
+        self.flush()
+        return self.receive(ready)
+
+    def receive(self, ready: Iterable[Any]) -> list[tuple[Peer, Any]]:
+        """Read the sockets in ``ready`` that are this object's (others are ignored: the
+        caller may have watched more in the same ``select``); returns the messages that
+        arrived, as (peer, message)."""
         out: list[tuple[Peer, Any]] = []
-        for fd, pending in list(self._pending.items()):
-            if pending:
-                self._flush_tcp(("tcp", fd))
         for sock in ready:
             if sock is self.listener:
                 self._accept()
-            elif sock in self.udp:
-                self._read_udp(self.udp.index(sock), sock, out)
-            else:
+            elif sock in self._udp_index:
+                self._read_udp(self._udp_index[sock], sock, out)
+            elif isinstance(sock, socket.socket) and self._tcp.get(sock.fileno()) is sock:
                 self._read_tcp(sock, out)
         return out
+
+    @property
+    def backlogged(self) -> bool:
+        """Whether some TCP client has bytes it could not take yet (see :meth:`flush`)."""
+        return bool(self._backlogged)
+
+    def flush(self) -> None:
+        """Write out what TCP clients could not take before, as far as they take it now."""
+        for fd in list(self._backlogged):
+            self._flush_tcp(("tcp", fd))
 
     def _accept(self) -> None:
         assert self.listener is not None
@@ -173,6 +210,7 @@ class MavlinkEndpoints:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._tcp[conn.fileno()] = conn
             self._links[("tcp", conn.fileno())] = _Link()
+            self._changed()
 
     def _read_tcp(self, sock: socket.socket, out: list[tuple[Peer, Any]]) -> None:
         peer: Peer = ("tcp", sock.fileno())
@@ -196,7 +234,9 @@ class MavlinkEndpoints:
             except OSError:
                 return
             addr = (addr[0], addr[1])
-            self._udp_peers[index].add(addr)
+            if addr not in self._udp_peers[index]:
+                self._udp_peers[index].add(addr)
+                self._changed()
             self._parse(("udp", index, addr), data, out)
 
     def _parse(self, peer: Peer, data: bytes, out: list[tuple[Peer, Any]]) -> None:
@@ -219,6 +259,11 @@ class MavlinkEndpoints:
                 self.tlog.write(m.get_msgbuf())
             out.append((peer, m))
 
+    @property
+    def closed_pending(self) -> bool:
+        """Whether connections closed since the last :meth:`pop_closed`."""
+        return bool(self._closed)
+
     def pop_closed(self) -> list[Peer]:
         """Peers whose connection closed since the last call."""
         out, self._closed = self._closed, []
@@ -229,9 +274,11 @@ class MavlinkEndpoints:
             self._closed.append(peer)
         sock = self._tcp.pop(peer[1], None)
         self._pending.pop(peer[1], None)
+        self._backlogged.discard(peer[1])
         self._links.pop(peer, None)
         if sock is not None:
             sock.close()
+            self._changed()
 
     # ----- sending
 
@@ -248,10 +295,10 @@ class MavlinkEndpoints:
         if self.tlog is not None:
             self.tlog.write(data)
         if peer is None:
-            for fd in list(self._tcp):
-                self._send_tcp(("tcp", fd), data)
-            for i, sock in enumerate(self.udp):
-                targets = {self.udp_targets[i], *self._udp_peers[i]}
+            for peer_ in self._links_cache:
+                if peer_[0] == "tcp":
+                    self._send_tcp(peer_, data)
+            for sock, targets in zip(self.udp, self._broadcast, strict=True):
                 for addr in targets:
                     self._send_udp(sock, addr, data)
         elif peer[0] == "tcp":
@@ -260,10 +307,18 @@ class MavlinkEndpoints:
             self._send_udp(self.udp[peer[1]], peer[2], data)
 
     def _send_tcp(self, peer: Peer, data: bytes) -> None:
-        sock = self._tcp.get(peer[1])
+        fd = peer[1]
+        sock = self._tcp.get(fd)
         if sock is None:
             return
-        pending = self._pending.setdefault(peer[1], bytearray())
+        if fd not in self._backlogged:
+            # nothing queued before (the usual case): straight to the socket
+            n = self._write_tcp(peer, sock, data)
+            if n is not None and n < len(data):
+                self._pending[fd] = bytearray(data[n:])
+                self._backlogged.add(fd)
+            return
+        pending = self._pending[fd]
         if len(pending) > _TCP_BACKLOG_BYTES:
             # a client that does not read loses whole frames rather than stalling the vehicle
             return
@@ -275,14 +330,24 @@ class MavlinkEndpoints:
         pending = self._pending.get(peer[1])
         if sock is None or not pending:
             return
-        try:
-            n = sock.send(pending)
-        except BlockingIOError:
-            return
-        except OSError:
-            self._drop_tcp(peer)
+        n = self._write_tcp(peer, sock, pending)
+        if n is None:
             return
         del pending[:n]
+        if not pending:
+            self._backlogged.discard(peer[1])
+
+    def _write_tcp(self, peer: Peer, sock: socket.socket, data: bytes | bytearray
+                   ) -> int | None:
+        """How many bytes of ``data`` the client took now; None if its connection failed
+        (then it is dropped)."""
+        try:
+            return sock.send(data)
+        except BlockingIOError:
+            return 0
+        except OSError:
+            self._drop_tcp(peer)
+            return None
 
     @staticmethod
     def _send_udp(sock: socket.socket, addr: Address, data: bytes) -> None:
@@ -292,7 +357,7 @@ class MavlinkEndpoints:
 
     def close(self) -> None:
         """Close every socket and flush the log."""
-        for sock in self._sockets():
+        for sock in self._socks:
             sock.close()
         self._tcp.clear()
         self._links.clear()

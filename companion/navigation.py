@@ -279,6 +279,11 @@ class Navigator:
         """The last reference produced (None before the first flying step)."""
         return self._ref
 
+    @property
+    def has_events(self) -> bool:
+        """Whether :meth:`pop_events` has events to hand out."""
+        return bool(self._events)
+
     def pop_events(self) -> list[tuple[str, object]]:
         """(kind, value) events since the last call."""
         out, self._events = self._events, []
@@ -557,11 +562,13 @@ class Navigator:
             self._hold()
         leg = self._leg
         assert leg is not None
-        ref = leg.follower.update(t, self._pos)
-        for ev in leg.follower.pop_events():
-            if ev.kind == "reached" and leg.seq is not None and leg.tag == "mission":
-                self._emit(NavEvent.REACHED, leg.seq)
-        if leg.follower.done and not leg.landing and not leg.finished:
+        follower = leg.follower
+        ref = follower.update(t, self._pos)
+        if follower.has_events:
+            for ev in follower.pop_events():
+                if ev.kind == "reached" and leg.seq is not None and leg.tag == "mission":
+                    self._emit(NavEvent.REACHED, leg.seq)
+        if follower.done and not leg.landing and not leg.finished:
             leg.finished = True
             self._leg_done(t, leg)
         return ref
@@ -581,9 +588,9 @@ class Navigator:
         # otherwise the finished leg's reference rests at its target: a hold
 
     def _land_detector(self, t: float, pos: Vec3, vel: Vec3) -> None:
-        on_gear = pos[2] <= self.gear_height_m + 0.05
-        still = math.sqrt(sum(v * v for v in vel)) < 0.3
-        if self.landing and on_gear and still:
+        leg = self._leg
+        if (leg is not None and leg.landing and pos[2] <= self.gear_height_m + 0.05
+                and math.sqrt(vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2]) < 0.3):
             if self._still_since is None:
                 self._still_since = t
             elif t - self._still_since >= self.p.land_detect_s:

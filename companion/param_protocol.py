@@ -233,6 +233,8 @@ class ParamProtocol:
 
     def tick(self, now_s: float) -> None:
         """Send the parameters the list streams' budgets allow; call often (>= 20 Hz)."""
+        if not self._streams:
+            return
         for peer in list(self._streams):
             self._pump(peer, float(now_s))
 

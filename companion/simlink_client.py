@@ -14,8 +14,7 @@ import socket
 import time
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import NamedTuple
 
 from tuavdefs import simlink as sl
 from tuavdefs.frames import Quat, Vec3
@@ -24,8 +23,7 @@ from tuavdefs.frames import Quat, Vec3
 _SEND_TIMEOUT_S = 5.0
 
 
-@dataclass(frozen=True)
-class TruthState:
+class TruthState(NamedTuple):
     """The plant's truth from HIL_STATE_QUATERNION, in project frames.
 
     ``position_enu_m`` [m] (resolution ~1 cm horizontally, 1 mm vertically),
@@ -44,8 +42,7 @@ class TruthState:
     ind_airspeed_m_s: float
 
 
-@dataclass(frozen=True)
-class ImuSample:
+class ImuSample(NamedTuple):
     """HIL_SENSOR in project frames: specific force [m/s^2], rates [rad/s], magnetic field
     [gauss] in body FLU; static pressure [hPa]; pressure altitude [m AMSL]; temperature
     [degC]; ``fields_updated`` bits as sent."""
@@ -60,8 +57,7 @@ class ImuSample:
     fields_updated: int
 
 
-@dataclass(frozen=True)
-class GpsFix:
+class GpsFix(NamedTuple):
     """HIL_GPS in project frames: position [m] and velocity [m/s] in the inertial ENU frame
     (from lat/lon/alt and the home), the raw latitude/longitude [deg] and altitude [m
     AMSL], claimed accuracies eph/epv [m], fix type and satellites."""
@@ -78,8 +74,7 @@ class GpsFix:
     satellites_visible: int
 
 
-@dataclass(frozen=True)
-class SimState:
+class SimState(NamedTuple):
     """One step's batch. ``time_usec`` is the HIL_SENSOR time to echo in the answer;
     ``sim_time_s`` the same in seconds; ``truth`` the latest HIL_STATE_QUATERNION (None if
     none came yet); ``imu`` this step's HIL_SENSOR; ``gps`` the latest HIL_GPS (None if none
@@ -106,10 +101,14 @@ class SimLinkClient:
         self.host = host
         self.port = port
         self.home = tuple(float(v) for v in home)
+        self._home_map = sl.home_map(self.home)
         self._sock: socket.socket | None = None
         self._parser = sl.FrameParser()
         self._encoder = sl.Encoder(sl.COMPANION_SYSID, sl.COMPANION_COMPID)
-        self._pending: deque = deque()
+        #: The link's messages read and not yet absorbed: (message id, values in wire order)
+        self._pending: deque[tuple[int, tuple]] = deque()
+        #: The receive timeout set on the socket [ms] (it blocks in recv for at most that)
+        self._recv_timeout_ms: int | None = None
         self._truth: TruthState | None = None
         self._gps: GpsFix | None = None
         self._gps_new = False
@@ -128,6 +127,10 @@ class SimLinkClient:
                     raise TimeoutError(f"no simulator at {self.host}:{self.port}") from e
                 time.sleep(0.02)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        # a blocking socket whose timeouts the kernel keeps (one system call a recv)
+        sock.settimeout(None)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, sl.timeval(_SEND_TIMEOUT_S))
+        self._recv_timeout_ms = None
         self._sock = sock
 
     @property
@@ -179,34 +182,39 @@ class SimLinkClient:
         left = end - time.monotonic()
         if left <= 0:
             raise TimeoutError("no sensor message from the simulator")
-        sock.settimeout(left)
+        # the socket's receive timeout: what is left, in whole milliseconds below it (set
+        # again only when that changes), or the microseconds left in the last one
+        ms = int(left * 1e3)
+        if ms != self._recv_timeout_ms:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO,
+                            sl.timeval(ms * 1e-3 if ms else left))
+            self._recv_timeout_ms = ms if ms else None
         try:
             data = sock.recv(65536)
-        except TimeoutError:
+        except BlockingIOError:     # the receive timeout
             raise TimeoutError("no sensor message from the simulator") from None
         except OSError as e:
             raise ConnectionError(f"simulator link failed: {e}") from e
         if not data:
             raise ConnectionError("the simulator closed the link")
-        self._pending.extend(self._parser.feed(data))
+        # the usual case, whole well-formed frames, skips the message objects
+        items = self._parser.feed_link(data)
+        if items is None:
+            items = [v for v in map(sl.link_values, self._parser.feed(data)) if v is not None]
+        self._pending.extend(items)
 
-    def _absorb(self, msg: Any) -> SimState | None:
-        mid = msg.get_msgId()
+    def _absorb(self, item: tuple[int, tuple]) -> SimState | None:
+        mid, v = item
         if mid == sl.MSG_HIL_STATE_QUATERNION:
-            pos, vel, quat, rates = sl.state_from_hil_state_quaternion(msg, self.home)
-            ias, tas = sl.airspeeds_from_hil_state_quaternion(msg)
-            self._truth = TruthState(int(msg.time_usec), pos, vel, quat, rates,
-                                     sl.specific_force_from_hil_state_quaternion(msg), tas, ias)
+            self._truth = TruthState(int(v[0]), *sl.truth_from_wire(v, self._home_map))
         elif mid == sl.MSG_HIL_GPS:
-            pos, vel, eph, epv = sl.gps_from_hil_gps(msg, self.home)
-            self._gps = GpsFix(int(msg.time_usec), pos, vel, msg.lat * 1e-7, msg.lon * 1e-7,
-                               msg.alt * 1e-3, eph, epv, int(msg.fix_type),
-                               int(msg.satellites_visible))
+            pos, vel, eph, epv = sl.gps_from_wire(v, self._home_map)
+            self._gps = GpsFix(int(v[0]), pos, vel, v[1] * 1e-7, v[2] * 1e-7, v[3] * 1e-3,
+                               eph, epv, int(v[11]), int(v[12]))
             self._gps_new = True
         elif mid == sl.MSG_HIL_SENSOR:
-            acc, gyro, mag, p, palt, temp = sl.imu_from_hil_sensor(msg)
-            t = int(msg.time_usec)
-            imu = ImuSample(t, acc, gyro, mag, p, palt, temp, int(msg.fields_updated))
+            t = int(v[0])
+            imu = ImuSample(t, *sl.imu_from_wire(v), int(v[14]))
             state = SimState(t, t * 1e-6, self._truth, imu, self._gps, self._gps_new)
             self._gps_new = False
             return state
@@ -217,14 +225,14 @@ class SimLinkClient:
                        lockstep: bool = True) -> None:
         """Answer the batch stamped ``time_usec`` [us] with four rotor commands in [0, 1]
         (rotor order of :mod:`tuavdefs.airframe`) and the armed flag."""
-        fields = sl.actuator_controls_fields(rotor_commands, armed, lockstep)
-        self.send_raw(self._encoder.hil_actuator_controls(time_usec, fields))
+        self.send_raw(self._encoder.pack_values(
+            sl.MSG_HIL_ACTUATOR_CONTROLS,
+            sl.actuator_controls_values(time_usec, rotor_commands, armed, lockstep)))
 
     def send_raw(self, data: bytes) -> None:
         """Write bytes on the link as they are (diagnostics and tests)."""
         sock = self._require()
         try:
-            sock.settimeout(_SEND_TIMEOUT_S)
             sock.sendall(data)
         except OSError as e:
             raise ConnectionError(f"simulator link failed: {e}") from e

@@ -51,7 +51,12 @@ class WinchReport:
         ``max_age_s``: an old report is not extrapolated further)."""
         if self.t_s is None:
             return self.length_m
-        age = min(max(t_s - self.t_s, 0.0), max_age_s)
+        # min(max(age, 0.0), max_age_s), without the calls: it runs at every period
+        age = t_s - self.t_s
+        if age < 0.0:
+            age = 0.0
+        if max_age_s < age:
+            age = max_age_s
         return self.length_m + self.speed_m_s * age
 
 

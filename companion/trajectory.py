@@ -135,6 +135,17 @@ def _horner(rev_coefs: list[float], x: float) -> float:
     return acc
 
 
+def _horner3(cols: list[tuple[float, float, float]], x: float) -> tuple[float, float, float]:
+    """Three polynomials at ``x`` by :func:`_horner`'s steps (so to the bit), at once:
+    ``cols[k]`` holds their k-th coefficients, highest power first."""
+    a = b = c = 0.0
+    for p, q, r in cols:
+        a = a * x + p
+        b = b * x + q
+        c = c * x + r
+    return (a, b, c)
+
+
 def _smoothstep5(x: float) -> float:
     return x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
 
@@ -146,8 +157,8 @@ class _Piecewise:
     """A piecewise polynomial in absolute time, any dimension; clamped before its start and
     held (at rest) after its end."""
 
-    __slots__ = ("t0", "end", "ndim", "_starts", "_durs", "_p", "_v", "_a", "_j", "_first",
-                 "_final")
+    __slots__ = ("t0", "end", "ndim", "_starts", "_durs", "_p", "_v", "_a", "_j", "_cols3",
+                 "_first", "_final")
 
     def __init__(self, t0: float, pieces: list[_Piece], final_pos: tuple[float, ...] | None,
                  ndim: int) -> None:
@@ -171,6 +182,10 @@ class _Piecewise:
                               else np.zeros((ndim, 1)))
             for store, d in zip((self._p, self._v, self._a, self._j), derivs, strict=True):
                 store.append([[float(x) for x in row[::-1]] for row in d])
+        # in three dimensions, the same coefficients by power for _horner3
+        self._cols3 = [tuple([list(zip(*store[i], strict=True)) for store in
+                              (self._p, self._v, self._a, self._j)])
+                       for i in range(len(self._starts))] if ndim == 3 else []
         self.end = t
         zeros = (0.0,) * ndim
         if final_pos is None:
@@ -182,6 +197,9 @@ class _Piecewise:
         if self.ndim == 1:  # the common scalar case (arc length), without the loops
             return ((_horner(self._p[i][0], tau),), (_horner(self._v[i][0], tau),),
                     (_horner(self._a[i][0], tau),), (_horner(self._j[i][0], tau),))
+        if self.ndim == 3:  # positions: the three axes together
+            p, v, a, j = self._cols3[i]
+            return (_horner3(p, tau), _horner3(v, tau), _horner3(a, tau), _horner3(j, tau))
         return (tuple([_horner(r, tau) for r in self._p[i]]),
                 tuple([_horner(r, tau) for r in self._v[i]]),
                 tuple([_horner(r, tau) for r in self._a[i]]),
@@ -484,8 +502,14 @@ class Transition(Trajectory):
         self.peak_yaw_rate_rad_s = _pieces_peaks(yaw_pieces)[0]
         self.within_limits = pos_ok and yaw_ok
         self.knots_s = tuple(sorted(set(self._pos.knots()) | set(self._yaw.knots())))
+        self._rest = self._sample(self.end_s)   # from the end on: at rest, the same sample
 
     def sample(self, t_s: float) -> RefSample:
+        if t_s >= self.end_s:
+            return self._rest
+        return self._sample(t_s)
+
+    def _sample(self, t_s: float) -> RefSample:
         p, v, a, j = self._pos.eval(t_s)
         y, yr, _, _ = self._yaw.eval(t_s)
         return RefSample(p, v, a, j, wrap_pi(y[0]), yr[0])  # type: ignore[arg-type]
@@ -981,6 +1005,11 @@ class WaypointFollower:
         """Point [m] the acceptance test currently uses (None while on an endless circle)."""
         return self._target
 
+    @property
+    def has_events(self) -> bool:
+        """Whether :meth:`pop_events` has events to hand out."""
+        return bool(self._events)
+
     def pop_events(self) -> list[MissionEvent]:
         """Events since the last call, oldest first."""
         out, self._events = self._events, []
@@ -1018,6 +1047,10 @@ class WaypointFollower:
         """Advance the mission with the vehicle at ``current_pos`` [m] at time ``t`` [s]
         (non-decreasing) and return the reference at ``t``."""
         traj = self.trajectory
+        phase = self._phase
+        if (t < traj.end_s and phase in (_TRANSIT, _CIRCLE)
+                or phase == _HOLD and t < self._hold_until or phase == _DONE):
+            return traj.sample(t)   # nothing to decide (most calls)
         pos = tuple(current_pos)
         for _ in range(2 * len(self._items) + 4):  # each pass changes phase or stops
             traj = self.trajectory

@@ -92,6 +92,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     start = time.monotonic()
     was_lost = False
+    positions_seen = 0
     try:
         while not stop.is_set():
             if args.duration is not None and time.monotonic() - start > args.duration:
@@ -107,7 +108,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             emit(winch.poll(now))
             if mav is not None:
                 mav.poll()
-                winch.set_uav(mav.uav_state(), mav.uav_state_time_ms())
+                if mav.positions_received != positions_seen:   # a new UAV state
+                    positions_seen = mav.positions_received
+                    winch.set_uav(mav.uav_state(), mav.uav_state_time_ms())
                 for req in mav.take_commands():
                     reply = winch.command(req, time.monotonic())
                     if reply is None:

@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -282,6 +283,22 @@ class Winch:
         self._frames_since_status = 0
         self._last_status_wall: float | None = None
         self._last_command: tuple[tuple, float, CommandReply] | None = None
+        # the frames this winch reads, by 11-bit id (a sensor node sharing the axis's node
+        # id takes all of that node's frames)
+        handlers: dict[int, Callable[[float, bytes], WinchOutput | None]] = {}
+        if 0 <= self.node <= cp.MAX_NODE_ID and self.node != self.sensor_node:
+            handlers[cp.frame_id(self.node, cp.Cmd.GET_ENCODER_ESTIMATES)] = self._encoder_frame
+            handlers[cp.frame_id(self.node, cp.Cmd.HEARTBEAT)] = self._axis_heartbeat_frame
+            handlers[cp.frame_id(self.node, cp.Cmd.GET_BUS_VOLTAGE_CURRENT)] = (
+                self._bus_voltage_current_frame)
+        if 0 <= self.sensor_node <= cp.MAX_NODE_ID:
+            handlers[cp.frame_id(self.sensor_node, cp.SensorCmd.WINCH_LENGTH)] = (
+                self._winch_length_frame)
+            handlers[cp.frame_id(self.sensor_node, cp.SensorCmd.WINCH_TENSION)] = (
+                self._winch_tension_frame)
+            handlers[cp.frame_id(self.sensor_node, cp.SensorCmd.WINCH_HEARTBEAT)] = (
+                self._winch_heartbeat_frame)
+        self._handlers = handlers
 
     # ------------------------------------------------------------------------ inputs
 
@@ -340,43 +357,42 @@ class Winch:
     def on_frame(self, wall_s: float, arbitration_id: int, data: bytes,
                  is_remote: bool = False) -> WinchOutput:
         """Handle one received CAN frame at wall time ``wall_s`` [s]."""
-        if is_remote or not 0 <= arbitration_id <= 0x7FF:
-            return WinchOutput()
-        nid, cmd = cp.split_id(arbitration_id)
-        try:
-            if nid == self.sensor_node:
-                self._on_sensor(cmd, data)
-                return WinchOutput()
-            if nid != self.node:
-                return WinchOutput()
-            if cmd == cp.Cmd.GET_ENCODER_ESTIMATES:
-                enc = cp.decode_encoder_estimates(data)
-                return self._on_encoder(wall_s, enc.pos_rev, enc.vel_rev_s)
-            if cmd == cp.Cmd.HEARTBEAT:
-                return self._on_axis_heartbeat(cp.decode_heartbeat(data))
-            if cmd == cp.Cmd.GET_BUS_VOLTAGE_CURRENT:
-                bvc = cp.decode_bus_voltage_current(data)
-                self.voltage_v, self.current_a = bvc.voltage_v, bvc.current_a
-        except cp.CanFrameError:
-            self.bad_frames += 1
+        handler = None if is_remote else self._handlers.get(arbitration_id)
+        if handler is not None:
+            try:
+                out = handler(wall_s, data)
+            except cp.CanFrameError:
+                self.bad_frames += 1
+            else:
+                if out is not None:
+                    return out
         return WinchOutput()
 
-    def _on_sensor(self, cmd: int, data: bytes) -> None:
-        if cmd == cp.SensorCmd.WINCH_LENGTH:
-            wl = cp.decode_winch_length(data)
-            if _finite(wl.length_m, wl.speed_m_s):
-                self.sensor_length_m, self.sensor_speed_m_s = wl.length_m, wl.speed_m_s
-        elif cmd == cp.SensorCmd.WINCH_TENSION:
-            wt = cp.decode_winch_tension(data)
-            self.sample_time_ms = wt.sample_time_ms
-            self.sensor_brake = wt.brake_engaged
-            if _finite(wt.tension_n):
-                self.tension_n = wt.tension_n
-        elif cmd == cp.SensorCmd.WINCH_HEARTBEAT:
-            hb = cp.decode_winch_heartbeat(data)
-            self.load_cell_healthy = hb.load_cell_healthy
-            self.at_full_stop = hb.at_full_stop
-            self.sensor_brake = hb.brake_engaged
+    def _encoder_frame(self, wall_s: float, data: bytes) -> WinchOutput:
+        pos_rev, vel_rev_s = cp.decode_encoder_estimates(data)
+        return self._on_encoder(wall_s, pos_rev, vel_rev_s)
+
+    def _axis_heartbeat_frame(self, wall_s: float, data: bytes) -> WinchOutput:
+        return self._on_axis_heartbeat(cp.decode_heartbeat(data))
+
+    def _bus_voltage_current_frame(self, wall_s: float, data: bytes) -> None:
+        self.voltage_v, self.current_a = cp.decode_bus_voltage_current(data)
+
+    def _winch_length_frame(self, wall_s: float, data: bytes) -> None:
+        length_m, speed_m_s = cp.decode_winch_length(data)
+        if math.isfinite(length_m) and math.isfinite(speed_m_s):
+            self.sensor_length_m, self.sensor_speed_m_s = length_m, speed_m_s
+
+    def _winch_tension_frame(self, wall_s: float, data: bytes) -> None:
+        tension_n, self.sensor_brake, self.sample_time_ms = cp.decode_winch_tension(data)
+        if math.isfinite(tension_n):
+            self.tension_n = tension_n
+
+    def _winch_heartbeat_frame(self, wall_s: float, data: bytes) -> None:
+        hb = cp.decode_winch_heartbeat(data)
+        self.load_cell_healthy = hb.load_cell_healthy
+        self.at_full_stop = hb.at_full_stop
+        self.sensor_brake = hb.brake_engaged
 
     def _on_axis_heartbeat(self, hb: cp.Heartbeat) -> WinchOutput:
         out = WinchOutput()
@@ -403,7 +419,7 @@ class Winch:
 
     def _on_encoder(self, wall_s: float, pos_rev: float, vel_rev_s: float) -> WinchOutput:
         out = WinchOutput()
-        if not _finite(pos_rev, vel_rev_s):
+        if not (math.isfinite(pos_rev) and math.isfinite(vel_rev_s)):
             self.bad_frames += 1
             return out
         self.encoder_frames += 1

@@ -9,7 +9,9 @@ client connects, and reconnects after a drop, on its own; sends while unconnecte
 
 from __future__ import annotations
 
+import select
 import socket
+import struct
 import time
 
 from pymavlink.dialects.v20 import common as mavlink2
@@ -19,6 +21,46 @@ from tuavdefs import component_link as cl
 from tuavdefs.frames import ned_to_enu
 
 Vec3 = tuple[float, float, float]
+
+_POSITION = mavlink2.MAVLink_local_position_ned_message
+_V2_HEADER = struct.Struct("<BBBBBBBHB")   # magic, len, incompat, compat, seq, ids, msgid
+_V2_MAGIC = 0xFD
+_V2_OVERHEAD = _V2_HEADER.size + 2        # header and checksum
+_POSITION_CRC_EXTRA = bytes((_POSITION.crc_extra,))
+
+
+#: pymavlink's checksum (CRC-16/MCRF4XX) in C, where it has it
+_MCRF4XX = mavlink2.mcrf4xx
+
+
+def _checksum(data: bytes) -> int:
+    """MAVLink's checksum of ``data`` (header after the magic, payload, CRC extra)."""
+    return _MCRF4XX(data, 0xFFFF) if _MCRF4XX is not None else mavlink2.x25crc(data).crc
+
+
+def local_positions(data: bytes) -> list[tuple] | None:
+    """The ``LOCAL_POSITION_NED`` fields (time_boot_ms, x, y, z, vx, vy, vz) of each frame
+    of ``data`` when it holds nothing but whole, unsigned MAVLink 2 frames of that message
+    with good checksums: what pymavlink's parser, holding no partial frame, decodes from
+    it. None for anything else (then pymavlink parses it)."""
+    out = []
+    size = _POSITION.unpacker.size
+    pos, end = 0, len(data)
+    while pos < end:
+        if end - pos < _V2_OVERHEAD:
+            return None
+        magic, length, incompat, _, _, _, _, id_low, id_high = _V2_HEADER.unpack_from(data, pos)
+        stop = pos + length + _V2_OVERHEAD
+        if (magic != _V2_MAGIC or incompat or id_low != _POSITION.id or id_high
+                or length > size or stop > end):
+            return None
+        body = data[pos + 1:stop - 2]
+        if _checksum(body + _POSITION_CRC_EXTRA) != data[stop - 2] | data[stop - 1] << 8:
+            return None
+        # MAVLink 2 drops the payload's trailing zeros
+        out.append(_POSITION.unpacker.unpack(body[_V2_HEADER.size - 1:].ljust(size, b"\0")))
+        pos = stop
+    return out
 
 
 class WinchLinkClient:
@@ -33,6 +75,9 @@ class WinchLinkClient:
         self._deadline = time.monotonic() + connect_timeout_s
         self._state: tuple[Vec3, Vec3] | None = None
         self._state_ms: int | None = None
+        self.positions_received = 0
+        """LOCAL_POSITION_NED messages received (the state is new when this changes)."""
+        self._readable: select.poll | None = None
         self._last_heartbeat = 0.0
         self._commands: list[CommandRequest] = []
         self.bad_frames = 0
@@ -47,45 +92,67 @@ class WinchLinkClient:
         s.setblocking(False)
         s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.sock = s
+        self._readable = select.poll()
+        self._readable.register(s, select.POLLIN)
         return True
 
     def poll(self) -> None:
         """Read what has arrived (non-blocking); connects (and reconnects) as needed."""
         if not self._connect():
             return
-        assert self.sock is not None
-        try:
-            data = self.sock.recv(65536)
-        except BlockingIOError:
-            data = None
-        except OSError:
-            data = b""
-        if data == b"":
-            self.sock.close()
-            self.sock = None
-            return
-        if data:
+        assert self.sock is not None and self._readable is not None
+        # poll first: on an idle link it costs less than a failing recv (an exception)
+        if self._readable.poll(0):
             try:
-                msgs = self.mav.parse_buffer(data) or []
-            except mavlink2.MAVError:
-                self.bad_frames += 1
-                msgs = []
-            for m in msgs:
-                kind = m.get_type()
-                if kind == "LOCAL_POSITION_NED":
-                    self._state = (ned_to_enu((m.x, m.y, m.z)), ned_to_enu((m.vx, m.vy, m.vz)))
-                    self._state_ms = int(m.time_boot_ms)
-                elif kind in ("COMMAND_LONG", "COMMAND_INT"):
-                    self._commands.append(CommandRequest(
-                        m.command, m.target_system, m.target_component, m.get_srcSystem(),
-                        m.get_srcComponent(), m.param1, m.param2, m.param3, m.param4,
-                        m.confirmation if kind == "COMMAND_LONG" else 0))
+                data = self.sock.recv(65536)
+            except BlockingIOError:
+                data = None
+            except OSError:
+                data = b""
+            if data == b"":
+                self.close()
+                return
+            if data:
+                self._receive(data)
         now = time.monotonic()
         if now - self._last_heartbeat >= 1.0:
             self._last_heartbeat = now
             self._send(self.mav.heartbeat_encode(
                 mavlink2.MAV_TYPE_WINCH, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0,
                 mavlink2.MAV_STATE_ACTIVE))
+
+    def _receive(self, data: bytes) -> None:
+        mav = self.mav
+        if mav.buf_len() == 0 and mav.signing.secret_key is None:
+            # the usual read: LOCAL_POSITION_NED frames only, parsed here
+            positions = local_positions(data)
+            if positions is not None:
+                self._set_state(*positions[-1])
+                self.positions_received += len(positions)
+                mav.total_bytes_received += len(data)
+                mav.total_packets_received += len(positions)
+                return
+        try:
+            msgs = mav.parse_buffer(data) or []
+        except mavlink2.MAVError:
+            self.bad_frames += 1
+            msgs = []
+        for m in msgs:
+            kind = m.get_type()
+            if kind == "LOCAL_POSITION_NED":
+                self._set_state(m.time_boot_ms, m.x, m.y, m.z, m.vx, m.vy, m.vz)
+                self.positions_received += 1
+            elif kind in ("COMMAND_LONG", "COMMAND_INT"):
+                self._commands.append(CommandRequest(
+                    m.command, m.target_system, m.target_component, m.get_srcSystem(),
+                    m.get_srcComponent(), m.param1, m.param2, m.param3, m.param4,
+                    m.confirmation if kind == "COMMAND_LONG" else 0))
+
+    def _set_state(self, time_boot_ms: int, x: float, y: float, z: float, vx: float,
+                   vy: float, vz: float) -> None:
+        """The UAV's state from LOCAL_POSITION_NED's fields (NED [m], [m/s]; [ms])."""
+        self._state = (ned_to_enu((x, y, z)), ned_to_enu((vx, vy, vz)))
+        self._state_ms = int(time_boot_ms)
 
     def uav_state_time_ms(self) -> int | None:
         """The vehicle's time [ms] (time_boot_ms: simulated time) of :meth:`uav_state`."""
@@ -131,11 +198,11 @@ class WinchLinkClient:
         try:
             self.sock.sendall(msg.pack(self.mav))
         except (BlockingIOError, OSError):
-            self.sock.close()
-            self.sock = None
+            self.close()
 
     def close(self) -> None:
         """Close the connection."""
         if self.sock is not None:
             self.sock.close()
             self.sock = None
+            self._readable = None

@@ -18,7 +18,7 @@ import time
 from collections.abc import Sequence
 from typing import TextIO
 
-from sitl.plant import Plant, initial_state
+from sitl.plant import POS, QUAT, VEL, Plant, initial_state
 from sitl.sensors import SensorNoise
 from sitl.simlink_server import SimLinkServer, WinderInputs
 from sitl.trim import hover_trim
@@ -50,10 +50,12 @@ class TruthLog:
         if (self._count - 1) % self.every:
             return
         p = server.plant
-        pos, vel = p.position_m, p.velocity_m_s
-        row = (p.t_s, *pos, *vel, *quat_to_euler(p.quaternion), p.tether_length_m,
-               p.drum_rate_rad_s, int(server.armed), *server.rotor_commands)
-        self.stream.write(",".join(repr(float(v)) for v in row) + "\n")
+        x = p.x
+        # the state's slices as Python floats: position_m, velocity_m_s and quaternion
+        row = (p.t_s, *x[POS].tolist(), *x[VEL].tolist(), *quat_to_euler(x[QUAT].tolist()),
+               p.tether_length_m, p.drum_rate_rad_s, int(server.armed),
+               *server.rotor_commands)
+        self.stream.write(",".join(map(repr, map(float, row))) + "\n")
         now = time.monotonic()
         if now - self._flushed >= 1.0:
             self.stream.flush()

@@ -58,6 +58,7 @@ from collections.abc import Mapping
 
 from tuavdefs.can_protocol import (
     AXIS_NODE_ID_DEFAULT,
+    F32_MAX,
     MAX_DLC,
     MESSAGES,
     WINCH_SENSOR_NODE_ID_DEFAULT,
@@ -86,7 +87,6 @@ from tuavdefs.can_protocol import (
     encode_winch_length,
     encode_winch_tension,
     frame_id,
-    is_finite_f32,
 )
 
 __all__ = ["Frame", "OdriveAxis", "WinchSensors", "CyclicSchedule", "DROP_REASONS"]
@@ -117,18 +117,22 @@ class CyclicSchedule:
         self.period_s = float(period_s)
         self._t0: float | None = None
         self._n = 0
+        self.next_s = -math.inf
+        """The next slot [s] (-inf until the first poll): :meth:`due` is False before
+        ``next_s - 1 ns``."""
 
     def due(self, t_s: float) -> bool:
         """True (once) when a slot at or before ``t_s`` [s] has not been served yet."""
+        if t_s + _TIME_EPS_S < self.next_s:
+            return False
         if self._t0 is None:
             self._t0 = t_s
             self._n = 1
-            return True
-        next_t = self._t0 + self._n * self.period_s
-        if t_s + _TIME_EPS_S < next_t:
-            return False
-        # serve this slot and skip any slots that were missed
-        self._n = max(self._n + 1, math.floor((t_s + _TIME_EPS_S - self._t0) / self.period_s) + 1)
+        else:
+            # serve this slot and skip any slots that were missed
+            self._n = max(self._n + 1,
+                          math.floor((t_s + _TIME_EPS_S - self._t0) / self.period_s) + 1)
+        self.next_s = self._t0 + self._n * self.period_s
         return True
 
 
@@ -200,6 +204,7 @@ class OdriveAxis:
                 raise ValueError(f"command {cmd!r} is not an axis->host message")
             if period is not None and period > 0.0:
                 self._schedules[int(cmd)] = CyclicSchedule(period)
+        self._next_cyclic_s = -math.inf if self._schedules else math.inf
 
     # ----------------------------------------------------------------------------- outputs
 
@@ -363,7 +368,11 @@ class OdriveAxis:
             self._ramped_torque_nm += min(max(err, -step), step)
         else:
             self._ramped_torque_nm = 0.0
-        return [self._reply(cmd) for cmd, sched in self._schedules.items() if sched.due(t_s)]
+        if t_s + _TIME_EPS_S < self._next_cyclic_s:
+            return []   # no schedule is due (the common case: they run at 10 and 100 Hz)
+        frames = [self._reply(cmd) for cmd, sched in self._schedules.items() if sched.due(t_s)]
+        self._next_cyclic_s = min(sched.next_s for sched in self._schedules.values())
+        return frames
 
     # ----------------------------------------------------------------------------- replies
 
@@ -403,9 +412,9 @@ class OdriveAxis:
 def _to_f32(value: float) -> float:
     """Magnitudes beyond the f32 range become +-inf, as an IEEE conversion rounds them, rather
     than failing to encode; NaN and infinities pass through."""
-    if math.isfinite(value) and not is_finite_f32(value):
-        return math.copysign(math.inf, value)
-    return value
+    if abs(value) <= F32_MAX or not math.isfinite(value):
+        return value
+    return math.copysign(math.inf, value)
 
 
 class WinchSensors:
@@ -425,6 +434,15 @@ class WinchSensors:
         self.counter = 0
         self._data_schedule = CyclicSchedule(period_s)
         self._hb_schedule = CyclicSchedule(heartbeat_period_s)
+        self._length_id = frame_id(self.node_id, SensorCmd.WINCH_LENGTH)
+        self._tension_id = frame_id(self.node_id, SensorCmd.WINCH_TENSION)
+        self._heartbeat_id = frame_id(self.node_id, SensorCmd.WINCH_HEARTBEAT)
+
+    def due(self, t_s: float) -> bool:
+        """Whether :meth:`tick` at ``t_s`` [s] has frames to send (it changes nothing: the
+        caller can skip working out the measurements when not)."""
+        return (t_s + _TIME_EPS_S >= self._data_schedule.next_s
+                or t_s + _TIME_EPS_S >= self._hb_schedule.next_s)
 
     def tick(self, t_s: float, length_m: float, speed_m_s: float, tension_n: float,
              brake_engaged: bool, at_full_stop: bool, at_empty_stop: bool) -> list[Frame]:
@@ -432,16 +450,16 @@ class WinchSensors:
         [m/s] (positive paying out), drum tension [N] and the brake and stop flags."""
         frames: list[Frame] = []
         if self._data_schedule.due(t_s):
-            frames.append(Frame(frame_id(self.node_id, SensorCmd.WINCH_LENGTH),
+            frames.append(Frame(self._length_id,
                                 encode_winch_length(_to_f32(length_m),
                                                     _to_f32(speed_m_s)), False))
-            frames.append(Frame(frame_id(self.node_id, SensorCmd.WINCH_TENSION),
+            frames.append(Frame(self._tension_id,
                                 encode_winch_tension(_to_f32(tension_n), brake_engaged,
                                                      round(t_s * 1000.0) & 0xFFFF),
                                 False))
         if self._hb_schedule.due(t_s):
             healthy = self.load_cell_healthy and math.isfinite(tension_n)
-            frames.append(Frame(frame_id(self.node_id, SensorCmd.WINCH_HEARTBEAT),
+            frames.append(Frame(self._heartbeat_id,
                                 encode_winch_heartbeat(brake_engaged, healthy, at_full_stop,
                                                        at_empty_stop, self.counter), False))
             self.counter = (self.counter + 1) & 0xFF

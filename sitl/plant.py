@@ -45,6 +45,7 @@ from sitl.kernel import (
     STICK_SPEED_M_S,
     drum_projection,
     pack_params,
+    rhs_into,
     rhs_kernel,
     rk4_into,
     tether_pull,
@@ -53,7 +54,7 @@ from sitl.tether import Tether, TetherForces, tether_forces_kernel
 from sitl.wind import WindModel, wind_kernel
 from sitl.winder import WinderModel
 from tuavdefs.airframe import command_to_rotor_speed, rotor_speed_setpoints
-from tuavdefs.frames import euler_to_quat, quat_to_euler
+from tuavdefs.frames import euler_to_quat, quat_rotate, quat_to_euler
 from tuavdefs.jit import entry_point
 from tuavdefs.params import SystemParams
 
@@ -133,6 +134,27 @@ def _truth_kernel(x: np.ndarray, p: np.ndarray, ea_n: float, w_n_per_m: float, h
         return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0.0,
                 False, False)
     return tether_forces_kernel(px, py, pz, length, ea_n, w_n_per_m, hf0, vf0)
+
+
+_quat_rotate_kernel = njit(quat_rotate)
+
+
+@njit
+def _specific_force_kernel(x: np.ndarray, p: np.ndarray, wind_e: float, wind_n: float,
+                           wind_u: float, warm: np.ndarray, g: float
+                           ) -> tuple[float, float, float]:
+    """What an ideal accelerometer at the centre of mass reads at the state ``x`` [m/s^2],
+    body FLU: ``R^T (a + g e3)`` (:func:`sitl.sensors.specific_force_flu`) with the
+    acceleration ``a`` of the state derivative (:func:`rhs`: rotor set-points at the
+    rotors' speeds, winder unpowered, the wind (east, north, up) [m/s]); the tether
+    solver's warm start ``warm`` is restored."""
+    wind = np.empty(3)
+    wind[0], wind[1], wind[2] = wind_e, wind_n, wind_u
+    dx = np.empty(N_STATES)
+    h, v = warm[0], warm[1]
+    rhs_into(dx, x, p, x[13:17], 0.0, False, wind, warm)
+    warm[0], warm[1] = h, v
+    return _quat_rotate_kernel((x[6], -x[7], -x[8], -x[9]), (dx[3], dx[4], dx[5] + g))
 
 
 class PlantInputs(NamedTuple):
@@ -250,6 +272,8 @@ class Plant:
         tether = m.tether
         self._truth = entry_point(_truth_kernel, self.x, m.p, tether.ea_n, tether.w_n_per_m,
                                   0.0, 0.0)
+        self._specific_force = entry_point(_specific_force_kernel, self.x, m.p, 0.0, 0.0,
+                                           0.0, m.warm, m.g)
 
     def step(self, u: PlantInputs) -> None:
         """Advance the plant by one step of ``dt_s`` with inputs ``u``."""
@@ -360,6 +384,15 @@ class Plant:
     def drum_rate_rad_s(self) -> float:
         """Drum rate, positive paying out [rad/s]."""
         return float(self.x[DRUM_RATE])
+
+    def specific_force_flu(self) -> tuple[float, float, float]:
+        """What an ideal accelerometer at the UAV's centre of mass reads [m/s^2], body FLU,
+        with the wind of the last step: ``specific_force_flu(plant_acceleration_enu(plant),
+        ...)`` of :mod:`sitl.sensors` in one compiled call, to the bit
+        (``tests/test_fast_paths.py``). Leaves the plant untouched."""
+        w = self.wind_m_s
+        m = self.model
+        return self._specific_force(self.x, m.p, w[0], w[1], w[2], m.warm, m.g)
 
     def tether_forces(self) -> TetherForces:
         """The tether's forces at the current state (:meth:`sitl.tether.Tether.forces`,

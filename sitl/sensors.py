@@ -62,13 +62,21 @@ def isa_temperature_k(alt_amsl_m: float) -> float:
     return ISA_T0_K - ISA_LAPSE_K_M * alt_amsl_m
 
 
-def isa_pressure_hpa(alt_amsl_m: float) -> float:
-    """ISA static pressure [hPa] at an altitude [m AMSL] (troposphere, below 11 km).
+def isa_air(alt_amsl_m: float) -> tuple[float, float, float]:
+    """ISA (static pressure [hPa], temperature [K], density [kg/m^3]) at an altitude [m
+    AMSL] (troposphere, below 11 km).
 
     The altitude is taken as geopotential; the difference from geometric altitude (about
     0.16 m at 1000 m) is far below the barometer's noise.
     """
-    return ISA_P0_HPA * (isa_temperature_k(alt_amsl_m) / ISA_T0_K) ** _ISA_EXP
+    t = isa_temperature_k(alt_amsl_m)
+    p = ISA_P0_HPA * (t / ISA_T0_K) ** _ISA_EXP
+    return p, t, p * 100.0 / (ISA_R_J_KG_K * t)
+
+
+def isa_pressure_hpa(alt_amsl_m: float) -> float:
+    """ISA static pressure [hPa] at an altitude [m AMSL] (:func:`isa_air`)."""
+    return isa_air(alt_amsl_m)[0]
 
 
 def isa_altitude_m(pressure_hpa: float) -> float:
@@ -77,8 +85,8 @@ def isa_altitude_m(pressure_hpa: float) -> float:
 
 
 def isa_density_kg_m3(alt_amsl_m: float) -> float:
-    """ISA air density [kg/m^3] at an altitude [m AMSL]."""
-    return isa_pressure_hpa(alt_amsl_m) * 100.0 / (ISA_R_J_KG_K * isa_temperature_k(alt_amsl_m))
+    """ISA air density [kg/m^3] at an altitude [m AMSL] (:func:`isa_air`)."""
+    return isa_air(alt_amsl_m)[2]
 
 
 # ----- truth quantities from the plant
@@ -106,16 +114,21 @@ def plant_acceleration_enu(plant: Plant) -> Vec3:
 
 
 def plant_specific_force_flu(plant: Plant) -> Vec3:
-    """What an ideal accelerometer at the UAV's centre of mass reads [m/s^2], body FLU."""
-    return specific_force_flu(plant_acceleration_enu(plant), plant.quaternion,
-                              plant.model.g)
+    """What an ideal accelerometer at the UAV's centre of mass reads [m/s^2], body FLU:
+    :func:`specific_force_flu` of :func:`plant_acceleration_enu`, computed in one compiled
+    call (:meth:`sitl.plant.Plant.specific_force_flu`, the same bits)."""
+    return plant.specific_force_flu()
+
+
+def airspeed_from(vel_m_s: Sequence[float], wind_m_s: Sequence[float]) -> float:
+    """True airspeed [m/s]: the speed of a velocity [m/s] relative to the wind [m/s]."""
+    v, w = vel_m_s, wind_m_s
+    return math.sqrt((v[0] - w[0]) ** 2 + (v[1] - w[1]) ** 2 + (v[2] - w[2]) ** 2)
 
 
 def airspeed_m_s(plant: Plant) -> float:
     """True airspeed [m/s]: the UAV's speed relative to the wind of the last step."""
-    v = plant.x[VEL]
-    w = plant.wind_m_s
-    return math.sqrt((v[0] - w[0]) ** 2 + (v[1] - w[1]) ** 2 + (v[2] - w[2]) ** 2)
+    return airspeed_from(plant.x[VEL], plant.wind_m_s)
 
 
 # ----- error models
@@ -188,6 +201,8 @@ class NoisyChannel:
                       if enabled and spec.bias_sigma > 0 else [0.0] * dim)
         self._z: list = []
         self._next = 0
+        self._sigma = spec.sigma
+        self._walk = spec.bias_walk
 
     @property
     def bias(self) -> np.ndarray:
@@ -195,24 +210,42 @@ class NoisyChannel:
         return np.array(self._bias)
 
     def _draw(self) -> list:
-        if self._next >= len(self._z):
+        """This sample's draws: [bias walk per axis, white noise per axis]."""
+        i = self._next
+        if i >= len(self._z):
             self._z = self._rng.standard_normal((_BLOCK, 2, self.dim)).tolist()
-            self._next = 0
-        z = self._z[self._next]
-        self._next += 1
-        return z
+            i = 0
+        self._next = i + 1
+        return self._z[i]
 
     def read(self, truth: Sequence[float], dt_s: float) -> tuple[float, ...]:
         """One reading of ``truth`` taken ``dt_s`` [s] after the previous one."""
         if not self.enabled:
             return tuple(float(v) for v in truth)
-        s = self.spec
         z_walk, z_noise = self._draw()
-        if s.bias_walk > 0.0:
-            k = s.bias_walk * math.sqrt(dt_s)
-            self._bias = [b + k * z for b, z in zip(self._bias, z_walk, strict=True)]
-        return tuple(float(t) + b + s.sigma * z
-                     for t, b, z in zip(truth, self._bias, z_noise, strict=True))
+        sigma = self._sigma
+        if self.dim == 3:   # the IMU's and the GPS velocity's: unrolled (speed only)
+            b0, b1, b2 = self._bias
+            if self._walk > 0.0:
+                k = self._walk * math.sqrt(dt_s)
+                b0, b1, b2 = b0 + k * z_walk[0], b1 + k * z_walk[1], b2 + k * z_walk[2]
+                self._bias = [b0, b1, b2]
+            t0, t1, t2 = truth
+            return (float(t0) + b0 + sigma * z_noise[0], float(t1) + b1 + sigma * z_noise[1],
+                    float(t2) + b2 + sigma * z_noise[2])
+        if self.dim == 1:   # the barometer's: unrolled
+            (b,) = self._bias
+            if self._walk > 0.0:
+                b = b + self._walk * math.sqrt(dt_s) * z_walk[0]
+                self._bias = [b]
+            (t,) = truth
+            return (float(t) + b + sigma * z_noise[0],)
+        bias = self._bias
+        if self._walk > 0.0:
+            k = self._walk * math.sqrt(dt_s)
+            bias = self._bias = [b + k * z for b, z in zip(bias, z_walk, strict=True)]
+        return tuple([float(t) + b + sigma * z
+                      for t, b, z in zip(truth, bias, z_noise, strict=True)])
 
 
 class ImuReading(NamedTuple):
@@ -281,8 +314,15 @@ class SensorSuite:
 
     def baro(self, alt_amsl_m: float, dt_s: float) -> BaroReading:
         """Barometer reading at a true altitude [m AMSL], ``dt_s`` [s] after the last."""
-        p = self.baro_channel.read((isa_pressure_hpa(alt_amsl_m),), dt_s)[0]
-        return BaroReading(p, isa_altitude_m(p), isa_temperature_k(alt_amsl_m) - 273.15)
+        pressure_hpa, temperature_k, _ = isa_air(alt_amsl_m)
+        return self.baro_of_air(pressure_hpa, temperature_k, dt_s)
+
+    def baro_of_air(self, pressure_hpa: float, temperature_k: float,
+                    dt_s: float) -> BaroReading:
+        """Barometer reading in air of a true static pressure [hPa] and temperature [K]
+        (the ISA's at an altitude: :func:`isa_air`), ``dt_s`` [s] after the last."""
+        p = self.baro_channel.read((pressure_hpa,), dt_s)[0]
+        return BaroReading(p, isa_altitude_m(p), temperature_k - 273.15)
 
     def gps(self, pos_enu_m: Sequence[float], vel_enu_m_s: Sequence[float],
             dt_s: float) -> GpsReading:

@@ -42,17 +42,10 @@ import time
 from array import array
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 from sitl.plant import POS, QUAT, RATES, VEL, Plant, PlantInputs
-from sitl.sensors import (
-    ISA_RHO0_KG_M3,
-    SensorNoise,
-    SensorSuite,
-    airspeed_m_s,
-    isa_density_kg_m3,
-    plant_specific_force_flu,
-)
+from sitl.sensors import ISA_RHO0_KG_M3, SensorNoise, SensorSuite, airspeed_from, isa_air
 from tuavdefs import simlink as sl
 
 #: How often a waiting loop looks at ``stop_event`` [s].
@@ -209,6 +202,8 @@ class SimLinkServer:
         self._encoder = sl.Encoder(sl.PLANT_SYSID, sl.PLANT_COMPID)
         self._parser = sl.FrameParser()
         self._sock: socket.socket | None = None
+        self._poller: select.poll | None = None
+        self._home_map = sl.home_map(self.home)
         self._last_gps_us: int | None = None
         self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -245,6 +240,7 @@ class SimLinkServer:
                 self._sock.close()
             finally:
                 self._sock = None
+                self._poller = None
 
     # ----- the loop
     def serve(self, max_sim_time_s: float | None = None,
@@ -376,7 +372,11 @@ class SimLinkServer:
                 sock, _ = self._listener.accept()
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                 sock.setblocking(True)
+                # lockstep: recv itself waits for the answer, _POLL_S at a time
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, sl.timeval(_POLL_S))
                 self._sock = sock
+                self._poller = select.poll()
+                self._poller.register(sock, select.POLLIN)
                 return True
         return False
 
@@ -406,28 +406,25 @@ class SimLinkServer:
         x = p.x.tolist()
         pos, vel, quat, rates = (tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]),
                                  tuple(x[RATES]))
-        f_flu = plant_specific_force_flu(p)
-        alt_amsl = self.home[2] + pos[2]
-        tas = airspeed_m_s(p)
-        ias = tas * math.sqrt(isa_density_kg_m3(alt_amsl) / ISA_RHO0_KG_M3)
-        s = self.sensors
+        f_flu = p.specific_force_flu()
+        pressure_hpa, temperature_k, density = isa_air(self.home[2] + pos[2])
+        tas = airspeed_from(vel, p.wind_m_s)
+        ias = tas * math.sqrt(density / ISA_RHO0_KG_M3)
+        s, enc, home = self.sensors, self._encoder, self._home_map
         chunks = []
         if self._last_gps_us is None or t_us - self._last_gps_us >= self.gps_period_us:
             gps_dt = (self.gps_period_us if self._last_gps_us is None
                       else t_us - self._last_gps_us) * 1e-6
             fix = s.gps(pos, vel, gps_dt)
             self._last_gps_us = t_us
-            chunks.append(self._encoder.hil_gps(sl.hil_gps_fields(
-                t_us, fix.position_enu_m, fix.velocity_enu_m_s, self.home,
-                eph_m=fix.eph_m, epv_m=fix.epv_m)))
-        chunks.append(self._encoder.hil_state_quaternion(sl.hil_state_quaternion_fields(
-            t_us, pos, vel, quat, rates, f_flu, self.home, true_airspeed_m_s=tas,
-            ind_airspeed_m_s=ias)))
-        imu = s.imu(f_flu, rates, quat, dt)
-        baro = s.baro(alt_amsl, dt)
-        chunks.append(self._encoder.hil_sensor(sl.hil_sensor_fields(
-            t_us, imu.accel_flu_m_s2, imu.gyro_flu_rad_s, imu.mag_flu_gauss,
-            baro.pressure_hpa, baro.pressure_alt_m, baro.temperature_c)))
+            chunks.append(enc.pack_values(sl.MSG_HIL_GPS, sl.hil_gps_values(
+                t_us, fix.position_enu_m, fix.velocity_enu_m_s, home, fix.eph_m, fix.epv_m)))
+        chunks.append(enc.pack_values(sl.MSG_HIL_STATE_QUATERNION,
+                                      sl.hil_state_quaternion_values(
+                                          t_us, pos, vel, quat, rates, f_flu, home, tas, ias)))
+        chunks.append(enc.pack_values(sl.MSG_HIL_SENSOR, sl.hil_sensor_values(
+            t_us, *s.imu(f_flu, rates, quat, dt),
+            *s.baro_of_air(pressure_hpa, temperature_k, dt))))
         assert self._sock is not None
         try:
             self._sock.sendall(b"".join(chunks))
@@ -439,35 +436,40 @@ class SimLinkServer:
         """Read until the answer to ``t_us`` arrives (True) or, in real time, the wall
         ``deadline`` passes (False). Returns (answered, late answers, ignored messages)."""
         sock = self._sock
-        assert sock is not None
+        poller = self._poller
+        assert sock is not None and poller is not None
+        parser = self._parser
         late = ignored = 0
         while True:
             if stop.is_set():
                 raise _StoppedError
-            if deadline is None:
-                wait = _POLL_S
-            else:
+            if deadline is not None:
                 wait = deadline - time.monotonic()
                 if wait <= 0:
                     return False, late, ignored
-                wait = min(wait, _POLL_S)
-            ready, _, _ = select.select([sock], [], [], wait)
-            if not ready:
-                continue
+                if not poller.poll(min(wait, _POLL_S) * 1e3):
+                    continue
             try:
-                data = sock.recv(65536)
+                data = sock.recv(65536)   # (lockstep: waits up to _POLL_S)
+            except BlockingIOError:   # the socket's receive timeout
+                continue
             except OSError as e:
                 raise _DisconnectedError from e
             if not data:
                 raise _DisconnectedError
             answered = False
-            for msg in self._parser.feed(data):
-                if msg.get_msgId() != sl.MSG_HIL_ACTUATOR_CONTROLS:
+            # the usual case, one well-formed answer, skips the message objects
+            items = parser.feed_link(data)
+            if items is None:
+                items = [sl.link_values(m) for m in parser.feed(data)]
+            for item in items:
+                if item is None or item[0] != sl.MSG_HIL_ACTUATOR_CONTROLS:
                     ignored += 1
                     continue
-                ts = int(msg.time_usec)
+                answer = sl.answer_from_wire(item[1])
+                ts = answer[0]
                 if ts == t_us or (self.real_time and ts < t_us):
-                    self._hold(msg)
+                    self._hold(answer)
                     if ts == t_us:
                         answered = True
                     else:
@@ -477,14 +479,10 @@ class SimLinkServer:
             if answered:
                 return True, late, ignored
 
-    def _hold(self, msg: Any) -> None:
-        try:
-            cmds, armed = sl.rotor_commands_from_controls(msg.controls, msg.mode)
-        except (ValueError, TypeError):
-            return
-        self.rotor_commands = cmds
-        self.armed = armed
-        self.companion_lockstep = sl.lockstep_flag(msg.flags)
+    def _hold(self, answer: tuple[int, tuple[float, float, float, float], bool, bool]
+              ) -> None:
+        """Hold an answer's (:func:`tuavdefs.simlink.answer_from_wire`) commands."""
+        _, self.rotor_commands, self.armed, self.companion_lockstep = answer
 
     def _advance(self) -> None:
         """N physics steps with the held commands and the caller's winder inputs."""

@@ -18,6 +18,7 @@ from tuavdefs.can_protocol import (
     AXIS_NODE_ID_DEFAULT,
     WINCH_SENSOR_NODE_ID_DEFAULT,
     Cmd,
+    frame_id,
     split_id,
 )
 from tuavdefs.canbus import CanLink, RxFrame
@@ -28,6 +29,7 @@ _HOST_COMMANDS = frozenset({Cmd.SET_INPUT_TORQUE, Cmd.SET_AXIS_STATE, Cmd.SET_CO
 
 #: DC bus voltage of the winder's drive [V] (a 48 V tether power supply's low side).
 BUS_VOLTAGE_V = 48.0
+_TWO_PI = 2.0 * math.pi
 
 
 class WinderCanNode:
@@ -45,13 +47,18 @@ class WinderCanNode:
         self._awaiting = False
         self.plant = plant
         w = plant.params.winder
-        two_pi = 2.0 * math.pi
         self.axis = OdriveAxis(axis_node_id, watchdog_timeout_s=watchdog_timeout_s,
                                torque_limit_nm=w.motor_torque_limit_n_m,
-                               vel_limit_rev_s=w.motor_speed_limit_rad_s / two_pi)
+                               vel_limit_rev_s=w.motor_speed_limit_rad_s / _TWO_PI)
         self.sensors = WinchSensors(sensor_node_id)
         self.frames_received = 0
         self.frames_sent = 0
+        self._encoder_id = frame_id(axis_node_id, Cmd.GET_ENCODER_ESTIMATES)
+        self._drum_radius = w.drum_radius_m
+        wm = plant.model.winder
+        self._motor_torque = wm.motor_torque_n_m
+        self._theta_min = wm.theta_min + 1e-9   # at the full stop at or below [rad]
+        self._theta_max = wm.theta_max - 1e-9   # at the empty stop at or above [rad]
 
     def service(self, t_s: float) -> None:
         """Feed every frame the bus holds to the axis, and send its replies."""
@@ -63,7 +70,12 @@ class WinderCanNode:
 
     def _receive(self, t_s: float, rx: RxFrame) -> None:
         self.frames_received += 1
-        node, cmd = split_id(rx.arbitration_id)
+        fid = rx.arbitration_id
+        if rx.is_extended or not 0 <= fid <= 0x7FF:
+            # a 29-bit frame of another protocol on the same bus: not CAN Simple, and not
+            # for this node (the axis counts nothing either)
+            return
+        node, cmd = split_id(fid)
         if node == self.axis.node_id and not rx.is_remote and cmd in _HOST_COMMANDS:
             self.host_seen = True
             self._awaiting = False
@@ -89,26 +101,31 @@ class WinderCanNode:
         """Emit the cyclic frames due at ``t_s`` [s]; returns (torque request [N m], motor
         powered) for the plant's winder inputs."""
         p = self.plant
-        two_pi = 2.0 * math.pi
-        theta = p.tether_length_m / p.params.winder.drum_radius_m
+        axis = self.axis
+        length = p.tether_length_m
+        theta = length / self._drum_radius
         omega = p.drum_rate_rad_s
-        applied = p.model.winder.motor_torque_n_m(self.axis.torque_command_nm, omega,
-                                                  self.axis.enabled)
-        frames = self.axis.tick(t_s, theta / two_pi, omega / two_pi, applied, BUS_VOLTAGE_V)
-        if any(split_id(f.arbitration_id)[1] == Cmd.GET_ENCODER_ESTIMATES and not f.is_remote
-               for f in frames):
+        enabled = axis.enabled
+        applied = self._motor_torque(axis.torque_command_nm, omega, enabled)
+        frames = axis.tick(t_s, theta / _TWO_PI, omega / _TWO_PI, applied, BUS_VOLTAGE_V)
+        if frames and any(f.arbitration_id == self._encoder_id and not f.is_remote
+                          for f in frames):
             self._awaiting = True
+        # solved every period, not only when the sensors send: each solve starts from the
+        # last one's solution, and the tensions sent must not depend on when it last ran
         tf = p.tether_forces()
-        wm = p.model.winder
-        # the winch's sensor frames of this instant go first: a host answering the encoder
-        # frame at once then knows the tension and the sample time that go with it
-        self._send(self.sensors.tick(
-            t_s, p.tether_length_m, omega * p.params.winder.drum_radius_m,
-            tf.drum_tension_n, not self.axis.enabled,
-            theta <= wm.theta_min + 1e-9, theta >= wm.theta_max - 1e-9))
-        self._send(frames)
+        if self.sensors.due(t_s):
+            # the winch's sensor frames of this instant go first: a host answering the
+            # encoder frame at once then knows the tension and the sample time that go
+            # with it
+            enabled = axis.enabled      # after the tick, which may have disarmed the axis
+            self._send(self.sensors.tick(
+                t_s, length, omega * self._drum_radius, tf.drum_tension_n, not enabled,
+                theta <= self._theta_min, theta >= self._theta_max))
+        if frames:
+            self._send(frames)
         self.await_host(t_s)
-        return self.axis.torque_command_nm, self.axis.enabled
+        return axis.torque_command_nm, axis.enabled
 
     def _send(self, frames: list) -> None:
         for f in frames:

@@ -1,6 +1,8 @@
 """The fast paths give the same bits as the code they stand in for: the plant stepped many
 steps in one compiled call, CPython's hypot compiled, the tether's compiled solve, the
-simulator link's own MAVLink packing and parsing, and numba's entry points."""
+simulator link's own MAVLink packing and parsing (from and to field values in wire order),
+its home mapping, the compiled specific force and the unrolled sensor channels, and
+numba's entry points."""
 
 import math
 import random
@@ -12,8 +14,10 @@ from pymavlink.dialects.v20 import common as mavlink2
 from sitl.catenary import catenary_end_forces
 from sitl.plant import Plant, PlantInputs
 from sitl.pymath import hypot2, hypot3
+from sitl.sensors import NoiseSpec, NoisyChannel, plant_acceleration_enu, specific_force_flu
 from sitl.tether import Tether, TetherForces
 from sitl.trim import hover_trim
+from tuavdefs import frames as fr
 from tuavdefs import simlink as sl
 from tuavdefs.jit import entry_point, njit
 from tuavdefs.params import GustParams, SystemParams, TetherParams, WindParams
@@ -157,3 +161,159 @@ def test_an_entry_point_is_the_kernel():
     fast = entry_point(kernel, 1.0, True, out)
     assert fast(3, 1, out) == kernel(3.0, True, out) == 6.0   # ints converted
     assert fast(2.5, False, out) == -2.5 and out[0] == 8.5
+
+
+# ----------------------------------------------------------------- the simulator link
+def _random_link_values(rng: random.Random, k: int) -> tuple[int, tuple]:
+    """One of the link's messages with random field values, from the fast value builders."""
+    home = sl.home_map((rng.uniform(-80, 80), rng.uniform(-180, 180), rng.uniform(-100, 4000)))
+
+    def vec(scale: float) -> tuple[float, float, float]:
+        return (rng.uniform(-scale, scale), rng.uniform(-scale, scale),
+                rng.uniform(-scale, scale))
+
+    kind = k % 4
+    if kind == 0:
+        q = vec(1.0)
+        return sl.MSG_HIL_STATE_QUATERNION, sl.hil_state_quaternion_values(
+            rng.randint(0, 2**40), vec(400.0), vec(400.0 if k % 8 == 0 else 30.0),
+            (rng.uniform(-1, 1), *q), vec(5.0), vec(20.0 if k % 8 else 400.0), home,
+            rng.uniform(0, 30), rng.uniform(0, 30))
+    if kind == 1:
+        vel = (0.0, 0.0, 0.0) if k % 8 == 1 else vec(30.0)
+        return sl.MSG_HIL_GPS, sl.hil_gps_values(rng.randint(0, 2**40), vec(400.0), vel,
+                                                 home, rng.uniform(0, 3), rng.uniform(0, 3))
+    if kind == 2:
+        return sl.MSG_HIL_SENSOR, sl.hil_sensor_values(
+            rng.randint(0, 2**40), vec(20.0), vec(5.0), vec(0.6), rng.uniform(800, 1013),
+            rng.uniform(0, 500), rng.uniform(-20, 40))
+    cmds = tuple(rng.choice((rng.uniform(-0.5, 1.5), math.nan, 0.0, 1.0)) for _ in range(4))
+    return sl.MSG_HIL_ACTUATOR_CONTROLS, sl.actuator_controls_values(
+        rng.randint(0, 2**40), cmds, rng.random() < 0.5, rng.random() < 0.5)
+
+
+def test_the_links_value_packers_are_pymavlinks():
+    """Frames packed straight from the values are pymavlink's bytes for the same fields."""
+    rng = random.Random(11)
+    for k in range(2000):
+        enc = sl.Encoder(rng.randint(0, 255), rng.randint(0, 255))
+        ref = mavlink2.MAVLink(None, srcSystem=enc.mav.srcSystem,
+                               srcComponent=enc.mav.srcComponent)
+        ref.seq = enc.mav.seq = rng.randint(0, 255)
+        msg_id, values = _random_link_values(rng, k)
+        fields = sl._CODECS[msg_id].fields(values)
+        want = mavlink2.mavlink_map[msg_id](**fields).pack(ref)
+        assert enc.pack_values(msg_id, values) == want
+        assert enc.mav.seq == (ref.seq + 1) % 256
+
+
+def test_the_links_field_builders_are_the_value_builders():
+    rng = random.Random(12)
+    home = (47.397742, 8.545594, 488.0)
+    hm = sl.home_map(home)
+    for _ in range(300):
+        pos, vel, f = (tuple(rng.uniform(-99, 99) for _ in range(3)) for _ in range(3))
+        q = (0.9, 0.1, -0.3, 0.2)
+        values = sl.hil_state_quaternion_values(5, pos, vel, q, (0.1, 0.2, 0.3), f, hm, 3.0,
+                                                2.5)
+        fields = sl.hil_state_quaternion_fields(5, pos, vel, q, (0.1, 0.2, 0.3), f, home,
+                                                3.0, 2.5)
+        assert sl._CODECS[sl.MSG_HIL_STATE_QUATERNION].wire_of(fields) == values
+        values = sl.hil_gps_values(6, pos, vel, hm, 0.4, 0.6)
+        assert sl._CODECS[sl.MSG_HIL_GPS].wire_of(
+            sl.hil_gps_fields(6, pos, vel, home, 0.4, 0.6)) == values
+
+
+def test_the_home_map_is_the_frames_mapping():
+    """:class:`HomeMap` gives the bits of :mod:`tuavdefs.frames`' functions."""
+    rng = random.Random(13)
+    for _ in range(5000):
+        home = (rng.uniform(-80, 80), rng.uniform(-180, 180), rng.uniform(-100, 4000))
+        pos = tuple(rng.uniform(-600, 600) for _ in range(3))
+        lat, lon, alt = fr.local_enu_to_global(pos, home)
+        want = (round(lat * 1e7), round(((lon + 180.0) % 360.0 - 180.0) * 1e7),
+                round(alt * 1000.0))
+        got = sl.home_map(home).global_fields(pos)
+        assert got == want
+        assert sl.home_map(home).local(*got) == fr.global_to_local_enu(
+            got[0] * 1e-7, got[1] * 1e-7, got[2] * 1e-3, home)
+
+
+def test_the_links_fast_parsing_is_the_general_parsers():
+    """:meth:`FrameParser.feed_link` and the wire decoders give what the general parser and
+    the field-based decoders give; anything unusual is left to the general parser."""
+    rng = random.Random(14)
+    home = (47.397742, 8.545594, 488.0)
+    hm = sl.home_map(home)
+    enc = sl.Encoder(1, 200)
+    for k in range(600):
+        batch = [_random_link_values(rng, k + i) for i in range(rng.randint(1, 4))]
+        data = b"".join(enc.pack_values(mid, v) for mid, v in batch)
+        fast, slow = sl.FrameParser(), sl.FrameParser()
+        got = fast.feed_link(data)
+        msgs = slow.feed(data)
+        assert got == [sl.link_values(m) for m in msgs]
+        assert (fast.frames, fast.bad_frames) == (slow.frames, slow.bad_frames) == (
+            len(batch), 0)
+        for (mid, values), msg in zip(got, msgs, strict=True):
+            if mid == sl.MSG_HIL_STATE_QUATERNION:
+                truth = sl.truth_from_wire(values, hm)
+                ias, tas = sl.airspeeds_from_hil_state_quaternion(msg)
+                assert truth == (*sl.state_from_hil_state_quaternion(msg, home),
+                                 sl.specific_force_from_hil_state_quaternion(msg), tas, ias)
+            elif mid == sl.MSG_HIL_GPS:
+                assert sl.gps_from_wire(values, hm) == sl.gps_from_hil_gps(msg, home)
+            elif mid == sl.MSG_HIL_SENSOR:
+                assert sl.imu_from_wire(values) == sl.imu_from_hil_sensor(msg)
+            else:
+                cmds, armed = sl.rotor_commands_from_controls(msg.controls, msg.mode)
+                assert sl.answer_from_wire(values) == (
+                    msg.time_usec, cmds, armed, sl.lockstep_flag(msg.flags))
+        # not the usual case: left to feed(), nothing counted
+        corrupt = bytearray(data)
+        corrupt[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
+        other = enc.pack(enc.mav.heartbeat_encode(18, 8, 0, 0, 0))
+        for unusual in (bytes(corrupt), data[:-1], data + other, other + data, b"\0" + data):
+            p = sl.FrameParser()
+            assert p.feed_link(unusual) is None and (p.frames, p.bad_frames) == (0, 0)
+        p = sl.FrameParser()
+        p.feed(data[:5])
+        assert p.feed_link(data[5:]) is None and p.pending_bytes == 5
+
+
+def test_the_compiled_specific_force_is_the_python_one():
+    params = _windy()
+    x, u = hover_trim(params, (12.0, 5.0, 20.0), 24.5)
+    plant = Plant(params, state=x)
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        cmds = tuple(float(c) for c in rng.uniform(0.3, 0.9, 4))
+        plant.advance(u._replace(rotor_commands=cmds), 4)
+        x_before, warm = plant.x.copy(), plant.model.warm.copy()
+        want = specific_force_flu(plant_acceleration_enu(plant), plant.quaternion,
+                                  plant.model.g)
+        plant.model.warm[:] = warm
+        assert plant.specific_force_flu() == want
+        assert np.array_equal(plant.x, x_before) and np.array_equal(plant.model.warm, warm)
+
+
+def test_the_unrolled_sensor_channels_are_the_general_formula():
+    """The 1- and 3-axis channels' unrolled arithmetic is the per-axis formula of the
+    others: the same draws, the same operations in the same order."""
+    spec = NoiseSpec(sigma=0.05, bias_sigma=0.1, bias_walk=0.02)
+    for dim in (1, 2, 3):
+        ch = NoisyChannel(spec, dim, np.random.default_rng(dim))
+        ref = np.random.default_rng(dim)
+        bias = [float(b) for b in ref.normal(0.0, spec.bias_sigma, dim)]
+        z = []
+        for i in range(600):
+            if i % 256 == 0:
+                z = ref.standard_normal((256, 2, dim)).tolist()
+            z_walk, z_noise = z[i % 256]
+            dt = 0.004 if i % 7 else 0.1
+            k = spec.bias_walk * math.sqrt(dt)
+            bias = [b + k * w for b, w in zip(bias, z_walk, strict=True)]
+            truth = [float(t) for t in np.random.default_rng(i).uniform(-9, 9, dim)]
+            want = tuple(t + b + spec.sigma * n
+                         for t, b, n in zip(truth, bias, z_noise, strict=True))
+            assert ch.read(truth, dt) == want

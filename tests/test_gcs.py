@@ -1,11 +1,14 @@
 """The companion as an ArduCopter-compatible vehicle: real plant and companion processes
 driven by a real pymavlink client over TCP (and UDP): connect, GUIDED, arm, take off,
 guided targets, parameters, a mission in AUTO, landing and disarming, the refusals of bad
-input, malformed frames, and the telemetry log."""
+input, malformed frames, and the telemetry log. Then the companion's sockets on their own:
+the component link's position frames, clients that fall behind, and input handled as it
+arrives."""
 
 from __future__ import annotations
 
 import math
+import select
 import socket
 import struct
 import time
@@ -14,6 +17,11 @@ import pytest
 from gcs_util import Vehicle, command, download_mission, free_port, upload_mission, wait_msg
 from pymavlink import mavutil
 
+from companion import component_server
+from companion.autopilot import Autopilot, Telemetry
+from companion.component_server import ComponentServer
+from companion.mavlink_io import MavlinkEndpoints
+from companion.navigation import NavigationParams, Navigator
 from tuavdefs.frames import global_to_local_enu, local_enu_to_global
 from tuavdefs.simlink import HOME_DEFAULT
 
@@ -368,3 +376,159 @@ def test_the_telemetry_log_parses_completely(flight):
     (stamp,) = struct.unpack(">Q", raw[:8])
     assert abs(stamp * 1e-6 - time.time()) < 3600
     assert raw[8] in (0xFD, 0xFE)
+
+
+# ----- the companion's sockets on their own (no processes)
+
+
+def _parse_all(data: bytes) -> list:
+    parser = M.MAVLink(None)
+    parser.robust_parsing = True
+    msgs = parser.parse_buffer(data) or []
+    assert all(m.get_type() != "BAD_DATA" for m in msgs)
+    return msgs
+
+
+def _slow_reader(port: int) -> socket.socket:
+    """A TCP client of 127.0.0.1:``port`` with a small receive buffer (a reader that falls
+    behind soon)."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(("127.0.0.1", port))
+    return sock
+
+
+def _read_until(sock: socket.socket, n_bytes: int, flush=None) -> bytes:
+    """Read from a blocking ``sock`` until ``n_bytes`` came (calling ``flush`` between
+    reads: what the control loop does at every period)."""
+    data = b""
+    sock.settimeout(5.0)
+    while len(data) < n_bytes:
+        if flush is not None:
+            flush()
+        data += sock.recv(1 << 16)
+    return data
+
+
+@pytest.mark.parametrize("crc_helper", ["fastcrc", "pure python"])
+def test_component_position_frames_are_pymavlinks(crc_helper, monkeypatch):
+    if crc_helper == "pure python":
+        monkeypatch.setattr(component_server, "_MCRF4XX", None)
+    server = ComponentServer(0)
+    try:
+        mav = server.mav
+        cases = [(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),           # all but one byte trimmed
+                 (1234, 1.5, -2.25, -10.0, 0.1, 0.2, 0.0),    # trailing zero bytes trimmed
+                 (4294967295, -0.0, 3.0, -0.0, -1.0, 1e-30, -0.0),
+                 (85240, 12.345678, -5.5e3, -7.0, 1.0 / 3.0, -2.0 / 3.0, 0.125)]
+        for seq in (0, 7, 255):
+            mav.seq = seq
+            for args in cases:
+                expected = mav.local_position_ned_encode(*args).pack(mav)
+                assert server.pack_position(*args) == expected
+        mav.seq = 0
+    finally:
+        server.close()
+
+
+def test_component_link_sends_positions_at_100_hz_in_ned_without_blocking():
+    server = ComponentServer(0)
+    client = _slow_reader(server.port)
+    try:
+        server.send_position(0.0, (1.0, 2.0, 3.0), (0.0, 0.0, 0.0))   # nobody yet: nothing
+        time.sleep(0.05)
+        server.poll()                          # accepts
+        assert server.connected and server.selectable is server.conn
+        # a component that does not read: nothing blocks, frames queue whole
+        server.conn.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+        n = 3000
+        for k in range(n):
+            t = 0.004 * k
+            server.send_position(t, (1.0, 2.0, 3.0 + k), (0.5, -0.25, 1.0))
+        assert server.backlogged
+        frame_len = len(server.pack_position(0, 2.0, 1.0, -3.0, -0.25, 0.5, -1.0))
+        sent = sum(1 for k in range(n) if k % 5 in (0, 3))   # 100 Hz of 250 Hz periods
+        data = _read_until(client, sent * frame_len, server.flush)
+        msgs = _parse_all(data)
+        assert not server.backlogged
+        assert len(msgs) == sent == len(data) // frame_len
+        first, second = msgs[0], msgs[1]
+        assert (first.time_boot_ms, first.x, first.y, first.z) == (0, 2.0, 1.0, -3.0)
+        assert (first.vx, first.vy, first.vz) == (-0.25, 0.5, -1.0)
+        assert second.time_boot_ms == 12 and second.z == -6.0
+    finally:
+        client.close()
+        server.close()
+
+
+def test_ground_station_tcp_frames_stay_whole_when_a_client_falls_behind():
+    ep = MavlinkEndpoints(0, [])
+    client = _slow_reader(ep.tcp_port)
+    try:
+        time.sleep(0.05)
+        assert ep.poll(0.5) == []              # accepts
+        assert [p[0] for p in ep.links()] == ["tcp"]
+        (sock,) = ep._tcp.values()
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+        n = 2000
+        for k in range(n):
+            ep.send(M.MAVLink_named_value_int_message(k, b"count", k))
+        assert ep.backlogged
+        frame_len = len(ep.pack(M.MAVLink_named_value_int_message(1, b"count", 1)))
+        data = _read_until(client, n * frame_len, ep.flush)
+        assert [m.value for m in _parse_all(data)] == list(range(n))
+        assert not ep.backlogged
+        client.close()
+        deadline = time.monotonic() + 5.0
+        while ep.links() and time.monotonic() < deadline:
+            ep.poll(0.1)
+        assert ep.links() == [] and len(ep.pop_closed()) == 1
+    finally:
+        ep.close()
+
+
+def test_input_is_handled_as_it_arrives_and_service_sends_what_is_due():
+    ep = MavlinkEndpoints(0, [])
+    comp = ComponentServer(0)
+    nav = Navigator(NavigationParams(), 0.2, 60.0)
+    ap = Autopilot(ep, nav, HOME_DEFAULT, [], component=comp, log=lambda text: None)
+    gcs = mavutil.mavlink_connection(f"tcp:127.0.0.1:{ep.tcp_port}", source_system=255)
+    winch = socket.create_connection(("127.0.0.1", comp.port))
+    try:
+        watched = ap.selectables()
+        assert set(watched) == {ep.listener, comp.listener}
+        assert ap.selectables() is watched              # unchanged: the same list
+
+        def wait_input(timeout_s: float = 2.0) -> None:
+            ready = select.select(ap.selectables(), [], [], timeout_s)[0]
+            assert ready
+            ap.receive([-1, *ready])                    # what is not its own is ignored
+
+        while not (comp.connected and ep.links()):
+            wait_input()                                # the two connections
+        assert set(ap.selectables()) == {ep.listener, comp.conn, *ep._tcp.values()}
+        telem = Telemetry(0.0, (0.0, 0.0, 0.2), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0),
+                          (0.0, 0.0, 0.0), 0.0)
+        ap.service(telem)                               # the first streams and heartbeat
+        assert wait_msg(gcs, "HEARTBEAT", timeout=2.0) is not None
+        gcs.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_PROTOCOL_VERSION, 0,
+                                  0, 0, 0, 0, 0, 0, 0)
+        wait_input()
+        # answered at once, not at the next control period
+        ack = wait_msg(gcs, "COMMAND_ACK", timeout=2.0)
+        assert (ack.command, ack.result) == (M.MAV_CMD_REQUEST_PROTOCOL_VERSION,
+                                            M.MAV_RESULT_UNSUPPORTED)
+        for k in range(1, 600):                         # 2.4 s of control periods
+            ap.service(telem._replace(t_s=0.004 * k))
+        counts: dict[str, int] = {}
+        deadline = time.monotonic() + 1.0
+        while (msg := gcs.recv_match(blocking=True, timeout=0.2)) is not None \
+                and time.monotonic() < deadline:
+            counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
+        # ATTITUDE at 10 Hz of simulated time, SYS_STATUS at 1 Hz, over t = 0.004 .. 2.396
+        assert 23 <= counts["ATTITUDE"] <= 24 and counts["SYS_STATUS"] == 2
+    finally:
+        gcs.close()
+        winch.close()
+        ep.close()
+        comp.close()

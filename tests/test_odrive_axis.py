@@ -409,3 +409,94 @@ def test_winch_sensor_faults_and_counter_wrap():
                 assert math.isnan(cp.decode_winch_tension(f.data).tension_n)
     assert decoded[255].counter == 255 and decoded[256].counter == 0
     assert not decoded[0].load_cell_healthy and decoded[0].at_full_stop
+
+
+def _reference_due(state: dict, period: float, t: float) -> bool:
+    """A fixed-rate schedule by its definition: slots at t0 + k period, t0 the first poll;
+    a poll serves the latest slot at or before it (1 ns tolerance), once."""
+    if state.get("t0") is None:
+        state["t0"], state["n"] = t, 1
+        return True
+    if t + 1e-9 < state["t0"] + state["n"] * period:
+        return False
+    state["n"] = max(state["n"] + 1, math.floor((t + 1e-9 - state["t0"]) / period) + 1)
+    return True
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.floats(0.0, 0.05), min_size=1, max_size=200),
+       st.sampled_from([0.004, 0.01, 0.0125]))
+def test_cyclic_outputs_are_the_schedules_by_their_definition(steps, enc_period):
+    """OdriveAxis.tick and WinchSensors.tick (which skip the schedules while nothing is
+    due) send exactly what the schedules' definition says, and WinchSensors.due tells."""
+    axis = OdriveAxis(encoder_period_s=enc_period)
+    sensors = WinchSensors()
+    ref: dict[str, dict] = {"hb": {}, "enc": {}, "data": {}, "whb": {}}
+    t = 0.0
+    for dt in steps:
+        t += dt
+        expected = [frame_id(0, cmd) for cmd, key, period in (
+            (Cmd.HEARTBEAT, "hb", 0.1), (Cmd.GET_ENCODER_ESTIMATES, "enc", enc_period))
+            if _reference_due(ref[key], period, t)]
+        assert [f.arbitration_id for f in axis.tick(t, 1.0, 0.0, 0.0, 48.0)] == expected
+        data_due = _reference_due(ref["data"], 0.01, t)
+        hb_due = _reference_due(ref["whb"], 0.1, t)
+        assert sensors.due(t) == (data_due or hb_due)
+        assert len(sensors.tick(t, 10.0, 0.0, 5.0, False, False, False)) == (
+            2 * data_due + hb_due)
+
+
+def test_winder_node_sends_each_instants_sensor_frames_before_its_encoder_frame():
+    from sitl.plant import Plant
+    from sitl.winder_node import WinderCanNode
+    from tuavdefs.canbus import CanLink
+    from tuavdefs.params import SystemParams
+
+    node_link, host = CanLink("virtual:node_order"), CanLink("virtual:node_order")
+    try:
+        node = WinderCanNode(node_link, Plant(SystemParams()))
+        bursts = []
+        for k in range(250):                       # 1 s of 4 ms control periods
+            t = k * 0.004
+            torque, enabled = node.tick(t)
+            assert (torque, enabled) == (0.0, False)
+            burst = []
+            while (rx := host.recv(0.0)) is not None:
+                burst.append(cp.split_id(rx.arbitration_id))
+            bursts.append(burst)
+    finally:
+        node_link.close()
+        host.close()
+    sensor = cp.WINCH_SENSOR_NODE_ID_DEFAULT
+    encoder = (0, Cmd.GET_ENCODER_ESTIMATES)
+    with_encoder = [b for b in bursts if encoder in b]
+    assert len(with_encoder) == 100                            # 100 Hz of simulated time
+    for b in with_encoder:
+        assert b[:2] == [(sensor, cp.SensorCmd.WINCH_LENGTH), (sensor, cp.SensorCmd.WINCH_TENSION)]
+    assert sum(len(b) for b in bursts) == node.frames_sent == 100 * 3 + 10 * 2
+
+
+def test_winder_node_ignores_29_bit_frames_of_other_protocols():
+    """An extended-id frame (another protocol sharing the bus) is received, counted and
+    ignored: no reply, no effect on the axis, and the node keeps serving CAN Simple."""
+    from sitl.plant import Plant
+    from sitl.winder_node import WinderCanNode
+    from tuavdefs.canbus import CanLink
+    from tuavdefs.params import SystemParams
+
+    node_link, host = CanLink("virtual:node_ext"), CanLink("virtual:node_ext")
+    try:
+        node = WinderCanNode(node_link, Plant(SystemParams()))
+        for fid in (0x18FF50E5, 0x7FF + 1, 0x00000001):
+            host.send(fid, bytes(8), is_extended=True)
+        host.send(cp.frame_id(0, Cmd.GET_ENCODER_ESTIMATES), b"", is_remote=True, dlc=8)
+        node.service(0.0)
+        replies = []
+        while (rx := host.recv(0.0)) is not None:
+            replies.append(rx.arbitration_id)
+    finally:
+        node_link.close()
+        host.close()
+    assert node.frames_received == 4
+    assert replies == [cp.frame_id(0, Cmd.GET_ENCODER_ESTIMATES)]
+    assert node.axis.rx_frames == 1

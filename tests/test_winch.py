@@ -8,16 +8,21 @@ from __future__ import annotations
 import math
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink2
 
 from groundstation import winch as wm
+from groundstation import winch_link
 from groundstation.lbar import LBarParams
 from groundstation.winch import CommandRequest, Winch, WinchMode, WinchOutput
+from groundstation.winch_link import WinchLinkClient, local_positions
 from groundstation.winder_control import WinderControlParams
 from groundstation.winder_host import WinderHost
 from sitl.odrive_axis import OdriveAxis, WinchSensors
 from sitl.winder import WinderModel
 from tuavdefs import can_protocol as cp
+from tuavdefs import component_link as cl
 from tuavdefs.params import SystemParams
 
 NAN = math.nan
@@ -590,3 +595,86 @@ def test_the_uav_position_is_carried_to_the_winch_sample_time():
     assert w.uav_now() == state
     w.set_uav(state, time_ms=65_530 + 40 - 500)     # too old to carry forward
     assert w.uav_now() == state
+
+
+# ------------------------------------------------- the component link's fast position path
+
+def _component_stream() -> list[bytes]:
+    """Frames as the companion sends them on the component link: positions (one with a
+    zero tail, which MAVLink 2 truncates), a command, a heartbeat."""
+    mav = cl.new_mavlink(cl.AUTOPILOT_COMPONENT_ID)
+    return [bytes(m.pack(mav)) for m in (
+        mav.local_position_ned_encode(1000, 1.0, 2.0, -10.0, 0.1, 0.2, 0.3),
+        mav.local_position_ned_encode(1010, 1.5, 2.5, -10.5, 0.4, 0.0, 0.0),
+        mav.local_position_ned_encode(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        mav.command_long_encode(1, 169, mavlink2.MAV_CMD_DO_WINCH, 1, 0, 1, 2.0, 0.5, 0, 0, 0),
+        mav.heartbeat_encode(2, 3, 0, 0, 4),
+        mav.local_position_ned_encode(1020, -3.0, 4.0, -12.0, -0.1, 0.2, -0.3),
+    )]
+
+
+def _pymavlink_positions(data: bytes) -> list[tuple]:
+    msgs = cl.new_mavlink(cl.WINCH_COMPONENT_ID).parse_buffer(data) or []
+    return [(m.time_boot_ms, m.x, m.y, m.z, m.vx, m.vy, m.vz) for m in msgs
+            if m.get_type() == "LOCAL_POSITION_NED"]
+
+
+def test_local_positions_is_pymavlinks_decoding_or_declines():
+    frames = _component_stream()
+    positions = [f for f in frames if f[7] == 32]
+    assert local_positions(positions[0]) == _pymavlink_positions(positions[0])
+    both = positions[1] + positions[2]                       # truncated payloads among them
+    assert local_positions(both) == _pymavlink_positions(both)
+    assert len(local_positions(both)) == 2
+    bad_crc = positions[0][:-1] + bytes((positions[0][-1] ^ 1,))
+    signed = positions[0][:2] + b"\x01" + positions[0][3:]
+    for declined in (frames[3], frames[4], positions[0] + frames[4], positions[0][:-1],
+                     positions[0] + b"\x00", bad_crc, signed, b"\xfe" + positions[0][1:]):
+        assert local_positions(declined) is None
+
+
+class _FakeSocket:
+    """Hands out pre-cut chunks of a stream to :meth:`WinchLinkClient.poll`."""
+
+    def __init__(self, chunks: list[bytes]) -> None:
+        self.chunks = chunks
+
+    def recv(self, size: int) -> bytes:
+        return self.chunks.pop(0)
+
+    def sendall(self, data: bytes) -> None:
+        pass
+
+
+class _Ready:
+    def poll(self, timeout: int) -> list:
+        return [(0, 1)]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.integers(0, 5), min_size=1, max_size=14), st.data())
+def test_the_client_reads_the_same_with_and_without_the_fast_path(order, data):
+    frames = _component_stream()
+    stream = b"".join(frames[i] for i in order)
+    cuts = sorted(data.draw(st.lists(st.integers(1, len(stream) - 1), max_size=4)))
+    if data.draw(st.booleans()):                                  # a damaged byte
+        pos = data.draw(st.integers(0, len(stream) - 1))
+        stream = stream[:pos] + bytes((stream[pos] ^ 0x55,)) + stream[pos + 1:]
+    chunks = [stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True)
+              if a < b]
+    clients = []
+    for fast in (True, False):
+        c = WinchLinkClient("127.0.0.1:9")
+        c.sock, c._readable, c._last_heartbeat = _FakeSocket(list(chunks)), _Ready(), 1e18
+        seen = []
+        for _ in chunks:
+            if fast:
+                c.poll()
+            else:
+                with pytest.MonkeyPatch.context() as mp:
+                    mp.setattr(winch_link, "local_positions", lambda data: None)
+                    c.poll()
+            seen.append((c.uav_state(), c.uav_state_time_ms(), c.take_commands(),
+                         c.bad_frames, c.positions_received))
+        clients.append(seen)
+    assert clients[0] == clients[1]

@@ -69,6 +69,7 @@ __all__ = [
     "encode_signals",
     "decode_signals",
     "is_finite_f32",
+    "F32_MAX",
     # decoded payloads
     "Heartbeat",
     "ErrorStatus",
@@ -309,11 +310,26 @@ def _check_len(name: str, data: bytes, min_len: int) -> bytes:
     return data
 
 
-def _pack(name: str, fmt: str, *values: Any) -> bytes:
-    """struct.pack with ValueError (not struct.error/OverflowError) for out-of-range
+# payload layouts, compiled once
+_S_B = struct.Struct("<B")
+_S_BB = struct.Struct("<BB")
+_S_I = struct.Struct("<I")
+_S_I4X = struct.Struct("<I4x")
+_S_IBBB = struct.Struct("<IBBB")
+_S_IBBBX = struct.Struct("<IBBBx")
+_S_II = struct.Struct("<II")
+_S_F = struct.Struct("<f")
+_S_F4X = struct.Struct("<f4x")
+_S_FBH = struct.Struct("<fBH")
+_S_FBHX = struct.Struct("<fBHx")
+_S_FF = struct.Struct("<ff")
+
+
+def _pack(name: str, layout: struct.Struct, *values: Any) -> bytes:
+    """``layout.pack`` with ValueError (not struct.error/OverflowError) for out-of-range
     values."""
     try:
-        return struct.pack(fmt, *values)
+        return layout.pack(*values)
     except (struct.error, OverflowError) as exc:
         raise ValueError(f"{name}: cannot encode {values!r}: {exc}") from exc
 
@@ -428,14 +444,14 @@ def encode_heartbeat(axis_error: int, axis_state: int, procedure_result: int = 0
                      trajectory_done: bool = True) -> bytes:
     """Heartbeat payload (8 bytes): u32 Axis_Error, u8 Axis_State @ byte 4, u8
     Procedure_Result @ byte 5, Trajectory_Done_Flag bit 48; the rest zero."""
-    return _pack("Heartbeat", "<IBBBx", _u32(axis_error), int(axis_state),
+    return _pack("Heartbeat", _S_IBBBX, _u32(axis_error), int(axis_state),
                  int(procedure_result), 1 if trajectory_done else 0)
 
 
 def decode_heartbeat(data: bytes) -> Heartbeat:
     """Decode a Heartbeat payload (7..8 bytes)."""
     data = _check_len("Heartbeat", data, 7)
-    err, state, result, flags = struct.unpack_from("<IBBB", data)
+    err, state, result, flags = _S_IBBB.unpack_from(data)
     return Heartbeat(err, state, result, bool(flags & 0x01))
 
 
@@ -453,95 +469,95 @@ def decode_estop(data: bytes) -> None:
 
 def encode_get_error(active_errors: int, disarm_reason: int) -> bytes:
     """Get_Error payload: u32 Active_Errors, u32 Disarm_Reason."""
-    return _pack("Get_Error", "<II", _u32(active_errors), _u32(disarm_reason))
+    return _pack("Get_Error", _S_II, _u32(active_errors), _u32(disarm_reason))
 
 
 def decode_get_error(data: bytes) -> ErrorStatus:
     """Decode a Get_Error payload."""
     data = _check_len("Get_Error", data, 8)
-    return ErrorStatus(*struct.unpack_from("<II", data))
+    return ErrorStatus(*_S_II.unpack_from(data))
 
 
 def encode_set_axis_state(requested_state: int) -> bytes:
     """Set_Axis_State payload (8 bytes): u32 Axis_Requested_State, 4 zero bytes."""
-    return _pack("Set_Axis_State", "<I4x", _u32(requested_state))
+    return _pack("Set_Axis_State", _S_I4X, _u32(requested_state))
 
 
 def decode_set_axis_state(data: bytes) -> int:
     """Decode Set_Axis_State (4..8 bytes) to the requested :class:`AxisState` value."""
     data = _check_len("Set_Axis_State", data, 4)
-    return struct.unpack_from("<I", data)[0]
+    return _S_I.unpack_from(data)[0]
 
 
 def encode_encoder_estimates(pos_rev: float, vel_rev_s: float) -> bytes:
     """Get_Encoder_Estimates payload: f32 Pos_Estimate [rev], f32 Vel_Estimate [rev/s]."""
-    return _pack("Get_Encoder_Estimates", "<ff", _f32(pos_rev), _f32(vel_rev_s))
+    return _pack("Get_Encoder_Estimates", _S_FF, _f32(pos_rev), _f32(vel_rev_s))
 
 
 def decode_encoder_estimates(data: bytes) -> EncoderEstimates:
     """Decode Get_Encoder_Estimates to ``(pos_rev, vel_rev_s)``."""
     data = _check_len("Get_Encoder_Estimates", data, 8)
-    return EncoderEstimates(*struct.unpack_from("<ff", data))
+    return EncoderEstimates(*_S_FF.unpack_from(data))
 
 
 def encode_set_controller_mode(control_mode: int, input_mode: int) -> bytes:
     """Set_Controller_Mode payload: u32 Control_Mode, u32 Input_Mode."""
-    return _pack("Set_Controller_Mode", "<II", _u32(control_mode), _u32(input_mode))
+    return _pack("Set_Controller_Mode", _S_II, _u32(control_mode), _u32(input_mode))
 
 
 def decode_set_controller_mode(data: bytes) -> ControllerMode:
     """Decode Set_Controller_Mode."""
     data = _check_len("Set_Controller_Mode", data, 8)
-    return ControllerMode(*struct.unpack_from("<II", data))
+    return ControllerMode(*_S_II.unpack_from(data))
 
 
 def encode_set_input_torque(torque_nm: float) -> bytes:
     """Set_Input_Torque payload (8 bytes): f32 Input_Torque [N m], 4 zero bytes."""
-    return _pack("Set_Input_Torque", "<f4x", _f32(torque_nm))
+    return _pack("Set_Input_Torque", _S_F4X, _f32(torque_nm))
 
 
 def decode_set_input_torque(data: bytes) -> float:
     """Decode Set_Input_Torque (4..8 bytes) to the torque [N m] (NaN stays NaN)."""
     data = _check_len("Set_Input_Torque", data, 4)
-    return struct.unpack_from("<f", data)[0]
+    return _S_F.unpack_from(data)[0]
 
 
 def encode_set_limits(velocity_limit_rev_s: float, current_limit_a: float) -> bytes:
     """Set_Limits payload: f32 Velocity_Limit [rev/s], f32 Current_Limit [A]."""
-    return _pack("Set_Limits", "<ff", _f32(velocity_limit_rev_s), _f32(current_limit_a))
+    return _pack("Set_Limits", _S_FF, _f32(velocity_limit_rev_s), _f32(current_limit_a))
 
 
 def decode_set_limits(data: bytes) -> Limits:
     """Decode Set_Limits."""
     data = _check_len("Set_Limits", data, 8)
-    return Limits(*struct.unpack_from("<ff", data))
+    return Limits(*_S_FF.unpack_from(data))
 
 
 def encode_iq(setpoint_a: float, measured_a: float) -> bytes:
     """Get_Iq payload: f32 Iq_Setpoint [A], f32 Iq_Measured [A]."""
-    return _pack("Get_Iq", "<ff", _f32(setpoint_a), _f32(measured_a))
+    return _pack("Get_Iq", _S_FF, _f32(setpoint_a), _f32(measured_a))
 
 
 def decode_iq(data: bytes) -> Iq:
     """Decode Get_Iq."""
     data = _check_len("Get_Iq", data, 8)
-    return Iq(*struct.unpack_from("<ff", data))
+    return Iq(*_S_FF.unpack_from(data))
 
 
 def encode_bus_voltage_current(voltage_v: float, current_a: float) -> bytes:
     """Get_Bus_Voltage_Current payload: f32 Bus_Voltage [V], f32 Bus_Current [A]."""
-    return _pack("Get_Bus_Voltage_Current", "<ff", _f32(voltage_v), _f32(current_a))
+    return _pack("Get_Bus_Voltage_Current", _S_FF, _f32(voltage_v), _f32(current_a))
 
 
 def decode_bus_voltage_current(data: bytes) -> BusVoltageCurrent:
     """Decode Get_Bus_Voltage_Current."""
     data = _check_len("Get_Bus_Voltage_Current", data, 8)
-    return BusVoltageCurrent(*struct.unpack_from("<ff", data))
+    return BusVoltageCurrent(*_S_FF.unpack_from(data))
 
 
 def encode_clear_errors(identify: bool = False) -> bytes:
     """Clear_Errors payload (DLC 1): u8 Identify (blink the LED)."""
-    return _pack("Clear_Errors", "<B", 1 if identify else 0)
+    return _pack("Clear_Errors", _S_B, 1 if identify else 0)
 
 
 def decode_clear_errors(data: bytes) -> bool:
@@ -552,13 +568,13 @@ def decode_clear_errors(data: bytes) -> bool:
 
 def encode_torques(target_nm: float, estimate_nm: float) -> bytes:
     """Get_Torques payload: f32 Torque_Target [N m], f32 Torque_Estimate [N m]."""
-    return _pack("Get_Torques", "<ff", _f32(target_nm), _f32(estimate_nm))
+    return _pack("Get_Torques", _S_FF, _f32(target_nm), _f32(estimate_nm))
 
 
 def decode_torques(data: bytes) -> Torques:
     """Decode Get_Torques."""
     data = _check_len("Get_Torques", data, 8)
-    return Torques(*struct.unpack_from("<ff", data))
+    return Torques(*_S_FF.unpack_from(data))
 
 
 def encode_winch_heartbeat(brake_engaged: bool, load_cell_healthy: bool, at_full_stop: bool,
@@ -568,7 +584,7 @@ def encode_winch_heartbeat(brake_engaged: bool, load_cell_healthy: bool, at_full
              | (WinchFlags.LOAD_CELL_HEALTHY if load_cell_healthy else 0)
              | (WinchFlags.AT_FULL_STOP if at_full_stop else 0)
              | (WinchFlags.AT_EMPTY_STOP if at_empty_stop else 0))
-    return _pack("Winch_Heartbeat", "<BB", int(flags), int(counter))
+    return _pack("Winch_Heartbeat", _S_BB, int(flags), int(counter))
 
 
 def decode_winch_heartbeat(data: bytes) -> WinchHeartbeat:
@@ -584,13 +600,13 @@ def decode_winch_heartbeat(data: bytes) -> WinchHeartbeat:
 def encode_winch_length(length_m: float, speed_m_s: float) -> bytes:
     """Winch_Length payload: f32 Line_Length [m] paid out, f32 Line_Speed [m/s] (positive
     paying out)."""
-    return _pack("Winch_Length", "<ff", _f32(length_m), _f32(speed_m_s))
+    return _pack("Winch_Length", _S_FF, _f32(length_m), _f32(speed_m_s))
 
 
 def decode_winch_length(data: bytes) -> WinchLength:
     """Decode Winch_Length."""
     data = _check_len("Winch_Length", data, 8)
-    return WinchLength(*struct.unpack_from("<ff", data))
+    return WinchLength(*_S_FF.unpack_from(data))
 
 
 def encode_winch_tension(tension_n: float, brake_engaged: bool,
@@ -598,14 +614,14 @@ def encode_winch_tension(tension_n: float, brake_engaged: bool,
     """Winch_Tension payload (8 bytes): f32 Tension [N] at the drum, u8 Brake_Engaged,
     u16 Sample_Time [ms] (the winch's clock modulo 65536, so a host can tell how old other
     data are against it), 1 zero pad byte."""
-    return _pack("Winch_Tension", "<fBHx", _f32(tension_n), 1 if brake_engaged else 0,
+    return _pack("Winch_Tension", _S_FBHX, _f32(tension_n), 1 if brake_engaged else 0,
                  int(sample_time_ms) & 0xFFFF)
 
 
 def decode_winch_tension(data: bytes) -> WinchTension:
     """Decode Winch_Tension (7..8 bytes)."""
     data = _check_len("Winch_Tension", data, 7)
-    tension, brake, stamp = struct.unpack_from("<fBH", data)
+    tension, brake, stamp = _S_FBH.unpack_from(data)
     return WinchTension(tension, bool(brake), stamp)
 
 
@@ -740,6 +756,10 @@ def decode_signals(name: str, data: bytes) -> dict[str, Any]:
     return dict(zip(spec.signals, values, strict=True))
 
 
+#: The largest finite f32 (3.4028235e38).
+F32_MAX = 3.4028234663852886e38
+
+
 def is_finite_f32(value: float) -> bool:
-    """True if ``value`` is a finite number that fits an f32 (|x| <= 3.4028235e38)."""
-    return math.isfinite(value) and abs(value) <= 3.4028234663852886e38
+    """True if ``value`` is a finite number that fits an f32 (|x| <= :data:`F32_MAX`)."""
+    return math.isfinite(value) and abs(value) <= F32_MAX

@@ -34,14 +34,23 @@ from MAVLink's NED/FRD here goes through :mod:`tuavdefs.frames`.
 
 :class:`FrameParser` splits a TCP byte stream into MAVLink frames, dropping (and counting)
 malformed, truncated and corrupted frames and resynchronising on the next valid one.
+
+Two ways through: the ``*_fields`` builders and field-based decoders work on mappings and
+pymavlink messages (general, for tools and tests); the link's ends, once every control
+period, use the same conversions on *values*, a message's fields in wire order as its
+``struct`` packs them (``*_values`` builders, :meth:`Encoder.pack_values`,
+:meth:`FrameParser.feed_link` for the usual well-formed input, ``*_from_wire`` decoders),
+which skip the dictionaries and message objects. ``tests/test_fast_paths.py`` checks that
+both give the same bytes and values.
 """
 
 from __future__ import annotations
 
+import functools
 import inspect
 import math
 import struct
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink2
@@ -50,11 +59,10 @@ from tuavdefs.airframe import ROTOR_LAYOUT
 from tuavdefs.frames import (
     Quat,
     Vec3,
+    _radii_m,
     enu_to_ned,
     flu_to_frd,
     frd_to_flu,
-    global_to_local_enu,
-    local_enu_to_global,
     ned_to_enu,
     quat_enu_flu_to_ned_frd,
     quat_ned_frd_to_enu_flu,
@@ -117,6 +125,19 @@ _INT16 = 32767
 _UINT16 = 65535
 
 
+# ----- sockets
+_TIMEVAL = struct.Struct("@ll")
+
+
+def timeval(seconds: float) -> bytes:
+    """A ``struct timeval`` of ``seconds`` [s], at least 1 us (0 would mean no timeout),
+    for the socket options SO_RCVTIMEO and SO_SNDTIMEO: timeouts the kernel keeps, so that
+    a blocking recv or send stays one system call (a Python-level socket timeout polls
+    before each)."""
+    us = max(round(seconds * 1e6), 1)
+    return _TIMEVAL.pack(us // 1_000_000, us % 1_000_000)
+
+
 # ----- the control period
 def control_period_us(control_rate_hz: float) -> int:
     """Control period [us] of ``control_rate_hz`` [Hz]; it must be a whole number of us."""
@@ -155,13 +176,13 @@ def _field(msg: Any, name: str) -> Any:
 
 def _round_clamp(x: float, lo: int, hi: int) -> int:
     """``x`` rounded to the nearest integer and clamped to [lo, hi] (NaN -> 0)."""
-    if math.isnan(x):
-        return 0
+    if lo < x < hi:     # the usual case first (NaN fails every comparison)
+        return round(x)
     if x >= hi:
         return hi
     if x <= lo:
         return lo
-    return round(x)
+    return 0
 
 
 def _deg_e7(angle_deg: float) -> int:
@@ -172,18 +193,70 @@ def _wrap_lon(lon_deg: float) -> float:
     return (lon_deg + 180.0) % 360.0 - 180.0
 
 
-def _global_fields(pos_enu_m: Vec3, home: tuple[float, float, float]) -> tuple[int, int, int]:
-    """(lat degE7, lon degE7, alt mm AMSL) of an inertial position [m]."""
-    lat, lon, alt = local_enu_to_global(pos_enu_m, home)
-    return _deg_e7(lat), _deg_e7(_wrap_lon(lon)), round(alt * 1000.0)
+class HomeMap:
+    """The local tangent plane at ``home`` (lat deg, lon deg, alt m AMSL) in the link's
+    integer units: inertial ENU [m] <-> (lat degE7, lon degE7, alt mm AMSL).
+
+    The same arithmetic as :func:`tuavdefs.frames.local_enu_to_global` and
+    :func:`tuavdefs.frames.global_to_local_enu` (bit for bit: ``tests/test_fast_paths.py``),
+    with the home's radii of curvature computed once instead of at every call.
+    """
+
+    def __init__(self, home: tuple[float, float, float]) -> None:
+        self.home = home
+        self._lat0, self._lon0, self._alt0 = home
+        self._r_n, self._r_e = _radii_m(self._lat0)
+        self._cos_lat0 = math.cos(math.radians(self._lat0))
+        self._r_e_cos = self._r_e * self._cos_lat0
+
+    def global_fields(self, pos_enu_m: Sequence[float]) -> tuple[int, int, int]:
+        """(lat degE7, lon degE7 wrapped to [-180, 180), alt mm AMSL) of an inertial
+        position [m]."""
+        lat = self._lat0 + math.degrees(pos_enu_m[1] / self._r_n)
+        lon = self._lon0 + math.degrees(pos_enu_m[0] / self._r_e_cos)
+        alt = self._alt0 + pos_enu_m[2]
+        return _deg_e7(lat), _deg_e7(_wrap_lon(lon)), round(alt * 1000.0)
+
+    def local(self, lat_e7: int, lon_e7: int, alt_mm: int) -> Vec3:
+        """The inertial position [m] of (lat degE7, lon degE7, alt mm AMSL)."""
+        north = math.radians(lat_e7 * 1e-7 - self._lat0) * self._r_n
+        east = (math.radians(_wrap_lon(lon_e7 * 1e-7 - self._lon0)) * self._r_e
+                * self._cos_lat0)
+        return (east, north, alt_mm * 1e-3 - self._alt0)
 
 
-def _local_from_global(msg: Any, home: tuple[float, float, float]) -> Vec3:
-    return global_to_local_enu(_field(msg, "lat") * 1e-7, _field(msg, "lon") * 1e-7,
-                               _field(msg, "alt") * 1e-3, home)
+def home_map(home: Sequence[float]) -> HomeMap:
+    """The :class:`HomeMap` of ``home`` (lat deg, lon deg, alt m AMSL), made once."""
+    return _home_map(tuple(float(v) for v in home))  # type: ignore[arg-type]
+
+
+_home_map = functools.lru_cache(maxsize=16)(HomeMap)
 
 
 # ----- HIL_STATE_QUATERNION
+def hil_state_quaternion_values(time_us: int, pos_enu_m: Vec3, vel_enu_m_s: Vec3,
+                                quat_enu_flu: Quat, rates_flu_rad_s: Vec3,
+                                specific_force_flu_m_s2: Vec3, home: HomeMap,
+                                true_airspeed_m_s: float, ind_airspeed_m_s: float) -> tuple:
+    """HIL_STATE_QUATERNION's field values in wire order (``attitude_quaternion`` spread
+    over four) for a truth state: what :func:`hil_state_quaternion_fields` describes,
+    ready for :meth:`Encoder.pack_values`."""
+    lat, lon, alt = home.global_fields(pos_enu_m)
+    vn, ve, vd = enu_to_ned(vel_enu_m_s)
+    wx, wy, wz = flu_to_frd(rates_flu_rad_s)
+    fx, fy, fz = flu_to_frd(specific_force_flu_m_s2)
+    return (int(time_us), *quat_enu_flu_to_ned_frd(tuple(quat_enu_flu)),
+            float(wx), float(wy), float(wz), lat, lon, alt,
+            _round_clamp(vn * 100.0, -_INT16, _INT16),
+            _round_clamp(ve * 100.0, -_INT16, _INT16),
+            _round_clamp(vd * 100.0, -_INT16, _INT16),
+            _round_clamp(ind_airspeed_m_s * 100.0, 0, _UINT16),
+            _round_clamp(true_airspeed_m_s * 100.0, 0, _UINT16),
+            _round_clamp(fx / MILLI_G_M_S2, -_INT16, _INT16),
+            _round_clamp(fy / MILLI_G_M_S2, -_INT16, _INT16),
+            _round_clamp(fz / MILLI_G_M_S2, -_INT16, _INT16))
+
+
 def hil_state_quaternion_fields(time_us: int, pos_enu_m: Vec3, vel_enu_m_s: Vec3,
                                 quat_enu_flu: Quat, rates_flu_rad_s: Vec3,
                                 specific_force_flu_m_s2: Vec3,
@@ -200,41 +273,32 @@ def hil_state_quaternion_fields(time_us: int, pos_enu_m: Vec3, vel_enu_m_s: Vec3
     alt [mm AMSL], vx/vy/vz NED [cm/s], airspeeds [cm/s], xacc/yacc/zacc FRD [mG]; the
     integer fields are rounded to the nearest unit and clamped to their type's range.
     """
-    lat, lon, alt = _global_fields(pos_enu_m, home)
-    v_ned = enu_to_ned(vel_enu_m_s)
-    w_frd = flu_to_frd(rates_flu_rad_s)
-    f_frd = flu_to_frd(specific_force_flu_m_s2)
     ias = true_airspeed_m_s if ind_airspeed_m_s is None else ind_airspeed_m_s
-    return {
-        "time_usec": int(time_us),
-        "attitude_quaternion": list(quat_enu_flu_to_ned_frd(tuple(quat_enu_flu))),
-        "rollspeed": float(w_frd[0]), "pitchspeed": float(w_frd[1]),
-        "yawspeed": float(w_frd[2]),
-        "lat": lat, "lon": lon, "alt": alt,
-        "vx": _round_clamp(v_ned[0] * 100.0, -_INT16, _INT16),
-        "vy": _round_clamp(v_ned[1] * 100.0, -_INT16, _INT16),
-        "vz": _round_clamp(v_ned[2] * 100.0, -_INT16, _INT16),
-        "ind_airspeed": _round_clamp(ias * 100.0, 0, _UINT16),
-        "true_airspeed": _round_clamp(true_airspeed_m_s * 100.0, 0, _UINT16),
-        "xacc": _round_clamp(f_frd[0] / MILLI_G_M_S2, -_INT16, _INT16),
-        "yacc": _round_clamp(f_frd[1] / MILLI_G_M_S2, -_INT16, _INT16),
-        "zacc": _round_clamp(f_frd[2] / MILLI_G_M_S2, -_INT16, _INT16),
-    }
+    return _CODECS[MSG_HIL_STATE_QUATERNION].fields(hil_state_quaternion_values(
+        time_us, pos_enu_m, vel_enu_m_s, quat_enu_flu, rates_flu_rad_s,
+        specific_force_flu_m_s2, home_map(home), true_airspeed_m_s, ias))
+
+
+def truth_from_wire(values: Sequence[Any], home: HomeMap
+                    ) -> tuple[Vec3, Vec3, Quat, Vec3, Vec3, float, float]:
+    """(position ENU [m], velocity ENU [m/s], quaternion body FLU -> ENU, rates FLU
+    [rad/s], specific force FLU [m/s^2], true airspeed [m/s], indicated airspeed [m/s]) of
+    HIL_STATE_QUATERNION's field values in wire order."""
+    v = values
+    pos = home.local(v[8], v[9], v[10])
+    vel = ned_to_enu((v[11] * 0.01, v[12] * 0.01, v[13] * 0.01))
+    quat = quat_ned_frd_to_enu_flu((float(v[1]), float(v[2]), float(v[3]), float(v[4])))
+    rates = frd_to_flu((float(v[5]), float(v[6]), float(v[7])))
+    force = frd_to_flu((v[16] * MILLI_G_M_S2, v[17] * MILLI_G_M_S2, v[18] * MILLI_G_M_S2))
+    return pos, vel, quat, rates, force, v[15] * 0.01, v[14] * 0.01
 
 
 def state_from_hil_state_quaternion(msg_fields: Any, home: tuple[float, float, float]
                                     ) -> tuple[Vec3, Vec3, Quat, Vec3]:
     """(position ENU [m], velocity ENU [m/s], quaternion body FLU -> ENU, rates FLU [rad/s])
     from a HIL_STATE_QUATERNION (a pymavlink message or a mapping of its fields)."""
-    pos = _local_from_global(msg_fields, home)
-    vel = ned_to_enu((_field(msg_fields, "vx") * 0.01, _field(msg_fields, "vy") * 0.01,
-                      _field(msg_fields, "vz") * 0.01))
-    q_ned = tuple(float(c) for c in _field(msg_fields, "attitude_quaternion"))
-    quat = quat_ned_frd_to_enu_flu(q_ned)  # type: ignore[arg-type]
-    rates = frd_to_flu((float(_field(msg_fields, "rollspeed")),
-                        float(_field(msg_fields, "pitchspeed")),
-                        float(_field(msg_fields, "yawspeed"))))
-    return pos, vel, quat, rates
+    values = _CODECS[MSG_HIL_STATE_QUATERNION].wire_of(msg_fields)
+    return truth_from_wire(values, home_map(home))[:4]  # type: ignore[return-value]
 
 
 def specific_force_from_hil_state_quaternion(msg_fields: Any) -> Vec3:
@@ -250,6 +314,25 @@ def airspeeds_from_hil_state_quaternion(msg_fields: Any) -> tuple[float, float]:
 
 
 # ----- HIL_GPS
+def hil_gps_values(time_us: int, pos_enu_m: Vec3, vel_enu_m_s: Vec3, home: HomeMap,
+                   eph_m: float = 0.3, epv_m: float = 0.5, satellites_visible: int = 10,
+                   fix_type: int = GPS_FIX_3D) -> tuple:
+    """HIL_GPS's field values in wire order: what :func:`hil_gps_fields` describes, ready
+    for :meth:`Encoder.pack_values`."""
+    lat, lon, alt = home.global_fields(pos_enu_m)
+    vn, ve, vd = enu_to_ned(vel_enu_m_s)
+    vel_cm = _round_clamp(math.hypot(vn, ve) * 100.0, 0, _UINT16 - 1)
+    cog = (UINT16_UNKNOWN if vel_cm == 0
+           else round(math.degrees(math.atan2(ve, vn)) * 100.0) % 36000)
+    return (int(time_us), lat, lon, alt,
+            _round_clamp(eph_m * 100.0, 0, _UINT16 - 1),
+            _round_clamp(epv_m * 100.0, 0, _UINT16 - 1), vel_cm,
+            _round_clamp(vn * 100.0, -_INT16, _INT16),
+            _round_clamp(ve * 100.0, -_INT16, _INT16),
+            _round_clamp(vd * 100.0, -_INT16, _INT16),
+            cog, int(fix_type), int(satellites_visible), 0, 0)
+
+
 def hil_gps_fields(time_us: int, pos_enu_m: Vec3, vel_enu_m_s: Vec3,
                    home: tuple[float, float, float], eph_m: float = 0.3, epv_m: float = 0.5,
                    satellites_visible: int = 10, fix_type: int = GPS_FIX_3D) -> dict[str, Any]:
@@ -259,35 +342,39 @@ def hil_gps_fields(time_us: int, pos_enu_m: Vec3, vel_enu_m_s: Vec3,
     PX4 reads them. Ground speed ``vel`` and ``vn/ve/vd`` in cm/s, course over ground
     ``cog`` in cdeg in [0, 36000) (unknown, 65535, when the ground speed rounds to 0).
     """
-    lat, lon, alt = _global_fields(pos_enu_m, home)
-    vn, ve, vd = enu_to_ned(vel_enu_m_s)
-    ground = math.hypot(vn, ve)
-    vel_cm = _round_clamp(ground * 100.0, 0, _UINT16 - 1)
-    cog = (UINT16_UNKNOWN if vel_cm == 0
-           else round(math.degrees(math.atan2(ve, vn)) * 100.0) % 36000)
-    return {
-        "time_usec": int(time_us), "fix_type": int(fix_type),
-        "lat": lat, "lon": lon, "alt": alt,
-        "eph": _round_clamp(eph_m * 100.0, 0, _UINT16 - 1),
-        "epv": _round_clamp(epv_m * 100.0, 0, _UINT16 - 1),
-        "vel": vel_cm,
-        "vn": _round_clamp(vn * 100.0, -_INT16, _INT16),
-        "ve": _round_clamp(ve * 100.0, -_INT16, _INT16),
-        "vd": _round_clamp(vd * 100.0, -_INT16, _INT16),
-        "cog": cog, "satellites_visible": int(satellites_visible), "id": 0, "yaw": 0,
-    }
+    return _CODECS[MSG_HIL_GPS].fields(hil_gps_values(
+        time_us, pos_enu_m, vel_enu_m_s, home_map(home), eph_m, epv_m, satellites_visible,
+        fix_type))
+
+
+def gps_from_wire(values: Sequence[Any], home: HomeMap) -> tuple[Vec3, Vec3, float, float]:
+    """(position ENU [m], velocity ENU [m/s], eph [m], epv [m]) of HIL_GPS's field values
+    in wire order."""
+    v = values
+    vel = ned_to_enu((v[7] * 0.01, v[8] * 0.01, v[9] * 0.01))
+    return home.local(v[1], v[2], v[3]), vel, v[4] * 0.01, v[5] * 0.01
 
 
 def gps_from_hil_gps(msg_fields: Any, home: tuple[float, float, float]
                      ) -> tuple[Vec3, Vec3, float, float]:
     """(position ENU [m], velocity ENU [m/s], eph [m], epv [m]) of a HIL_GPS."""
-    pos = _local_from_global(msg_fields, home)
-    vel = ned_to_enu((_field(msg_fields, "vn") * 0.01, _field(msg_fields, "ve") * 0.01,
-                      _field(msg_fields, "vd") * 0.01))
-    return pos, vel, _field(msg_fields, "eph") * 0.01, _field(msg_fields, "epv") * 0.01
+    return gps_from_wire(_CODECS[MSG_HIL_GPS].wire_of(msg_fields), home_map(home))
 
 
 # ----- HIL_SENSOR
+def hil_sensor_values(time_us: int, accel_flu_m_s2: Vec3, gyro_flu_rad_s: Vec3,
+                      mag_flu_gauss: Vec3, abs_pressure_hpa: float, pressure_alt_m: float,
+                      temperature_c: float) -> tuple:
+    """HIL_SENSOR's field values in wire order: what :func:`hil_sensor_fields` describes,
+    ready for :meth:`Encoder.pack_values`."""
+    ax, ay, az = flu_to_frd(accel_flu_m_s2)
+    gx, gy, gz = flu_to_frd(gyro_flu_rad_s)
+    mx, my, mz = flu_to_frd(mag_flu_gauss)
+    return (int(time_us), float(ax), float(ay), float(az), float(gx), float(gy), float(gz),
+            float(mx), float(my), float(mz), float(abs_pressure_hpa), 0.0,
+            float(pressure_alt_m), float(temperature_c), SENSOR_FIELDS_FILLED, 0)
+
+
 def hil_sensor_fields(time_us: int, accel_flu_m_s2: Vec3, gyro_flu_rad_s: Vec3,
                       mag_flu_gauss: Vec3, abs_pressure_hpa: float, pressure_alt_m: float,
                       temperature_c: float) -> dict[str, Any]:
@@ -295,38 +382,49 @@ def hil_sensor_fields(time_us: int, accel_flu_m_s2: Vec3, gyro_flu_rad_s: Vec3,
     [rad/s], magnetic field [gauss]; static pressure [hPa], pressure altitude [m],
     temperature [degC]. Vectors go out in body FRD; ``fields_updated`` is
     :data:`SENSOR_FIELDS_FILLED` (diff_pressure 0: no airspeed sensor)."""
-    a = flu_to_frd(accel_flu_m_s2)
-    g = flu_to_frd(gyro_flu_rad_s)
-    m = flu_to_frd(mag_flu_gauss)
-    return {
-        "time_usec": int(time_us),
-        "xacc": float(a[0]), "yacc": float(a[1]), "zacc": float(a[2]),
-        "xgyro": float(g[0]), "ygyro": float(g[1]), "zgyro": float(g[2]),
-        "xmag": float(m[0]), "ymag": float(m[1]), "zmag": float(m[2]),
-        "abs_pressure": float(abs_pressure_hpa), "diff_pressure": 0.0,
-        "pressure_alt": float(pressure_alt_m), "temperature": float(temperature_c),
-        "fields_updated": SENSOR_FIELDS_FILLED, "id": 0,
-    }
+    return _CODECS[MSG_HIL_SENSOR].fields(hil_sensor_values(
+        time_us, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss, abs_pressure_hpa,
+        pressure_alt_m, temperature_c))
+
+
+def imu_from_wire(values: Sequence[Any]) -> tuple[Vec3, Vec3, Vec3, float, float, float]:
+    """(specific force FLU [m/s^2], rates FLU [rad/s], field FLU [gauss], static pressure
+    [hPa], pressure altitude [m], temperature [degC]) of HIL_SENSOR's field values in wire
+    order."""
+    v = [float(x) for x in values[1:14]]
+    return (frd_to_flu((v[0], v[1], v[2])), frd_to_flu((v[3], v[4], v[5])),
+            frd_to_flu((v[6], v[7], v[8])), v[9], v[11], v[12])
 
 
 def imu_from_hil_sensor(msg_fields: Any) -> tuple[Vec3, Vec3, Vec3, float, float, float]:
     """(specific force FLU [m/s^2], rates FLU [rad/s], field FLU [gauss], static pressure
     [hPa], pressure altitude [m], temperature [degC]) of a HIL_SENSOR."""
-    def vec(a: str, b: str, c: str) -> Vec3:
-        return frd_to_flu((float(_field(msg_fields, a)), float(_field(msg_fields, b)),
-                           float(_field(msg_fields, c))))
-
-    return (vec("xacc", "yacc", "zacc"), vec("xgyro", "ygyro", "zgyro"),
-            vec("xmag", "ymag", "zmag"), float(_field(msg_fields, "abs_pressure")),
-            float(_field(msg_fields, "pressure_alt")), float(_field(msg_fields, "temperature")))
+    return imu_from_wire(_CODECS[MSG_HIL_SENSOR].wire_of(msg_fields))
 
 
 # ----- HIL_ACTUATOR_CONTROLS
 def _clean_command(c: float) -> float:
     c = float(c)
+    if 0.0 <= c <= 1.0:     # the usual case first (NaN fails it)
+        return c
     if math.isnan(c):
         return 0.0
     return min(max(c, 0.0), 1.0)
+
+
+_UNUSED_CONTROLS = (0.0,) * (N_CONTROLS - N_ROTORS)
+
+
+def actuator_controls_values(time_us: int, rotor_commands: Sequence[float], armed: bool,
+                             lockstep: bool = True) -> tuple:
+    """HIL_ACTUATOR_CONTROLS' field values in wire order (``controls`` spread over 16) for
+    :func:`actuator_controls_fields`' inputs and the ``time_usec`` answered [us], ready for
+    :meth:`Encoder.pack_values`."""
+    if len(rotor_commands) != N_ROTORS:
+        raise ValueError(f"need {N_ROTORS} rotor commands, got {len(rotor_commands)}")
+    return (int(time_us), FLAG_LOCKSTEP if lockstep else 0,
+            *map(_clean_command, rotor_commands), *_UNUSED_CONTROLS,
+            MODE_ARMED if armed else MODE_DISARMED)
 
 
 def actuator_controls_fields(rotor_commands: Sequence[float], armed: bool,
@@ -335,11 +433,10 @@ def actuator_controls_fields(rotor_commands: Sequence[float], armed: bool,
     caller's: the HIL_SENSOR time being answered). ``rotor_commands`` are the four
     normalised commands in [0, 1] (rotor order of :mod:`tuavdefs.airframe`), clamped, NaN
     sent as 0; the other 12 controls are 0."""
-    if len(rotor_commands) != N_ROTORS:
-        raise ValueError(f"need {N_ROTORS} rotor commands, got {len(rotor_commands)}")
-    controls = [_clean_command(c) for c in rotor_commands] + [0.0] * (N_CONTROLS - N_ROTORS)
-    return {"controls": controls, "mode": MODE_ARMED if armed else MODE_DISARMED,
-            "flags": FLAG_LOCKSTEP if lockstep else 0}
+    fields = _CODECS[MSG_HIL_ACTUATOR_CONTROLS].fields(
+        actuator_controls_values(0, rotor_commands, armed, lockstep))
+    del fields["time_usec"]
+    return fields
 
 
 def rotor_commands_from_controls(controls: Sequence[float], mode: int
@@ -349,8 +446,17 @@ def rotor_commands_from_controls(controls: Sequence[float], mode: int
     MAV_MODE_FLAG_SAFETY_ARMED bit."""
     if len(controls) < N_ROTORS:
         raise ValueError(f"need at least {N_ROTORS} controls, got {len(controls)}")
-    cmds = tuple(_clean_command(c) for c in controls[:N_ROTORS])
+    cmds = tuple(map(_clean_command, controls[:N_ROTORS]))
     return cmds, bool(int(mode) & MODE_FLAG_ARMED)  # type: ignore[return-value]
+
+
+def answer_from_wire(values: Sequence[Any]
+                     ) -> tuple[int, tuple[float, float, float, float], bool, bool]:
+    """(time_usec answered [us], rotor commands in [0, 1], armed, lockstep) of
+    HIL_ACTUATOR_CONTROLS' field values in wire order (as
+    :func:`rotor_commands_from_controls` and :func:`lockstep_flag` read them)."""
+    cmds, armed = rotor_commands_from_controls(values[2:2 + N_ROTORS], values[18])
+    return int(values[0]), cmds, armed, lockstep_flag(values[1])
 
 
 def lockstep_flag(flags: int) -> bool:
@@ -397,7 +503,10 @@ class _Codec:
     """MAVLink 2 packing and unpacking of one message type, without pymavlink's generic
     per-message machinery: the same bytes as ``MAVLink.send`` writes and the same message
     objects as ``MAVLink.decode`` returns (``tests/test_simlink.py`` compares them), about
-    three times faster. For the simulator link's own messages (no strings, no signing)."""
+    three times faster. For the simulator link's own messages (no strings, no signing).
+
+    A message's *values* are its fields in wire order with the arrays spread out: what its
+    ``struct`` packs (``cls.unpacker``)."""
 
     def __init__(self, cls: type) -> None:
         self.cls = cls
@@ -418,26 +527,62 @@ class _Codec:
             pos += max(n, 1)
         self.plan = [(starts[name], arrays[name]) for name in cls.fieldnames]
 
-    def pack(self, mav: mavlink2.MAVLink, fields: Mapping[str, Any]) -> bytes:
-        """The frame of a message with ``fields`` from ``mav`` (its ids and sequence)."""
+    def _spread(self, get: Callable[[str], Any]) -> list[Any]:
+        """The values of the fields ``get`` returns by name."""
         values: list[Any] = []
-        defaults = self.defaults
         for name, n in self.wire:
-            v = fields[name] if name in fields else defaults[name]
+            v = get(name)
             if n:
                 values.extend(v[k] for k in range(n))
             else:
                 values.append(v)
+        return values
+
+    def values(self, fields: Mapping[str, Any]) -> list[Any]:
+        """The values of ``fields`` (missing ones take pymavlink's defaults)."""
+        defaults = self.defaults
+        return self._spread(lambda name: fields[name] if name in fields else defaults[name])
+
+    def wire_of(self, msg_fields: Any) -> tuple:
+        """The values of a pymavlink message or of a mapping of all its fields."""
+        return tuple(self._spread(lambda name: _field(msg_fields, name)))
+
+    def fields(self, values: Sequence[Any]) -> dict[str, Any]:
+        """The mapping of field names (arrays as lists) of ``values``."""
+        out: dict[str, Any] = {}
+        i = 0
+        for name, n in self.wire:
+            if n:
+                out[name] = list(values[i:i + n])
+                i += n
+            else:
+                out[name] = values[i]
+                i += 1
+        return out
+
+    def pack(self, mav: mavlink2.MAVLink, fields: Mapping[str, Any]) -> bytes:
+        """The frame of a message with ``fields`` from ``mav`` (its ids and sequence)."""
+        return self.pack_values(mav, self.values(fields))
+
+    def pack_values(self, mav: mavlink2.MAVLink, values: Sequence[Any]) -> bytes:
+        """The frame of a message with ``values`` from ``mav`` (its ids and sequence)."""
         payload = self.unpacker.pack(*values).rstrip(b"\0") or b"\0"
         mid = self.msg_id
-        header = _HEADER_V2_STRUCT.pack(_MAGIC_V2, len(payload), 0, 0, mav.seq, mav.srcSystem,
-                                        mav.srcComponent, mid & 0xFFFF, mid >> 16)
-        body = header + payload
+        seq = mav.seq
+        body = _HEADER_V2_STRUCT.pack(_MAGIC_V2, len(payload), 0, 0, seq, mav.srcSystem,
+                                      mav.srcComponent, mid & 0xFFFF, mid >> 16) + payload
         frame = body + _CRC_STRUCT.pack(_crc16(body[1:] + self.crc_extra))
-        mav.seq = (mav.seq + 1) % 256
+        mav.seq = (seq + 1) % 256
         mav.total_packets_sent += 1
         mav.total_bytes_sent += len(frame)
         return frame
+
+    def unpack(self, payload: bytes) -> tuple:
+        """The values of a MAVLink 2 payload (which drops its trailing zeros)."""
+        size = self.unpacker.size
+        if len(payload) != size:
+            payload = payload[:size] + bytes(size - len(payload))
+        return self.unpacker.unpack(payload)
 
     def decode(self, frame: bytearray) -> mavlink2.MAVLink_message | None:
         """The message of an unsigned MAVLink 2 ``frame`` of this type (None: bad CRC)."""
@@ -446,11 +591,7 @@ class _Codec:
         crc = frame[-2] | (frame[-1] << 8)
         if crc != _crc16(bytes(frame[1:-2]) + self.crc_extra):
             return None
-        size = self.unpacker.size
-        payload = bytes(frame[_HEADER_V2:-2])
-        if len(payload) < size:   # MAVLink 2 drops the payload's trailing zeros
-            payload += bytes(size - len(payload))
-        t = self.unpacker.unpack(payload[:size])
+        t = self.unpack(bytes(frame[_HEADER_V2:-2]))
         m = self.cls(*[t[a] if n == 0 else list(t[a:a + n]) for a, n in self.plan])
         m._signed = False
         m._msgbuf = frame
@@ -468,6 +609,13 @@ _CODECS = {c.msg_id: c for c in map(_Codec, (
     mavlink2.MAVLink_hil_actuator_controls_message))}
 
 
+def link_values(msg: mavlink2.MAVLink_message) -> tuple[int, tuple] | None:
+    """(message id, values in wire order) of one of the link's messages (None for any
+    other message): what :meth:`FrameParser.feed_link` returns for it."""
+    codec = _CODECS.get(msg.get_msgId())
+    return None if codec is None else (codec.msg_id, codec.wire_of(msg))
+
+
 class Encoder:
     """Packs MAVLink 2 messages into bytes, with this end's ids and a running sequence."""
 
@@ -481,10 +629,16 @@ class Encoder:
         return self._sink.take()
 
     def _fast(self, msg_id: int, fields: Mapping[str, Any]) -> bytes:
+        return self.pack_values(msg_id, _CODECS[msg_id].values(fields))
+
+    def pack_values(self, msg_id: int, values: Sequence[Any]) -> bytes:
+        """The frame of one of the link's messages from its values in wire order (the
+        ``*_values`` functions here), advancing the sequence number."""
+        codec = _CODECS[msg_id]
         if self.mav.signing.sign_outgoing:   # pymavlink signs: let it pack
             cls = mavlink2.mavlink_map[msg_id]
-            return self.pack(cls(**{**_CODECS[msg_id].defaults, **fields}))
-        return _CODECS[msg_id].pack(self.mav, fields)
+            return self.pack(cls(**codec.fields(values)))
+        return codec.pack_values(self.mav, values)
 
     def hil_sensor(self, fields: Mapping[str, Any]) -> bytes:
         """A HIL_SENSOR frame from :func:`hil_sensor_fields`' output."""
@@ -562,6 +716,31 @@ class FrameParser:
             self._drop(j)
             del buf[:m]
             self._accept(msg, out)
+        return out
+
+    def feed_link(self, data: bytes) -> list[tuple[int, tuple]] | None:
+        """The usual case of :meth:`feed`, fast: when nothing is pending and ``data`` is
+        whole unsigned MAVLink 2 frames of the link's own messages with valid CRCs, their
+        (message id, values in wire order), counted as :meth:`feed` counts them. Anything
+        else returns None and changes nothing: pass ``data`` to :meth:`feed` then."""
+        if self._buf:
+            return None
+        out = []
+        i, n = 0, len(data)
+        while i < n:
+            if data[i] != _MAGIC_V2 or n - i < _HEADER_V2 + 2 or data[i + 2]:
+                return None   # not a frame start, short, signed or impossible flags
+            end = i + _HEADER_V2 + data[i + 1] + 2
+            codec = _CODECS.get(data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16))
+            if codec is None or end > n or (
+                    _crc16(data[i + 1:end - 2] + codec.crc_extra)
+                    != data[end - 2] | (data[end - 1] << 8)):
+                return None
+            out.append((codec.msg_id, codec.unpack(data[i + _HEADER_V2:end - 2])))
+            i = end
+        if out:
+            self.frames += len(out)
+            self._in_bad_run = False
         return out
 
     def _accept(self, msg: mavlink2.MAVLink_message, out: list) -> None:
