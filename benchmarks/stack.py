@@ -43,7 +43,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from tuav_sitl.realtime import RT_PRIORITY
+from tuav_sitl.realtime import RT_PRIORITY, cpu_split, set_affinity
+from tuav_sitl.up import RECORDER_INTERVAL_S
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -290,14 +291,19 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
               profile: bool = False, real_time: bool = False,
               control_rate_hz: float = 250.0, plant_extra: Sequence[str] = (),
               priority: str | None = None,
-              on_connected: Callable[[], object] | None = None) -> StackResult:
+              on_connected: Callable[[], object] | None = None,
+              pin: bool | None = None, recorder: bool = True) -> StackResult:
     """Run the three processes in ``work`` (logs, profiles, truth series) and return what
     they did: in lockstep, or paced by the wall clock (``real_time``), at
     ``control_rate_hz`` [Hz] (the companion's gains get the same rate), flying ``flight``
     (default :func:`goto_flight`). The plant stops after ``duration_s`` [s] of simulated
     time without a client, and once the flight's client has exited with one (then without
     a duration). ``priority`` (:data:`PRIORITIES`) is given to the three processes when the
-    companion has connected; ``on_connected`` is called then too (the flight begins)."""
+    companion has connected; ``on_connected`` is called then too (the flight begins).
+    As ``tuav-sitl up`` runs them: the bus recorder (``tuav-sitl candump -L`` to a log)
+    listens too unless ``recorder`` is False, and in lockstep the plant gets a CPU of its
+    own and the others share the rest (:func:`tuav_sitl.realtime.cpu_split`) unless ``pin``
+    is False (None: pin in lockstep only)."""
     flight = flight if flight is not None else goto_flight()
     if (duration_s is None) == (not flight.client):
         raise ValueError("a flight without a client needs a duration; one with a client "
@@ -329,7 +335,15 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]))
     results: dict[str, ProcessResult] = {}
+    pin = (not real_time) if pin is None else pin
     try:
+        if recorder:
+            logs["candump"] = work / "candump.log"
+            with open(logs["candump"], "w") as log:
+                procs["candump"] = subprocess.Popen(
+                    [py, "-m", "tuav_sitl", "candump", "-s", "2", "--can", can, "--interval",
+                     repr(RECORDER_INTERVAL_S), "--log", str(work / "can.log")], cwd=ROOT,
+                    stdout=log, stderr=subprocess.STDOUT, env=env)
         for name in PROCESSES:
             logs[name] = work / f"{name}.log"
             with open(logs[name], "w") as log:
@@ -343,11 +357,15 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
         _wait_ready(procs["companion"], logs["companion"], "companion: connected")
         start_cpu = {name: _cpu_s(p.pid) for name, p in procs.items()}
         if priority is not None:
-            for p in procs.values():
-                set_priority(p.pid, priority)
+            for name in PROCESSES:
+                set_priority(procs[name].pid, priority)
+        split = cpu_split() if pin else None
+        for name, p in procs.items():
+            if split is not None and name in split:
+                set_affinity(p.pid, split[name])
         if profile:   # the flight begins: profile from here (benchmarks.profiled)
-            for p in procs.values():
-                p.send_signal(signal.SIGUSR1)
+            for name in PROCESSES:
+                procs[name].send_signal(signal.SIGUSR1)
         if on_connected is not None:
             on_connected()
         if flight.client:
@@ -381,12 +399,16 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
         procs["groundstation"].send_signal(signal.SIGTERM)
         code, cpu = _reap(procs["groundstation"], 30.0)
         results["groundstation"] = ProcessResult(code, cpu - start_cpu["groundstation"], "")
+        if "candump" in procs:
+            procs["candump"].send_signal(signal.SIGTERM)
+            code, cpu = _reap(procs["candump"], 30.0)
+            results["candump"] = ProcessResult(code, cpu - start_cpu["candump"], "")
     finally:
         for p in procs.values():
             if p.returncode is None and p.poll() is None:
                 p.kill()
                 p.wait()
-    results = {k: results[k] for k in (*PROCESSES, "client") if k in results}
+    results = {k: results[k] for k in (*PROCESSES, "client", "candump") if k in results}
     for name, r in results.items():
         r.log = logs[name].read_text()
         if profile and (work / f"{name}.prof").is_file():
@@ -406,11 +428,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=None,
                     help="goto: stop the plant after [s] of simulated time (default 10 s)")
     ap.add_argument("--profile", action="store_true", help="run every process under cProfile")
+    ap.add_argument("--no-pin", action="store_true",
+                    help="let the processes run on any CPU (as up --no-pin)")
+    ap.add_argument("--no-recorder", action="store_true",
+                    help="without the bus recorder that up runs")
+    ap.add_argument("--priority", choices=PRIORITIES, default=None,
+                    help="scheduling for the three processes (experiments)")
     args = ap.parse_args(argv)
     flight = goto_flight() if args.flight == "goto" else mission_flight(
         args.flight == "short-mission")
     duration = None if flight.client else args.duration or 10.0
-    res = run_stack(Path(args.work), duration, flight, profile=args.profile)
+    res = run_stack(Path(args.work), duration, flight, profile=args.profile,
+                    priority=args.priority, pin=False if args.no_pin else None,
+                    recorder=not args.no_recorder)
     out = asdict(res)
     out["real_time_factor"] = res.real_time_factor
     print(json.dumps(out))

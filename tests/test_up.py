@@ -1,6 +1,7 @@
 """``tuav-sitl up`` starts, supervises and stops the three processes (in a private network
 namespace for the CAN bus)."""
 
+import os
 
 import pytest
 from netns_util import netns_available, run_session
@@ -25,6 +26,8 @@ def test_a_run_ends_cleanly_with_its_folder(session):
     assert n["can_decoded_torques"] > 10     # the bus recording decodes with the DBC
     assert n["truth_rows"] >= 140          # 3 s at 50 Hz
     assert n["left"] == []
+    if len(os.sched_getaffinity(0)) >= 2:   # lockstep: the plant on a CPU of its own
+        assert "scheduling: plant on CPU" in n["stdout"]
 
 
 def test_ctrl_c_stops_all_three_within_3_s(session):

@@ -65,3 +65,12 @@ def test_every_port_moves_per_instance():
     # no instance's API port is another's ground-station port
     gcs = {ports_for(i).udp_gcs for i in range(10)}
     assert not gcs & {ports_for(i).udp_api for i in range(10)}
+
+
+def test_lockstep_gives_the_plant_a_cpu_of_its_own():
+    from tuav_sitl.realtime import cpu_split
+
+    assert cpu_split({3}) is None
+    split = cpu_split({5, 2, 7})
+    assert split == {"plant": {2}, "companion": {5, 7}, "groundstation": {5, 7},
+                     "candump": {5, 7}}

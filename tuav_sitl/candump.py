@@ -4,7 +4,14 @@ Works on every bus spec the stack uses (SocketCAN or udp_multicast), so it is th
 watch the bus where ``candump`` itself cannot (no SocketCAN). Output is line-buffered, so
 ``tuav-sitl candump -L | python -m cantools decode <the DBC>`` works; ``--decode`` appends
 the signals decoded with the project's DBC; ``--log FILE`` also writes candump ``-L`` lines
-to a file (flushed at least once a second).
+to a file (flushed at least once a second). Timestamps are the kernel's receive times.
+
+Frames are printed in bursts: after a wake-up every frame already waiting is read and the
+output flushed once. A recorder that need not show frames the moment they pass (``tuav-sitl
+up``'s, which logs to a file with ``-s 2``) also waits ``--interval`` between bursts, so it
+wakes up a hundred times a second rather than once a frame: in lockstep at 20 times real
+time the bus carries several thousand frames a second, and a wake-up per frame cost the
+stack as much CPU as the ground station.
 """
 
 from __future__ import annotations
@@ -34,6 +41,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--count", type=int, default=None, help="stop after N frames")
     ap.add_argument("--timeout", type=float, default=None,
                     help="stop after this many seconds without a frame")
+    ap.add_argument("-s", dest="silent", type=int, choices=(0, 2), default=0,
+                    help="silent mode, as candump's: 2 prints nothing (with --log: only log)")
+    ap.add_argument("--interval", type=float, default=0.0, metavar="S",
+                    help="wait this long [s] between bursts of frames (a recorder's "
+                         "fewer wake-ups; frames keep their receive times)")
 
 
 def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
@@ -52,9 +64,10 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     log_file = open(args.log, "a") if args.log else None  # noqa: SIM115
     stop = {"now": False}
     signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
+    show = args.silent == 0
     n = 0
     last_rx = time.monotonic()
-    last_flush = time.monotonic()
+    last_flush = last_rx
     try:
         while not stop["now"]:
             rx = link.recv(timeout_s=0.1)
@@ -64,26 +77,37 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                     break
                 continue
             last_rx = now
-            ts = time.time()
-            if args.log_format:
-                line = format_log(ts, iface, rx.arbitration_id, rx.data, rx.is_remote,
-                                  rx.is_extended)
-            else:
-                line = format_default(iface, rx.arbitration_id, rx.data, rx.is_remote,
-                                      rx.is_extended, len(iface))
-            if db is not None and not rx.is_remote:
-                line += _decoded(db, rx.arbitration_id, rx.data)
-            out.write(line + "\n")
-            out.flush()
+            lines: list[str] = []
+            logged: list[str] = []
+            while rx is not None:
+                ts = rx.timestamp if rx.timestamp > 0.0 else time.time()
+                log_line = (format_log(ts, iface, rx.arbitration_id, rx.data, rx.is_remote,
+                                       rx.is_extended)
+                            if log_file is not None or args.log_format else "")
+                if show:
+                    line = log_line if args.log_format else format_default(
+                        iface, rx.arbitration_id, rx.data, rx.is_remote, rx.is_extended,
+                        len(iface))
+                    if db is not None and not rx.is_remote:
+                        line += _decoded(db, rx.arbitration_id, rx.data)
+                    lines.append(line)
+                if log_file is not None:
+                    logged.append(log_line)
+                n += 1
+                if args.count is not None and n >= args.count:
+                    stop["now"] = True
+                    break
+                rx = link.recv(timeout_s=0.0)
+            if lines:
+                out.write("\n".join(lines) + "\n")
+                out.flush()
             if log_file is not None:
-                log_file.write(format_log(ts, iface, rx.arbitration_id, rx.data,
-                                          rx.is_remote, rx.is_extended) + "\n")
+                log_file.write("\n".join(logged) + "\n")
                 if now - last_flush >= 1.0:
                     log_file.flush()
                     last_flush = now
-            n += 1
-            if args.count is not None and n >= args.count:
-                break
+            if args.interval > 0.0 and not stop["now"]:
+                time.sleep(args.interval)
     except KeyboardInterrupt:
         pass
     except BrokenPipeError:

@@ -39,6 +39,9 @@ from tuavdefs.paramspec import ParameterError, load_toml, to_dict
 READY_TIMEOUT_S = 60.0
 #: How long a process gets to exit after SIGTERM before it is killed [s].
 STOP_GRACE_S = 2.0
+#: The bus recorder's wait between bursts of frames [s]: the frames keep their receive
+#: times; its socket holds a few hundred frames, a second of the bus at 20x real time.
+RECORDER_INTERVAL_S = 0.01
 
 
 class UpError(RuntimeError):
@@ -216,6 +219,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--no-rt-priority", action="store_true",
                     help="in real time, leave the processes at normal scheduling (by "
                          "default they get SCHED_FIFO where permitted)")
+    ap.add_argument("--no-pin", action="store_true",
+                    help="in lockstep, let the processes run on any CPU (by default the "
+                         "plant gets a CPU of its own and the others share the rest)")
     out = ap.add_mutually_exclusive_group()
     out.add_argument("--headless", action="store_true",
                      help="print only errors and the log folder (no banner, no status)")
@@ -323,7 +329,8 @@ def run_up(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     code = 0
     try:
-        stack.start_recorder("candump", ["-m", "tuav_sitl", "candump", "-L", "--can", can,
+        stack.start_recorder("candump", ["-m", "tuav_sitl", "candump", "-s", "2", "--can", can,
+                                         "--interval", repr(RECORDER_INTERVAL_S),
                                          "--log", str(run_dir / "can.log")])
         stack.start("plant", plant_args, "listening on")
         stack.start("groundstation", gs_args, "groundstation: CAN")
@@ -337,6 +344,8 @@ def run_up(args: argparse.Namespace) -> int:
                 why = set_real_time(stack.procs[name].pid) or why
             sched = (f"SCHED_FIFO priority {RT_PRIORITY}" if why is None
                      else f"normal (SCHED_FIFO {why}; jitter may exceed 2 ms under load)")
+        elif speedup != 1.0 and not args.no_pin:
+            sched = _pin(stack)
         if not args.headless:
             print(_banner(run_dir, ports, can, args, speedup, sched), flush=True)
         while stopping["signal"] is None:
@@ -365,6 +374,25 @@ def run_up(args: argparse.Namespace) -> int:
     return code
 
 
+def _pin(stack: Stack) -> str:
+    """In lockstep: the plant on a CPU of its own, the other processes on the rest
+    (:func:`tuav_sitl.realtime.cpu_split`); returns the banner's words for it."""
+    from tuav_sitl.realtime import cpu_split, set_affinity
+
+    split = cpu_split()
+    if split is None:
+        return "normal (one CPU)"
+    why = None
+    for name, proc in (*stack.procs.items(), *stack.recorders.items()):
+        if name in split:
+            why = set_affinity(proc.pid, split[name]) or why
+    if why is not None:
+        return f"normal (CPU affinity: {why})"
+    plant = ",".join(map(str, sorted(split["plant"])))
+    rest = ",".join(map(str, sorted(split["companion"])))
+    return f"plant on CPU {plant}, the others on CPU {rest}"
+
+
 def _banner(run_dir: Path, ports: Ports, can: str, args: argparse.Namespace,
             speedup: float, sched: str = "normal") -> str:
     interface, channel = resolve_spec(can)
@@ -385,7 +413,7 @@ def _banner(run_dir: Path, ports: Ports, can: str, args: argparse.Namespace,
         f"  component link (companion <-> winch): tcp:127.0.0.1:{ports.component}",
         f"  winder CAN bus: {interface}:{channel}   watch it: {watch}",
         f"  home: {lat:.7f}, {lon:.7f}, {alt:.1f} m AMSL (the winder)",
-        f"  clock: {clock}" + (f"; scheduling: {sched}" if speedup == 1.0 else ""),
+        f"  clock: {clock}; scheduling: {sched}",
         f"  logs: {run_dir} (flight.tlog, can.log, truth.csv, a log per process)",
         "  Ctrl-C stops all three.",
     ])
