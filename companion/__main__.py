@@ -44,7 +44,7 @@ from companion.param_protocol import params_to_defs
 from companion.simlink_client import SimLinkClient
 from tuavdefs import component_link as cl
 from tuavdefs import simlink as sl
-from tuavdefs.frames import quat_to_euler
+from tuavdefs.frames import quat_to_yaw
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
 
@@ -234,7 +234,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             last_t[0] = t
             state = VehicleState(truth.position_enu_m, truth.velocity_enu_m_s,
                                  truth.quaternion, truth.body_rates_flu_rad_s)
-            yaw = quat_to_euler(state.quat)[2]
+            yaw = quat_to_yaw(state.quat)
             if not started:
                 started = True
                 nav.start(t, state.pos_m, state.vel_m_s, yaw)
@@ -251,7 +251,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 if not was_flying:
                     flight.reset(state, (min_speed,) * 4)
                 was_flying = True
-                cmds = flight.update(t, state, ref).rotor_commands
+                cmds = flight.commands(t, state, ref)
             else:
                 was_flying = False
                 cmds = (0.0, 0.0, 0.0, 0.0)

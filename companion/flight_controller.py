@@ -73,9 +73,10 @@ class FlightController:
         # process with deadlines must not wait for it there), and call it without numba's
         # dispatch: the arguments' types never change
         at = (0.0, 0.0, 10.0)
-        self._step = entry_point(flight_step, self.dt_s, *at, *_ZERO3, 1.0, 0.0, 0.0, 0.0,
-                                 *_ZERO3, *at, *_ZERO3, *_ZERO3, 0.0, 12.0, True, 1.0, True,
-                                 False, True, *self._components())
+        example = (self.dt_s, *at, *_ZERO3, 1.0, 0.0, 0.0, 0.0, *_ZERO3, *at, *_ZERO3,
+                   *_ZERO3, 0.0, 12.0, True, 1.0, True, False, True, *self._components())
+        self._step = entry_point(flight_step, *example)
+        self._commands = entry_point(flight_commands, example)
 
     def set_gains(self, gains: FlightControlParams) -> None:
         """Fly with ``gains`` from the next step on (a ground station changed a parameter),
@@ -103,18 +104,31 @@ class FlightController:
     def update(self, t_s: float, state: VehicleState, ref: RefSample,
                armed: bool = True) -> FlightStep:
         """One control step at time ``t_s`` [s]."""
+        commands, saturated, p, a, tether_force = self._step(*self._arguments(
+            t_s, state, ref, armed))
+        return FlightStep(commands, saturated, _position_output(p), _attitude_output(a),
+                          tether_force)
+
+    def commands(self, t_s: float, state: VehicleState, ref: RefSample,
+                 armed: bool = True) -> tuple[float, float, float, float]:
+        """The rotor commands of :meth:`update` (the same step, the same states after
+        it) without its diagnostics, which the control loop does not need."""
+        return self._commands(self._arguments(t_s, state, ref, armed))
+
+    def _arguments(self, t_s: float, state: VehicleState, ref: RefSample, armed: bool
+                   ) -> tuple[Any, ...]:
+        """:func:`flight_step`'s arguments for the step at ``t_s`` [s]; the command
+        filter counts as initialised from then on."""
         g, winch = self.gains, self.winch
         tension = winch.tension_n if g.use_measured_tension else None
         measured = tension is not None
         f = self.attitude.filter
-        commands, saturated, p, a, tether_force = self._step(
-            self.dt_s, *state.pos_m, *state.vel_m_s, *state.quat, *state.rates_rad_s,
-            *ref.pos_m, *ref.vel_m_s, *ref.acc_m_s2, ref.yaw_rad, winch.length_at(t_s),
-            measured, tension if measured else 0.0, g.use_tether_model, f.initialised,
-            bool(armed), *self._components())
+        args = (self.dt_s, *state.pos_m, *state.vel_m_s, *state.quat, *state.rates_rad_s,
+                *ref.pos_m, *ref.vel_m_s, *ref.acc_m_s2, ref.yaw_rad, winch.length_at(t_s),
+                measured, tension if measured else 0.0, g.use_tether_model, f.initialised,
+                bool(armed), *self._components())
         f.initialised = True
-        return FlightStep(commands, saturated, _position_output(p), _attitude_output(a),
-                          tether_force)
+        return args
 
     def _components(self) -> tuple[Any, ...]:
         """What :func:`flight_step` takes from the components: their scalar parameters,
@@ -164,3 +178,10 @@ def flight_step(dt_s: float, px: float, py: float, pz: float, vx: float, vy: flo
     rotor_speed_setpoints(setpoints, c0, c1, c2, c3, armed, speed_min, speed_max)
     advance_kernel(speeds, setpoints, decay)
     return (c0, c1, c2, c3), saturated, po, ao, (ftx, fty, ftz)
+
+
+@njit
+def flight_commands(args: tuple[Any, ...]) -> tuple[float, float, float, float]:
+    """``flight_step(*args)`` (the same updates in place) returning only the rotor
+    commands: no diagnostics to hand back to Python."""
+    return flight_step(*args)[0]

@@ -21,6 +21,9 @@ from tuavdefs.frames import Quat, Vec3
 
 #: Longest a send may block (the plant not reading) before the link counts as failed [s].
 _SEND_TIMEOUT_S = 5.0
+_SENSOR = sl.MSG_HIL_SENSOR
+_TRUTH = sl.MSG_HIL_STATE_QUATERNION
+_new = tuple.__new__
 
 
 class TruthState(NamedTuple):
@@ -205,19 +208,22 @@ class SimLinkClient:
 
     def _absorb(self, item: tuple[int, tuple]) -> SimState | None:
         mid, v = item
-        if mid == sl.MSG_HIL_STATE_QUATERNION:
-            self._truth = TruthState(int(v[0]), *sl.truth_from_wire(v, self._home_map))
+        # the records are built as the tuples they are (tuple.__new__), without their
+        # Python-level constructors
+        if mid == _SENSOR:
+            t = int(v[0])
+            state = _new(SimState, (t, t * 1e-6, self._truth,
+                                    _new(ImuSample, (t, *sl.imu_from_wire(v), int(v[14]))),
+                                    self._gps, self._gps_new))
+            self._gps_new = False
+            return state
+        if mid == _TRUTH:
+            self._truth = _new(TruthState, (int(v[0]), *sl.truth_from_wire(v, self._home_map)))
         elif mid == sl.MSG_HIL_GPS:
             pos, vel, eph, epv = sl.gps_from_wire(v, self._home_map)
             self._gps = GpsFix(int(v[0]), pos, vel, v[1] * 1e-7, v[2] * 1e-7, v[3] * 1e-3,
                                eph, epv, int(v[11]), int(v[12]))
             self._gps_new = True
-        elif mid == sl.MSG_HIL_SENSOR:
-            t = int(v[0])
-            imu = ImuSample(t, *sl.imu_from_wire(v), int(v[14]))
-            state = SimState(t, t * 1e-6, self._truth, imu, self._gps, self._gps_new)
-            self._gps_new = False
-            return state
         return None
 
     # ----- sending
@@ -225,9 +231,8 @@ class SimLinkClient:
                        lockstep: bool = True) -> None:
         """Answer the batch stamped ``time_usec`` [us] with four rotor commands in [0, 1]
         (rotor order of :mod:`tuavdefs.airframe`) and the armed flag."""
-        self.send_raw(self._encoder.pack_values(
-            sl.MSG_HIL_ACTUATOR_CONTROLS,
-            sl.actuator_controls_values(time_usec, rotor_commands, armed, lockstep)))
+        self.send_raw(self._encoder.actuator_controls(time_usec, rotor_commands, armed,
+                                                      lockstep))
 
     def send_raw(self, data: bytes) -> None:
         """Write bytes on the link as they are (diagnostics and tests)."""

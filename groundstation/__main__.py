@@ -22,6 +22,7 @@ back.
 from __future__ import annotations
 
 import argparse
+import select
 import signal
 import sys
 import threading
@@ -42,6 +43,10 @@ from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
 
 __all__ = ["ENCODER_TIMEOUT_S", "build_parser", "main"]
+
+#: The longest wait for a CAN frame [ms]: the wall-clock duties (encoder loss, WINCH_STATUS,
+#: the heartbeat, commands) are looked at least this often.
+LOOP_MS = 10
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -77,8 +82,8 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"MAVLink {args.mavlink}", flush=True)
 
     def emit(out: WinchOutput) -> None:
-        for f in out.frames:
-            link.send(f.arbitration_id, f.data, f.is_remote, len(f.data))
+        if out.frames:
+            link.send_frames(out.frames)
         for n in out.notices:
             print(f"groundstation: {n.text}", flush=True)
             if mav is not None:
@@ -90,6 +95,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                              flags=st.flags, voltage_v=st.voltage_v, current_a=st.current_a,
                              temperature_c=st.temperature_c)
 
+    # one wait per turn, on the bus alone: the plant sends the frames of an instant back to
+    # back, and what the component link brought meanwhile is read after them
+    bus = None
+    if link.fileno() >= 0:
+        bus = select.poll()
+        bus.register(link.fileno(), select.POLLIN)
+    handle = winch.handle_frame
     start = time.monotonic()
     was_lost = False
     positions_seen = 0
@@ -99,25 +111,31 @@ def main(argv: Sequence[str] | None = None) -> int:
                 break
             # the bus first: each encoder frame is answered before anything else is done
             # (in lockstep the plant waits for that answer); then the MAVLink side
-            rx = link.recv(timeout_s=0.01)
-            while rx is not None:
-                emit(winch.on_frame(time.monotonic(), rx.arbitration_id, rx.data,
-                                    rx.is_remote))
-                rx = link.recv(timeout_s=0.0)
+            if bus is not None:
+                frames = link.recv_ready() if bus.poll(LOOP_MS) else ()
+            else:
+                rx = link.recv(timeout_s=LOOP_MS * 1e-3)
+                frames = () if rx is None else [rx, *link.recv_ready()]
+            for rx in frames:
+                out = handle(time.monotonic(), rx.arbitration_id, rx.data, rx.is_remote)
+                if out is not None:
+                    emit(out)
             now = time.monotonic()
-            emit(winch.poll(now))
+            if now >= winch.next_poll_s():
+                emit(winch.poll(now))
             if mav is not None:
                 mav.poll()
                 if mav.positions_received != positions_seen:   # a new UAV state
                     positions_seen = mav.positions_received
                     winch.set_uav(mav.uav_state(), mav.uav_state_time_ms())
-                for req in mav.take_commands():
-                    reply = winch.command(req, time.monotonic())
-                    if reply is None:
-                        continue
-                    mav.command_ack(reply.command, reply.result, reply.target_system,
-                                    reply.target_component)
-                    emit(WinchOutput(notices=list(reply.notices)))
+                if mav.commands_waiting:
+                    for req in mav.take_commands():
+                        reply = winch.command(req, time.monotonic())
+                        if reply is None:
+                            continue
+                        mav.command_ack(reply.command, reply.result, reply.target_system,
+                                        reply.target_component)
+                        emit(WinchOutput(notices=list(reply.notices)))
             if winch.lost != was_lost:      # the log lines of the stream itself
                 was_lost = winch.lost
                 print(f"groundstation: encoder frames {'lost' if was_lost else 'back'}",

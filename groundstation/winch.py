@@ -216,7 +216,12 @@ def _identity(req: CommandRequest) -> tuple:
 
 
 def _finite(*values: float) -> bool:
-    return all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)
+    """Whether every value is a finite int or float (a plain loop: this runs for every
+    UAV position)."""
+    for v in values:  # noqa: SIM110 - all() over a generator costs twice as much
+        if not (isinstance(v, (int, float)) and math.isfinite(v)):
+            return False
+    return True
 
 
 class Winch:
@@ -299,6 +304,12 @@ class Winch:
             handlers[cp.frame_id(self.sensor_node, cp.SensorCmd.WINCH_HEARTBEAT)] = (
                 self._winch_heartbeat_frame)
         self._handlers = handlers
+        # the answers' ids, worked out once (None for a node id no frame can carry: then no
+        # encoder frame is ever handled, and nothing is sent to it)
+        valid = 0 <= self.node <= cp.MAX_NODE_ID
+        self._torque_id = cp.frame_id(self.node, cp.Cmd.SET_INPUT_TORQUE) if valid else None
+        self._bus_request = (cp.Frame(cp.frame_id(self.node, cp.Cmd.GET_BUS_VOLTAGE_CURRENT),
+                                      bytes(8), True) if valid else None)
 
     # ------------------------------------------------------------------------ inputs
 
@@ -357,16 +368,23 @@ class Winch:
     def on_frame(self, wall_s: float, arbitration_id: int, data: bytes,
                  is_remote: bool = False) -> WinchOutput:
         """Handle one received CAN frame at wall time ``wall_s`` [s]."""
-        handler = None if is_remote else self._handlers.get(arbitration_id)
-        if handler is not None:
-            try:
-                out = handler(wall_s, data)
-            except cp.CanFrameError:
-                self.bad_frames += 1
-            else:
-                if out is not None:
-                    return out
-        return WinchOutput()
+        out = self.handle_frame(wall_s, arbitration_id, data, is_remote)
+        return WinchOutput() if out is None else out
+
+    def handle_frame(self, wall_s: float, arbitration_id: int, data: bytes,
+                     is_remote: bool = False) -> WinchOutput | None:
+        """:meth:`on_frame`, None when there is nothing to send (most frames: the sensors',
+        heartbeats, frames for other nodes)."""
+        if is_remote:
+            return None
+        handler = self._handlers.get(arbitration_id)
+        if handler is None:
+            return None
+        try:
+            return handler(wall_s, data)
+        except cp.CanFrameError:
+            self.bad_frames += 1
+            return None
 
     def _encoder_frame(self, wall_s: float, data: bytes) -> WinchOutput:
         pos_rev, vel_rev_s = cp.decode_encoder_estimates(data)
@@ -442,14 +460,12 @@ class Winch:
                 self.host.controller.reset()
                 self._arm_pending = False
             torque = self._control(out)
-            out.frames.append(cp.Frame(cp.frame_id(self.node, cp.Cmd.SET_INPUT_TORQUE),
-                                       cp.encode_set_input_torque(torque)))
+            out.frames.append(cp.Frame(self._torque_id, cp.encode_set_input_torque(torque)))
             self.torque_commands += 1
         self._frames_since_status += 1
         if self._frames_since_status >= self.status_every:
             out.status = self._status(wall_s)
-            out.frames.append(cp.Frame(
-                cp.frame_id(self.node, cp.Cmd.GET_BUS_VOLTAGE_CURRENT), bytes(8), True))
+            out.frames.append(self._bus_request)
         return out
 
     def _check_locked(self, out: WinchOutput) -> None:
@@ -543,6 +559,19 @@ class Winch:
               or wall_s - self._last_status_wall >= self.p.status_wall_period_s):
             out.status = self._status(wall_s)
         return out
+
+    def next_poll_s(self) -> float:
+        """A wall time [s] before which :meth:`poll` has nothing to do (it may have nothing
+        to do then either: it decides; -inf while a status is due at every call)."""
+        last_status = self._last_status_wall
+        if last_status is None:
+            return -math.inf
+        due = last_status + self.p.status_wall_period_s
+        last = self._last_encoder_wall
+        if not self.lost and last is not None:
+            due = min(due, last + self.p.encoder_timeout_s)
+        # a microsecond early: the sums above round, poll's differences decide
+        return due - 1e-6
 
     # ------------------------------------------------------------------------- status
 

@@ -9,7 +9,6 @@ client connects, and reconnects after a drop, on its own; sends while unconnecte
 
 from __future__ import annotations
 
-import select
 import socket
 import struct
 import time
@@ -77,7 +76,6 @@ class WinchLinkClient:
         self._state_ms: int | None = None
         self.positions_received = 0
         """LOCAL_POSITION_NED messages received (the state is new when this changes)."""
-        self._readable: select.poll | None = None
         self._last_heartbeat = 0.0
         self._commands: list[CommandRequest] = []
         self.bad_frames = 0
@@ -92,28 +90,26 @@ class WinchLinkClient:
         s.setblocking(False)
         s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.sock = s
-        self._readable = select.poll()
-        self._readable.register(s, select.POLLIN)
         return True
 
     def poll(self) -> None:
         """Read what has arrived (non-blocking); connects (and reconnects) as needed."""
         if not self._connect():
             return
-        assert self.sock is not None and self._readable is not None
-        # poll first: on an idle link it costs less than a failing recv (an exception)
-        if self._readable.poll(0):
-            try:
-                data = self.sock.recv(65536)
-            except BlockingIOError:
-                data = None
-            except OSError:
-                data = b""
-            if data == b"":
-                self.close()
-                return
-            if data:
-                self._receive(data)
+        assert self.sock is not None
+        # no poll first: the process calls this about once per position received, so the
+        # read mostly finds data, and a poll would be a second system call
+        try:
+            data = self.sock.recv(65536)
+        except BlockingIOError:
+            data = None
+        except OSError:
+            data = b""
+        if data == b"":
+            self.close()
+            return
+        if data:
+            self._receive(data)
         now = time.monotonic()
         if now - self._last_heartbeat >= 1.0:
             self._last_heartbeat = now
@@ -162,6 +158,11 @@ class WinchLinkClient:
         """The latest (position [m], velocity [m/s]) of the UAV, z-up frame, or None."""
         return self._state
 
+    @property
+    def commands_waiting(self) -> bool:
+        """Whether :meth:`take_commands` has something to hand out."""
+        return bool(self._commands)
+
     def take_commands(self) -> list[CommandRequest]:
         """The COMMAND_LONG/COMMAND_INT messages received since the last call (any target:
         :meth:`groundstation.winch.Winch.command` decides which are for the winch)."""
@@ -205,4 +206,3 @@ class WinchLinkClient:
         if self.sock is not None:
             self.sock.close()
             self.sock = None
-            self._readable = None

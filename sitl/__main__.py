@@ -18,7 +18,7 @@ import time
 from collections.abc import Sequence
 from typing import TextIO
 
-from sitl.plant import POS, QUAT, VEL, Plant, initial_state
+from sitl.plant import DRUM_RATE, POS, QUAT, VEL, Plant, initial_state
 from sitl.sensors import SensorNoise
 from sitl.simlink_server import SimLinkServer, WinderInputs
 from sitl.trim import hover_trim
@@ -32,6 +32,8 @@ from tuavdefs.paramspec import load_option
 TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "roll_rad",
                  "pitch_rad", "yaw_rad", "tether_length_m", "drum_rate_rad_s", "armed",
                  "rotor1", "rotor2", "rotor3", "rotor4")
+#: A row of the truth log: the columns' values (floats) as their repr.
+_ROW = ",".join(["%r"] * len(TRUTH_COLUMNS)) + "\n"
 
 
 class TruthLog:
@@ -50,12 +52,13 @@ class TruthLog:
         if (self._count - 1) % self.every:
             return
         p = server.plant
-        x = p.x
-        # the state's slices as Python floats: position_m, velocity_m_s and quaternion
-        row = (p.t_s, *x[POS].tolist(), *x[VEL].tolist(), *quat_to_euler(x[QUAT].tolist()),
-               p.tether_length_m, p.drum_rate_rad_s, int(server.armed),
-               *server.rotor_commands)
-        self.stream.write(",".join(map(repr, map(float, row))) + "\n")
+        x = p.x.tolist()
+        c0, c1, c2, c3 = server.rotor_commands
+        # every value a float, each written as its repr
+        self.stream.write(_ROW % (float(p.t_s), *x[POS], *x[VEL], *quat_to_euler(x[QUAT]),
+                                  float(p.tether_length_m), x[DRUM_RATE],
+                                  1.0 if server.armed else 0.0, float(c0), float(c1),
+                                  float(c2), float(c3)))
         now = time.monotonic()
         if now - self._flushed >= 1.0:
             self.stream.flush()
@@ -126,7 +129,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             t = server.plant.t_s
             node.service(t)
             torque, enabled = node.tick(t)
-            server.winder_inputs = WinderInputs(torque, enabled)
+            if server.winder_inputs != (torque, enabled):   # (a new tuple only if new)
+                server.winder_inputs = WinderInputs(torque, enabled)
         if log is not None:
             log.record(server)
 

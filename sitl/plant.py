@@ -284,9 +284,15 @@ class Plant:
         ``n`` calls of :meth:`step`, to the bit, in one compiled call (the wind sampled at
         every step; the interpreter is back only for a new block of the wind's random
         draws and for ground contact)."""
+        self.advance_held(u.rotor_commands, u.armed, u.winder_torque_n_m, u.winder_enabled, n)
+
+    def advance_held(self, rotor_commands: Sequence[float], armed: bool,
+                     winder_torque_n_m: float, winder_enabled: bool, n: int) -> None:
+        """:meth:`advance` with the fields of its :class:`PlantInputs` given one by one."""
         if n <= 0:
             return
-        c0, c1, c2, c3, armed, command, enabled = *u.rotor_commands, *u[1:]
+        c0, c1, c2, c3 = rotor_commands
+        command, enabled = winder_torque_n_m, winder_enabled
         m, dt, wind = self.model, self.dt_s, self.wind
         varies = not wind.constant
         x = np.array(self.x, dtype=float)   # a new array each call, as the kernel wants it

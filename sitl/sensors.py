@@ -181,6 +181,29 @@ class SensorNoise:
 
 #: Standard normal draws fetched from a channel's stream at a time (speed only).
 _BLOCK = 256
+#: Most axes of a channel (the layout of :class:`NoiseState`'s arrays).
+_MAX_DIM = 3
+
+
+class NoiseState(NamedTuple):
+    """The state of ``n`` noisy channels in arrays, so that compiled code
+    (:mod:`sitl.batch`) can read them as :class:`NoisyChannel` does: per channel ``k``,
+    ``draws[k]`` its current block of standard normal draws (``_BLOCK`` samples x [bias
+    walk, white noise] x ``_MAX_DIM`` axes, of which its own ``dim`` first are used),
+    ``bias[k]`` its bias per axis [unit of the channel], ``cursor[k]`` the next sample of
+    the block, ``params[k]`` (enabled as 0/1, sigma, bias walk) of its
+    :class:`NoiseSpec`."""
+
+    draws: np.ndarray
+    bias: np.ndarray
+    cursor: np.ndarray
+    params: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> NoiseState:
+        """Arrays for ``n`` channels, all zero."""
+        return cls(np.zeros((n, _BLOCK, 2, _MAX_DIM)), np.zeros((n, _MAX_DIM)),
+                   np.zeros(n, dtype=np.int64), np.zeros((n, 3)))
 
 
 class NoisyChannel:
@@ -188,35 +211,56 @@ class NoisyChannel:
 
     The stream is consumed in blocks of standard normal draws (two per axis and sample:
     bias walk, white noise), so a channel's readings depend only on its seed and on how
-    often it has been read.
+    often it has been read. The next block is drawn as soon as one is used up, so that
+    the state is always ready for a read. The channel's state lives in slot ``slot`` of a
+    :class:`NoiseState` (its own if none is given), where compiled code can read the
+    channel too.
     """
 
     def __init__(self, spec: NoiseSpec, dim: int, rng: np.random.Generator,
-                 enabled: bool = True) -> None:
+                 enabled: bool = True, state: NoiseState | None = None,
+                 slot: int = 0) -> None:
+        if not 1 <= dim <= _MAX_DIM:
+            raise ValueError(f"a channel has 1 to {_MAX_DIM} axes, not {dim}")
         self.spec = spec
         self.dim = dim
         self.enabled = enabled
         self._rng = rng
-        self._bias = ([float(b) for b in rng.normal(0.0, spec.bias_sigma, dim)]
-                      if enabled and spec.bias_sigma > 0 else [0.0] * dim)
-        self._z: list = []
-        self._next = 0
+        st = NoiseState.empty(1) if state is None else state
+        self._block = st.draws[slot, :, :, :dim]
+        self._bias_a = st.bias[slot, :dim]
+        self._cursor = st.cursor[slot:slot + 1]
+        st.params[slot] = (1.0 if enabled else 0.0, spec.sigma, spec.bias_walk)
+        self._z: list | None = None   # the block as lists (for the interpreter)
         self._sigma = spec.sigma
         self._walk = spec.bias_walk
+        if enabled:
+            if spec.bias_sigma > 0:
+                self._bias_a[:] = rng.normal(0.0, spec.bias_sigma, dim)
+            self.refill()
 
     @property
     def bias(self) -> np.ndarray:
         """The current bias, per axis [unit of the channel]."""
-        return np.array(self._bias)
+        return self._bias_a.copy()
+
+    def refill(self) -> None:
+        """Draw the next block of the stream (the last one is used up)."""
+        self._block[...] = self._rng.standard_normal((_BLOCK, 2, self.dim))
+        self._cursor[0] = 0
+        self._z = None
 
     def _draw(self) -> list:
         """This sample's draws: [bias walk per axis, white noise per axis]."""
-        i = self._next
-        if i >= len(self._z):
-            self._z = self._rng.standard_normal((_BLOCK, 2, self.dim)).tolist()
-            i = 0
-        self._next = i + 1
-        return self._z[i]
+        i = int(self._cursor[0])
+        z = self._z
+        if z is None:
+            z = self._z = self._block.tolist()
+        if i + 1 < _BLOCK:
+            self._cursor[0] = i + 1
+        else:
+            self.refill()
+        return z[i]  # type: ignore[no-any-return]
 
     def read(self, truth: Sequence[float], dt_s: float) -> tuple[float, ...]:
         """One reading of ``truth`` taken ``dt_s`` [s] after the previous one."""
@@ -225,25 +269,26 @@ class NoisyChannel:
         z_walk, z_noise = self._draw()
         sigma = self._sigma
         if self.dim == 3:   # the IMU's and the GPS velocity's: unrolled (speed only)
-            b0, b1, b2 = self._bias
+            b0, b1, b2 = self._bias_a.tolist()
             if self._walk > 0.0:
                 k = self._walk * math.sqrt(dt_s)
                 b0, b1, b2 = b0 + k * z_walk[0], b1 + k * z_walk[1], b2 + k * z_walk[2]
-                self._bias = [b0, b1, b2]
+                self._bias_a[:] = (b0, b1, b2)
             t0, t1, t2 = truth
             return (float(t0) + b0 + sigma * z_noise[0], float(t1) + b1 + sigma * z_noise[1],
                     float(t2) + b2 + sigma * z_noise[2])
         if self.dim == 1:   # the barometer's: unrolled
-            (b,) = self._bias
+            (b,) = self._bias_a.tolist()
             if self._walk > 0.0:
                 b = b + self._walk * math.sqrt(dt_s) * z_walk[0]
-                self._bias = [b]
+                self._bias_a[0] = b
             (t,) = truth
             return (float(t) + b + sigma * z_noise[0],)
-        bias = self._bias
+        bias = self._bias_a.tolist()
         if self._walk > 0.0:
             k = self._walk * math.sqrt(dt_s)
-            bias = self._bias = [b + k * z for b, z in zip(bias, z_walk, strict=True)]
+            bias = [b + k * z for b, z in zip(bias, z_walk, strict=True)]
+            self._bias_a[:] = bias
         return tuple([float(t) + b + sigma * z
                       for t, b, z in zip(truth, bias, z_noise, strict=True)])
 
@@ -292,14 +337,23 @@ class SensorSuite:
         n = self.noise
         streams = [np.random.default_rng(s) for s in np.random.SeedSequence(n.seed).spawn(7)]
         on = n.enabled
-        self.accel = NoisyChannel(n.accel, 3, streams[0], on)
-        self.gyro = NoisyChannel(n.gyro, 3, streams[1], on)
-        self.mag = NoisyChannel(n.mag, 3, streams[2], on)
-        self.baro_channel = NoisyChannel(n.baro, 1, streams[3], on)
-        self.gps_horizontal = NoisyChannel(n.gps_horizontal, 2, streams[4], on)
-        self.gps_vertical = NoisyChannel(n.gps_vertical, 1, streams[5], on)
-        self.gps_velocity = NoisyChannel(n.gps_velocity, 3, streams[6], on)
+        #: The channels' state, slots in the order of :attr:`channels`.
+        self.noise_state = st = NoiseState.empty(7)
+        self.accel = NoisyChannel(n.accel, 3, streams[0], on, st, 0)
+        self.gyro = NoisyChannel(n.gyro, 3, streams[1], on, st, 1)
+        self.mag = NoisyChannel(n.mag, 3, streams[2], on, st, 2)
+        self.baro_channel = NoisyChannel(n.baro, 1, streams[3], on, st, 3)
+        self.gps_horizontal = NoisyChannel(n.gps_horizontal, 2, streams[4], on, st, 4)
+        self.gps_vertical = NoisyChannel(n.gps_vertical, 1, streams[5], on, st, 5)
+        self.gps_velocity = NoisyChannel(n.gps_velocity, 3, streams[6], on, st, 6)
+        self.channels = (self.accel, self.gyro, self.mag, self.baro_channel,
+                         self.gps_horizontal, self.gps_vertical, self.gps_velocity)
         self._field_enu = ned_to_enu(tuple(float(v) for v in self.earth_field_ned_gauss))
+
+    @property
+    def earth_field_enu_gauss(self) -> Vec3:
+        """The Earth's magnetic field in the inertial ENU frame [gauss]."""
+        return self._field_enu
 
     def magnetic_field_flu(self, quat_enu_flu: Quat) -> Vec3:
         """The true Earth field in body FLU [gauss] at attitude body FLU -> ENU."""

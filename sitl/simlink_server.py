@@ -44,6 +44,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from sitl.batch import batch_packer
 from sitl.plant import POS, QUAT, RATES, VEL, Plant, PlantInputs
 from sitl.sensors import ISA_RHO0_KG_M3, SensorNoise, SensorSuite, airspeed_from, isa_air
 from tuavdefs import simlink as sl
@@ -60,6 +61,18 @@ def _quantile(sorted_values: Sequence[float], q: float) -> float:
         return math.nan
     k = min(len(sorted_values) - 1, max(0, math.ceil(q * len(sorted_values)) - 1))
     return float(sorted_values[k])
+
+
+def _answer_from_link(values: tuple) -> tuple[int, tuple[float, float, float, float], bool,
+                                              bool]:
+    """:func:`tuavdefs.simlink.answer_from_wire` of the values
+    :meth:`tuavdefs.simlink.FrameParser.feed_link` unpacks (integers and floats), the usual
+    case (commands in [0, 1]) inline."""
+    ts, flags, c0, c1, c2, c3 = values[:6]
+    if 0.0 <= c0 <= 1.0 and 0.0 <= c1 <= 1.0 and 0.0 <= c2 <= 1.0 and 0.0 <= c3 <= 1.0:
+        return (ts, (c0, c1, c2, c3), bool(values[18] & sl.MODE_FLAG_ARMED),
+                bool(flags & sl.FLAG_LOCKSTEP))
+    return sl.answer_from_wire(values)
 
 
 class WinderInputs(NamedTuple):
@@ -196,10 +209,14 @@ class SimLinkServer:
         self.armed = False
         #: Whether the last answer announced lockstep (HIL_ACTUATOR_CONTROLS flags bit 0).
         self.companion_lockstep = False
-        self.last_inputs = PlantInputs()
+        # what the last period's physics steps held: PlantInputs' fields (last_inputs)
+        self._held: tuple = tuple(PlantInputs())
         #: Control periods advanced by the running (or last) serve().
         self.steps = 0
         self._encoder = sl.Encoder(sl.PLANT_SYSID, sl.PLANT_COMPID)
+        #: The batches in one compiled call (None without numba: :meth:`_batch_bytes`).
+        self._packer = batch_packer(plant, self.sensors, self.home, self._encoder,
+                                    self.period_us)
         self._parser = sl.FrameParser()
         self._sock: socket.socket | None = None
         self._poller: select.poll | None = None
@@ -401,6 +418,23 @@ class SimLinkServer:
 
     def _send_batch(self, t_us: int) -> None:
         """HIL_GPS (when due), HIL_STATE_QUATERNION and HIL_SENSOR for the current state."""
+        gps_dt: float | None = None
+        last = self._last_gps_us
+        if last is None or t_us - last >= self.gps_period_us:
+            gps_dt = (self.gps_period_us if last is None else t_us - last) * 1e-6
+            self._last_gps_us = t_us
+        data = None if self._packer is None else self._packer.pack(t_us, gps_dt)
+        if data is None:
+            data = self._batch_bytes(t_us, gps_dt)
+        try:
+            self._sock.sendall(data)  # type: ignore[union-attr]
+        except OSError as e:
+            raise _DisconnectedError from e
+
+    def _batch_bytes(self, t_us: int, gps_dt: float | None) -> bytes:
+        """The batch for the current state at ``t_us`` [us] (with HIL_GPS, its channels read
+        ``gps_dt`` [s] after the last fix, unless None), interpreted: the reference of
+        :class:`sitl.batch.BatchPacker`, and the path for what it leaves alone."""
         p = self.plant
         dt = self.period_us * 1e-6
         x = p.x.tolist()
@@ -412,11 +446,8 @@ class SimLinkServer:
         ias = tas * math.sqrt(density / ISA_RHO0_KG_M3)
         s, enc, home = self.sensors, self._encoder, self._home_map
         chunks = []
-        if self._last_gps_us is None or t_us - self._last_gps_us >= self.gps_period_us:
-            gps_dt = (self.gps_period_us if self._last_gps_us is None
-                      else t_us - self._last_gps_us) * 1e-6
+        if gps_dt is not None:
             fix = s.gps(pos, vel, gps_dt)
-            self._last_gps_us = t_us
             chunks.append(enc.pack_values(sl.MSG_HIL_GPS, sl.hil_gps_values(
                 t_us, fix.position_enu_m, fix.velocity_enu_m_s, home, fix.eph_m, fix.epv_m)))
         chunks.append(enc.pack_values(sl.MSG_HIL_STATE_QUATERNION,
@@ -425,11 +456,7 @@ class SimLinkServer:
         chunks.append(enc.pack_values(sl.MSG_HIL_SENSOR, sl.hil_sensor_values(
             t_us, *s.imu(f_flu, rates, quat, dt),
             *s.baro_of_air(pressure_hpa, temperature_k, dt))))
-        assert self._sock is not None
-        try:
-            self._sock.sendall(b"".join(chunks))
-        except OSError as e:
-            raise _DisconnectedError from e
+        return b"".join(chunks)
 
     def _wait_answer(self, t_us: int, deadline: float | None, stop: threading.Event
                      ) -> tuple[bool, int, int]:
@@ -460,13 +487,15 @@ class SimLinkServer:
             answered = False
             # the usual case, one well-formed answer, skips the message objects
             items = parser.feed_link(data)
+            decode = _answer_from_link
             if items is None:
                 items = [sl.link_values(m) for m in parser.feed(data)]
+                decode = sl.answer_from_wire
             for item in items:
                 if item is None or item[0] != sl.MSG_HIL_ACTUATOR_CONTROLS:
                     ignored += 1
                     continue
-                answer = sl.answer_from_wire(item[1])
+                answer = decode(item[1])
                 ts = answer[0]
                 if ts == t_us or (self.real_time and ts < t_us):
                     self._hold(answer)
@@ -484,10 +513,13 @@ class SimLinkServer:
         """Hold an answer's (:func:`tuavdefs.simlink.answer_from_wire`) commands."""
         _, self.rotor_commands, self.armed, self.companion_lockstep = answer
 
+    @property
+    def last_inputs(self) -> PlantInputs:
+        """The inputs the last control period's physics steps held."""
+        return PlantInputs(*self._held)
+
     def _advance(self) -> None:
         """N physics steps with the held commands and the caller's winder inputs."""
-        w = self.winder_inputs
-        u = PlantInputs(rotor_commands=self.rotor_commands, armed=self.armed,
-                        winder_torque_n_m=float(w.torque_n_m), winder_enabled=bool(w.enabled))
-        self.last_inputs = u
-        self.plant.advance(u, self.physics_steps)
+        torque, enabled = self.winder_inputs
+        held = self._held = (self.rotor_commands, self.armed, float(torque), bool(enabled))
+        self.plant.advance_held(*held, self.physics_steps)

@@ -19,7 +19,6 @@ from tuavdefs.can_protocol import (
     WINCH_SENSOR_NODE_ID_DEFAULT,
     Cmd,
     frame_id,
-    split_id,
 )
 from tuavdefs.canbus import CanLink, RxFrame
 
@@ -75,8 +74,7 @@ class WinderCanNode:
             # a 29-bit frame of another protocol on the same bus: not CAN Simple, and not
             # for this node (the axis counts nothing either)
             return
-        node, cmd = split_id(fid)
-        if node == self.axis.node_id and not rx.is_remote and cmd in _HOST_COMMANDS:
+        if fid >> 5 == self.axis.node_id and not rx.is_remote and (fid & 0x1F) in _HOST_COMMANDS:
             self.host_seen = True
             self._awaiting = False
         self._send(self.axis.handle(t_s, rx.arbitration_id, rx.data, rx.is_remote,
@@ -108,9 +106,10 @@ class WinderCanNode:
         enabled = axis.enabled
         applied = self._motor_torque(axis.torque_command_nm, omega, enabled)
         frames = axis.tick(t_s, theta / _TWO_PI, omega / _TWO_PI, applied, BUS_VOLTAGE_V)
-        if frames and any(f.arbitration_id == self._encoder_id and not f.is_remote
-                          for f in frames):
-            self._awaiting = True
+        if frames:
+            for f in frames:
+                if f.arbitration_id == self._encoder_id and not f.is_remote:
+                    self._awaiting = True
         # solved every period, not only when the sensors send: each solve starts from the
         # last one's solution, and the tensions sent must not depend on when it last ran
         tf = p.tether_forces()
@@ -119,15 +118,16 @@ class WinderCanNode:
             # encoder frame at once then knows the tension and the sample time that go
             # with it
             enabled = axis.enabled      # after the tick, which may have disarmed the axis
-            self._send(self.sensors.tick(
+            sensor_frames = self.sensors.tick(
                 t_s, length, omega * self._drum_radius, tf.drum_tension_n, not enabled,
-                theta <= self._theta_min, theta >= self._theta_max))
+                theta <= self._theta_min, theta >= self._theta_max)
+            frames = sensor_frames + frames if frames else sensor_frames
         if frames:
+            # every frame of the instant built first, then sent back to back: a host
+            # tends to find them together, and wakes once
             self._send(frames)
         self.await_host(t_s)
         return axis.torque_command_nm, axis.enabled
 
     def _send(self, frames: list) -> None:
-        for f in frames:
-            self.link.send(f.arbitration_id, f.data, f.is_remote, len(f.data))
-            self.frames_sent += 1
+        self.frames_sent += self.link.send_frames(frames)

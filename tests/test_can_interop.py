@@ -18,3 +18,9 @@ def test_canlink_and_python_can_understand_each_other():
     assert out["a_extra"] is False and out["own_dropped"] == 2
     assert out["pc"] == [[0x29, "010203", False, 3], [0x2A, "", True, 8]]
     assert out["stamp_ok"] is True
+    # send_frames: python-can's frames, in order; recv_ready: all of them at once
+    assert out["burst_sent"] == 3
+    assert out["burst"] == [[0x31, "01", False, False], [0x32, "00" * 8, True, False],
+                            [0x33, "", False, False]]
+    assert out["burst_pc"] == [[0x31, "01", False, 1], [0x32, "", True, 8], [0x33, "", False, 0]]
+    assert out["empty_ready"] == [] and out["fileno_ok"] is True

@@ -4,22 +4,34 @@ simulator link's own MAVLink packing and parsing (from and to field values in wi
 its home mapping, the compiled specific force and the unrolled sensor channels, and
 numba's entry points."""
 
+import io
 import math
 import random
+import struct
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
+from sitl.__main__ import TRUTH_COLUMNS, TruthLog
+from sitl.batch import BatchPacker
 from sitl.catenary import catenary_end_forces
 from sitl.plant import Plant, PlantInputs
 from sitl.pymath import hypot2, hypot3
-from sitl.sensors import NoiseSpec, NoisyChannel, plant_acceleration_enu, specific_force_flu
+from sitl.sensors import (
+    NoiseSpec,
+    NoisyChannel,
+    SensorNoise,
+    plant_acceleration_enu,
+    specific_force_flu,
+)
+from sitl.simlink_server import SimLinkServer, _answer_from_link
 from sitl.tether import Tether, TetherForces
 from sitl.trim import hover_trim
 from tuavdefs import frames as fr
 from tuavdefs import simlink as sl
-from tuavdefs.jit import entry_point, njit
+from tuavdefs.jit import JIT, entry_point, njit
 from tuavdefs.params import GustParams, SystemParams, TetherParams, WindParams
 
 
@@ -317,3 +329,150 @@ def test_the_unrolled_sensor_channels_are_the_general_formula():
             want = tuple(t + b + spec.sigma * n
                          for t, b, n in zip(truth, bias, z_noise, strict=True))
             assert ch.read(truth, dt) == want
+
+
+# ----------------------------------------------------------------- the plant's batch
+class _Sink:
+    """A connected socket's stand-in: keeps what is sent."""
+
+    def __init__(self) -> None:
+        self.sent: list[bytes] = []
+
+    def sendall(self, data: bytes) -> None:
+        self.sent.append(bytes(data))
+
+
+def _batch_outcome(server: SimLinkServer, t_us: int) -> tuple:
+    """What sending one batch does: its bytes (or the exception), the encoder's counters."""
+    sink = _Sink()
+    server._sock = sink  # type: ignore[assignment]
+    try:
+        server._send_batch(t_us)
+        out: object = sink.sent
+    except Exception as e:  # noqa: BLE001 - the same error either way is the point
+        out = (type(e), str(e))
+    mav = server._encoder.mav
+    return out, mav.seq, mav.total_packets_sent, mav.total_bytes_sent
+
+
+def _random_state(rng: np.random.Generator, k: int, x0: np.ndarray) -> np.ndarray:
+    """A state near ``x0``, now and then with values the fields clamp (fast, high, spun,
+    stopped) or that no field can carry (far, hot, not finite)."""
+    x = x0.copy()
+    x[0:3] += rng.uniform(-30.0, 30.0, 3)
+    x[3:6] = rng.normal(0.0, 5.0, 3)
+    q = rng.normal(size=4)
+    x[6:10] = q / np.linalg.norm(q)
+    x[10:13] = rng.normal(0.0, 1.0, 3)
+    edge = k % 23
+    if edge == 1:
+        x[3:6] = rng.choice((-1.0, 1.0), 3) * rng.uniform(327.0, 800.0, 3)   # clamped speeds
+    elif edge == 2:
+        x[3:6] = 0.0    # course unknown
+    elif edge == 3:
+        x[10:13] = rng.uniform(-1e3, 1e3, 3)   # large rates and specific force
+        x[13:17] *= 3.0
+    elif edge == 4:
+        x[2] = 30000.0 + rng.uniform(0, 20000.0)   # thin (or no) air
+    elif edge == 5:
+        x[0] = 3e9    # beyond the link's longitude integers
+    elif edge == 6:
+        x[rng.integers(0, 19)] = rng.choice((math.nan, math.inf))
+    elif edge == 7:
+        x[10] = 1e39   # beyond a float32
+    return x
+
+
+@pytest.mark.parametrize("noise, home", [
+    (SensorNoise(seed=7), sl.HOME_DEFAULT),
+    (SensorNoise.off(), (-33.9, 179.99995, 12.0)),
+    (SensorNoise(seed=8, baro=NoiseSpec(0.0, 0.0, 0.5), gps_vertical=NoiseSpec(0.0),
+                 gyro=NoiseSpec(0.01, 0.0, 0.0)), (89.0, -179.99998, 4000.0)),
+])
+def test_the_compiled_batch_is_the_interpreted_one(noise: SensorNoise,
+                                                   home: tuple[float, float, float]):
+    """:class:`sitl.batch.BatchPacker` sends the bytes the interpreted path sends and
+    leaves the sensors and the encoder as it leaves them, over thousands of periods (the
+    channels' blocks of draws refilled, GPS periods, clamped and unknown fields); what it
+    leaves alone (values no field carries) still goes the interpreted way."""
+    params = _windy()
+    x0, u = hover_trim(params, (12.0, 5.0, 20.0), 24.5)
+    servers = [SimLinkServer(Plant(params, state=x0), port=0, sensor_noise=noise, home=home)
+               for _ in range(2)]
+    fast, ref = servers
+    ref._packer = None
+    assert (fast._packer is not None) == JIT
+    if not JIT:   # the kernel interpreted
+        fast._packer = BatchPacker(fast.plant, fast.sensors, fast.home, fast._encoder,
+                                   fast.period_us)
+    periods = 3000 if JIT else 300
+    rng = np.random.default_rng(5)
+    t_us = 0
+    try:
+        for k in range(periods):
+            if k % 50 == 0:   # a real step now and then (wind, warm start)
+                for s in servers:
+                    s.plant.x = x0.copy()
+                    s.plant.advance(u, 4)
+            else:
+                x = _random_state(rng, k, x0)
+                for s in servers:
+                    s.plant.x = x.copy()
+            t_us += 4000 * int(rng.integers(1, 4))
+            got, want = _batch_outcome(fast, t_us), _batch_outcome(ref, t_us)
+            assert got == want, k
+            for a, b in zip(fast.sensors.noise_state, ref.sensors.noise_state, strict=True):
+                assert np.array_equal(a, b, equal_nan=True), k
+            assert np.array_equal(fast.plant.model.warm, ref.plant.model.warm)
+    finally:
+        for s in servers:
+            s._sock = None
+            s.close()
+
+
+def test_the_truth_logs_row_is_each_values_repr():
+    """A row of the plant's truth log is the repr of each column's value as a float (the
+    columns of :data:`sitl.__main__.TRUTH_COLUMNS`), for any state: gimbal lock, negative
+    zeros, integer commands."""
+    plant = Plant(SystemParams())
+    server = SimpleNamespace(plant=plant, armed=False, rotor_commands=(0.0, 0.0, 0.0, 0.0))
+    stream = io.StringIO()
+    log = TruthLog(stream, 1)
+    rng = np.random.default_rng(9)
+    rows = []
+    for k in range(500):
+        x = plant.x.copy()
+        x[:6] = rng.normal(0.0, 10.0, 6)
+        q = rng.normal(size=4)
+        x[6:10] = (q / np.linalg.norm(q) if k % 5 else
+                   fr.euler_to_quat(0.0, math.copysign(math.pi / 2, k % 2 - 0.5), 0.3))
+        x[17:19] = rng.uniform(1.0, 50.0), -0.0 if k % 3 == 0 else rng.normal()
+        plant.x, plant.t_s = x, k * 0.004
+        server.armed = bool(k % 2)
+        server.rotor_commands = ((1, 0, 1, 0) if k % 7 == 0
+                                 else tuple(rng.uniform(0, 1, 4).tolist()))
+        log.record(server)  # type: ignore[arg-type]
+        row = (plant.t_s, *x[0:3].tolist(), *x[3:6].tolist(), *fr.quat_to_euler(
+            x[6:10].tolist()), plant.tether_length_m, plant.drum_rate_rad_s,
+            int(server.armed), *server.rotor_commands)
+        rows.append(",".join(map(repr, map(float, row))))
+    lines = stream.getvalue().splitlines()
+    assert lines == [",".join(TRUTH_COLUMNS), *rows]
+
+
+def test_the_plants_answer_decoding_is_the_links():
+    """The plant's inline decoding of an answer parsed by
+    :meth:`tuavdefs.simlink.FrameParser.feed_link` is
+    :func:`tuavdefs.simlink.answer_from_wire`, whatever the commands."""
+    rng = random.Random(15)
+    enc = sl.Encoder(sl.COMPANION_SYSID, sl.COMPANION_COMPID)
+    odd = (math.nan, -math.inf, math.inf, -0.0, 0.0, 1.0, -1e-9, 1.0000001, 3.0)
+    for k in range(3000):
+        cmds = tuple(rng.choice(odd) if rng.random() < 0.2 else rng.uniform(-0.1, 1.1)
+                     for _ in range(4))
+        frame = enc.pack_values(sl.MSG_HIL_ACTUATOR_CONTROLS, sl.actuator_controls_values(
+            rng.randint(0, 2**63), (0.5,) * 4, k % 2 == 0, k % 3 == 0))
+        ((_, values),) = sl.FrameParser().feed_link(frame)
+        values = (*values[:2], *struct.unpack("<4f", struct.pack("<4f", *cmds)), *values[6:])
+        got, want = _answer_from_link(values), sl.answer_from_wire(values)
+        assert repr(got) == repr(want) and got[0] == values[0]

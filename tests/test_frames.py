@@ -1,6 +1,8 @@
 """Frame conversions: round trips, and known states mapped to what MAVLink expects."""
 
 import math
+import random
+import struct
 
 import numpy as np
 import pytest
@@ -132,3 +134,36 @@ def test_global_mapping_scale():
     lat, lon, _ = fr.local_enu_to_global((111320.0, 110574.0, 0.0), (0.0, 0.0, 0.0))
     assert math.isclose(lat, 1.0, abs_tol=2e-3)
     assert math.isclose(lon, 1.0, abs_tol=2e-3)
+
+
+def _quat_cases(n: int):
+    """Random unit-range quaternions, half of them with components among the values that
+    make products zero or exact (signed zeros, +-1, +-sqrt(1/2), subnormals)."""
+    rnd = random.Random(20261122)
+    special = [0.0, -0.0, 1.0, -1.0, 0.5, -0.5, math.sqrt(0.5), -math.sqrt(0.5), 1e-300,
+               -5e-324, 3.0, math.nan, math.inf]
+    for i in range(n):
+        yield tuple(rnd.choice(special) if i % 2 and rnd.random() < 0.5
+                    else rnd.uniform(-1.0, 1.0) for _ in range(4))
+
+
+def _outcome(fn, q):
+    try:
+        return struct.pack("<4d", *fn(q))      # bit for bit, the zeros' signs included
+    except ValueError as e:
+        return str(e)
+
+
+def test_the_written_out_attitude_conversion_is_the_products_bit_for_bit():
+    for q in _quat_cases(50_000):
+        assert (_outcome(fr.quat_ned_frd_to_enu_flu, q)
+                == _outcome(fr._quat_ned_frd_to_enu_flu_products, q)), q
+
+
+def test_the_yaw_alone_is_the_euler_yaw():
+    cases = [fr.euler_to_quat(r, p, y) for r, p, y in
+             np.random.default_rng(3).uniform(-3.2, 3.2, (2000, 3))]
+    cases += [fr.euler_to_quat(0.3, s * math.pi / 2, 1.0) for s in (-1, 1)]   # gimbal lock
+    cases += [(1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), (math.nan, 0.0, 0.0, 0.0)]
+    for q in cases:
+        assert struct.pack("<d", fr.quat_to_yaw(q)) == struct.pack("<d", fr.quat_to_euler(q)[2])

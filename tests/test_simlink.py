@@ -541,3 +541,51 @@ def test_late_answers_miss_deadlines_only_in_real_time(real_time):
     else:
         assert summary.missed_deadlines == 0 and summary.late_answers == 0
         assert summary.steps == 15
+
+
+def test_the_written_out_decoders_are_the_frame_conversions():
+    """truth_from_wire and imu_from_wire spell out the frames module's conversions; the
+    same floats come out as through them, payloads short of their trailing zeros too."""
+    rng = np.random.default_rng(9)
+    hm = sl.home_map(HOME)
+    enc = sl.Encoder(sl.PLANT_SYSID, sl.PLANT_COMPID)
+    for k in range(400):
+        pos, vel, rates, force, mag = (tuple(rng.uniform(-30.0, 30.0, 3)) for _ in range(5))
+        if k % 4 == 0:
+            force = (force[0], force[1], 0.0)   # zacc 0: the payload loses its last bytes
+        q = fr.euler_to_quat(*rng.uniform(-3.0, 3.0, 3))
+        data = (enc.pack_values(sl.MSG_HIL_STATE_QUATERNION, sl.hil_state_quaternion_values(
+                    4000 * k, pos, vel, q, rates, force, hm, 3.0, 2.5))
+                + enc.pack_values(sl.MSG_HIL_SENSOR, sl.hil_sensor_values(
+                    4000 * k, force, rates, mag, 990.0, 210.0, 12.0)))
+        items = sl.FrameParser().feed_link(data)
+        assert items == [sl.link_values(m) for m in sl.FrameParser().feed(data)]
+        (_, v), (_, w) = items
+        assert sl.truth_from_wire(v, hm) == (
+            hm.local(v[8], v[9], v[10]), fr.ned_to_enu((v[11] * 0.01, v[12] * 0.01,
+                                                        v[13] * 0.01)),
+            fr._quat_ned_frd_to_enu_flu_products(v[1:5]), fr.frd_to_flu(v[5:8]),
+            fr.frd_to_flu(tuple(x * sl.MILLI_G_M_S2 for x in v[16:19])),
+            v[15] * 0.01, v[14] * 0.01)
+        assert sl.imu_from_wire(w) == (fr.frd_to_flu(w[1:4]), fr.frd_to_flu(w[4:7]),
+                                       fr.frd_to_flu(w[7:10]), w[10], w[12], w[13])
+
+
+def test_the_actuator_frame_is_the_general_packing():
+    """Encoder.actuator_controls sends the bytes pack_values sends for
+    actuator_controls_values, commands to clean included, and counts alike."""
+    rnd = np.random.default_rng(4)
+    fast, ref = sl.Encoder(1, 1), sl.Encoder(1, 1)
+    odd = [0.0, -0.0, 1.0, 1, 0, 1.5, -0.25, math.nan, math.inf, -math.inf, np.float32(0.3)]
+    for k in range(2000):
+        cmds = tuple(odd[int(rnd.integers(len(odd)))] if rnd.random() < 0.3
+                     else float(rnd.random()) for _ in range(4))
+        armed, lockstep = bool(k % 3), bool(k % 5)
+        t_us = int(rnd.integers(0, 2**50))
+        assert fast.actuator_controls(t_us, cmds, armed, lockstep) == ref.pack_values(
+            sl.MSG_HIL_ACTUATOR_CONTROLS, sl.actuator_controls_values(t_us, cmds, armed,
+                                                                      lockstep))
+    assert (fast.mav.seq, fast.mav.total_packets_sent, fast.mav.total_bytes_sent) == (
+        ref.mav.seq, ref.mav.total_packets_sent, ref.mav.total_bytes_sent)
+    with pytest.raises(ValueError):
+        fast.actuator_controls(0, (0.5,) * 3, True)

@@ -433,6 +433,40 @@ def test_unhealthy_on_axis_errors_and_a_bad_load_cell():
     assert not w.status_flags() & wm.FLAG_HEALTHY
 
 
+def test_polling_only_from_next_poll_s_on_changes_nothing():
+    """The process calls poll only once ``next_poll_s`` has come: the same outputs as
+    polling at every turn of its loop, through frames, their loss and their return."""
+    every, gated = ready(20.0), ready(20.0)
+    k = 2.0 * math.pi * R_W
+    for step in range(1, 800):
+        wall = 0.0005 * step
+        frame = step % 20 == 0 and not 300 <= step < 600        # 10 ms apart, then lost
+        outs = []
+        for w, gate in ((every, False), (gated, True)):
+            out = WinchOutput()
+            if frame:
+                out.extend(w.on_frame(wall, ENC_ID, cp.encode_encoder_estimates(20.0 / k, 0.0)))
+            if not gate or wall >= w.next_poll_s():
+                out.extend(w.poll(wall))
+            outs.append(out)
+        assert repr(outs[0]) == repr(outs[1])                  # (NaN tensions)
+    assert every.lost is False and every.encoder_frames == gated.encoder_frames
+
+
+def test_handle_frame_is_on_frame_with_none_for_nothing_to_send():
+    a, b = ready(20.0), ready(20.0)
+    frames = [(ENC_ID, cp.encode_encoder_estimates(3.0, 0.1), False), (ENC_ID, b"\x00", False),
+              (ENC_ID, bytes(8), True), (0x7FF, b"\xff" * 8, False),
+              (cp.frame_id(0, cp.Cmd.HEARTBEAT), cp.encode_heartbeat(0x40, 1), False),
+              (cp.frame_id(cp.WINCH_SENSOR_NODE_ID_DEFAULT, cp.SensorCmd.WINCH_TENSION),
+               cp.encode_winch_tension(5.0, False, 7), False)]
+    for fid, data, remote in frames * 6:
+        out = b.handle_frame(1.0, fid, data, remote)
+        expected = WinchOutput() if out is None else out
+        assert repr(a.on_frame(1.0, fid, data, remote)) == repr(expected)   # (NaN tensions)
+    assert a.bad_frames == b.bad_frames == 6 and a.encoder_frames == b.encoder_frames
+
+
 def test_garbage_never_crashes():
     w = ready(20.0)
     for fid, data in [(ENC_ID, b"\x00"), (ENC_ID, cp.encode_encoder_estimates(NAN, 0.0)),
@@ -646,11 +680,6 @@ class _FakeSocket:
         pass
 
 
-class _Ready:
-    def poll(self, timeout: int) -> list:
-        return [(0, 1)]
-
-
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.integers(0, 5), min_size=1, max_size=14), st.data())
 def test_the_client_reads_the_same_with_and_without_the_fast_path(order, data):
@@ -665,7 +694,7 @@ def test_the_client_reads_the_same_with_and_without_the_fast_path(order, data):
     clients = []
     for fast in (True, False):
         c = WinchLinkClient("127.0.0.1:9")
-        c.sock, c._readable, c._last_heartbeat = _FakeSocket(list(chunks)), _Ready(), 1e18
+        c.sock, c._last_heartbeat = _FakeSocket(list(chunks)), 1e18
         seen = []
         for _ in chunks:
             if fast:

@@ -115,6 +115,16 @@ def euler_to_quat(roll: float, pitch: float, yaw: float) -> Quat:
                            cr * cp * sy - sr * sp * cy))
 
 
+def quat_to_yaw(q: Quat) -> float:
+    """The yaw [rad] of unit quaternion q: ``quat_to_euler(q)[2]`` without roll and
+    pitch."""
+    w, x, y, z = q
+    sinp = 2.0 * (w * y - z * x)
+    if sinp >= 1.0 - 1e-12 or sinp <= -1.0 + 1e-12:
+        return quat_to_euler(q)[2]      # gimbal lock
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
 def quat_to_euler(q: Quat) -> Vec3:
     """Z-Y-X Euler angles (roll, pitch, yaw) [rad] of unit quaternion q.
 
@@ -149,10 +159,34 @@ def quat_enu_flu_to_ned_frd(q: Quat) -> Quat:
     return quat_normalize(quat_multiply(quat_multiply(_Q_NED_FROM_ENU, q), _Q_FLU_FROM_FRD))
 
 
-def quat_ned_frd_to_enu_flu(q: Quat) -> Quat:
-    """Attitude from MAVLink's (body FRD -> NED) to (body FLU -> inertial ENU)."""
+def _quat_ned_frd_to_enu_flu_products(q: Quat) -> Quat:
+    """Attitude from MAVLink's (body FRD -> NED) to (body FLU -> inertial ENU), through
+    the generic products: the definition :func:`quat_ned_frd_to_enu_flu` follows."""
     return quat_normalize(quat_multiply(quat_multiply(quat_conjugate(_Q_NED_FROM_ENU), q),
                                         quat_conjugate(_Q_FLU_FROM_FRD)))
+
+
+def quat_ned_frd_to_enu_flu(q: Quat) -> Quat:
+    """Attitude from MAVLink's (body FRD -> NED) to (body FLU -> inertial ENU).
+
+    The products of :func:`_quat_ned_frd_to_enu_flu_products` written out: their terms
+    with a factor 0 add an exact (signed) zero, those with a factor +-1 are exact, so
+    wherever the product's components are all non-zero and finite the few remaining
+    terms give the same floats, bit for bit (``tests/test_frames.py``); elsewhere (a
+    zero's sign would depend on the dropped terms) the generic products decide.
+    """
+    w, x, y, z = q
+    s = _SQRT_HALF
+    sw, sx, sy, sz = s * w, s * x, s * y, s * z
+    rw = -sw - sz
+    rx = -(sx + sy)
+    ry = -(sx - sy)
+    rz = sz - sw
+    n = math.sqrt(rw * rw + rx * rx + ry * ry + rz * rz)
+    if not (rw and rx and ry and rz and 0.0 < n < math.inf):
+        return _quat_ned_frd_to_enu_flu_products(q)
+    k = 1.0 / n if rw >= 0.0 else -1.0 / n
+    return (rw * k, rx * k, ry * k, rz * k)
 
 
 def yaw_enu_to_ned(yaw_rad: float) -> float:

@@ -30,7 +30,8 @@ commands over ``[t, t + T)`` (:func:`physics_steps_per_period` physics steps) an
 batch for ``t + T``.
 
 Inside the project positions are z-up ENU and the body frame FLU; every conversion to and
-from MAVLink's NED/FRD here goes through :mod:`tuavdefs.frames`.
+from MAVLink's NED/FRD here goes through :mod:`tuavdefs.frames` (the per-period decoders
+write its axis swaps and sign changes out, ``tests/test_simlink.py`` checks them).
 
 :class:`FrameParser` splits a TCP byte stream into MAVLink frames, dropping (and counting)
 malformed, truncated and corrupted frames and resynchronising on the next valid one.
@@ -284,13 +285,13 @@ def truth_from_wire(values: Sequence[Any], home: HomeMap
     """(position ENU [m], velocity ENU [m/s], quaternion body FLU -> ENU, rates FLU
     [rad/s], specific force FLU [m/s^2], true airspeed [m/s], indicated airspeed [m/s]) of
     HIL_STATE_QUATERNION's field values in wire order."""
-    v = values
-    pos = home.local(v[8], v[9], v[10])
-    vel = ned_to_enu((v[11] * 0.01, v[12] * 0.01, v[13] * 0.01))
-    quat = quat_ned_frd_to_enu_flu((float(v[1]), float(v[2]), float(v[3]), float(v[4])))
-    rates = frd_to_flu((float(v[5]), float(v[6]), float(v[7])))
-    force = frd_to_flu((v[16] * MILLI_G_M_S2, v[17] * MILLI_G_M_S2, v[18] * MILLI_G_M_S2))
-    return pos, vel, quat, rates, force, v[15] * 0.01, v[14] * 0.01
+    # (ned_to_enu and frd_to_flu written out: swaps and sign changes, exact)
+    _, qw, qx, qy, qz, wx, wy, wz, lat, lon, alt, vn, ve, vd, ias, tas, fx, fy, fz = values
+    return (home.local(lat, lon, alt), (ve * 0.01, vn * 0.01, -(vd * 0.01)),
+            quat_ned_frd_to_enu_flu((float(qw), float(qx), float(qy), float(qz))),
+            (float(wx), -float(wy), -float(wz)),
+            (fx * MILLI_G_M_S2, -(fy * MILLI_G_M_S2), -(fz * MILLI_G_M_S2)),
+            tas * 0.01, ias * 0.01)
 
 
 def state_from_hil_state_quaternion(msg_fields: Any, home: tuple[float, float, float]
@@ -391,9 +392,10 @@ def imu_from_wire(values: Sequence[Any]) -> tuple[Vec3, Vec3, Vec3, float, float
     """(specific force FLU [m/s^2], rates FLU [rad/s], field FLU [gauss], static pressure
     [hPa], pressure altitude [m], temperature [degC]) of HIL_SENSOR's field values in wire
     order."""
-    v = [float(x) for x in values[1:14]]
-    return (frd_to_flu((v[0], v[1], v[2])), frd_to_flu((v[3], v[4], v[5])),
-            frd_to_flu((v[6], v[7], v[8])), v[9], v[11], v[12])
+    # (frd_to_flu written out: sign changes, exact)
+    _, ax, ay, az, gx, gy, gz, mx, my, mz, p, _, alt, temp = values[:14]
+    return ((float(ax), -float(ay), -float(az)), (float(gx), -float(gy), -float(gz)),
+            (float(mx), -float(my), -float(mz)), float(p), float(alt), float(temp))
 
 
 def imu_from_hil_sensor(msg_fields: Any) -> tuple[Vec3, Vec3, Vec3, float, float, float]:
@@ -488,10 +490,14 @@ class _Sink:
         return out
 
 
+#: pymavlink's C helper for the checksum (``mcrf4xx(data, 0xFFFF)``), None if not installed
+_MCRF4XX: Callable[[bytes, int], int] | None = getattr(mavlink2, "mcrf4xx", None)
+
+
 def _crc16(data: bytes) -> int:
     """MAVLink's checksum (CRC-16/MCRF4XX) of ``data``, as pymavlink computes it."""
-    if mavlink2.mcrf4xx is not None:
-        return int(mavlink2.mcrf4xx(data, 0xFFFF))
+    if _MCRF4XX is not None:
+        return int(_MCRF4XX(data, 0xFFFF))
     return int(mavlink2.x25crc(data).crc)
 
 
@@ -608,6 +614,12 @@ _CODECS = {c.msg_id: c for c in map(_Codec, (
     mavlink2.MAVLink_hil_state_quaternion_message,
     mavlink2.MAVLink_hil_actuator_controls_message))}
 
+#: A whole HIL_ACTUATOR_CONTROLS frame but its checksum: header, then the payload.
+_ACTUATOR_FRAME = struct.Struct(
+    _HEADER_V2_STRUCT.format + _CODECS[MSG_HIL_ACTUATOR_CONTROLS].unpacker.format[1:])
+_ACTUATOR_PAYLOAD = _CODECS[MSG_HIL_ACTUATOR_CONTROLS].unpacker.size
+_ACTUATOR_CRC_EXTRA = _CODECS[MSG_HIL_ACTUATOR_CONTROLS].crc_extra
+
 
 def link_values(msg: mavlink2.MAVLink_message) -> tuple[int, tuple] | None:
     """(message id, values in wire order) of one of the link's messages (None for any
@@ -639,6 +651,32 @@ class Encoder:
             cls = mavlink2.mavlink_map[msg_id]
             return self.pack(cls(**codec.fields(values)))
         return codec.pack_values(self.mav, values)
+
+    def actuator_controls(self, time_us: int, rotor_commands: Sequence[float], armed: bool,
+                          lockstep: bool = True) -> bytes:
+        """The HIL_ACTUATOR_CONTROLS frame answering ``time_us`` [us] with four rotor
+        commands in [0, 1] and the armed flag: the bytes of :meth:`pack_values` of
+        :func:`actuator_controls_values`, packed in one go (its payload never ends in a
+        zero: ``mode`` is never 0)."""
+        mav = self.mav
+        if len(rotor_commands) != N_ROTORS or mav.signing.sign_outgoing:
+            return self.pack_values(MSG_HIL_ACTUATOR_CONTROLS, actuator_controls_values(
+                time_us, rotor_commands, armed, lockstep))
+        c0, c1, c2, c3 = rotor_commands
+        seq = mav.seq
+        frame = _ACTUATOR_FRAME.pack(
+            _MAGIC_V2, _ACTUATOR_PAYLOAD, 0, 0, seq, mav.srcSystem, mav.srcComponent,
+            MSG_HIL_ACTUATOR_CONTROLS, 0, int(time_us), FLAG_LOCKSTEP if lockstep else 0,
+            c0 if 0.0 <= c0 <= 1.0 else _clean_command(c0),
+            c1 if 0.0 <= c1 <= 1.0 else _clean_command(c1),
+            c2 if 0.0 <= c2 <= 1.0 else _clean_command(c2),
+            c3 if 0.0 <= c3 <= 1.0 else _clean_command(c3),
+            *_UNUSED_CONTROLS, MODE_ARMED if armed else MODE_DISARMED)
+        frame += _CRC_STRUCT.pack(_crc16(frame[1:] + _ACTUATOR_CRC_EXTRA))
+        mav.seq = (seq + 1) % 256
+        mav.total_packets_sent += 1
+        mav.total_bytes_sent += len(frame)
+        return frame
 
     def hil_sensor(self, fields: Mapping[str, Any]) -> bytes:
         """A HIL_SENSOR frame from :func:`hil_sensor_fields`' output."""
@@ -727,16 +765,24 @@ class FrameParser:
             return None
         out = []
         i, n = 0, len(data)
+        mcrf = _MCRF4XX
         while i < n:
             if data[i] != _MAGIC_V2 or n - i < _HEADER_V2 + 2 or data[i + 2]:
                 return None   # not a frame start, short, signed or impossible flags
-            end = i + _HEADER_V2 + data[i + 1] + 2
+            size = data[i + 1]
+            end = i + _HEADER_V2 + size + 2
             codec = _CODECS.get(data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16))
-            if codec is None or end > n or (
-                    _crc16(data[i + 1:end - 2] + codec.crc_extra)
+            if codec is None or end > n:
+                return None
+            body = data[i + 1:end - 2] + codec.crc_extra
+            if ((mcrf(body, 0xFFFF) if mcrf is not None else _crc16(body))
                     != data[end - 2] | (data[end - 1] << 8)):
                 return None
-            out.append((codec.msg_id, codec.unpack(data[i + _HEADER_V2:end - 2])))
+            # a whole payload straight from the stream; one short of its trailing zeros
+            # through unpack
+            out.append((codec.msg_id, codec.unpacker.unpack_from(data, i + _HEADER_V2)
+                        if size == codec.unpacker.size
+                        else codec.unpack(data[i + _HEADER_V2:end - 2])))
             i = end
         if out:
             self.frames += len(out)

@@ -32,6 +32,19 @@ def main() -> int:
                    for m in got_pc if m],
             "stamp_ok": all(f and abs(f.timestamp - time.time()) < 5.0 for f in got_b),
         }
+        # a burst of frames sent back to back, taken in one call as they arrived
+        out["empty_ready"] = b.recv_ready()
+        out["burst_sent"] = a.send_frames([(0x31, b"\x01", False), (0x32, bytes(8), True),
+                                           (0x33, b"", False)])
+        time.sleep(0.05)
+        out["burst"] = [[f.arbitration_id, f.data.hex(), f.is_remote, f.is_extended]
+                        for f in b.recv_ready()]
+        got_pc = []
+        while (m := pc.recv(0.2)) is not None:
+            got_pc.append(m)
+        out["burst_pc"] = [[m.arbitration_id, bytes(m.data).hex(), m.is_remote_frame, m.dlc]
+                           for m in got_pc if 0x31 <= m.arbitration_id <= 0x33]
+        out["fileno_ok"] = a.fileno() == a._mc.rx.fileno() >= 0
     finally:
         pc.shutdown()
         a.close()

@@ -1,0 +1,393 @@
+"""The plant's sensor batch (HIL_GPS when due, HIL_STATE_QUATERNION, HIL_SENSOR) as MAVLink
+bytes in one compiled call.
+
+:meth:`sitl.simlink_server.SimLinkServer` builds a control period's batch from the plant's
+state through :mod:`sitl.sensors` (the noisy channels) and :mod:`tuavdefs.simlink` (the
+field conversions and :class:`tuavdefs.simlink.Encoder`): a few hundred interpreted
+operations. :func:`batch_kernel` does the same arithmetic, in the same order, on the same
+random draws (the channels' :class:`sitl.sensors.NoiseState`), and writes the frames, so
+that the bytes, the channels' state afterwards and the encoder's sequence are the same to
+the bit (``tests/test_fast_paths.py`` checks it over thousands of periods).
+
+The kernel handles the usual case only: a finite state, air the ISA can describe, integer
+fields that need no error and floats that fit a float32. Anything else leaves everything
+untouched and :meth:`BatchPacker.pack` returns None, for the interpreted path to do
+whatever it does (raise, most likely). Without numba (``TUAV_NO_JIT=1``) there is no
+packer: the interpreted path is the only one.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+import re
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from sitl._jit import JIT, njit
+from sitl.plant import Plant, _quat_rotate_kernel, _specific_force_kernel
+from sitl.pymath import hypot2
+from sitl.sensors import (
+    _BLOCK,
+    _ISA_EXP,
+    ISA_LAPSE_K_M,
+    ISA_P0_HPA,
+    ISA_R_J_KG_K,
+    ISA_RHO0_KG_M3,
+    ISA_T0_K,
+    SensorSuite,
+)
+from tuavdefs import simlink as sl
+from tuavdefs.frames import _Q_FLU_FROM_FRD, _Q_NED_FROM_ENU, quat_multiply
+from tuavdefs.jit import entry_point
+
+# (the link's constants as globals of this module, so that the compiled code's cache key
+# holds their values: tuavdefs.jit.dependency_digest)
+_FIX_3D = sl.GPS_FIX_3D
+_MILLI_G_M_S2 = sl.MILLI_G_M_S2
+_FIELDS_FILLED = sl.SENSOR_FIELDS_FILLED
+#: The satellites HIL_GPS reports (the plant's: hil_gps_values' default).
+_SATELLITES = inspect.signature(sl.hil_gps_values).parameters["satellites_visible"].default
+_round_clamp = njit(sl._round_clamp)
+_wrap_lon = njit(sl._wrap_lon)
+_quat_multiply = njit(quat_multiply)
+
+#: The messages' rows in the kernel's arrays, in the batch's order.
+_GPS, _STATE, _SENSOR = 0, 1, 2
+_MESSAGES = (mavlink2.MAVLink_hil_gps_message, mavlink2.MAVLink_hil_state_quaternion_message,
+             mavlink2.MAVLink_hil_sensor_message)
+#: Kinds of a payload field (a layout code is kind * 16 + size in bytes).
+_FLOAT, _UNSIGNED, _SIGNED = 0, 1, 2
+_STRUCT_CODES = {"f": (_FLOAT, 4), "Q": (_UNSIGNED, 8), "I": (_UNSIGNED, 4),
+                 "H": (_UNSIGNED, 2), "B": (_UNSIGNED, 1), "i": (_SIGNED, 4),
+                 "h": (_SIGNED, 2), "b": (_SIGNED, 1)}
+_MAX_FIELDS = 20
+#: The channels' slots in :class:`sitl.sensors.NoiseState` (:attr:`SensorSuite.channels`).
+_ACCEL, _GYRO, _MAG, _BARO, _GPS_H, _GPS_V, _GPS_VEL = range(7)
+#: The constants the kernel is handed (indices into its ``consts``).
+(_K_LAT0, _K_LON0, _K_ALT0, _K_RN, _K_RECOS, _K_FIELD_E, _K_FIELD_N, _K_FIELD_U, _K_G,
+ _K_TWO, _K_EPH, _K_EPV, _N_CONSTS) = range(13)
+#: Magnitude below which a float rounds to an int64 safely.
+_ROUND_MAX = 2.0 ** 62
+#: A batch's bytes at most (three frames of at most 10 + 255 + 2).
+_OUT_BYTES = 3 * 267
+
+
+def _layout(cls: type) -> list[int]:
+    """[number of fields, layout code per field] of a message's ``struct`` format."""
+    codes = []
+    for count, char in re.findall(r"(\d*)([a-zA-Z])", cls.unpacker.format):
+        kind, size = _STRUCT_CODES[char]
+        codes += [kind * 16 + size] * int(count or 1)
+    return [len(codes), *codes]
+
+
+@njit
+def _read(c: int, dim: int, t0: float, t1: float, t2: float, dt: float, draws: np.ndarray,
+          bias: np.ndarray, cursor: np.ndarray, params: np.ndarray, new_bias: np.ndarray,
+          out: np.ndarray) -> None:
+    """:meth:`sitl.sensors.NoisyChannel.read` of channel ``c`` (``dim`` axes of the truth
+    ``t0, t1, t2``) into ``out``, its bias after the read into ``new_bias[c]``; the state
+    itself is left to :func:`_commit`."""
+    if params[c, 0] == 0.0:   # disabled: the truth
+        out[0], out[1], out[2] = t0, t1, t2
+        return
+    i = cursor[c]
+    sigma, walk = params[c, 1], params[c, 2]
+    k = walk * math.sqrt(dt) if walk > 0.0 else 0.0
+    for a in range(dim):
+        b = bias[c, a]
+        if walk > 0.0:
+            b = b + k * draws[c, i, 0, a]
+        new_bias[c, a] = b
+        t = t0 if a == 0 else (t1 if a == 1 else t2)
+        out[a] = t + b + sigma * draws[c, i, 1, a]
+
+
+@njit
+def _global(consts: np.ndarray, e: float, n: float, u: float, iv: np.ndarray,
+            at: int) -> bool:
+    """:meth:`tuavdefs.simlink.HomeMap.global_fields` of (east, north, up) [m] into
+    ``iv[at:at + 3]``; False if a value is not a finite number an int64 holds."""
+    lat = consts[_K_LAT0] + math.degrees(n / consts[_K_RN])
+    lon = _wrap_lon(consts[_K_LON0] + math.degrees(e / consts[_K_RECOS]))
+    alt = consts[_K_ALT0] + u
+    ok = True
+    for j, v in enumerate((lat * 1e7, lon * 1e7, alt * 1000.0)):
+        if not abs(v) < _ROUND_MAX:
+            ok = False
+        else:
+            iv[at + j] = round(v)
+    return ok
+
+
+@njit
+def _fits(layout: np.ndarray, fv: np.ndarray, iv: np.ndarray, f32: np.ndarray) -> bool:
+    """Whether a message's values pack as the interpreter packs them, without error: finite
+    floats that fit a float32, integers in their field's range."""
+    for k in range(layout[0]):
+        code = layout[1 + k]
+        kind, size = code >> 4, code & 15
+        if kind == _FLOAT:
+            f32[0] = fv[k]
+            if not (math.isfinite(fv[k]) and math.isfinite(f32[0])):
+                return False
+        elif kind == _UNSIGNED:
+            if iv[k] < 0 or (size < 8 and iv[k] >= 1 << (8 * size)):
+                return False
+        elif not -(1 << (8 * size - 1)) <= iv[k] < 1 << (8 * size - 1):
+            return False
+    return True
+
+
+@njit
+def _crc(out: np.ndarray, start: int, end: int, extra: int) -> int:
+    """MAVLink's CRC-16/MCRF4XX of ``out[start:end]`` and the CRC_EXTRA byte ``extra``."""
+    crc = 0xFFFF
+    for i in range(start, end + 1):
+        b = int(out[i]) if i < end else extra
+        tmp = (b ^ (crc & 0xFF)) & 0xFF
+        tmp = (tmp ^ (tmp << 4)) & 0xFF
+        crc = ((crc >> 8) ^ (tmp << 8) ^ (tmp << 3) ^ (tmp >> 4)) & 0xFFFF
+    return crc
+
+
+@njit
+def _frame(out: np.ndarray, pos: int, seq: int, sysid: int, compid: int, msg: np.ndarray,
+           layout: np.ndarray, fv: np.ndarray, iv: np.ndarray, f32: np.ndarray,
+           u32: np.ndarray) -> int:
+    """One unsigned MAVLink 2 frame at ``out[pos:]`` (:meth:`tuavdefs.simlink._Codec.
+    pack_values`: the payload's trailing zeros dropped, one kept); returns its end."""
+    start = pos + 10
+    p = start
+    for k in range(layout[0]):
+        code = layout[1 + k]
+        if code >> 4 == _FLOAT:
+            f32[0] = fv[k]
+            v = np.int64(u32[0])
+        else:
+            v = iv[k]
+        for b in range(code & 15):
+            out[p] = (v >> (8 * b)) & 0xFF
+            p += 1
+    while p > start and out[p - 1] == 0:
+        p -= 1
+    if p == start:
+        p += 1    # (out[start] is 0)
+    msg_id = msg[0]
+    header = (0xFD, p - start, 0, 0, seq, sysid, compid, msg_id & 0xFF, (msg_id >> 8) & 0xFF,
+              msg_id >> 16)
+    for j, h in enumerate(header):
+        out[pos + j] = h
+    crc = _crc(out, pos + 1, p, msg[1])
+    out[p] = crc & 0xFF
+    out[p + 1] = crc >> 8
+    return p + 2
+
+
+@njit
+def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: float,
+                 seq: int, sysid: int, compid: int, x: np.ndarray, p: np.ndarray,
+                 wind_e: float, wind_n: float, wind_u: float, warm: np.ndarray,
+                 consts: np.ndarray, draws: np.ndarray, bias: np.ndarray,
+                 cursor: np.ndarray, params: np.ndarray, layouts: np.ndarray,
+                 msgs: np.ndarray, fv: np.ndarray, iv: np.ndarray, new_bias: np.ndarray,
+                 f32: np.ndarray, u32: np.ndarray) -> tuple[int, int]:
+    """The batch for the plant's state ``x`` at ``t_us`` [us] into ``out``, as
+    :meth:`sitl.simlink_server.SimLinkServer` builds it interpreted: HIL_GPS if
+    ``gps_due`` (its channels read ``gps_dt`` [s] after the last fix), then
+    HIL_STATE_QUATERNION and HIL_SENSOR (its channels read ``dt`` [s] after the last),
+    sequence numbers from ``seq``; the noise channels' state (``draws``, ``bias``,
+    ``cursor``, ``params``: :class:`sitl.sensors.NoiseState`) advanced. Returns (bytes
+    written, a bit for each channel whose block it used up, to be refilled now:
+    :meth:`sitl.sensors.NoisyChannel.refill`), or (0, 0) when this is not the usual case,
+    nothing changed. ``layouts``, ``msgs``:
+    :class:`BatchPacker`'s description of the messages; ``fv``, ``iv``, ``new_bias``,
+    ``f32``/``u32`` (one float32 and its bits): scratch."""
+    reads = 0b0001111 | (0b1110000 if gps_due else 0)
+    for j in range(19):
+        if not math.isfinite(x[j]):
+            return 0, 0
+    px, py, pz, vx, vy, vz = x[0], x[1], x[2], x[3], x[4], x[5]
+    qw, qx, qy, qz, wx, wy, wz = x[6], x[7], x[8], x[9], x[10], x[11], x[12]
+    ok = True
+    r = np.empty(3)
+    if gps_due:   # HIL_GPS
+        _read(_GPS_H, 2, px, py, 0.0, gps_dt, draws, bias, cursor, params, new_bias, r)
+        ge, gn = r[0], r[1]
+        _read(_GPS_V, 1, pz, 0.0, 0.0, gps_dt, draws, bias, cursor, params, new_bias, r)
+        gu = r[0]
+        _read(_GPS_VEL, 3, vx, vy, vz, gps_dt, draws, bias, cursor, params, new_bias, r)
+        vn, ve, vd = r[1], r[0], -r[2]
+        g_f, g_i = fv[_GPS], iv[_GPS]
+        g_i[0] = t_us
+        ok = _global(consts, ge, gn, gu, g_i, 1) and ok
+        vel_cm = _round_clamp(hypot2(vn, ve) * 100.0, 0, 65534)
+        g_i[4] = _round_clamp(consts[_K_EPH] * 100.0, 0, 65534)
+        g_i[5] = _round_clamp(consts[_K_EPV] * 100.0, 0, 65534)
+        g_i[6] = vel_cm
+        g_i[7] = _round_clamp(vn * 100.0, -32767, 32767)
+        g_i[8] = _round_clamp(ve * 100.0, -32767, 32767)
+        g_i[9] = _round_clamp(vd * 100.0, -32767, 32767)
+        if vel_cm == 0:
+            g_i[10] = 65535
+        else:
+            cog = math.degrees(math.atan2(ve, vn)) * 100.0
+            if not abs(cog) < _ROUND_MAX:
+                ok = False
+            else:
+                g_i[10] = round(cog) % 36000
+        g_i[11], g_i[12], g_i[13], g_i[14] = _FIX_3D, _SATELLITES, 0, 0
+        ok = ok and _fits(layouts[_GPS], g_f, g_i, f32)
+    # the truth and the air
+    fx, fy, fz = _specific_force_kernel(x, p, wind_e, wind_n, wind_u, warm, consts[_K_G])
+    temperature_k = ISA_T0_K - ISA_LAPSE_K_M * (consts[_K_ALT0] + pz)
+    if not temperature_k > 0.0:
+        return 0, 0
+    pressure_hpa = ISA_P0_HPA * (temperature_k / ISA_T0_K) ** _ISA_EXP
+    density = pressure_hpa * 100.0 / (ISA_R_J_KG_K * temperature_k)
+    # CPython's x ** 2 is the C library's pow (not always x * x): a run-time exponent
+    two = consts[_K_TWO]
+    tas = math.sqrt((vx - wind_e) ** two + (vy - wind_n) ** two + (vz - wind_u) ** two)
+    ias = tas * math.sqrt(density / ISA_RHO0_KG_M3)
+    # HIL_STATE_QUATERNION
+    s_f, s_i = fv[_STATE], iv[_STATE]
+    s_i[0] = t_us
+    a0, a1, a2, a3 = _quat_multiply(_quat_multiply(_Q_NED_FROM_ENU, (qw, qx, qy, qz)),
+                                    _Q_FLU_FROM_FRD)
+    n = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+    if n == 0.0 or not math.isfinite(n):
+        return 0, 0
+    sc = 1.0 / n if a0 >= 0.0 else -1.0 / n
+    s_f[1], s_f[2], s_f[3], s_f[4] = a0 * sc, a1 * sc, a2 * sc, a3 * sc
+    s_f[5], s_f[6], s_f[7] = wx, -wy, -wz
+    ok = _global(consts, px, py, pz, s_i, 8) and ok
+    s_i[11] = _round_clamp(vy * 100.0, -32767, 32767)
+    s_i[12] = _round_clamp(vx * 100.0, -32767, 32767)
+    s_i[13] = _round_clamp(-vz * 100.0, -32767, 32767)
+    s_i[14] = _round_clamp(ias * 100.0, 0, 65535)
+    s_i[15] = _round_clamp(tas * 100.0, 0, 65535)
+    s_i[16] = _round_clamp(fx / _MILLI_G_M_S2, -32767, 32767)
+    s_i[17] = _round_clamp(-fy / _MILLI_G_M_S2, -32767, 32767)
+    s_i[18] = _round_clamp(-fz / _MILLI_G_M_S2, -32767, 32767)
+    ok = ok and _fits(layouts[_STATE], s_f, s_i, f32)
+    # HIL_SENSOR
+    h_f, h_i = fv[_SENSOR], iv[_SENSOR]
+    h_i[0] = t_us
+    _read(_ACCEL, 3, fx, fy, fz, dt, draws, bias, cursor, params, new_bias, r)
+    h_f[1], h_f[2], h_f[3] = r[0], -r[1], -r[2]
+    _read(_GYRO, 3, wx, wy, wz, dt, draws, bias, cursor, params, new_bias, r)
+    h_f[4], h_f[5], h_f[6] = r[0], -r[1], -r[2]
+    me, mn, mu = _quat_rotate_kernel((qw, -qx, -qy, -qz), (consts[_K_FIELD_E],
+                                                             consts[_K_FIELD_N],
+                                                             consts[_K_FIELD_U]))
+    _read(_MAG, 3, me, mn, mu, dt, draws, bias, cursor, params, new_bias, r)
+    h_f[7], h_f[8], h_f[9] = r[0], -r[1], -r[2]
+    _read(_BARO, 1, pressure_hpa, 0.0, 0.0, dt, draws, bias, cursor, params, new_bias, r)
+    baro = r[0]
+    if baro < 0.0:   # (the interpreter's power of a negative number is complex)
+        return 0, 0
+    h_f[10], h_f[11] = baro, 0.0
+    h_f[12] = ISA_T0_K / ISA_LAPSE_K_M * (1.0 - (baro / ISA_P0_HPA) ** (1.0 / _ISA_EXP))
+    h_f[13] = temperature_k - 273.15
+    h_i[14], h_i[15] = _FIELDS_FILLED, 0
+    if not (ok and _fits(layouts[_SENSOR], h_f, h_i, f32)) or t_us < 0:
+        return 0, 0
+    # the usual case: commit the channels' reads, write the frames
+    used_up = 0
+    for c in range(7):
+        if (reads >> c) & 1 != 0 and params[c, 0] != 0.0:
+            for a in range(3):
+                bias[c, a] = new_bias[c, a]
+            cursor[c] += 1
+            if cursor[c] == _BLOCK:
+                used_up |= 1 << c
+    pos = 0
+    for m in range(3):
+        if m != _GPS or gps_due:
+            pos = _frame(out, pos, seq, sysid, compid, msgs[m], layouts[m], fv[m], iv[m],
+                         f32, u32)
+            seq = (seq + 1) & 0xFF
+    return pos, used_up
+
+
+class BatchPacker:
+    """The batches of :class:`sitl.simlink_server.SimLinkServer` through
+    :func:`batch_kernel`: the plant's state, the sensor channels of ``sensors`` (their
+    state advanced as reading them advances it), ``home`` (lat deg, lon deg, alt m AMSL)
+    and the frames' ids and sequence of ``encoder`` (updated as it updates them)."""
+
+    def __init__(self, plant: Plant, sensors: SensorSuite, home: tuple[float, float, float],
+                 encoder: sl.Encoder, period_us: int) -> None:
+        self.plant = plant
+        self.sensors = sensors
+        self.encoder = encoder
+        self.dt_s = period_us * 1e-6
+        hm = sl.home_map(home)
+        field = sensors.earth_field_enu_gauss
+        noise = sensors.noise
+        consts = np.zeros(_N_CONSTS)
+        consts[[_K_LAT0, _K_LON0, _K_ALT0, _K_RN, _K_RECOS]] = (
+            hm._lat0, hm._lon0, hm._alt0, hm._r_n, hm._r_e_cos)
+        consts[[_K_FIELD_E, _K_FIELD_N, _K_FIELD_U]] = field
+        consts[_K_G] = plant.model.g
+        consts[_K_TWO] = 2.0
+        consts[_K_EPH] = max(noise.gps_horizontal.sigma, 0.01)
+        consts[_K_EPV] = max(noise.gps_vertical.sigma, 0.01)
+        self._consts = consts
+        self._layouts = np.zeros((3, 1 + _MAX_FIELDS), dtype=np.int64)
+        self._msgs = np.zeros((3, 2), dtype=np.int64)
+        for m, cls in enumerate(_MESSAGES):
+            layout = _layout(cls)
+            self._layouts[m, :len(layout)] = layout
+            self._msgs[m] = (cls.id, cls.crc_extra)
+        self._fv = np.zeros((3, _MAX_FIELDS))
+        self._iv = np.zeros((3, _MAX_FIELDS), dtype=np.int64)
+        self._new_bias = np.zeros((7, 3))
+        self._f32 = np.zeros(1, dtype=np.float32)
+        self._u32 = self._f32.view(np.uint32)
+        self._out = np.zeros(_OUT_BYTES, dtype=np.uint8)
+        self._view = memoryview(self._out)   # type: ignore[arg-type]
+        st = sensors.noise_state
+        self._state = (st.draws, st.bias, st.cursor, st.params)
+        self._scratch = (self._layouts, self._msgs, self._fv, self._iv, self._new_bias,
+                         self._f32, self._u32)
+        m = plant.model
+        self._kernel = entry_point(batch_kernel, self._out, 0, False, 0.0, 0.0, 0, 0, 0,
+                                   plant.x, m.p, 0.0, 0.0, 0.0, m.warm, consts, *self._state,
+                                   *self._scratch)
+
+    def pack(self, t_us: int, gps_dt_s: float | None) -> memoryview | None:
+        """The batch for the plant's current state at ``t_us`` [us] (with HIL_GPS, its
+        channels read ``gps_dt_s`` [s] after the last fix, unless None), or None when
+        :func:`batch_kernel` leaves it to the interpreter (nothing changed then)."""
+        mav = self.encoder.mav
+        if mav.signing.sign_outgoing:
+            return None
+        p = self.plant
+        m = p.model
+        w = p.wind_m_s
+        gps = gps_dt_s is not None
+        n, used_up = self._kernel(
+            self._out, t_us, gps, gps_dt_s if gps else 0.0, self.dt_s, mav.seq,
+            mav.srcSystem, mav.srcComponent, p.x, m.p, w[0], w[1], w[2], m.warm,
+            self._consts, *self._state, *self._scratch)
+        if n == 0:
+            return None
+        if used_up:
+            for c, channel in enumerate(self.sensors.channels):
+                if (used_up >> c) & 1:
+                    channel.refill()
+        frames = 3 if gps else 2
+        mav.seq = (mav.seq + frames) % 256
+        mav.total_packets_sent += frames
+        mav.total_bytes_sent += n
+        return self._view[:n]
+
+
+def batch_packer(plant: Plant, sensors: SensorSuite, home: tuple[float, float, float],
+                 encoder: sl.Encoder, period_us: int) -> BatchPacker | None:
+    """A :class:`BatchPacker`, or None without numba (the interpreted path is then the
+    faster one)."""
+    return BatchPacker(plant, sensors, home, encoder, period_us) if JIT else None
