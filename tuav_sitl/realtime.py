@@ -12,23 +12,21 @@ everything else whatever happens.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 
 #: SCHED_FIFO priority given to the processes (1 lowest .. 99 highest; low on purpose).
 RT_PRIORITY = 10
 
 
-def set_real_time(pid: int, priority: int = RT_PRIORITY) -> str | None:
-    """Give every thread of process ``pid`` SCHED_FIFO at ``priority``; None when done,
-    else why not (the process then keeps its normal scheduling)."""
-    if not hasattr(os, "sched_setscheduler"):
-        return "SCHED_FIFO is not available on this system"
+def _each_thread(pid: int, apply: Callable[[int], object]) -> str | None:
+    """``apply(tid)`` for every thread of process ``pid``; None when done, else why not."""
     try:
         tids = [int(t) for t in os.listdir(f"/proc/{pid}/task")]
     except OSError:
         tids = [pid]
     try:
         for tid in tids:
-            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+            apply(tid)
     except PermissionError:
         return "not permitted (needs root, CAP_SYS_NICE or an rtprio limit)"
     except ProcessLookupError:
@@ -36,6 +34,15 @@ def set_real_time(pid: int, priority: int = RT_PRIORITY) -> str | None:
     except OSError as exc:
         return str(exc)
     return None
+
+
+def set_real_time(pid: int, priority: int = RT_PRIORITY) -> str | None:
+    """Give every thread of process ``pid`` SCHED_FIFO at ``priority``; None when done,
+    else why not (the process then keeps its normal scheduling)."""
+    if not hasattr(os, "sched_setscheduler"):
+        return "SCHED_FIFO is not available on this system"
+    param = os.sched_param(priority)
+    return _each_thread(pid, lambda tid: os.sched_setscheduler(tid, os.SCHED_FIFO, param))
 
 
 def cpu_split(available: set[int] | None = None) -> dict[str, set[int]] | None:
@@ -58,15 +65,4 @@ def set_affinity(pid: int, cpus: set[int]) -> str | None:
     """Restrict every thread of process ``pid`` to ``cpus``; None when done, else why not."""
     if not hasattr(os, "sched_setaffinity"):
         return "CPU affinity is not available on this system"
-    try:
-        tids = [int(t) for t in os.listdir(f"/proc/{pid}/task")]
-    except OSError:
-        tids = [pid]
-    try:
-        for tid in tids:
-            os.sched_setaffinity(tid, cpus)
-    except ProcessLookupError:
-        return "the process has gone"
-    except OSError as exc:
-        return str(exc)
-    return None
+    return _each_thread(pid, lambda tid: os.sched_setaffinity(tid, cpus))
