@@ -18,7 +18,6 @@ packer: the interpreted path is the only one.
 
 from __future__ import annotations
 
-import inspect
 import math
 import re
 
@@ -26,7 +25,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from sitl._jit import JIT, njit
-from sitl.plant import Plant, _quat_rotate_kernel, _specific_force_kernel
+from sitl.plant import Plant, quat_rotate_kernel, specific_force_kernel
 from sitl.pymath import hypot2
 from sitl.sensors import (
     _BLOCK,
@@ -39,7 +38,7 @@ from sitl.sensors import (
     SensorSuite,
 )
 from tuavdefs import simlink as sl
-from tuavdefs.frames import _Q_FLU_FROM_FRD, _Q_NED_FROM_ENU, quat_multiply
+from tuavdefs.frames import Q_FLU_FROM_FRD, Q_NED_FROM_ENU, quat_multiply
 from tuavdefs.jit import entry_point
 
 # (the link's constants as globals of this module, so that the compiled code's cache key
@@ -48,9 +47,9 @@ _FIX_3D = sl.GPS_FIX_3D
 _MILLI_G_M_S2 = sl.MILLI_G_M_S2
 _FIELDS_FILLED = sl.SENSOR_FIELDS_FILLED
 #: The satellites HIL_GPS reports (the plant's: hil_gps_values' default).
-_SATELLITES = inspect.signature(sl.hil_gps_values).parameters["satellites_visible"].default
-_round_clamp = njit(sl._round_clamp)
-_wrap_lon = njit(sl._wrap_lon)
+_SATELLITES = sl.GPS_SATELLITES_VISIBLE
+round_clamp = njit(sl.round_clamp)
+wrap_lon = njit(sl.wrap_lon)
 _quat_multiply = njit(quat_multiply)
 
 #: The messages' rows in the kernel's arrays, in the batch's order.
@@ -111,7 +110,7 @@ def _global(consts: np.ndarray, e: float, n: float, u: float, iv: np.ndarray,
     """:meth:`tuavdefs.simlink.HomeMap.global_fields` of (east, north, up) [m] into
     ``iv[at:at + 3]``; False if a value is not a finite number an int64 holds."""
     lat = consts[_K_LAT0] + math.degrees(n / consts[_K_RN])
-    lon = _wrap_lon(consts[_K_LON0] + math.degrees(e / consts[_K_RECOS]))
+    lon = wrap_lon(consts[_K_LON0] + math.degrees(e / consts[_K_RECOS]))
     alt = consts[_K_ALT0] + u
     ok = True
     for j, v in enumerate((lat * 1e7, lon * 1e7, alt * 1000.0)):
@@ -223,13 +222,13 @@ def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: f
         g_f, g_i = fv[_GPS], iv[_GPS]
         g_i[0] = t_us
         ok = _global(consts, ge, gn, gu, g_i, 1) and ok
-        vel_cm = _round_clamp(hypot2(vn, ve) * 100.0, 0, 65534)
-        g_i[4] = _round_clamp(consts[_K_EPH] * 100.0, 0, 65534)
-        g_i[5] = _round_clamp(consts[_K_EPV] * 100.0, 0, 65534)
+        vel_cm = round_clamp(hypot2(vn, ve) * 100.0, 0, 65534)
+        g_i[4] = round_clamp(consts[_K_EPH] * 100.0, 0, 65534)
+        g_i[5] = round_clamp(consts[_K_EPV] * 100.0, 0, 65534)
         g_i[6] = vel_cm
-        g_i[7] = _round_clamp(vn * 100.0, -32767, 32767)
-        g_i[8] = _round_clamp(ve * 100.0, -32767, 32767)
-        g_i[9] = _round_clamp(vd * 100.0, -32767, 32767)
+        g_i[7] = round_clamp(vn * 100.0, -32767, 32767)
+        g_i[8] = round_clamp(ve * 100.0, -32767, 32767)
+        g_i[9] = round_clamp(vd * 100.0, -32767, 32767)
         if vel_cm == 0:
             g_i[10] = 65535
         else:
@@ -241,7 +240,7 @@ def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: f
         g_i[11], g_i[12], g_i[13], g_i[14] = _FIX_3D, _SATELLITES, 0, 0
         ok = ok and _fits(layouts[_GPS], g_f, g_i, f32)
     # the truth and the air
-    fx, fy, fz = _specific_force_kernel(x, p, wind_e, wind_n, wind_u, warm, consts[_K_G])
+    fx, fy, fz = specific_force_kernel(x, p, wind_e, wind_n, wind_u, warm, consts[_K_G])
     temperature_k = ISA_T0_K - ISA_LAPSE_K_M * (consts[_K_ALT0] + pz)
     if not temperature_k > 0.0:
         return 0, 0
@@ -254,8 +253,8 @@ def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: f
     # HIL_STATE_QUATERNION
     s_f, s_i = fv[_STATE], iv[_STATE]
     s_i[0] = t_us
-    a0, a1, a2, a3 = _quat_multiply(_quat_multiply(_Q_NED_FROM_ENU, (qw, qx, qy, qz)),
-                                    _Q_FLU_FROM_FRD)
+    a0, a1, a2, a3 = _quat_multiply(_quat_multiply(Q_NED_FROM_ENU, (qw, qx, qy, qz)),
+                                    Q_FLU_FROM_FRD)
     n = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
     if n == 0.0 or not math.isfinite(n):
         return 0, 0
@@ -263,14 +262,14 @@ def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: f
     s_f[1], s_f[2], s_f[3], s_f[4] = a0 * sc, a1 * sc, a2 * sc, a3 * sc
     s_f[5], s_f[6], s_f[7] = wx, -wy, -wz
     ok = _global(consts, px, py, pz, s_i, 8) and ok
-    s_i[11] = _round_clamp(vy * 100.0, -32767, 32767)
-    s_i[12] = _round_clamp(vx * 100.0, -32767, 32767)
-    s_i[13] = _round_clamp(-vz * 100.0, -32767, 32767)
-    s_i[14] = _round_clamp(ias * 100.0, 0, 65535)
-    s_i[15] = _round_clamp(tas * 100.0, 0, 65535)
-    s_i[16] = _round_clamp(fx / _MILLI_G_M_S2, -32767, 32767)
-    s_i[17] = _round_clamp(-fy / _MILLI_G_M_S2, -32767, 32767)
-    s_i[18] = _round_clamp(-fz / _MILLI_G_M_S2, -32767, 32767)
+    s_i[11] = round_clamp(vy * 100.0, -32767, 32767)
+    s_i[12] = round_clamp(vx * 100.0, -32767, 32767)
+    s_i[13] = round_clamp(-vz * 100.0, -32767, 32767)
+    s_i[14] = round_clamp(ias * 100.0, 0, 65535)
+    s_i[15] = round_clamp(tas * 100.0, 0, 65535)
+    s_i[16] = round_clamp(fx / _MILLI_G_M_S2, -32767, 32767)
+    s_i[17] = round_clamp(-fy / _MILLI_G_M_S2, -32767, 32767)
+    s_i[18] = round_clamp(-fz / _MILLI_G_M_S2, -32767, 32767)
     ok = ok and _fits(layouts[_STATE], s_f, s_i, f32)
     # HIL_SENSOR
     h_f, h_i = fv[_SENSOR], iv[_SENSOR]
@@ -279,7 +278,7 @@ def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: f
     h_f[1], h_f[2], h_f[3] = r[0], -r[1], -r[2]
     _read(_GYRO, 3, wx, wy, wz, dt, draws, bias, cursor, params, new_bias, r)
     h_f[4], h_f[5], h_f[6] = r[0], -r[1], -r[2]
-    me, mn, mu = _quat_rotate_kernel((qw, -qx, -qy, -qz), (consts[_K_FIELD_E],
+    me, mn, mu = quat_rotate_kernel((qw, -qx, -qy, -qz), (consts[_K_FIELD_E],
                                                              consts[_K_FIELD_N],
                                                              consts[_K_FIELD_U]))
     _read(_MAG, 3, me, mn, mu, dt, draws, bias, cursor, params, new_bias, r)
@@ -329,7 +328,7 @@ class BatchPacker:
         noise = sensors.noise
         consts = np.zeros(_N_CONSTS)
         consts[[_K_LAT0, _K_LON0, _K_ALT0, _K_RN, _K_RECOS]] = (
-            hm._lat0, hm._lon0, hm._alt0, hm._r_n, hm._r_e_cos)
+            hm.lat0_deg, hm.lon0_deg, hm.alt0_m, hm.r_n_m, hm.r_e_cos_m)
         consts[[_K_FIELD_E, _K_FIELD_N, _K_FIELD_U]] = field
         consts[_K_G] = plant.model.g
         consts[_K_TWO] = 2.0

@@ -136,11 +136,11 @@ def _truth_kernel(x: np.ndarray, p: np.ndarray, ea_n: float, w_n_per_m: float, h
     return tether_forces_kernel(px, py, pz, length, ea_n, w_n_per_m, hf0, vf0)
 
 
-_quat_rotate_kernel = njit(quat_rotate)
+quat_rotate_kernel = njit(quat_rotate)
 
 
 @njit
-def _specific_force_kernel(x: np.ndarray, p: np.ndarray, wind_e: float, wind_n: float,
+def specific_force_kernel(x: np.ndarray, p: np.ndarray, wind_e: float, wind_n: float,
                            wind_u: float, warm: np.ndarray, g: float
                            ) -> tuple[float, float, float]:
     """What an ideal accelerometer at the centre of mass reads at the state ``x`` [m/s^2],
@@ -154,7 +154,7 @@ def _specific_force_kernel(x: np.ndarray, p: np.ndarray, wind_e: float, wind_n: 
     h, v = warm[0], warm[1]
     rhs_into(dx, x, p, x[13:17], 0.0, False, wind, warm)
     warm[0], warm[1] = h, v
-    return _quat_rotate_kernel((x[6], -x[7], -x[8], -x[9]), (dx[3], dx[4], dx[5] + g))
+    return quat_rotate_kernel((x[6], -x[7], -x[8], -x[9]), (dx[3], dx[4], dx[5] + g))
 
 
 class PlantInputs(NamedTuple):
@@ -272,7 +272,7 @@ class Plant:
         tether = m.tether
         self._truth = entry_point(_truth_kernel, self.x, m.p, tether.ea_n, tether.w_n_per_m,
                                   0.0, 0.0)
-        self._specific_force = entry_point(_specific_force_kernel, self.x, m.p, 0.0, 0.0,
+        self._specific_force = entry_point(specific_force_kernel, self.x, m.p, 0.0, 0.0,
                                            0.0, m.warm, m.g)
 
     def step(self, u: PlantInputs) -> None:

@@ -35,9 +35,9 @@ _WGS84_E2 = _WGS84_F * (2.0 - _WGS84_F)
 _SQRT_HALF = math.sqrt(0.5)
 # Rotation taking ENU vectors to NED vectors: x<->y swap and z flip. As a quaternion it is a
 # 180 deg rotation about the axis (1, 1, 0)/sqrt(2).
-_Q_NED_FROM_ENU: Quat = (0.0, _SQRT_HALF, _SQRT_HALF, 0.0)
+Q_NED_FROM_ENU: Quat = (0.0, _SQRT_HALF, _SQRT_HALF, 0.0)
 # Rotation taking FRD body vectors to FLU body vectors: 180 deg about body x.
-_Q_FLU_FROM_FRD: Quat = (0.0, 1.0, 0.0, 0.0)
+Q_FLU_FROM_FRD: Quat = (0.0, 1.0, 0.0, 0.0)
 
 
 def enu_to_ned(v: Vec3) -> Vec3:
@@ -156,14 +156,14 @@ quat_to_euler_kernel = njit(quat_to_euler)
 
 def quat_enu_flu_to_ned_frd(q: Quat) -> Quat:
     """Attitude from (body FLU -> inertial ENU) to MAVLink's (body FRD -> NED)."""
-    return quat_normalize(quat_multiply(quat_multiply(_Q_NED_FROM_ENU, q), _Q_FLU_FROM_FRD))
+    return quat_normalize(quat_multiply(quat_multiply(Q_NED_FROM_ENU, q), Q_FLU_FROM_FRD))
 
 
 def _quat_ned_frd_to_enu_flu_products(q: Quat) -> Quat:
     """Attitude from MAVLink's (body FRD -> NED) to (body FLU -> inertial ENU), through
     the generic products: the definition :func:`quat_ned_frd_to_enu_flu` follows."""
-    return quat_normalize(quat_multiply(quat_multiply(quat_conjugate(_Q_NED_FROM_ENU), q),
-                                        quat_conjugate(_Q_FLU_FROM_FRD)))
+    return quat_normalize(quat_multiply(quat_multiply(quat_conjugate(Q_NED_FROM_ENU), q),
+                                        quat_conjugate(Q_FLU_FROM_FRD)))
 
 
 def quat_ned_frd_to_enu_flu(q: Quat) -> Quat:

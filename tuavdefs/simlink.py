@@ -121,6 +121,8 @@ MILLI_G_M_S2 = 9.80665e-3
 #: HIL_GPS fix type 3 (3-D fix) and the cog value that means "unknown".
 GPS_FIX_3D = 3
 UINT16_UNKNOWN = 65535
+#: Satellites the simulated receiver reports in HIL_GPS.
+GPS_SATELLITES_VISIBLE = 10
 
 _INT16 = 32767
 _UINT16 = 65535
@@ -175,7 +177,7 @@ def _field(msg: Any, name: str) -> Any:
     return getattr(msg, name)
 
 
-def _round_clamp(x: float, lo: int, hi: int) -> int:
+def round_clamp(x: float, lo: int, hi: int) -> int:
     """``x`` rounded to the nearest integer and clamped to [lo, hi] (NaN -> 0)."""
     if lo < x < hi:     # the usual case first (NaN fails every comparison)
         return round(x)
@@ -190,7 +192,8 @@ def _deg_e7(angle_deg: float) -> int:
     return round(angle_deg * 1e7)
 
 
-def _wrap_lon(lon_deg: float) -> float:
+def wrap_lon(lon_deg: float) -> float:
+    """A longitude [deg] wrapped to [-180, 180)."""
     return (lon_deg + 180.0) % 360.0 - 180.0
 
 
@@ -201,29 +204,32 @@ class HomeMap:
     The same arithmetic as :func:`tuavdefs.frames.local_enu_to_global` and
     :func:`tuavdefs.frames.global_to_local_enu` (bit for bit: ``tests/test_fast_paths.py``),
     with the home's radii of curvature computed once instead of at every call.
+    ``lat0_deg``, ``lon0_deg``, ``alt0_m``: the home; ``r_n_m``: the meridian radius of
+    curvature there [m]; ``r_e_cos_m``: the prime-vertical radius times cos(latitude) [m]
+    (metres per radian of longitude).
     """
 
     def __init__(self, home: tuple[float, float, float]) -> None:
         self.home = home
-        self._lat0, self._lon0, self._alt0 = home
-        self._r_n, self._r_e = _radii_m(self._lat0)
-        self._cos_lat0 = math.cos(math.radians(self._lat0))
-        self._r_e_cos = self._r_e * self._cos_lat0
+        self.lat0_deg, self.lon0_deg, self.alt0_m = home
+        self.r_n_m, self._r_e = _radii_m(self.lat0_deg)
+        self._cos_lat0 = math.cos(math.radians(self.lat0_deg))
+        self.r_e_cos_m = self._r_e * self._cos_lat0
 
     def global_fields(self, pos_enu_m: Sequence[float]) -> tuple[int, int, int]:
         """(lat degE7, lon degE7 wrapped to [-180, 180), alt mm AMSL) of an inertial
         position [m]."""
-        lat = self._lat0 + math.degrees(pos_enu_m[1] / self._r_n)
-        lon = self._lon0 + math.degrees(pos_enu_m[0] / self._r_e_cos)
-        alt = self._alt0 + pos_enu_m[2]
-        return _deg_e7(lat), _deg_e7(_wrap_lon(lon)), round(alt * 1000.0)
+        lat = self.lat0_deg + math.degrees(pos_enu_m[1] / self.r_n_m)
+        lon = self.lon0_deg + math.degrees(pos_enu_m[0] / self.r_e_cos_m)
+        alt = self.alt0_m + pos_enu_m[2]
+        return _deg_e7(lat), _deg_e7(wrap_lon(lon)), round(alt * 1000.0)
 
     def local(self, lat_e7: int, lon_e7: int, alt_mm: int) -> Vec3:
         """The inertial position [m] of (lat degE7, lon degE7, alt mm AMSL)."""
-        north = math.radians(lat_e7 * 1e-7 - self._lat0) * self._r_n
-        east = (math.radians(_wrap_lon(lon_e7 * 1e-7 - self._lon0)) * self._r_e
+        north = math.radians(lat_e7 * 1e-7 - self.lat0_deg) * self.r_n_m
+        east = (math.radians(wrap_lon(lon_e7 * 1e-7 - self.lon0_deg)) * self._r_e
                 * self._cos_lat0)
-        return (east, north, alt_mm * 1e-3 - self._alt0)
+        return (east, north, alt_mm * 1e-3 - self.alt0_m)
 
 
 def home_map(home: Sequence[float]) -> HomeMap:
@@ -248,14 +254,14 @@ def hil_state_quaternion_values(time_us: int, pos_enu_m: Vec3, vel_enu_m_s: Vec3
     fx, fy, fz = flu_to_frd(specific_force_flu_m_s2)
     return (int(time_us), *quat_enu_flu_to_ned_frd(tuple(quat_enu_flu)),
             float(wx), float(wy), float(wz), lat, lon, alt,
-            _round_clamp(vn * 100.0, -_INT16, _INT16),
-            _round_clamp(ve * 100.0, -_INT16, _INT16),
-            _round_clamp(vd * 100.0, -_INT16, _INT16),
-            _round_clamp(ind_airspeed_m_s * 100.0, 0, _UINT16),
-            _round_clamp(true_airspeed_m_s * 100.0, 0, _UINT16),
-            _round_clamp(fx / MILLI_G_M_S2, -_INT16, _INT16),
-            _round_clamp(fy / MILLI_G_M_S2, -_INT16, _INT16),
-            _round_clamp(fz / MILLI_G_M_S2, -_INT16, _INT16))
+            round_clamp(vn * 100.0, -_INT16, _INT16),
+            round_clamp(ve * 100.0, -_INT16, _INT16),
+            round_clamp(vd * 100.0, -_INT16, _INT16),
+            round_clamp(ind_airspeed_m_s * 100.0, 0, _UINT16),
+            round_clamp(true_airspeed_m_s * 100.0, 0, _UINT16),
+            round_clamp(fx / MILLI_G_M_S2, -_INT16, _INT16),
+            round_clamp(fy / MILLI_G_M_S2, -_INT16, _INT16),
+            round_clamp(fz / MILLI_G_M_S2, -_INT16, _INT16))
 
 
 def hil_state_quaternion_fields(time_us: int, pos_enu_m: Vec3, vel_enu_m_s: Vec3,
@@ -316,27 +322,29 @@ def airspeeds_from_hil_state_quaternion(msg_fields: Any) -> tuple[float, float]:
 
 # ----- HIL_GPS
 def hil_gps_values(time_us: int, pos_enu_m: Vec3, vel_enu_m_s: Vec3, home: HomeMap,
-                   eph_m: float = 0.3, epv_m: float = 0.5, satellites_visible: int = 10,
+                   eph_m: float = 0.3, epv_m: float = 0.5,
+                   satellites_visible: int = GPS_SATELLITES_VISIBLE,
                    fix_type: int = GPS_FIX_3D) -> tuple:
     """HIL_GPS's field values in wire order: what :func:`hil_gps_fields` describes, ready
     for :meth:`Encoder.pack_values`."""
     lat, lon, alt = home.global_fields(pos_enu_m)
     vn, ve, vd = enu_to_ned(vel_enu_m_s)
-    vel_cm = _round_clamp(math.hypot(vn, ve) * 100.0, 0, _UINT16 - 1)
+    vel_cm = round_clamp(math.hypot(vn, ve) * 100.0, 0, _UINT16 - 1)
     cog = (UINT16_UNKNOWN if vel_cm == 0
            else round(math.degrees(math.atan2(ve, vn)) * 100.0) % 36000)
     return (int(time_us), lat, lon, alt,
-            _round_clamp(eph_m * 100.0, 0, _UINT16 - 1),
-            _round_clamp(epv_m * 100.0, 0, _UINT16 - 1), vel_cm,
-            _round_clamp(vn * 100.0, -_INT16, _INT16),
-            _round_clamp(ve * 100.0, -_INT16, _INT16),
-            _round_clamp(vd * 100.0, -_INT16, _INT16),
+            round_clamp(eph_m * 100.0, 0, _UINT16 - 1),
+            round_clamp(epv_m * 100.0, 0, _UINT16 - 1), vel_cm,
+            round_clamp(vn * 100.0, -_INT16, _INT16),
+            round_clamp(ve * 100.0, -_INT16, _INT16),
+            round_clamp(vd * 100.0, -_INT16, _INT16),
             cog, int(fix_type), int(satellites_visible), 0, 0)
 
 
 def hil_gps_fields(time_us: int, pos_enu_m: Vec3, vel_enu_m_s: Vec3,
                    home: tuple[float, float, float], eph_m: float = 0.3, epv_m: float = 0.5,
-                   satellites_visible: int = 10, fix_type: int = GPS_FIX_3D) -> dict[str, Any]:
+                   satellites_visible: int = GPS_SATELLITES_VISIBLE, fix_type: int = GPS_FIX_3D
+                   ) -> dict[str, Any]:
     """The fields of HIL_GPS for a (measured) position [m] and velocity [m/s] in ENU.
 
     ``eph_m``/``epv_m`` are the claimed horizontal/vertical accuracies [m], sent in cm as
