@@ -814,6 +814,7 @@ class Autopilot:
         next_due = math.inf
         for peer in links:
             st = self._link(peer)
+            frames: list[bytes] = []
             for name, entry in st.schedule.items():
                 interval, due = entry
                 if interval <= 0.0:
@@ -824,8 +825,11 @@ class Autopilot:
                         data = built.get(name)
                         if data is None:
                             data = built[name] = self.io.pack(self._build(name, self._telem))
-                        self.io.send_bytes(data, peer)
+                        frames.append(data)
                 next_due = min(next_due, entry[1])
+            if frames:
+                # in one write: a station wakes once for the period's telemetry
+                self.io.send_frames(frames, peer)
         for gone in [p for p in self._links if p not in links]:
             del self._links[gone]
         self._streams_due, self._streams_gen = next_due, gen

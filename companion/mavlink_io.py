@@ -290,6 +290,18 @@ class MavlinkEndpoints:
         """Send ``msg`` (a pymavlink message object) to ``peer``, or to every link."""
         self.send_bytes(self.pack(msg), peer)
 
+    def send_frames(self, frames: list[bytes], peer: Peer) -> None:
+        """Send several packed frames to ``peer`` in one write (one wake-up of the ground
+        station for a period's telemetry); the telemetry log still stamps each frame."""
+        if self.tlog is not None:
+            for frame in frames:
+                self.tlog.write(frame)
+        data = frames[0] if len(frames) == 1 else b"".join(frames)
+        if peer[0] == "tcp":
+            self._send_tcp(peer, data)
+        elif peer[0] == "udp":
+            self._send_udp(self.udp[peer[1]], peer[2], data)
+
     def send_bytes(self, data: bytes, peer: Peer | None = None) -> None:
         """Send packed frames as they are (used to forward other components' messages)."""
         if self.tlog is not None:
