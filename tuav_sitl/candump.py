@@ -79,17 +79,17 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             last_rx = now
             lines: list[str] = []
             logged: list[str] = []
-            while rx is not None:
-                ts = rx.timestamp if rx.timestamp > 0.0 else time.time()
-                log_line = (format_log(ts, iface, rx.arbitration_id, rx.data, rx.is_remote,
-                                       rx.is_extended)
+            for f in (rx, *link.recv_ready()):
+                ts = f.timestamp if f.timestamp > 0.0 else time.time()
+                log_line = (format_log(ts, iface, f.arbitration_id, f.data, f.is_remote,
+                                       f.is_extended)
                             if log_file is not None or args.log_format else "")
                 if show:
                     line = log_line if args.log_format else format_default(
-                        iface, rx.arbitration_id, rx.data, rx.is_remote, rx.is_extended,
+                        iface, f.arbitration_id, f.data, f.is_remote, f.is_extended,
                         len(iface))
-                    if db is not None and not rx.is_remote:
-                        line += _decoded(db, rx.arbitration_id, rx.data)
+                    if db is not None and not f.is_remote:
+                        line += _decoded(db, f.arbitration_id, f.data)
                     lines.append(line)
                 if log_file is not None:
                     logged.append(log_line)
@@ -97,7 +97,6 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 if args.count is not None and n >= args.count:
                     stop["now"] = True
                     break
-                rx = link.recv(timeout_s=0.0)
             if lines:
                 out.write("\n".join(lines) + "\n")
                 out.flush()
