@@ -63,18 +63,6 @@ def _quantile(sorted_values: Sequence[float], q: float) -> float:
     return float(sorted_values[k])
 
 
-def _answer_from_link(values: tuple) -> tuple[int, tuple[float, float, float, float], bool,
-                                              bool]:
-    """:func:`tuavdefs.simlink.answer_from_wire` of the values
-    :meth:`tuavdefs.simlink.FrameParser.feed_link` unpacks (integers and floats), the usual
-    case (commands in [0, 1]) inline."""
-    ts, flags, c0, c1, c2, c3 = values[:6]
-    if 0.0 <= c0 <= 1.0 and 0.0 <= c1 <= 1.0 and 0.0 <= c2 <= 1.0 and 0.0 <= c3 <= 1.0:
-        return (ts, (c0, c1, c2, c3), bool(values[18] & sl.MODE_FLAG_ARMED),
-                bool(flags & sl.FLAG_LOCKSTEP))
-    return sl.answer_from_wire(values)
-
-
 class WinderInputs(NamedTuple):
     """The winder's part of :class:`sitl.plant.PlantInputs`: motor torque request [N m]
     (positive pays out) and whether the motor is powered (brake released)."""
@@ -487,15 +475,13 @@ class SimLinkServer:
             answered = False
             # the usual case, one well-formed answer, skips the message objects
             items = parser.feed_link(data)
-            decode = _answer_from_link
             if items is None:
                 items = [sl.link_values(m) for m in parser.feed(data)]
-                decode = sl.answer_from_wire
             for item in items:
                 if item is None or item[0] != sl.MSG_HIL_ACTUATOR_CONTROLS:
                     ignored += 1
                     continue
-                answer = decode(item[1])
+                answer = sl.answer_from_wire(item[1])
                 ts = answer[0]
                 if ts == t_us or (self.real_time and ts < t_us):
                     self._hold(answer)

@@ -26,7 +26,7 @@ from sitl.sensors import (
     plant_acceleration_enu,
     specific_force_flu,
 )
-from sitl.simlink_server import SimLinkServer, _answer_from_link
+from sitl.simlink_server import SimLinkServer
 from sitl.tether import Tether, TetherForces
 from sitl.trim import hover_trim
 from tuavdefs import frames as fr
@@ -460,10 +460,11 @@ def test_the_truth_logs_row_is_each_values_repr():
     assert lines == [",".join(TRUTH_COLUMNS), *rows]
 
 
-def test_the_plants_answer_decoding_is_the_links():
-    """The plant's inline decoding of an answer parsed by
-    :meth:`tuavdefs.simlink.FrameParser.feed_link` is
-    :func:`tuavdefs.simlink.answer_from_wire`, whatever the commands."""
+def test_the_answers_usual_case_is_the_general_decoding():
+    """:func:`tuavdefs.simlink.answer_from_wire` of an answer parsed by
+    :meth:`tuavdefs.simlink.FrameParser.feed_link` (its inline usual case, commands in
+    [0, 1]) is what :func:`rotor_commands_from_controls` and :func:`lockstep_flag` read,
+    whatever the commands."""
     rng = random.Random(15)
     enc = sl.Encoder(sl.COMPANION_SYSID, sl.COMPANION_COMPID)
     odd = (math.nan, -math.inf, math.inf, -0.0, 0.0, 1.0, -1e-9, 1.0000001, 3.0)
@@ -474,5 +475,7 @@ def test_the_plants_answer_decoding_is_the_links():
             rng.randint(0, 2**63), (0.5,) * 4, k % 2 == 0, k % 3 == 0))
         ((_, values),) = sl.FrameParser().feed_link(frame)
         values = (*values[:2], *struct.unpack("<4f", struct.pack("<4f", *cmds)), *values[6:])
-        got, want = _answer_from_link(values), sl.answer_from_wire(values)
+        got = sl.answer_from_wire(values)
+        want = (int(values[0]), *sl.rotor_commands_from_controls(values[2:6], values[18]),
+                sl.lockstep_flag(values[1]))
         assert repr(got) == repr(want) and got[0] == values[0]

@@ -465,8 +465,13 @@ def answer_from_wire(values: Sequence[Any]
     """(time_usec answered [us], rotor commands in [0, 1], armed, lockstep) of
     HIL_ACTUATOR_CONTROLS' field values in wire order (as
     :func:`rotor_commands_from_controls` and :func:`lockstep_flag` read them)."""
+    ts, flags, c0, c1, c2, c3 = values[:2 + N_ROTORS]
+    if 0.0 <= c0 <= 1.0 and 0.0 <= c1 <= 1.0 and 0.0 <= c2 <= 1.0 and 0.0 <= c3 <= 1.0:
+        # the usual case (once a period in the plant): nothing to clamp, NaN fails it
+        return (int(ts), (float(c0), float(c1), float(c2), float(c3)),
+                bool(int(values[18]) & MODE_FLAG_ARMED), bool(int(flags) & FLAG_LOCKSTEP))
     cmds, armed = rotor_commands_from_controls(values[2:2 + N_ROTORS], values[18])
-    return int(values[0]), cmds, armed, lockstep_flag(values[1])
+    return int(ts), cmds, armed, lockstep_flag(flags)
 
 
 def lockstep_flag(flags: int) -> bool:
