@@ -8,6 +8,7 @@ import struct
 from pymavlink.dialects.v20 import common as mavlink2
 
 from tuavdefs import component_link as cl
+from tuavdefs.simlink import mavlink_crc
 
 Vec3 = tuple[float, float, float]
 
@@ -23,18 +24,6 @@ _LPN_ID = (_LPN.id & 0xFFFF, _LPN.id >> 16)
 _HEADER = struct.Struct("<BBBBBBHB")
 _MAGIC = bytes((mavlink2.PROTOCOL_MARKER_V2,))
 _CRC = struct.Struct("<H")
-#: pymavlink's CRC-16/MCRF4XX: its C helper when installed, its own class otherwise.
-_MCRF4XX = getattr(mavlink2, "mcrf4xx", None)
-
-
-def _x25crc(data: bytes) -> int:
-    """The MAVLink checksum of ``data`` (the frame after its magic byte, then the
-    message's CRC extra), as pymavlink computes it."""
-    if _MCRF4XX is not None:
-        return int(_MCRF4XX(data, 0xFFFF))
-    return int(mavlink2.x25crc(data).crc)
-
-
 class ComponentServer:
     """One component at a time on 127.0.0.1:``port``; never blocks the control loop.
 
@@ -113,7 +102,7 @@ class ComponentServer:
             n -= 1
         body = _HEADER.pack(n, 0, 0, mav.seq, mav.srcSystem, mav.srcComponent,
                             *_LPN_ID) + payload[:n]
-        return _MAGIC + body + _CRC.pack(_x25crc(body + _LPN_CRC_EXTRA))
+        return _MAGIC + body + _CRC.pack(mavlink_crc(body + _LPN_CRC_EXTRA))
 
     @property
     def connected(self) -> bool:

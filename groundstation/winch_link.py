@@ -18,6 +18,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from groundstation.winch import TEMPERATURE_UNKNOWN, CommandRequest
 from tuavdefs import component_link as cl
 from tuavdefs.frames import ned_to_enu
+from tuavdefs.simlink import mavlink_crc
 
 Vec3 = tuple[float, float, float]
 
@@ -26,15 +27,6 @@ _V2_HEADER = struct.Struct("<BBBBBBBHB")   # magic, len, incompat, compat, seq, 
 _V2_MAGIC = 0xFD
 _V2_OVERHEAD = _V2_HEADER.size + 2        # header and checksum
 _POSITION_CRC_EXTRA = bytes((_POSITION.crc_extra,))
-
-
-#: pymavlink's checksum (CRC-16/MCRF4XX) in C, where it has it
-_MCRF4XX = mavlink2.mcrf4xx
-
-
-def _checksum(data: bytes) -> int:
-    """MAVLink's checksum of ``data`` (header after the magic, payload, CRC extra)."""
-    return _MCRF4XX(data, 0xFFFF) if _MCRF4XX is not None else mavlink2.x25crc(data).crc
 
 
 def local_positions(data: bytes) -> list[tuple] | None:
@@ -54,7 +46,7 @@ def local_positions(data: bytes) -> list[tuple] | None:
                 or length > size or stop > end):
             return None
         body = data[pos + 1:stop - 2]
-        if _checksum(body + _POSITION_CRC_EXTRA) != data[stop - 2] | data[stop - 1] << 8:
+        if mavlink_crc(body + _POSITION_CRC_EXTRA) != data[stop - 2] | data[stop - 1] << 8:
             return None
         # MAVLink 2 drops the payload's trailing zeros
         out.append(_POSITION.unpacker.unpack(body[_V2_HEADER.size - 1:].ljust(size, b"\0")))

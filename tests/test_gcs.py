@@ -17,11 +17,11 @@ import pytest
 from gcs_util import Vehicle, command, download_mission, free_port, upload_mission, wait_msg
 from pymavlink import mavutil
 
-from companion import component_server
 from companion.autopilot import Autopilot, Telemetry
 from companion.component_server import ComponentServer
 from companion.mavlink_io import MavlinkEndpoints
 from companion.navigation import NavigationParams, Navigator
+from tuavdefs import simlink
 from tuavdefs.frames import global_to_local_enu, local_enu_to_global
 from tuavdefs.simlink import HOME_DEFAULT
 
@@ -413,7 +413,7 @@ def _read_until(sock: socket.socket, n_bytes: int, flush=None) -> bytes:
 @pytest.mark.parametrize("crc_helper", ["fastcrc", "pure python"])
 def test_component_position_frames_are_pymavlinks(crc_helper, monkeypatch):
     if crc_helper == "pure python":
-        monkeypatch.setattr(component_server, "_MCRF4XX", None)
+        monkeypatch.setattr(simlink, "_MCRF4XX", None)
     server = ComponentServer(0)
     try:
         mav = server.mav

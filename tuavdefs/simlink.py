@@ -507,8 +507,9 @@ class _Sink:
 _MCRF4XX: Callable[[bytes, int], int] | None = getattr(mavlink2, "mcrf4xx", None)
 
 
-def _crc16(data: bytes) -> int:
-    """MAVLink's checksum (CRC-16/MCRF4XX) of ``data``, as pymavlink computes it."""
+def mavlink_crc(data: bytes) -> int:
+    """MAVLink's checksum (CRC-16/MCRF4XX) of ``data`` (a frame after its magic byte, then
+    the message's CRC extra), as pymavlink computes it: its C helper where installed."""
     if _MCRF4XX is not None:
         return int(_MCRF4XX(data, 0xFFFF))
     return int(mavlink2.x25crc(data).crc)
@@ -590,7 +591,7 @@ class _Codec:
         seq = mav.seq
         body = _HEADER_V2_STRUCT.pack(_MAGIC_V2, len(payload), 0, 0, seq, mav.srcSystem,
                                       mav.srcComponent, mid & 0xFFFF, mid >> 16) + payload
-        frame = body + _CRC_STRUCT.pack(_crc16(body[1:] + self.crc_extra))
+        frame = body + _CRC_STRUCT.pack(mavlink_crc(body[1:] + self.crc_extra))
         mav.seq = (seq + 1) % 256
         mav.total_packets_sent += 1
         mav.total_bytes_sent += len(frame)
@@ -608,7 +609,7 @@ class _Codec:
         (_, mlen, incompat, compat, seq, sysid, compid, _, _) = _HEADER_V2_STRUCT.unpack_from(
             frame)
         crc = frame[-2] | (frame[-1] << 8)
-        if crc != _crc16(bytes(frame[1:-2]) + self.crc_extra):
+        if crc != mavlink_crc(bytes(frame[1:-2]) + self.crc_extra):
             return None
         t = self.unpack(bytes(frame[_HEADER_V2:-2]))
         m = self.cls(*[t[a] if n == 0 else list(t[a:a + n]) for a, n in self.plan])
@@ -685,7 +686,7 @@ class Encoder:
             c2 if 0.0 <= c2 <= 1.0 else _clean_command(c2),
             c3 if 0.0 <= c3 <= 1.0 else _clean_command(c3),
             *_UNUSED_CONTROLS, MODE_ARMED if armed else MODE_DISARMED)
-        frame += _CRC_STRUCT.pack(_crc16(frame[1:] + _ACTUATOR_CRC_EXTRA))
+        frame += _CRC_STRUCT.pack(mavlink_crc(frame[1:] + _ACTUATOR_CRC_EXTRA))
         mav.seq = (seq + 1) % 256
         mav.total_packets_sent += 1
         mav.total_bytes_sent += len(frame)
@@ -788,7 +789,7 @@ class FrameParser:
             if codec is None or end > n:
                 return None
             body = data[i + 1:end - 2] + codec.crc_extra
-            if ((mcrf(body, 0xFFFF) if mcrf is not None else _crc16(body))
+            if ((mcrf(body, 0xFFFF) if mcrf is not None else mavlink_crc(body))
                     != data[end - 2] | (data[end - 1] << 8)):
                 return None
             # a whole payload straight from the stream; one short of its trailing zeros
