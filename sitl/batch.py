@@ -378,10 +378,7 @@ class BatchPacker:
             for c, channel in enumerate(self.sensors.channels):
                 if (used_up >> c) & 1:
                     channel.refill()
-        frames = 3 if gps else 2
-        mav.seq = (mav.seq + frames) % 256
-        mav.total_packets_sent += frames
-        mav.total_bytes_sent += n
+        sl.count_sent(mav, 3 if gps else 2, n)
         return self._view[:n]
 
 

@@ -519,6 +519,15 @@ _HEADER_V2_STRUCT = struct.Struct("<BBBBBBBHB")
 _CRC_STRUCT = struct.Struct("<H")
 
 
+def count_sent(mav: mavlink2.MAVLink, frames: int, nbytes: int) -> None:
+    """Account ``frames`` frames of ``nbytes`` bytes in all, packed here with ``mav``'s
+    ids from its current sequence number, as ``MAVLink.send`` does: the sequence advances
+    (modulo 256) and the sent counters grow."""
+    mav.seq = (mav.seq + frames) % 256
+    mav.total_packets_sent += frames
+    mav.total_bytes_sent += nbytes
+
+
 class _Codec:
     """MAVLink 2 packing and unpacking of one message type, without pymavlink's generic
     per-message machinery: the same bytes as ``MAVLink.send`` writes and the same message
@@ -592,9 +601,7 @@ class _Codec:
         body = _HEADER_V2_STRUCT.pack(_MAGIC_V2, len(payload), 0, 0, seq, mav.srcSystem,
                                       mav.srcComponent, mid & 0xFFFF, mid >> 16) + payload
         frame = body + _CRC_STRUCT.pack(mavlink_crc(body[1:] + self.crc_extra))
-        mav.seq = (seq + 1) % 256
-        mav.total_packets_sent += 1
-        mav.total_bytes_sent += len(frame)
+        count_sent(mav, 1, len(frame))
         return frame
 
     def unpack(self, payload: bytes) -> tuple:
@@ -687,9 +694,7 @@ class Encoder:
             c3 if 0.0 <= c3 <= 1.0 else _clean_command(c3),
             *_UNUSED_CONTROLS, MODE_ARMED if armed else MODE_DISARMED)
         frame += _CRC_STRUCT.pack(mavlink_crc(frame[1:] + _ACTUATOR_CRC_EXTRA))
-        mav.seq = (seq + 1) % 256
-        mav.total_packets_sent += 1
-        mav.total_bytes_sent += len(frame)
+        count_sent(mav, 1, len(frame))
         return frame
 
     def hil_sensor(self, fields: Mapping[str, Any]) -> bytes:
