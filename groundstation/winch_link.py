@@ -10,7 +10,6 @@ client connects, and reconnects after a drop, on its own; sends while unconnecte
 from __future__ import annotations
 
 import socket
-import struct
 import time
 
 from pymavlink.dialects.v20 import common as mavlink2
@@ -18,15 +17,12 @@ from pymavlink.dialects.v20 import common as mavlink2
 from groundstation.winch import TEMPERATURE_UNKNOWN, CommandRequest
 from tuavdefs import component_link as cl
 from tuavdefs.frames import ned_to_enu
-from tuavdefs.simlink import mavlink_crc
+from tuavdefs.simlink import frame_codecs, whole_frames
 
 Vec3 = tuple[float, float, float]
 
 _POSITION = mavlink2.MAVLink_local_position_ned_message
-_V2_HEADER = struct.Struct("<BBBBBBBHB")   # magic, len, incompat, compat, seq, ids, msgid
-_V2_MAGIC = 0xFD
-_V2_OVERHEAD = _V2_HEADER.size + 2        # header and checksum
-_POSITION_CRC_EXTRA = bytes((_POSITION.crc_extra,))
+_POSITION_CODECS = frame_codecs(_POSITION)
 
 
 def local_positions(data: bytes) -> list[tuple] | None:
@@ -34,24 +30,8 @@ def local_positions(data: bytes) -> list[tuple] | None:
     of ``data`` when it holds nothing but whole, unsigned MAVLink 2 frames of that message
     with good checksums: what pymavlink's parser, holding no partial frame, decodes from
     it. None for anything else (then pymavlink parses it)."""
-    out = []
-    size = _POSITION.unpacker.size
-    pos, end = 0, len(data)
-    while pos < end:
-        if end - pos < _V2_OVERHEAD:
-            return None
-        magic, length, incompat, _, _, _, _, id_low, id_high = _V2_HEADER.unpack_from(data, pos)
-        stop = pos + length + _V2_OVERHEAD
-        if (magic != _V2_MAGIC or incompat or id_low != _POSITION.id or id_high
-                or length > size or stop > end):
-            return None
-        body = data[pos + 1:stop - 2]
-        if mavlink_crc(body + _POSITION_CRC_EXTRA) != data[stop - 2] | data[stop - 1] << 8:
-            return None
-        # MAVLink 2 drops the payload's trailing zeros
-        out.append(_POSITION.unpacker.unpack(body[_V2_HEADER.size - 1:].ljust(size, b"\0")))
-        pos = stop
-    return out
+    frames = whole_frames(data, _POSITION_CODECS)
+    return None if frames is None else [values for _, values in frames]
 
 
 class WinchLinkClient:

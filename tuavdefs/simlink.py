@@ -532,7 +532,8 @@ class _Codec:
     """MAVLink 2 packing and unpacking of one message type, without pymavlink's generic
     per-message machinery: the same bytes as ``MAVLink.send`` writes and the same message
     objects as ``MAVLink.decode`` returns (``tests/test_simlink.py`` compares them), about
-    three times faster. For the simulator link's own messages (no strings, no signing).
+    three times faster. For messages without strings, unsigned (the simulator link's own,
+    and the component link's LOCAL_POSITION_NED through :func:`whole_frames`).
 
     A message's *values* are its fields in wire order with the arrays spread out: what its
     ``struct`` packs (``cls.unpacker``)."""
@@ -629,11 +630,17 @@ class _Codec:
         return m
 
 
+def frame_codecs(*classes: type) -> dict[int, _Codec]:
+    """Codecs for :func:`whole_frames` of pymavlink message classes (without strings or
+    one-element arrays), by message id."""
+    return {c.msg_id: c for c in map(_Codec, classes)}
+
+
 #: The simulator link's messages, packed and parsed by :class:`_Codec`.
-_CODECS = {c.msg_id: c for c in map(_Codec, (
+_CODECS = frame_codecs(
     mavlink2.MAVLink_hil_sensor_message, mavlink2.MAVLink_hil_gps_message,
     mavlink2.MAVLink_hil_state_quaternion_message,
-    mavlink2.MAVLink_hil_actuator_controls_message))}
+    mavlink2.MAVLink_hil_actuator_controls_message)
 
 #: A whole HIL_ACTUATOR_CONTROLS frame but its checksum: header, then the payload.
 _ACTUATOR_FRAME = struct.Struct(
@@ -714,6 +721,36 @@ class Encoder:
         return self._fast(MSG_HIL_ACTUATOR_CONTROLS, {**fields, "time_usec": int(time_us)})
 
 
+def whole_frames(data: bytes, codecs: Mapping[int, _Codec]
+                 ) -> list[tuple[int, tuple]] | None:
+    """(message id, values in wire order) of each frame of ``data`` when it is nothing but
+    whole, unsigned MAVLink 2 frames of the ``codecs``' messages with valid CRCs (what a
+    parser holding no partial frame decodes from it); None for anything else, which is
+    then a general parser's to read."""
+    out = []
+    i, n = 0, len(data)
+    mcrf = _MCRF4XX
+    while i < n:
+        if data[i] != _MAGIC_V2 or n - i < _HEADER_V2 + 2 or data[i + 2]:
+            return None   # not a frame start, short, signed or impossible flags
+        size = data[i + 1]
+        end = i + _HEADER_V2 + size + 2
+        codec = codecs.get(data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16))
+        if codec is None or end > n:
+            return None
+        body = data[i + 1:end - 2] + codec.crc_extra
+        if ((mcrf(body, 0xFFFF) if mcrf is not None else mavlink_crc(body))
+                != data[end - 2] | (data[end - 1] << 8)):
+            return None
+        # a whole payload straight from the stream; one short of its trailing zeros
+        # through unpack
+        out.append((codec.msg_id, codec.unpacker.unpack_from(data, i + _HEADER_V2)
+                    if size == codec.unpacker.size
+                    else codec.unpack(data[i + _HEADER_V2:end - 2])))
+        i = end
+    return out
+
+
 class FrameParser:
     """Splits a byte stream into MAVLink (1 or 2) messages of the common dialect.
 
@@ -782,27 +819,7 @@ class FrameParser:
         else returns None and changes nothing: pass ``data`` to :meth:`feed` then."""
         if self._buf:
             return None
-        out = []
-        i, n = 0, len(data)
-        mcrf = _MCRF4XX
-        while i < n:
-            if data[i] != _MAGIC_V2 or n - i < _HEADER_V2 + 2 or data[i + 2]:
-                return None   # not a frame start, short, signed or impossible flags
-            size = data[i + 1]
-            end = i + _HEADER_V2 + size + 2
-            codec = _CODECS.get(data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16))
-            if codec is None or end > n:
-                return None
-            body = data[i + 1:end - 2] + codec.crc_extra
-            if ((mcrf(body, 0xFFFF) if mcrf is not None else mavlink_crc(body))
-                    != data[end - 2] | (data[end - 1] << 8)):
-                return None
-            # a whole payload straight from the stream; one short of its trailing zeros
-            # through unpack
-            out.append((codec.msg_id, codec.unpacker.unpack_from(data, i + _HEADER_V2)
-                        if size == codec.unpacker.size
-                        else codec.unpack(data[i + _HEADER_V2:end - 2])))
-            i = end
+        out = whole_frames(data, _CODECS)
         if out:
             self.frames += len(out)
             self._in_bad_run = False
