@@ -268,22 +268,6 @@ class NoisyChannel:
             return tuple(float(v) for v in truth)
         z_walk, z_noise = self._draw()
         sigma = self._sigma
-        if self.dim == 3:   # the IMU's and the GPS velocity's: unrolled (speed only)
-            b0, b1, b2 = self._bias_a.tolist()
-            if self._walk > 0.0:
-                k = self._walk * math.sqrt(dt_s)
-                b0, b1, b2 = b0 + k * z_walk[0], b1 + k * z_walk[1], b2 + k * z_walk[2]
-                self._bias_a[:] = (b0, b1, b2)
-            t0, t1, t2 = truth
-            return (float(t0) + b0 + sigma * z_noise[0], float(t1) + b1 + sigma * z_noise[1],
-                    float(t2) + b2 + sigma * z_noise[2])
-        if self.dim == 1:   # the barometer's: unrolled
-            (b,) = self._bias_a.tolist()
-            if self._walk > 0.0:
-                b = b + self._walk * math.sqrt(dt_s) * z_walk[0]
-                self._bias_a[0] = b
-            (t,) = truth
-            return (float(t) + b + sigma * z_noise[0],)
         bias = self._bias_a.tolist()
         if self._walk > 0.0:
             k = self._walk * math.sqrt(dt_s)

@@ -1,8 +1,8 @@
 """The fast paths give the same bits as the code they stand in for: the plant stepped many
 steps in one compiled call, CPython's hypot compiled, the tether's compiled solve, the
 simulator link's own MAVLink packing and parsing (from and to field values in wire order),
-its home mapping, the compiled specific force and the unrolled sensor channels, and
-numba's entry points."""
+its home mapping, the compiled specific force, the sensor channels' per-axis formula
+(which the plant's compiled batch repeats), and numba's entry points."""
 
 import io
 import math
@@ -309,9 +309,9 @@ def test_the_compiled_specific_force_is_the_python_one():
         assert np.array_equal(plant.x, x_before) and np.array_equal(plant.model.warm, warm)
 
 
-def test_the_unrolled_sensor_channels_are_the_general_formula():
-    """The 1- and 3-axis channels' unrolled arithmetic is the per-axis formula of the
-    others: the same draws, the same operations in the same order."""
+def test_the_sensor_channels_are_the_per_axis_formula():
+    """A 1-, 2- and 3-axis channel's reading is the per-axis formula: the same draws, the
+    same operations in the same order (what sitl/batch.py compiles)."""
     spec = NoiseSpec(sigma=0.05, bias_sigma=0.1, bias_walk=0.02)
     for dim in (1, 2, 3):
         ch = NoisyChannel(spec, dim, np.random.default_rng(dim))
