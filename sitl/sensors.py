@@ -126,11 +126,6 @@ def airspeed_from(vel_m_s: Sequence[float], wind_m_s: Sequence[float]) -> float:
     return math.sqrt((v[0] - w[0]) ** 2 + (v[1] - w[1]) ** 2 + (v[2] - w[2]) ** 2)
 
 
-def airspeed_m_s(plant: Plant) -> float:
-    """True airspeed [m/s]: the UAV's speed relative to the wind of the last step."""
-    return airspeed_from(plant.x[VEL], plant.wind_m_s)
-
-
 # ----- error models
 @dataclass(frozen=True)
 class NoiseSpec:
