@@ -22,7 +22,6 @@ back.
 from __future__ import annotations
 
 import argparse
-import select
 import signal
 import sys
 import threading
@@ -44,9 +43,9 @@ from tuavdefs.paramspec import load_option
 
 __all__ = ["ENCODER_TIMEOUT_S", "build_parser", "main"]
 
-#: The longest wait for a CAN frame [ms]: the wall-clock duties (encoder loss, WINCH_STATUS,
+#: The longest wait for a CAN frame [s]: the wall-clock duties (encoder loss, WINCH_STATUS,
 #: the heartbeat, commands) are looked at least this often.
-LOOP_MS = 10
+LOOP_S = 0.01
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -95,12 +94,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                              flags=st.flags, voltage_v=st.voltage_v, current_a=st.current_a,
                              temperature_c=st.temperature_c)
 
-    # one wait per turn, on the bus alone: the plant sends the frames of an instant back to
-    # back, and what the component link brought meanwhile is read after them
-    bus = None
-    if link.fileno() >= 0:
-        bus = select.poll()
-        bus.register(link.fileno(), select.POLLIN)
     handle = winch.handle_frame
     start = time.monotonic()
     was_lost = False
@@ -110,12 +103,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             if args.duration is not None and time.monotonic() - start > args.duration:
                 break
             # the bus first: each encoder frame is answered before anything else is done
-            # (in lockstep the plant waits for that answer); then the MAVLink side
-            if bus is not None:
-                frames = link.recv_ready() if bus.poll(LOOP_MS) else ()
-            else:
-                rx = link.recv(timeout_s=LOOP_MS * 1e-3)
-                frames = () if rx is None else [rx, *link.recv_ready()]
+            # (in lockstep the plant waits for that answer); then the MAVLink side. One wait
+            # per turn, on the bus alone: the plant sends the frames of an instant back to
+            # back, and what the component link brought meanwhile is read after them
+            rx = link.recv(timeout_s=LOOP_S)
+            frames = () if rx is None else [rx, *link.recv_ready()]
             for rx in frames:
                 out = handle(time.monotonic(), rx.arbitration_id, rx.data, rx.is_remote)
                 if out is not None:
