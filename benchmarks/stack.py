@@ -43,7 +43,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from tuav_sitl.realtime import RT_PRIORITY, cpu_split, set_affinity
+from tuav_sitl.realtime import BACKGROUND, RT_PRIORITY, cpu_split, set_affinity, set_background
 from tuav_sitl.up import RECORDER_INTERVAL_S
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -363,6 +363,8 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
         for name, p in procs.items():
             if split is not None and name in split:
                 set_affinity(p.pid, split[name])
+            if split is not None and name in BACKGROUND:
+                set_background(p.pid)
         if profile:   # the flight begins: profile from here (benchmarks.profiled)
             for name in PROCESSES:
                 procs[name].send_signal(signal.SIGUSR1)

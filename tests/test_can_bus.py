@@ -208,3 +208,8 @@ def test_the_kernel_drops_own_datagrams_by_their_source_port():
     # without the filter (a kernel that refuses it) the same frames, dropped here
     assert out["fallback_filter"] is False
     assert out["fallback_got"] == ["from b"] and out["fallback_own_dropped"] == 2
+    # a recorder's receive buffer (root may exceed rmem_max): 3000 unread frames all kept,
+    # in order, where the default buffer drops some
+    assert out["burst_granted"] >= 4 * 1024 * 1024
+    assert out["burst_big_got"] == list(range(3000))
+    assert out["burst_small_got"] < 3000

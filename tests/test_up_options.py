@@ -2,6 +2,9 @@
 
 import argparse
 import math
+import os
+import subprocess
+import sys
 
 import pytest
 
@@ -73,4 +76,18 @@ def test_lockstep_gives_the_plant_a_cpu_of_its_own():
     assert cpu_split({3}) is None
     split = cpu_split({5, 2, 7})
     assert split == {"plant": {2}, "companion": {5, 7}, "groundstation": {5, 7},
-                     "candump": {5, 7}}
+                     "candump": {2}}
+
+
+def test_the_recorder_runs_at_idle_priority_in_lockstep():
+    from tuav_sitl.realtime import BACKGROUND, set_background
+
+    assert {"candump"} == BACKGROUND
+    proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        assert os.sched_getscheduler(proc.pid) == os.SCHED_OTHER
+        assert set_background(proc.pid) is None
+        assert os.sched_getscheduler(proc.pid) == os.SCHED_IDLE
+    finally:
+        proc.kill()
+        proc.wait()

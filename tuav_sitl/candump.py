@@ -11,7 +11,10 @@ output flushed once. A recorder that need not show frames the moment they pass (
 up``'s, which logs to a file with ``-s 2``) also waits ``--interval`` between bursts, so it
 wakes up a hundred times a second rather than once a frame: in lockstep at 20 times real
 time the bus carries several thousand frames a second, and a wake-up per frame cost the
-stack as much CPU as the ground station.
+stack as much CPU as the ground station. Such a recorder asks for a receive buffer of
+:data:`RECORDER_BUFFER_BYTES`, which holds about half a second of that traffic: ``tuav-sitl
+up`` runs it at idle priority in lockstep (:mod:`tuav_sitl.realtime`), where it may read
+late but must not lose a frame.
 """
 
 from __future__ import annotations
@@ -28,6 +31,8 @@ from tuavdefs.canbus import CanBusError, CanLink
 
 #: The interface name printed for a udp_multicast bus (candump needs a name).
 MULTICAST_IFACE = "udpmc0"
+#: Receive buffer [bytes] a recorder (``--interval``) asks for.
+RECORDER_BUFFER_BYTES = 4 * 1024 * 1024
 
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
@@ -45,7 +50,8 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="silent mode, as candump's: 2 prints nothing (with --log: only log)")
     ap.add_argument("--interval", type=float, default=0.0, metavar="S",
                     help="wait this long [s] between bursts of frames (a recorder's "
-                         "fewer wake-ups; frames keep their receive times)")
+                         "fewer wake-ups; frames keep their receive times; also asks for "
+                         "a 4 MiB receive buffer)")
 
 
 def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
@@ -55,6 +61,8 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     except CanBusError as exc:
         print(f"tuav-sitl candump: {exc}", file=sys.stderr)
         return 1
+    if args.interval > 0.0:
+        link.set_receive_buffer(RECORDER_BUFFER_BYTES)
     iface = link.channel if link.interface == "socketcan" else MULTICAST_IFACE
     db = None
     if args.decode:

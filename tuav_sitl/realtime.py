@@ -1,4 +1,5 @@
-"""Scheduling of the stack's processes: SCHED_FIFO in real time, CPU affinity in lockstep.
+"""Scheduling of the stack's processes: SCHED_FIFO in real time, CPU affinity (and idle
+priority for the bus recorder) in lockstep.
 
 Paced by the wall clock, the plant and the companion must each get the CPU within a
 fraction of a 4 ms control period. Under the default scheduler a process woken while busy
@@ -47,18 +48,37 @@ def set_real_time(pid: int, priority: int = RT_PRIORITY) -> str | None:
 
 def cpu_split(available: set[int] | None = None) -> dict[str, set[int]] | None:
     """CPUs for the stack's processes in lockstep: the plant on a CPU of its own, the
-    companion, the ground station and the bus recorder on the others (``available``: the
-    CPUs this process may use, by default its own affinity). None with fewer than 2 CPUs.
+    companion and the ground station on the others, the bus recorder (a
+    :data:`BACKGROUND` process) on the plant's (``available``: the CPUs this process may
+    use, by default its own affinity). None with fewer than 2 CPUs.
 
     In lockstep the plant is the busiest process and on the simulation's critical path;
     with a CPU of its own it is never preempted by the ground station's or the companion's
     wake-ups and never migrates, which on 2 CPUs cut its CPU time per period by about a
-    tenth and raised the stack's rate by about as much (docs/performance.md)."""
+    tenth and raised the stack's rate by about as much. The plant's CPU still idles
+    about two fifths of the time, while the plant waits for the companion's answer: the
+    recorder, at idle priority (:func:`set_background`), works in those gaps and never
+    delays the plant, which took its load off the companion's CPU and raised the rate
+    by another 5-9 % (docs/performance.md)."""
     cpus = sorted(available if available is not None else os.sched_getaffinity(0))
     if len(cpus) < 2:
         return None
     plant, rest = {cpus[0]}, set(cpus[1:])
-    return {"plant": plant, "companion": rest, "groundstation": rest, "candump": rest}
+    return {"plant": plant, "companion": rest, "groundstation": rest, "candump": plant}
+
+
+#: Processes that in lockstep only use CPU time the others leave (:func:`set_background`):
+#: the bus recorder, which reads in bursts and keeps each frame's kernel receive time.
+BACKGROUND = frozenset({"candump"})
+
+
+def set_background(pid: int) -> str | None:
+    """Give every thread of process ``pid`` SCHED_IDLE: it runs only when its CPUs have
+    nothing else to run (unprivileged); None when done, else why not."""
+    if not hasattr(os, "SCHED_IDLE"):
+        return "SCHED_IDLE is not available on this system"
+    param = os.sched_param(0)
+    return _each_thread(pid, lambda tid: os.sched_setscheduler(tid, os.SCHED_IDLE, param))
 
 
 def set_affinity(pid: int, cpus: set[int]) -> str | None:

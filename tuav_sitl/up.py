@@ -375,9 +375,10 @@ def run_up(args: argparse.Namespace) -> int:
 
 
 def _pin(stack: Stack) -> str:
-    """In lockstep: the plant on a CPU of its own, the other processes on the rest
+    """In lockstep: the plant on a CPU of its own, the companion and the ground station on
+    the rest, the recorder at idle priority on the plant's
     (:func:`tuav_sitl.realtime.cpu_split`); returns the banner's words for it."""
-    from tuav_sitl.realtime import cpu_split, set_affinity
+    from tuav_sitl.realtime import BACKGROUND, cpu_split, set_affinity, set_background
 
     split = cpu_split()
     if split is None:
@@ -386,11 +387,14 @@ def _pin(stack: Stack) -> str:
     for name, proc in (*stack.procs.items(), *stack.recorders.items()):
         if name in split:
             why = set_affinity(proc.pid, split[name]) or why
+        if name in BACKGROUND:
+            why = set_background(proc.pid) or why
     if why is not None:
         return f"normal (CPU affinity: {why})"
     plant = ",".join(map(str, sorted(split["plant"])))
     rest = ",".join(map(str, sorted(split["companion"])))
-    return f"plant on CPU {plant}, the others on CPU {rest}"
+    return (f"plant on CPU {plant}, companion and ground station on CPU {rest}, "
+            f"recorder at idle priority on CPU {plant}")
 
 
 def _banner(run_dir: Path, ports: Ports, can: str, args: argparse.Namespace,

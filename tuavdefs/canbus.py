@@ -158,6 +158,27 @@ class CanLink:
         except (NotImplementedError, AttributeError, OSError, TypeError, ValueError):
             return -1
 
+    def set_receive_buffer(self, size_bytes: int) -> int:
+        """Ask the kernel for a receive buffer of ``size_bytes`` [bytes] on the receiving
+        socket (beyond ``net.core.rmem_max`` where the process may: root or CAP_NET_ADMIN), so
+        that a reader which falls behind for a while (a recorder running at idle priority)
+        finds its frames queued rather than dropped. Returns the size granted [bytes] (the
+        kernel's count, about twice what it keeps for data), or 0 where the bus has no
+        socket."""
+        if self._mc is not None:
+            sock = self._mc.rx
+        else:
+            sock = getattr(self.bus, "socket", None)
+            if not isinstance(sock, socket.socket):
+                return 0
+        force = getattr(socket, "SO_RCVBUFFORCE", 33)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, force, size_bytes)
+        except OSError:     # not permitted: as much as rmem_max allows
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size_bytes)
+        return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+
     def recv_ready(self) -> list[RxFrame]:
         """Every frame from another node that has already arrived (none: an empty list),
         without waiting: what calling ``recv(0.0)`` until it returns None gives, in one

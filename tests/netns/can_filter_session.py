@@ -10,6 +10,9 @@ import time
 from tuavdefs import canbus
 from tuavdefs.canbus import MULTICAST_PORT, CanLink
 
+#: Frames of the unread burst (more than a default receive buffer holds).
+BURST = 3000
+
 
 def _texts(link: CanLink) -> list[str]:
     got = []
@@ -62,6 +65,19 @@ def main() -> int:
             "fallback_own_dropped": c.own_frames_dropped,
             "fallback_filter": c._mc.kernel_filter,
         }
+        # a burst nobody reads meanwhile: a link with the default receive buffer loses the
+        # end of it, one with a recorder's buffer keeps every frame
+        small, big = CanLink("udp_multicast"), CanLink("udp_multicast")
+        granted = big.set_receive_buffer(4 * 1024 * 1024)
+        sender = CanLink("udp_multicast")
+        for i in range(BURST):
+            sender.send(0x30, i.to_bytes(4, "little"))
+        time.sleep(0.1)
+        small_got, big_got = len(small.recv_ready()), big.recv_ready()
+        for link in (small, big, sender):
+            link.close()
+        out.update(burst_granted=granted, burst_small_got=small_got,
+                   burst_big_got=[int.from_bytes(f.data, "little") for f in big_got])
     finally:
         watcher.close()
         for link in (a, b, c):
