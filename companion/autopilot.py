@@ -89,6 +89,11 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "ATTITUDE": 10.0, "VFR_HUD": 2.0, "HOME_POSITION": 0.2, "MISSION_CURRENT": 1.0,
     "SYSTEM_TIME": 0.5,
 }
+#: A message due within this [s] of a period's time is sent in that period: its due times
+#: are sums of intervals in floating point, and without it messages due at the same instant
+#: (a 5 Hz one on a 10 Hz one's grid) land a period apart as their rounding falls, and a
+#: ground station wakes for each.
+DUE_TOLERANCE_S = 1e-6
 #: REQUEST_DATA_STREAM groups, as ArduPilot assigns messages to them.
 STREAM_GROUPS: dict[int, tuple[str, ...]] = {
     M.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "GPS_RAW_INT", "MISSION_CURRENT"),
@@ -238,9 +243,11 @@ class Autopilot:
                 self._nav_event(kind, value)
         tm = self._telem
         t = tm.t_s if tm is not None else -math.inf
-        if now_wall - self._last_hb_wall >= 1.0 or t - self._last_hb_sim >= 1.0:
+        if (now_wall - self._last_hb_wall >= 1.0
+                or t - self._last_hb_sim >= 1.0 - DUE_TOLERANCE_S):
             self.send_heartbeat()
-        if tm is not None and (t >= self._streams_due or io.generation != self._streams_gen):
+        if tm is not None and (t >= self._streams_due - DUE_TOLERANCE_S
+                               or io.generation != self._streams_gen):
             self._streams(t)    # something is due on some link (otherwise nothing to do)
         if io.backlogged:
             io.flush()
@@ -819,7 +826,7 @@ class Autopilot:
                 interval, due = entry
                 if interval <= 0.0:
                     continue
-                if t >= due:
+                if t >= due - DUE_TOLERANCE_S:
                     entry[1] = max(due + interval, t) if t - due < interval else t + interval
                     if not (name == "HOME_POSITION" and self.nav.home_m is None):
                         data = built.get(name)

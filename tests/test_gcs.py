@@ -7,6 +7,7 @@ arrives."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import select
 import socket
@@ -532,3 +533,33 @@ def test_input_is_handled_as_it_arrives_and_service_sends_what_is_due():
         winch.close()
         ep.close()
         comp.close()
+
+
+def test_telemetry_due_at_one_instant_goes_out_in_one_period():
+    """The default streams (10, 5, 2, 1, 0.5 and 0.2 Hz) all lie on the 10 Hz grid, so a
+    ground station gets data in 10 periods per simulated second and no more, however the
+    sums of their intervals round."""
+    ep = MavlinkEndpoints(0, [])
+    nav = Navigator(NavigationParams(), 0.2, 60.0)
+    ap = Autopilot(ep, nav, HOME_DEFAULT, [], log=lambda text: None)
+    gcs = socket.create_connection(("127.0.0.1", ep.tcp_port))
+    gcs.setblocking(False)
+    try:
+        while not ep.links():
+            ap.receive(select.select(ap.selectables(), [], [], 2.0)[0])
+        telem = Telemetry(0.0, (0.0, 0.0, 0.2), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0),
+                          (0.0, 0.0, 0.0), 0.0)
+        t0 = 3.212     # the link opens at some period's time, off the grid of round numbers
+        periods_with_data = 0
+        for k in range(2500):                           # 10 s of 4 ms control periods
+            ap.service(telem._replace(t_s=t0 + 0.004 * k))
+            time.sleep(0.0002 if k % 50 else 0.002)     # loopback delivery
+            got = b""
+            with contextlib.suppress(BlockingIOError):
+                while chunk := gcs.recv(65536):
+                    got += chunk
+            periods_with_data += bool(got)
+        assert periods_with_data == 100
+    finally:
+        gcs.close()
+        ep.close()
