@@ -10,6 +10,7 @@ winder stays braked.
 from __future__ import annotations
 
 import argparse
+import gc
 import math
 import signal
 import sys
@@ -150,6 +151,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     can_text = f", winder on CAN {node.link.description}" if node else ", winder braked"
     print(f"plant: listening on tcp:127.0.0.1:{server.port} "
           f"({server.pacing.replace('-', ' ')}{can_text})", flush=True)
+    # the start-up's objects (numpy, numba, pymavlink and their modules: most of the heap)
+    # move to the collector's permanent generation, so its full collections during the
+    # run no longer walk them: about a tenth of the loop's CPU (docs/performance.md)
+    gc.collect()
+    gc.freeze()
     try:
         summary = server.serve(max_sim_time_s=args.duration, stop_event=stop,
                                accept_timeout_s=args.accept_timeout)
