@@ -312,8 +312,9 @@ class SimLinkServer:
                     last_sent = sent
                 if pending and not self.real_time:
                     # lockstep: the caller's work for the state just reached (the winder's
-                    # CAN traffic, its wait for the ground station's answer, the truth log)
-                    # runs while the companion computes its answer, off the critical path
+                    # CAN traffic, its wait for the ground station's answer to an earlier
+                    # period's encoder frame, the truth log) runs while the companion
+                    # computes its answer, off the critical path
                     pending = False
                     self.on_step(self)  # type: ignore[misc]
                 answered, n_late, n_ignored = self._wait_answer(t_us, deadline, stop)

@@ -3,8 +3,10 @@
 Every control period the plant process hands the node the frames the bus delivered
 (:meth:`WinderCanNode.service`), lets the axis and the sensors emit what is due for the
 current simulated time, and reads back the motor's state for the drum: powered or braked,
-and the torque it is asked for. The plant applies the torque limits' cut-back near the
-velocity limit itself (``sitl.kernel.motor_torque``).
+and the torque it is asked for. A host's answer to an encoder frame applies from the next
+control period on, in lockstep as in real time (:meth:`WinderCanNode.tick`). The plant
+applies the torque limits' cut-back near the velocity limit itself
+(``sitl.kernel.motor_torque``).
 """
 
 from __future__ import annotations
@@ -82,8 +84,8 @@ class WinderCanNode:
 
     def await_host(self, t_s: float) -> None:
         """In lockstep, once a host has shown itself, wait (at most ``answer_timeout_s`` of
-        wall time) for its answer to the encoder frame just sent, so the torque it computes
-        from the drum's state at ``t_s`` applies from ``t_s`` on."""
+        wall time) for its answer to the last encoder frame sent, if it has not come yet;
+        ``t_s`` [s] is the simulated time it is received at."""
         if not (self.lockstep and self.host_seen and self._awaiting):
             return
         end = time.monotonic() + self.answer_timeout_s
@@ -97,7 +99,15 @@ class WinderCanNode:
 
     def tick(self, t_s: float) -> tuple[float, bool]:
         """Emit the cyclic frames due at ``t_s`` [s]; returns (torque request [N m], motor
-        powered) for the plant's winder inputs."""
+        powered) for the plant's winder inputs.
+
+        In lockstep it first waits for the host's answer to the encoder frame of an earlier
+        period (:meth:`await_host`): the torque a host computes from the drum's state at
+        one control period applies from the next, whatever the host's speed. That is the
+        timing of real time, where the answer arrives during the period and the plant
+        reads it just before the next one's physics; lockstep keeps it exactly, and the
+        ground station computes while the plant and the companion go on."""
+        self.await_host(t_s)
         p = self.plant
         axis = self.axis
         length = p.tether_length_m
@@ -126,7 +136,6 @@ class WinderCanNode:
             # every frame of the instant built first, then sent back to back: a host
             # tends to find them together, and wakes once
             self._send(frames)
-        self.await_host(t_s)
         return axis.torque_command_nm, axis.enabled
 
     def _send(self, frames: list) -> None:

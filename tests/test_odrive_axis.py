@@ -500,3 +500,70 @@ def test_winder_node_ignores_29_bit_frames_of_other_protocols():
     assert node.frames_received == 4
     assert replies == [cp.frame_id(0, Cmd.GET_ENCODER_ESTIMATES)]
     assert node.axis.rx_frames == 1
+
+
+def _lockstep_torques(channel: str, delays_s: tuple[float, ...]) -> list[tuple[float, bool]]:
+    """(torque the node returns, whether it sent an encoder frame) per control period, over
+    0.4 s of lockstep against a host thread that answers the n-th encoder frame with
+    0.01 n N m after ``delays_s[n % len]`` [s] of wall time."""
+    import threading
+    import time
+
+    from sitl.plant import Plant
+    from sitl.winder_node import WinderCanNode
+    from tuavdefs.canbus import CanLink
+    from tuavdefs.params import SystemParams
+
+    node_link, host = CanLink(f"virtual:{channel}"), CanLink(f"virtual:{channel}")
+    node = WinderCanNode(node_link, Plant(SystemParams()), lockstep=True)
+    encoder_id = cp.frame_id(0, Cmd.GET_ENCODER_ESTIMATES)
+    stop = threading.Event()
+
+    def answer() -> None:
+        n = 0
+        while not stop.is_set():
+            rx = host.recv(0.01)
+            if rx is None or rx.arbitration_id != encoder_id or rx.is_remote:
+                continue
+            time.sleep(delays_s[n % len(delays_s)])
+            n += 1
+            host.send(cp.frame_id(0, Cmd.SET_INPUT_TORQUE), cp.encode_set_input_torque(0.01 * n))
+
+    # armed before the first period, so the node waits for the host from the start
+    host.send(cp.frame_id(0, Cmd.CLEAR_ERRORS), cp.encode_clear_errors())
+    host.send(cp.frame_id(0, Cmd.SET_CONTROLLER_MODE), cp.encode_set_controller_mode(
+        cp.ControlMode.TORQUE, cp.InputMode.PASSTHROUGH))
+    host.send(cp.frame_id(0, Cmd.SET_AXIS_STATE),
+              cp.encode_set_axis_state(cp.AxisState.CLOSED_LOOP_CONTROL))
+    thread = threading.Thread(target=answer, daemon=True)
+    thread.start()
+    out = []
+    try:
+        for k in range(100):
+            t = k * 0.004
+            node.service(t)
+            torque, enabled = node.tick(t)
+            assert enabled
+            out.append((torque, node._awaiting))
+    finally:
+        stop.set()
+        thread.join()
+        node_link.close()
+        host.close()
+    assert node.late_answers == 0
+    return out
+
+
+def test_in_lockstep_a_hosts_torque_applies_from_the_next_period_whatever_its_delay():
+    """Real time's timing, kept exactly: the torque answering the encoder frame of one
+    control period is what the plant gets from the next period on, never in the period
+    that sent the frame, and the sequence does not depend on how long the host takes."""
+    quick = _lockstep_torques("lockstep_quick", (0.0,))
+    slow = _lockstep_torques("lockstep_slow", (0.003, 0.0, 0.0015, 0.0005))
+    assert quick == slow
+    sent = 0
+    for torque, sent_now in quick:
+        # the frames sent before this period have all been answered, this one's not yet
+        assert torque == pytest.approx(0.01 * sent, abs=1e-6)
+        sent += sent_now
+    assert sent == 40                       # 100 Hz of simulated time over 0.4 s
