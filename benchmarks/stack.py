@@ -44,7 +44,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from tuav_sitl.realtime import BACKGROUND, RT_PRIORITY, cpu_split, set_affinity, set_background
-from tuav_sitl.up import RECORDER_INTERVAL_S
+from tuav_sitl.up import RECORDER_INTERVAL_S, TELEMETRY_BATCH_S
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -326,7 +326,8 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
         "groundstation": ["-m", "groundstation", "--can", can, "--mavlink",
                           f"127.0.0.1:{comp_port}"],
         "companion": ["-m", "companion", "--sim", f"127.0.0.1:{sim_port}",
-                      "--component-port", str(comp_port), *gains, *flight.companion_args],
+                      "--component-port", str(comp_port), *gains, *flight.companion_args,
+                      *([] if real_time else ["--telemetry-batch", repr(TELEMETRY_BATCH_S)])],
     }
     ready = {"plant": "listening on", "groundstation": "groundstation: CAN",
              "companion": None}

@@ -129,6 +129,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="push MAVLink by UDP here (repeatable; default 127.0.0.1:14550 and "
                          "127.0.0.1:14540; 'none' for none)")
     ap.add_argument("--tlog", default=None, help="telemetry log of all ground-station traffic")
+    ap.add_argument("--telemetry-batch", type=float, default=0.0, metavar="S",
+                    help="write what a TCP ground station did not ask for (telemetry, "
+                         "broadcasts) at most every S seconds of wall time, replies at once "
+                         "(0: everything at once; tuav-sitl up uses 0.01 in lockstep faster "
+                         "than real time)")
     ap.add_argument("--param-file", default=None,
                     help="parameters persisted here (.parm); loaded at start if present")
     ap.add_argument("--connect-timeout", type=float, default=30.0, help="[s]")
@@ -149,7 +154,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         components = ComponentServer(args.component_port) if args.component_port else None
         endpoints = MavlinkEndpoints(None if args.gcs_tcp < 0 else args.gcs_tcp, udp,
-                                     tlog=TelemetryLog(args.tlog) if args.tlog else None)
+                                     tlog=TelemetryLog(args.tlog) if args.tlog else None,
+                                     batch_s=max(args.telemetry_batch, 0.0))
     except OSError as exc:
         print(f"companion: cannot listen: {exc.strerror} ({exc})", file=sys.stderr)
         return 1

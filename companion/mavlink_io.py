@@ -19,6 +19,7 @@ Unix epoch; pymavlink's ``mavutil.mavlink_connection(path)`` reads it back.
 from __future__ import annotations
 
 import contextlib
+import math
 import select
 import socket
 import struct
@@ -85,14 +86,26 @@ class MavlinkEndpoints:
     ``tcp_port`` 0 picks a free port (see :attr:`tcp_port`); ``None`` disables TCP.
     ``udp_targets`` are the push addresses (one socket each, bound to an ephemeral port on
     127.0.0.1). ``tlog`` records every frame in and out.
+
+    ``batch_s`` [s of wall time], when positive, batches what goes to a TCP client
+    unasked (telemetry streams, broadcasts, forwarded messages): it waits until ``batch_s``
+    has passed since the client's last write and goes out with the next write, which
+    :meth:`flush` makes once it is due, and at once with any reply to the client (ahead of
+    it, so the order is kept). In lockstep many times faster than real time a period's
+    telemetry otherwise wakes a ground station several hundred times a second of wall
+    time, and its CPU is taken from the simulation.
     """
 
     def __init__(self, tcp_port: int | None = GCS_TCP_PORT_DEFAULT,
                  udp_targets: Iterable[Address] = (("127.0.0.1", UDP_GCS_PORT_DEFAULT),
                                                    ("127.0.0.1", UDP_API_PORT_DEFAULT)),
-                 host: str = "127.0.0.1", tlog: TelemetryLog | None = None) -> None:
+                 host: str = "127.0.0.1", tlog: TelemetryLog | None = None,
+                 batch_s: float = 0.0) -> None:
         self.mav = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         self.tlog = tlog
+        self.batch_s = batch_s
+        self._last_write: dict[int, float] = {}   # wall time of each TCP client's last write
+        self._held: set[int] = set()              # TCP clients with batched bytes waiting
         self.bad_frames = 0
         self.listener: socket.socket | None = None
         if tcp_port is not None:
@@ -191,12 +204,20 @@ class MavlinkEndpoints:
 
     @property
     def backlogged(self) -> bool:
-        """Whether some TCP client has bytes it could not take yet (see :meth:`flush`)."""
+        """Whether some TCP client has bytes waiting: that it could not take yet, or
+        batched (see :meth:`flush`)."""
         return bool(self._backlogged)
 
     def flush(self) -> None:
-        """Write out what TCP clients could not take before, as far as they take it now."""
+        """Write out what TCP clients could not take before, as far as they take it now,
+        and batched bytes whose time has come."""
+        held = self._held
+        now = time.monotonic() if held else 0.0
         for fd in list(self._backlogged):
+            if fd in held:
+                if now - self._last_write.get(fd, -math.inf) < self.batch_s:
+                    continue
+                held.discard(fd)
             self._flush_tcp(("tcp", fd))
 
     def _accept(self) -> None:
@@ -275,6 +296,8 @@ class MavlinkEndpoints:
         sock = self._tcp.pop(peer[1], None)
         self._pending.pop(peer[1], None)
         self._backlogged.discard(peer[1])
+        self._held.discard(peer[1])
+        self._last_write.pop(peer[1], None)
         self._links.pop(peer, None)
         if sock is not None:
             sock.close()
@@ -298,7 +321,7 @@ class MavlinkEndpoints:
                 self.tlog.write(frame)
         data = frames[0] if len(frames) == 1 else b"".join(frames)
         if peer[0] == "tcp":
-            self._send_tcp(peer, data)
+            self._send_tcp(peer, data, unasked=True)
         elif peer[0] == "udp":
             self._send_udp(self.udp[peer[1]], peer[2], data)
 
@@ -309,7 +332,7 @@ class MavlinkEndpoints:
         if peer is None:
             for peer_ in self._links_cache:
                 if peer_[0] == "tcp":
-                    self._send_tcp(peer_, data)
+                    self._send_tcp(peer_, data, unasked=True)
             for sock, targets in zip(self.udp, self._broadcast, strict=True):
                 for addr in targets:
                     self._send_udp(sock, addr, data)
@@ -318,11 +341,23 @@ class MavlinkEndpoints:
         elif peer[0] == "udp":
             self._send_udp(self.udp[peer[1]], peer[2], data)
 
-    def _send_tcp(self, peer: Peer, data: bytes) -> None:
+    def _send_tcp(self, peer: Peer, data: bytes, unasked: bool = False) -> None:
         fd = peer[1]
         sock = self._tcp.get(fd)
         if sock is None:
             return
+        if unasked and self.batch_s > 0.0 and (fd in self._held or fd not in self._backlogged):
+            now = time.monotonic()
+            if fd in self._held or now - self._last_write.get(fd, -math.inf) < self.batch_s:
+                # batched: out with the next write (flush, or a reply)
+                pending = self._pending.get(fd)
+                if pending is None:
+                    self._pending[fd] = bytearray(data)
+                elif len(pending) <= _TCP_BACKLOG_BYTES:
+                    pending += data
+                self._held.add(fd)
+                self._backlogged.add(fd)
+                return
         if fd not in self._backlogged:
             # nothing queued before (the usual case): straight to the socket
             n = self._write_tcp(peer, sock, data)
@@ -342,6 +377,7 @@ class MavlinkEndpoints:
         pending = self._pending.get(peer[1])
         if sock is None or not pending:
             return
+        self._held.discard(peer[1])     # a write now: whatever was batched goes with it
         n = self._write_tcp(peer, sock, pending)
         if n is None:
             return
@@ -353,6 +389,8 @@ class MavlinkEndpoints:
                    ) -> int | None:
         """How many bytes of ``data`` the client took now; None if its connection failed
         (then it is dropped)."""
+        if self.batch_s > 0.0:
+            self._last_write[peer[1]] = time.monotonic()
         try:
             return sock.send(data)
         except BlockingIOError:

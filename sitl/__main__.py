@@ -129,18 +129,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         if node is not None:
             t = server.plant.t_s
             node.service(t)
-            torque, enabled = node.tick(t)
-            if server.winder_inputs != (torque, enabled):   # (a new tuple only if new)
-                server.winder_inputs = WinderInputs(torque, enabled)
+            node.tick(t)
         if log is not None:
             log.record(server)
+
+    def before_physics(server: SimLinkServer) -> None:
+        # (in lockstep: the last moment to wait for the ground station's torque)
+        inputs = node.inputs(server.plant.t_s)      # type: ignore[union-attr]
+        if server.winder_inputs != inputs:   # (a new tuple only if new)
+            server.winder_inputs = WinderInputs(*inputs)
 
     try:
         server = SimLinkServer(plant, control_rate_hz=args.control_rate,
                                home=tuple(args.home), port=args.port,
                                real_time=real_time, speedup=args.speedup,
                                sensor_noise=SensorNoise.off() if args.no_noise else None,
-                               on_step=on_step)
+                               on_step=on_step,
+                               before_physics=before_physics if node is not None else None)
     except OSError as exc:
         print(f"plant: cannot listen on 127.0.0.1:{args.port}: {exc.strerror}",
               file=sys.stderr)

@@ -19,12 +19,14 @@ plant itself falls more than a period behind the wall clock it re-anchors its sc
 counts an overrun.
 
 The winder's inputs are not carried by this link (the winder is driven over CAN by another
-process): the caller sets :attr:`SimLinkServer.winder_inputs` between steps, for instance
-from ``on_step``, which is called once for every state a control period reaches, before
-the next period's physics steps: in lockstep just after the batch describing that state
-has gone out (so that the caller's work, such as the winder's CAN traffic, overlaps the
+process): the caller sets :attr:`SimLinkServer.winder_inputs` between steps, from
+``on_step``, which is called once for every state a control period reaches, before the
+next period's physics steps: in lockstep just after the batch describing that state has
+gone out (so that the caller's work, such as the winder's CAN traffic, overlaps the
 companion's), in real time once the answer is in (so that what the caller received while
-waiting, such as a torque command, applies as early as possible).
+waiting, such as a torque command, applies as early as possible); and from
+``before_physics``, called in both modes just before each period's physics steps, once
+the answer is in (in lockstep, the last moment to wait for another process's input).
 
 Malformed, truncated and corrupted frames are counted and dropped; a disconnect of the
 companion, ``stop_event`` or ``max_sim_time_s`` ends :meth:`SimLinkServer.serve` with a
@@ -169,7 +171,8 @@ class SimLinkServer:
                  winder_inputs: WinderInputs = _WINDER_BRAKED,
                  earth_field_ned_gauss: tuple[float, float, float] | None = None,
                  on_step: Callable[[SimLinkServer], None] | None = None,
-                 speedup: float | None = None) -> None:
+                 speedup: float | None = None,
+                 before_physics: Callable[[SimLinkServer], None] | None = None) -> None:
         _check_loopback(host)
         self.plant = plant
         self.control_rate_hz = float(control_rate_hz)
@@ -188,6 +191,7 @@ class SimLinkServer:
             raise ValueError(f"speedup must be > 0, got {speedup!r}")
         self.winder_inputs = winder_inputs
         self.on_step = on_step
+        self.before_physics = before_physics
         suite_kw = {} if earth_field_ned_gauss is None else {
             "earth_field_ned_gauss": tuple(earth_field_ned_gauss)}
         self.sensors = SensorSuite(noise=sensor_noise or SensorNoise(), home=self.home,
@@ -312,9 +316,8 @@ class SimLinkServer:
                     last_sent = sent
                 if pending and not self.real_time:
                     # lockstep: the caller's work for the state just reached (the winder's
-                    # CAN traffic, its wait for the ground station's answer to an earlier
-                    # period's encoder frame, the truth log) runs while the companion
-                    # computes its answer, off the critical path
+                    # CAN traffic, the truth log) runs while the companion computes its
+                    # answer, off the critical path
                     pending = False
                     self.on_step(self)  # type: ignore[misc]
                 answered, n_late, n_ignored = self._wait_answer(t_us, deadline, stop)
@@ -333,6 +336,8 @@ class SimLinkServer:
                 # the pacing's statistics start once the companion has answered (before
                 # that it is still starting up)
                 in_service = in_service or answered or n_late > 0
+                if self.before_physics is not None:
+                    self.before_physics(self)
                 self._advance()
                 self.steps += 1
                 pending = self.on_step is not None

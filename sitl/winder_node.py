@@ -4,7 +4,7 @@ Every control period the plant process hands the node the frames the bus deliver
 (:meth:`WinderCanNode.service`), lets the axis and the sensors emit what is due for the
 current simulated time, and reads back the motor's state for the drum: powered or braked,
 and the torque it is asked for. A host's answer to an encoder frame applies from the next
-control period on, in lockstep as in real time (:meth:`WinderCanNode.tick`). The plant
+control period on, in lockstep as in real time (:meth:`WinderCanNode.inputs`). The plant
 applies the torque limits' cut-back near the velocity limit itself
 (``sitl.kernel.motor_torque``).
 """
@@ -46,6 +46,7 @@ class WinderCanNode:
         self.host_seen = False
         self.late_answers = 0
         self._awaiting = False
+        self._encoder_t = -math.inf      # when the last encoder frame was sent [s]
         self.plant = plant
         w = plant.params.winder
         self.axis = OdriveAxis(axis_node_id, watchdog_timeout_s=watchdog_timeout_s,
@@ -101,13 +102,8 @@ class WinderCanNode:
         """Emit the cyclic frames due at ``t_s`` [s]; returns (torque request [N m], motor
         powered) for the plant's winder inputs.
 
-        In lockstep it first waits for the host's answer to the encoder frame of an earlier
-        period (:meth:`await_host`): the torque a host computes from the drum's state at
-        one control period applies from the next, whatever the host's speed. That is the
-        timing of real time, where the answer arrives during the period and the plant
-        reads it just before the next one's physics; lockstep keeps it exactly, and the
-        ground station computes while the plant and the companion go on."""
-        self.await_host(t_s)
+        Sends without waiting for a host; the plant takes its inputs for the physics from
+        :meth:`inputs`."""
         p = self.plant
         axis = self.axis
         length = p.tether_length_m
@@ -119,7 +115,11 @@ class WinderCanNode:
         if frames:
             for f in frames:
                 if f.arbitration_id == self._encoder_id and not f.is_remote:
+                    # one encoder frame unanswered at a time (at control rates above the
+                    # encoder's 100 Hz it never waits here)
+                    self.await_host(t_s)
                     self._awaiting = True
+                    self._encoder_t = t_s
         # solved every period, not only when the sensors send: each solve starts from the
         # last one's solution, and the tensions sent must not depend on when it last ran
         tf = p.tether_forces()
@@ -137,6 +137,20 @@ class WinderCanNode:
             # tends to find them together, and wakes once
             self._send(frames)
         return axis.torque_command_nm, axis.enabled
+
+    def inputs(self, t_s: float) -> tuple[float, bool]:
+        """(torque request [N m], motor powered) for the plant's physics from ``t_s`` [s] on.
+
+        In lockstep it first waits for the host's answer to an encoder frame sent at an
+        earlier period (:meth:`await_host`; one sent at ``t_s`` itself is answered for the
+        next period): the torque a host computes from the drum's state at one control
+        period applies from the next, whatever the host's speed. That is the timing of real
+        time, where the answer arrives during the period and the plant reads it just
+        before the next one's physics; lockstep keeps it exactly, and the ground station
+        computes while the plant and the companion go on."""
+        if self._awaiting and self._encoder_t < t_s:
+            self.await_host(t_s)
+        return self.axis.torque_command_nm, self.axis.enabled
 
     def _send(self, frames: list) -> None:
         self.frames_sent += self.link.send_frames(frames)

@@ -563,3 +563,46 @@ def test_telemetry_due_at_one_instant_goes_out_in_one_period():
     finally:
         gcs.close()
         ep.close()
+
+
+def test_batched_telemetry_waits_for_its_interval_and_replies_take_it_along():
+    """With ``batch_s``, what a TCP ground station did not ask for goes out at most every
+    ``batch_s`` of wall time (flush), and a reply carries what waited ahead of it: every
+    frame arrives, in the order sent."""
+    ep = MavlinkEndpoints(0, [], batch_s=0.3)
+    gcs = socket.create_connection(("127.0.0.1", ep.tcp_port))
+    gcs.settimeout(0.05)
+    try:
+        while not ep.links():
+            ep.poll(0.1)
+        peer = ep.links()[0]
+
+        def frame(k: int) -> bytes:
+            return ep.pack(M.MAVLink_system_time_message(k, k))
+
+        def received() -> bytes:
+            got = b""
+            with contextlib.suppress(TimeoutError):
+                while chunk := gcs.recv(65536):
+                    got += chunk
+            return got
+
+        ep.send_frames([frame(1)], peer)        # the first in a while: at once
+        assert received() == frame(1)
+        ep.send_frames([frame(2)], peer)        # within the interval: held
+        ep.send_bytes(frame(3))                 # a broadcast too
+        ep.flush()
+        assert ep.backlogged and received() == b""
+        time.sleep(0.35)
+        ep.flush()                              # its time has come
+        assert not ep.backlogged and received() == frame(2) + frame(3)
+        four = frame(4)
+        ep.send_frames([four], peer)            # held again ...
+        ep.send(M.MAVLink_command_ack_message(1, 0), peer)   # ... until a reply
+        got = received()
+        assert got.startswith(four)
+        msgs = mavutil.mavlink.MAVLink(None).parse_buffer(got[len(four):])
+        assert [m.get_type() for m in msgs] == ["COMMAND_ACK"]
+    finally:
+        gcs.close()
+        ep.close()

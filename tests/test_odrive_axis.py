@@ -542,9 +542,10 @@ def _lockstep_torques(channel: str, delays_s: tuple[float, ...]) -> list[tuple[f
         for k in range(100):
             t = k * 0.004
             node.service(t)
-            torque, enabled = node.tick(t)
+            node.tick(t)
+            torque, enabled = node.inputs(t)
             assert enabled
-            out.append((torque, node._awaiting))
+            out.append((torque, node._encoder_t == t))
     finally:
         stop.set()
         thread.join()

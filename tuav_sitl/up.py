@@ -40,8 +40,12 @@ READY_TIMEOUT_S = 60.0
 #: How long a process gets to exit after SIGTERM before it is killed [s].
 STOP_GRACE_S = 2.0
 #: The bus recorder's wait between bursts of frames [s]: the frames keep their receive
-#: times; its socket holds a few hundred frames, a second of the bus at 20x real time.
+#: times; its socket holds about half a second of the bus at 20x real time.
 RECORDER_INTERVAL_S = 0.01
+#: In lockstep faster than real time, the companion writes a TCP ground station what it
+#: did not ask for (telemetry, broadcasts) at most this often [s of wall time]; replies
+#: go at once.
+TELEMETRY_BATCH_S = 0.01
 
 
 class UpError(RuntimeError):
@@ -317,6 +321,8 @@ def run_up(args: argparse.Namespace) -> int:
                  "--param-file", str(run_dir / "companion.parm"), *common]
     if args.goto is not None:
         comp_args += ["--goto", *map(str, args.goto)]
+    if speedup != 1.0:
+        comp_args += ["--telemetry-batch", repr(TELEMETRY_BATCH_S)]
     gs_args = ["-m", "groundstation", "--can", can, "--mavlink",
                f"127.0.0.1:{ports.component}", *common]
     stack = Stack(run_dir, echo=args.verbose)
