@@ -102,8 +102,9 @@ class WinderCanNode:
         """Emit the cyclic frames due at ``t_s`` [s]; returns (torque request [N m], motor
         powered) for the plant's winder inputs.
 
-        Sends without waiting for a host; the plant takes its inputs for the physics from
-        :meth:`inputs`."""
+        It waits for a host only to keep one encoder frame unanswered at a time (at
+        control rates above the encoder's 100 Hz, never: :meth:`inputs` has waited
+        already); the plant takes its inputs for the physics from :meth:`inputs`."""
         p = self.plant
         axis = self.axis
         length = p.tether_length_m
@@ -115,9 +116,7 @@ class WinderCanNode:
         if frames:
             for f in frames:
                 if f.arbitration_id == self._encoder_id and not f.is_remote:
-                    # one encoder frame unanswered at a time (at control rates above the
-                    # encoder's 100 Hz it never waits here)
-                    self.await_host(t_s)
+                    self.await_host(t_s)     # (the one before, if still unanswered)
                     self._awaiting = True
                     self._encoder_t = t_s
         # solved every period, not only when the sensors send: each solve starts from the
