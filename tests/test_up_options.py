@@ -91,3 +91,21 @@ def test_the_recorder_runs_at_idle_priority_in_lockstep():
     finally:
         proc.kill()
         proc.wait()
+
+
+def test_the_stack_waits_for_the_plants_own_end(tmp_path):
+    """When the companion ends first (the plant closing the link at the end of its run),
+    ``up`` waits for the plant's own exit to decide: a process that ends in time gives its
+    code, one that does not gives None."""
+    from tuav_sitl.up import Stack
+
+    stack = Stack(tmp_path, echo=False)
+    sleep = [sys.executable, "-c", "import sys, time; time.sleep(float(sys.argv[1]))"]
+    stack.procs["plant"] = subprocess.Popen([*sleep, "0.3"])
+    stack.procs["companion"] = subprocess.Popen([*sleep, "30"])
+    try:
+        assert stack.wait_exit("plant", 10.0) == ("plant", 0)
+        assert stack.wait_exit("companion", 0.2) is None
+    finally:
+        stack.procs["companion"].kill()
+        stack.procs["companion"].wait()

@@ -133,6 +133,14 @@ class Stack:
                 return name, code
         return None
 
+    def wait_exit(self, name: str, timeout_s: float) -> tuple[str, int] | None:
+        """(name, exit code) of process ``name`` once it has exited, waiting at most
+        ``timeout_s`` [s]; None if it is still running."""
+        try:
+            return name, self.procs[name].wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            return None
+
     def stop(self) -> None:
         """SIGTERM to all, then SIGKILL to whatever is left after the grace time."""
         everyone = [*self.procs.values(), *self.recorders.values()]
@@ -359,6 +367,11 @@ def run_up(args: argparse.Namespace) -> int:
             ended = stack.first_exit()
             if ended is not None:
                 name, rc = ended
+                if name != "plant" and rc == 0:
+                    # the plant ending its run (--duration) closes the link, and the
+                    # companion may exit first: the plant's own end decides
+                    ended = stack.wait_exit("plant", STOP_GRACE_S) or ended
+                    name, rc = ended
                 if name == "plant" and rc == 0:
                     if not args.headless:
                         print(f"tuav-sitl up: plant finished: "
