@@ -304,8 +304,11 @@ def bench_processes(quick: bool) -> list[Row]:
         cpu = ls["cpu_s"]
         rows.append(Row(
             stack_name, ls["rtf"], "sim s / wall s",
-            note=f"{ls['flight']} over MAVLink TCP, from the ground: "
-                 f"{ls['sim_s']:.0f} s simulated in "
+            note=f"{ls['flight']} over MAVLink TCP, from the ground; "
+                 + (f"the median of {len(ls['rtf_runs'])} flights ("
+                    + ", ".join(f"{r:.2f}x" for r in sorted(ls["rtf_runs"])) + "): "
+                    if len(ls.get("rtf_runs", ())) > 1 else "")
+                 + f"{ls['sim_s']:.0f} s simulated in "
                  f"{ls['wall_s']:.2f} s; {ls['mission']}; CPU (per control period) "
                  + ", ".join(f"{_PROCESS_LABELS.get(k, k)} {v:.2f} s "
                              f"({v / (ls['sim_s'] * 250.0) * 1e6:.0f} us)"
