@@ -43,7 +43,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from tuav_sitl.realtime import BACKGROUND, RT_PRIORITY, cpu_split, set_affinity, set_background
+from tuav_sitl.realtime import (
+    BACKGROUND,
+    NICENESS,
+    RT_PRIORITY,
+    cpu_split,
+    set_affinity,
+    set_background,
+    set_nice,
+)
 from tuav_sitl.up import RECORDER_INTERVAL_S, TELEMETRY_BATCH_S
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -302,8 +310,9 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
     companion has connected; ``on_connected`` is called then too (the flight begins).
     As ``tuav-sitl up`` runs them: the bus recorder (``tuav-sitl candump -L`` to a log)
     listens too unless ``recorder`` is False, and in lockstep the plant gets a CPU of its
-    own and the others share the rest (:func:`tuav_sitl.realtime.cpu_split`) unless ``pin``
-    is False (None: pin in lockstep only)."""
+    own, the companion and the ground station (at :data:`tuav_sitl.realtime.NICENESS`)
+    share the rest and the recorder runs at idle priority beside the plant
+    (:mod:`tuav_sitl.realtime`) unless ``pin`` is False (None: pin in lockstep only)."""
     flight = flight if flight is not None else goto_flight()
     if (duration_s is None) == (not flight.client):
         raise ValueError("a flight without a client needs a duration; one with a client "
@@ -366,6 +375,8 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
                 set_affinity(p.pid, split[name])
             if split is not None and name in BACKGROUND:
                 set_background(p.pid)
+            if split is not None and name in NICENESS and priority is None:
+                set_nice(p.pid, NICENESS[name])
         if profile:   # the flight begins: profile from here (benchmarks.profiled)
             for name in PROCESSES:
                 procs[name].send_signal(signal.SIGUSR1)

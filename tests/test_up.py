@@ -29,6 +29,7 @@ def test_a_run_ends_cleanly_with_its_folder(session):
     if len(os.sched_getaffinity(0)) >= 2:   # lockstep: the plant on a CPU of its own
         assert "scheduling: plant on CPU" in n["stdout"]
         assert "recorder at idle priority" in n["stdout"]
+        assert "ground station (nice 5)" in n["stdout"]
 
 
 def test_ctrl_c_stops_all_three_within_3_s(session):

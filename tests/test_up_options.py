@@ -93,6 +93,20 @@ def test_the_recorder_runs_at_idle_priority_in_lockstep():
         proc.wait()
 
 
+def test_the_ground_station_yields_to_the_companion_in_lockstep():
+    from tuav_sitl.realtime import NICENESS, set_nice
+
+    assert NICENESS == {"groundstation": 5}
+    proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        assert os.getpriority(os.PRIO_PROCESS, proc.pid) == 0
+        assert set_nice(proc.pid, 5) is None
+        assert os.getpriority(os.PRIO_PROCESS, proc.pid) == 5
+    finally:
+        proc.kill()
+        proc.wait()
+
+
 def test_the_stack_waits_for_the_plants_own_end(tmp_path):
     """When the companion ends first (the plant closing the link at the end of its run),
     ``up`` waits for the plant's own exit to decide: a process that ends in time gives its

@@ -394,10 +394,17 @@ def run_up(args: argparse.Namespace) -> int:
 
 
 def _pin(stack: Stack) -> str:
-    """In lockstep: the plant on a CPU of its own, the companion and the ground station on
-    the rest, the recorder at idle priority on the plant's
-    (:func:`tuav_sitl.realtime.cpu_split`); returns the banner's words for it."""
-    from tuav_sitl.realtime import BACKGROUND, cpu_split, set_affinity, set_background
+    """In lockstep: the plant on a CPU of its own, the companion and the ground station (at
+    a lower priority) on the rest, the recorder at idle priority on the plant's
+    (:mod:`tuav_sitl.realtime`); returns the banner's words for it."""
+    from tuav_sitl.realtime import (
+        BACKGROUND,
+        NICENESS,
+        cpu_split,
+        set_affinity,
+        set_background,
+        set_nice,
+    )
 
     split = cpu_split()
     if split is None:
@@ -408,12 +415,15 @@ def _pin(stack: Stack) -> str:
             why = set_affinity(proc.pid, split[name]) or why
         if name in BACKGROUND:
             why = set_background(proc.pid) or why
+        if name in NICENESS:
+            why = set_nice(proc.pid, NICENESS[name]) or why
     if why is not None:
         return f"normal (CPU affinity: {why})"
     plant = ",".join(map(str, sorted(split["plant"])))
     rest = ",".join(map(str, sorted(split["companion"])))
-    return (f"plant on CPU {plant}, companion and ground station on CPU {rest}, "
-            f"recorder at idle priority on CPU {plant}")
+    return (f"plant on CPU {plant}, companion and ground station (nice "
+            f"{NICENESS['groundstation']}) on CPU {rest}, recorder at idle priority on CPU "
+            f"{plant}")
 
 
 def _banner(run_dir: Path, ports: Ports, can: str, args: argparse.Namespace,
