@@ -1,5 +1,5 @@
-"""Scheduling of the stack's processes: SCHED_FIFO in real time, CPU affinity (and idle
-priority for the bus recorder) in lockstep.
+"""Scheduling of the stack's processes: SCHED_FIFO in real time; in lockstep CPU affinity,
+idle priority for the bus recorder and a lower one for the ground station.
 
 Paced by the wall clock, the plant and the companion must each get the CPU within a
 fraction of a 4 ms control period. Under the default scheduler a process woken while busy
