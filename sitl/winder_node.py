@@ -98,13 +98,13 @@ class WinderCanNode:
                 return
             self._receive(t_s, rx)
 
-    def tick(self, t_s: float) -> tuple[float, bool]:
-        """Emit the cyclic frames due at ``t_s`` [s]; returns (torque request [N m], motor
-        powered) for the plant's winder inputs.
+    def tick(self, t_s: float) -> None:
+        """Emit the cyclic frames due at ``t_s`` [s]; the plant takes its inputs for the
+        physics from :meth:`inputs`.
 
         It waits for a host only to keep one encoder frame unanswered at a time (at
         control rates above the encoder's 100 Hz, never: :meth:`inputs` has waited
-        already); the plant takes its inputs for the physics from :meth:`inputs`."""
+        already)."""
         p = self.plant
         axis = self.axis
         length = p.tether_length_m
@@ -135,7 +135,6 @@ class WinderCanNode:
             # every frame of the instant built first, then sent back to back: a host
             # tends to find them together, and wakes once
             self._send(frames)
-        return axis.torque_command_nm, axis.enabled
 
     def inputs(self, t_s: float) -> tuple[float, bool]:
         """(torque request [N m], motor powered) for the plant's physics from ``t_s`` [s] on.

@@ -458,8 +458,8 @@ def test_winder_node_sends_each_instants_sensor_frames_before_its_encoder_frame(
         bursts = []
         for k in range(250):                       # 1 s of 4 ms control periods
             t = k * 0.004
-            torque, enabled = node.tick(t)
-            assert (torque, enabled) == (0.0, False)
+            node.tick(t)
+            assert node.inputs(t) == (0.0, False)
             burst = []
             while (rx := host.recv(0.0)) is not None:
                 burst.append(cp.split_id(rx.arbitration_id))
