@@ -346,18 +346,18 @@ class MavlinkEndpoints:
         sock = self._tcp.get(fd)
         if sock is None:
             return
-        if unasked and self.batch_s > 0.0 and (fd in self._held or fd not in self._backlogged):
-            now = time.monotonic()
-            if fd in self._held or now - self._last_write.get(fd, -math.inf) < self.batch_s:
-                # batched: out with the next write (flush, or a reply)
-                pending = self._pending.get(fd)
-                if pending is None:
-                    self._pending[fd] = bytearray(data)
-                elif len(pending) <= _TCP_BACKLOG_BYTES:
-                    pending += data
-                self._held.add(fd)
-                self._backlogged.add(fd)
-                return
+        if unasked and self.batch_s > 0.0 and (
+                fd in self._held or (fd not in self._backlogged and time.monotonic()
+                                     - self._last_write.get(fd, -math.inf) < self.batch_s)):
+            # batched: out with the next write (flush, or a reply)
+            pending = self._pending.get(fd)
+            if pending is None:
+                self._pending[fd] = bytearray(data)
+            elif len(pending) <= _TCP_BACKLOG_BYTES:
+                pending += data
+            self._held.add(fd)
+            self._backlogged.add(fd)
+            return
         if fd not in self._backlogged:
             # nothing queued before (the usual case): straight to the socket
             n = self._write_tcp(peer, sock, data)
