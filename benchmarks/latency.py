@@ -99,12 +99,14 @@ def measure(work: Path, duration_s: float, control_rate_hz: float = 250.0) -> di
     def on_step(server: SimLinkServer) -> None:
         t = server.plant.t_s
         node.service(t)
-        torque, enabled = node.tick(t)
-        server.winder_inputs = WinderInputs(torque, enabled)
+        node.tick(t)
+
+    def before_physics(server: SimLinkServer) -> None:
+        server.winder_inputs = WinderInputs(*node.inputs(server.plant.t_s))
 
     port = _free_port()
     server = TracedServer(plant, control_rate_hz=control_rate_hz, port=port, real_time=True,
-                          on_step=on_step)
+                          on_step=on_step, before_physics=before_physics)
     py = sys.executable
     with open(work / "companion.log", "w") as log:
         comp = subprocess.Popen([py, "-m", "companion", "--sim", f"127.0.0.1:{port}",
