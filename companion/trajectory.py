@@ -21,9 +21,9 @@ Profiles (``u = (t - t0) / T`` is normalised time):
   time ``tau`` the coefficients ``c0 = p0, c1 = v0, c2 = a0/2,
   c3 = (20D - 12 v0 T - 3 a0 T^2) / (2T^3), c4 = (-30D + 16 v0 T + 3 a0 T^2) / (2T^4),
   c5 = (12D - 6 v0 T - a0 T^2) / (2T^5)`` with ``D = g - p0``. ``T`` is the shortest
-  duration found (geometric scan, then bisection) whose exact peak speed and acceleration
-  (maxima of the squared-norm polynomials over the segment, from the roots of their
-  derivatives) are within the limits. A single quintic cannot always do that when
+  duration found (geometric scan, then a bracketed regula falsi) whose exact peak speed
+  and acceleration (maxima of the squared-norm polynomials over the segment, from the
+  roots of their derivatives) are within the limits. A single quintic cannot always do that when
   ``a0 != 0`` (its velocity picks up ``a0 T h'(u)``, up to ``~ a0 T / 15``), so a two-phase
   plan is also tried: first the acceleration is brought to zero over ``tau1`` (0.5 s,
   halved as needed) as ``a = (1 - x)(a0 + x d)``, ``x = tau / tau1``, where
@@ -52,6 +52,7 @@ Profiles (``u = (t - t0) / T`` is normalised time):
 from __future__ import annotations
 
 import bisect
+import functools
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable
@@ -60,6 +61,7 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.polynomial import polynomial as npoly
+from scipy.linalg.lapack import dgeev as _dgeev
 from scipy.optimize import minimize_scalar
 
 from tuavdefs.frames import wrap_pi
@@ -226,25 +228,43 @@ def _peak_norm(c: np.ndarray) -> float:
     if scale == 0.0 or not math.isfinite(scale):
         return scale
     c = c / scale  # so that squaring neither underflows nor overflows
-    sq = np.convolve(c[0], c[0])
-    for row in c[1:]:
-        sq = sq + np.convolve(row, row)
-    vals = [np.polyval(sq[::-1], _PEAK_GRID)]
-    d = sq[1:] * np.arange(1, len(sq))  # ascending derivative
+    n = 2 * c.shape[1] - 1
+    # The squared norm's coefficients: the anti-diagonal sums of the Gram matrix of c's
+    # columns (np.polyval's Python loop would cost more than the whole rest).
+    sq = np.bincount(_antidiagonals(c.shape[1]), weights=(c.T @ c).ravel(), minlength=n)
+    best = float((_grid_powers(n) @ sq).max())
+    d = sq[1:] * np.arange(1, n)  # ascending derivative
     m = len(d)
     while m > 1 and abs(d[m - 1]) < 1e-300:
         m -= 1
     if m > 1:
         comp = np.eye(m - 1, k=-1)  # companion matrix of the monic derivative
         comp[0, :] = -d[m - 2::-1] / d[m - 1]
+        roots = None
         if np.isfinite(comp).all():
-            roots = np.linalg.eigvals(comp).real
-        else:  # pathological leading coefficient: fall back to a dense grid
+            # LAPACK's geev without numpy.linalg's wrapper, which costs twice the solve
+            wr, _, _, _, info = _dgeev(comp, compute_vl=0, compute_vr=0)
+            if info == 0:
+                roots = wr
+        if roots is None:  # pathological leading coefficient: fall back to a dense grid
             roots = np.linspace(0.0, 1.0, 4097)
         roots = roots[(roots >= 0.0) & (roots <= 1.0)]
         if roots.size:
-            vals.append(np.polyval(sq[::-1], roots))
-    return scale * math.sqrt(max(max(float(v.max()) for v in vals), 0.0))
+            best = max(best, float((roots[:, None] ** np.arange(n) @ sq).max()))
+    return scale * math.sqrt(max(best, 0.0))
+
+
+@functools.cache
+def _antidiagonals(m: int) -> np.ndarray:
+    """Flat index i + j of each element (i, j) of an m x m matrix."""
+    k = np.arange(m)
+    return (k[:, None] + k[None, :]).ravel()
+
+
+@functools.cache
+def _grid_powers(n: int) -> np.ndarray:
+    """The peak grid's powers 0 .. n-1, (grid, n): times ascending coefficients, values."""
+    return _PEAK_GRID[:, None] ** np.arange(n)
 
 
 def _piece_peaks(dur: float, c: np.ndarray) -> tuple[float, float]:
@@ -290,39 +310,78 @@ def _search_quintic(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, goal: np.nda
                     v_max: float, a_max: float, t_min: float) -> tuple[float | None, float]:
     """(shortest feasible duration or None, least-violating duration seen)."""
 
-    def ratio(T: float) -> float:
-        return _limit_ratio([(T, _quintic_to_rest(p0, v0, a0, goal, T))], v_max, a_max)
+    limit = 1.0 + _LIMIT_RTOL
+
+    def excess(T: float) -> float:
+        """Largest of peak speed / v_max and peak acceleration / a_max, less the limit."""
+        return _limit_ratio([(T, _quintic_to_rest(p0, v0, a0, goal, T))], v_max,
+                            a_max) - limit
 
     dist = math.hypot(*(goal - p0))  # hypot, not np.linalg.norm: no underflow of tiny moves
     vn, an = math.hypot(*v0), math.hypot(*a0)
     # Necessary conditions: cover the distance at v_max; stop from v0 at a_max.
     T = max(t_min, dist / v_max, vn / a_max, 1e-3)
-    prev = None
-    best_r, best_T = math.inf, T
+    prev, f_prev = None, math.inf
+    best_f, best_T = math.inf, T
     for _ in range(_SCAN_STEPS):
         # At u*, |v| >= |a0| T h'(u*) - |v0| |g'(u*)| - D s'(u*) / T, which only grows with T:
         # once it exceeds v_max, no longer duration can work either.
-        if an * T * _H1 - vn * _G1 - dist * _S1 / T > v_max * (1.0 + _LIMIT_RTOL):
+        if an * T * _H1 - vn * _G1 - dist * _S1 / T > v_max * limit:
             break
-        r = ratio(T)
-        if r <= 1.0 + _LIMIT_RTOL:
+        f = excess(T)
+        if f <= 0.0:
             if prev is None:
                 return T, T
-            # Feasibility need not be monotone in T, so keep the invariant lo infeasible /
-            # hi feasible rather than assume it.
-            lo, hi = prev, T
-            while hi / lo - 1.0 > _BISECT_RTOL:
-                mid = math.sqrt(lo * hi)
-                if ratio(mid) <= 1.0 + _LIMIT_RTOL:
-                    hi = mid
-                else:
-                    lo = mid
+            hi = _bracket_boundary(excess, prev, f_prev, T, f)
             return hi, hi
-        if r < best_r:
-            best_r, best_T = r, T
-        prev = T
+        if f < best_f:
+            best_f, best_T = f, T
+        prev, f_prev = T, f
         T *= _SCAN_RATIO
     return None, best_T
+
+
+def _bracket_boundary(excess: Callable[[float], float], lo: float, f_lo: float, hi: float,
+                      f_hi: float) -> float:
+    """A duration ``hi`` [s] with ``excess(hi) <= 0`` and, within ``_BISECT_RTOL`` below
+    it, a duration ``lo`` with ``excess(lo) > 0``; from such a bracket (lo, hi) with
+    ``f_lo = excess(lo) > 0 >= f_hi = excess(hi)``.
+
+    Feasibility need not be monotone in T, so the bracket keeps lo infeasible and hi
+    feasible rather than assume it. Steps are regula falsi in log T with the
+    Anderson-Bjoerck weighting, aimed a third of the tolerance past the root estimate
+    toward the end that did not move last, so that once the estimate is that good the
+    other end closes in too (about six evaluations where bisection takes twenty). A
+    bisection follows whenever the bracket has not halved in the last four steps, so that
+    the worst case stays within a few times bisection's.
+    """
+    bias = math.log1p(_BISECT_RTOL / 3.0)
+    widths = [math.inf] * 4
+    side = 0  # which end the last step moved: -1 lo, +1 hi
+    while hi / lo - 1.0 > _BISECT_RTOL:
+        a, b = math.log(lo), math.log(hi)
+        if b - a > 0.5 * widths[-4] or f_lo == f_hi:
+            x = 0.5 * (a + b)
+        else:
+            x = b - f_hi * (b - a) / (f_hi - f_lo) - side * bias
+        T = math.exp(x)
+        if not lo < T < hi:  # rounding, or the aim left the bracket: bisect
+            T = math.sqrt(lo * hi)
+            if not lo < T < hi:
+                break
+        widths.append(b - a)
+        f = excess(T)
+        if f <= 0.0:
+            if side == 1:  # hi moved twice: weigh lo down (Anderson-Bjoerck)
+                m = 1.0 - f / f_hi if f_hi < 0.0 else 0.0
+                f_lo *= m if m > 0.0 else 0.5
+            hi, f_hi, side = T, f, 1
+        else:
+            if side == -1:
+                m = 1.0 - f / f_lo
+                f_hi *= m if m > 0.0 else 0.5
+            lo, f_lo, side = T, f, -1
+    return hi
 
 
 def _acc_ramp_down(p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, v_max: float,

@@ -15,6 +15,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from companion.trajectory import (
+    _BISECT_RTOL,
     DEFAULT_MAX_YAW_ACC_RAD_S2,
     DEFAULT_MAX_YAW_RATE_RAD_S,
     DEFAULT_MIN_DURATION_S,
@@ -33,6 +34,8 @@ from companion.trajectory import (
     Trajectory,
     Transition,
     WaypointFollower,
+    _bracket_boundary,
+    _peak_norm,
 )
 from tuavdefs.frames import wrap_pi
 
@@ -384,6 +387,69 @@ def test_retarget_from_infeasible_state_is_flagged():
     assert tr.sample(tr.end_s).pos_m == (100.0, 0.0, 0.0)
     assert_derivatives(tr)
     assert_continuous(tr)
+
+
+# --- the planner's numerics -----------------------------------------------------------------
+
+@SETTINGS
+@given(ndim=st.integers(1, 3), m=st.integers(1, 6), scale_exp=st.floats(-6.0, 6.0),
+       seed=st.integers(0, 2**32 - 1))
+def test_peak_norm_matches_a_dense_sampling(ndim, m, scale_exp, seed):
+    """The exact peak of a vector polynomial's norm over [0, 1] is at least every sampled
+    value and at most the densest sampling's peak plus what that sampling can miss."""
+    c = np.random.default_rng(seed).normal(size=(ndim, m)) * 10.0**scale_exp
+    u = np.linspace(0.0, 1.0, 200_001)
+    norms = np.sqrt(sum(np.polynomial.polynomial.polyval(u, row) ** 2 for row in c))
+    dense = float(norms.max())
+    peak = _peak_norm(c)
+    assert peak >= dense * (1.0 - 1e-12)
+    assert peak <= dense * (1.0 + 1e-8)
+
+
+def _counting(f):
+    calls: list[tuple[float, float]] = []
+
+    def wrapped(x: float) -> float:
+        calls.append((x, f(x)))
+        return calls[-1][1]
+    return wrapped, calls
+
+
+def _check_bracket(f, lo, hi, result, calls):
+    """The contract: result feasible, and an infeasible point (evaluated or the initial lo)
+    within the tolerance below it."""
+    assert f(result) <= 0.0 and lo < result <= hi
+    below = [x for x, fx in [(lo, f(lo)), *calls] if fx > 0.0 and x < result]
+    assert result / max(below) - 1.0 <= _BISECT_RTOL
+
+
+def test_bracket_boundary_smooth_root_in_a_few_evaluations():
+    """Peak-ratio-like excess 2/T^2 - 1 (root sqrt 2): the regula falsi brackets it to the
+    tolerance in a handful of evaluations, where bisection from (1, 2) needs
+    log2(ln 2 / 1e-7) ~ 23."""
+    f = lambda T: 2.0 / T**2 - 1.0  # noqa: E731
+    g, calls = _counting(f)
+    hi = _bracket_boundary(g, 1.0, f(1.0), 2.0, f(2.0))
+    _check_bracket(f, 1.0, 2.0, hi, calls)
+    assert hi >= math.sqrt(2.0) and hi / math.sqrt(2.0) - 1.0 <= _BISECT_RTOL
+    assert len(calls) <= 8
+
+
+@pytest.mark.parametrize("case", ["step", "wiggle", "zero_at_hi", "flat_then_drop"])
+def test_bracket_boundary_keeps_its_invariant_on_awkward_excesses(case):
+    """Discontinuous, non-monotone (several sign changes), a root exactly at hi, and a
+    plateau: the result is always feasible with an infeasible point within the tolerance
+    below it, in at most about four bisections' worth of evaluations."""
+    f = {"step": lambda T: 1.0 if T < 1.3 else -1.0,
+         "wiggle": lambda T: math.cos(60.0 * (T - 1.0)) - 0.2 * (T - 1.0),
+         "zero_at_hi": lambda T: 2.0 - T,
+         "flat_then_drop": lambda T: 1e-3 if T < 1.9 else (1.95 - T)}[case]
+    lo, hi = 1.0, 2.0
+    assert f(lo) > 0.0 >= f(hi)
+    g, calls = _counting(f)
+    result = _bracket_boundary(g, lo, f(lo), hi, f(hi))
+    _check_bracket(f, lo, hi, result, calls)
+    assert len(calls) <= 4 * math.ceil(math.log2(math.log(2.0) / _BISECT_RTOL)) + 4
 
 
 # --- Hold, Line -----------------------------------------------------------------------------
