@@ -268,6 +268,7 @@ def bench_command_latency(quick: bool) -> list[Row]:
 
 #: How the process rows name the processes.
 _PROCESS_LABELS = {"client": "mission client (pymavlink)"}
+_SIM_LINK_LABELS = {"unix": "a Unix-domain socket", "tcp": "TCP"}
 
 
 def _proc_rows_skipped(why: str) -> list[Row]:
@@ -304,7 +305,8 @@ def bench_processes(quick: bool) -> list[Row]:
         cpu = ls["cpu_s"]
         rows.append(Row(
             stack_name, ls["rtf"], "sim s / wall s",
-            note=f"{ls['flight']} over MAVLink TCP, from the ground; "
+            note=f"{ls['flight']} over MAVLink TCP, from the ground, the simulator link "
+                 f"on {_SIM_LINK_LABELS.get(ls.get('sim_link'), '?')} as up runs it; "
                  + (f"the median of {len(ls['rtf_runs'])} flights ("
                     + ", ".join(f"{r:.2f}x" for r in sorted(ls["rtf_runs"])) + "): "
                     if len(ls.get("rtf_runs", ())) > 1 else "")
@@ -314,6 +316,11 @@ def bench_processes(quick: bool) -> list[Row]:
                              f"({v / (ls['sim_s'] * 250.0) * 1e6:.0f} us)"
                              for k, v in cpu.items()),
             goal=f">= 20x: {'met' if ls['rtf'] >= 20.0 else 'NOT met'}"))
+        if "rtf_tcp" in ls:
+            rows.append(Row(
+                "  the same with the simulator link on TCP", ls["rtf_tcp"], "sim s / wall s",
+                note=f"one flight (up --sim-link tcp); the default is "
+                     f"{ls['rtf'] / ls['rtf_tcp']:.2f} times as fast"))
         for name, shares in ls["shares"].items():
             per_period_us = (ls["profiled_s"][name] / ls["profiled_sim_s"] * 1e6 / 250.0)
             rows.append(Row(

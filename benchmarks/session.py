@@ -46,9 +46,10 @@ LOCKSTEP_RUNS = 3
 
 def lockstep(work: Path, quick: bool) -> dict:
     """The stack in lockstep flying the scripted mission :data:`LOCKSTEP_RUNS` times: speed
-    and CPU of the median flight (by speed; every flight's speed listed), then where the
-    time goes (one more flight, every process under cProfile from the flight's start to
-    its end)."""
+    and CPU of the median flight (by speed; every flight's speed listed), one flight with
+    the simulator link on TCP when up's default is a Unix-domain socket (not with
+    ``quick``), then where the time goes (one more flight, every process under cProfile
+    from the flight's start to its end)."""
     flight = stack.mission_flight(short=quick)
     runs = []
     for i in range(1 if quick else LOCKSTEP_RUNS):
@@ -65,6 +66,11 @@ def lockstep(work: Path, quick: bool) -> dict:
                  "cpu_s": {k: v.cpu_s for k, v in run.processes.items()},
                  "exit": {k: v.exit_code for k, v in run.processes.items()},
                  "mission": _mission_outcome(run.processes["client"].log)}
+    out["sim_link"] = stack.SIM_LINK_DEFAULT
+    if not quick and stack.SIM_LINK_DEFAULT != "tcp":
+        # one flight with the other simulator link, for comparison
+        tcp = stack.run_stack(work / "lockstep-tcp", flight=flight, sim_link="tcp")
+        out["rtf_tcp"] = tcp.real_time_factor
     prof = stack.run_stack(work / "profile", flight=flight, profile=True)
     out["profiled_rtf"] = prof.real_time_factor
     out["profiled_sim_s"] = prof.sim_s

@@ -52,7 +52,8 @@ from tuav_sitl.realtime import (
     set_background,
     set_nice,
 )
-from tuav_sitl.up import RECORDER_INTERVAL_S, TELEMETRY_BATCH_S
+from tuav_sitl.up import RECORDER_INTERVAL_S, SIM_LINK_DEFAULT, TELEMETRY_BATCH_S
+from tuavdefs.simlink import SIM_HOST_DEFAULT, format_sim_address
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -300,7 +301,8 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
               control_rate_hz: float = 250.0, plant_extra: Sequence[str] = (),
               priority: str | None = None,
               on_connected: Callable[[], object] | None = None,
-              pin: bool | None = None, recorder: bool = True) -> StackResult:
+              pin: bool | None = None, recorder: bool = True,
+              sim_link: str = SIM_LINK_DEFAULT) -> StackResult:
     """Run the three processes in ``work`` (logs, profiles, truth series) and return what
     they did: in lockstep, or paced by the wall clock (``real_time``), at
     ``control_rate_hz`` [Hz] (the companion's gains get the same rate), flying ``flight``
@@ -312,13 +314,17 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
     listens too unless ``recorder`` is False, and in lockstep the plant gets a CPU of its
     own, the companion and the ground station (at :data:`tuav_sitl.realtime.NICENESS`)
     share the rest and the recorder runs at idle priority beside the plant
-    (:mod:`tuav_sitl.realtime`) unless ``pin`` is False (None: pin in lockstep only)."""
+    (:mod:`tuav_sitl.realtime`) unless ``pin`` is False (None: pin in lockstep only), and
+    the simulator link is ``sim_link``: "unix" (an abstract Unix-domain name of this
+    process's own) or "tcp" (a free port)."""
     flight = flight if flight is not None else goto_flight()
     if (duration_s is None) == (not flight.client):
         raise ValueError("a flight without a client needs a duration; one with a client "
                          "ends with it")
     work.mkdir(parents=True, exist_ok=True)
-    sim_port, comp_port = _free_port(), _free_port()
+    comp_port = _free_port()
+    sim = (f"@tuav-sitl-bench-{os.getpid()}" if sim_link == "unix"
+           else (SIM_HOST_DEFAULT, _free_port()))
     can = "udp_multicast"
     py = sys.executable
     gains: list[str] = []
@@ -326,7 +332,8 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
         (work / "gains.toml").write_text(f"rate_hz = {float(control_rate_hz)!r}\n")
         gains = ["--gains", str(work / "gains.toml")]
     commands = {
-        "plant": ["-m", "sitl", "--port", str(sim_port), "--can", can, "--position",
+        "plant": ["-m", "sitl", *(["--socket", sim] if isinstance(sim, str)
+                                  else ["--port", str(sim[1])]), "--can", can, "--position",
                   *map(str, flight.start_m),
                   *(["--duration", str(duration_s)] if duration_s is not None else []),
                   "--control-rate", str(float(control_rate_hz)),
@@ -334,7 +341,7 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
                   *(["--real-time"] if real_time else []), *plant_extra],
         "groundstation": ["-m", "groundstation", "--can", can, "--mavlink",
                           f"127.0.0.1:{comp_port}"],
-        "companion": ["-m", "companion", "--sim", f"127.0.0.1:{sim_port}",
+        "companion": ["-m", "companion", "--sim", format_sim_address(sim),
                       "--component-port", str(comp_port), *gains, *flight.companion_args,
                       *([] if real_time else ["--telemetry-batch", repr(TELEMETRY_BATCH_S)])],
     }
@@ -448,13 +455,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="without the bus recorder that up runs")
     ap.add_argument("--priority", choices=PRIORITIES, default=None,
                     help="scheduling for the three processes (experiments)")
+    ap.add_argument("--sim-link", choices=("unix", "tcp"), default=SIM_LINK_DEFAULT,
+                    help="the simulator link, as up --sim-link (default: up's)")
     args = ap.parse_args(argv)
     flight = goto_flight() if args.flight == "goto" else mission_flight(
         args.flight == "short-mission")
     duration = None if flight.client else args.duration or 10.0
     res = run_stack(Path(args.work), duration, flight, profile=args.profile,
                     priority=args.priority, pin=False if args.no_pin else None,
-                    recorder=not args.no_recorder)
+                    recorder=not args.no_recorder, sim_link=args.sim_link)
     out = asdict(res)
     out["real_time_factor"] = res.real_time_factor
     print(json.dumps(out))

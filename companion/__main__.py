@@ -78,6 +78,13 @@ def _address(text: str) -> tuple[str, int]:
     return (host or "127.0.0.1", int(port))
 
 
+def _sim_address(text: str) -> tuple[str, int] | str:
+    try:
+        return sl.parse_sim_address(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 class _Waiter:
     """Waits for input on the plant's link (descriptor ``sim_fd``) and on sockets that
     change now and then (the autopilot's), with ``poll``: registered once per change, not
@@ -113,7 +120,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m companion", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sim", default=f"127.0.0.1:{sl.SIM_PORT_DEFAULT}",
-                    help="HOST:PORT of the plant's simulator link")
+                    type=_sim_address, metavar="ADDRESS",
+                    help="the plant's simulator link: HOST:PORT or tcp:HOST:PORT, or "
+                         "unix:PATH for a Unix-domain socket (unix:@NAME: Linux's abstract "
+                         "namespace)")
     ap.add_argument("--home", type=float, nargs=3, default=sl.HOME_DEFAULT,
                     metavar=("LAT", "LON", "ALT"),
                     help="the winder's global position (ground altitude AMSL [m])")
@@ -164,8 +174,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     veh = params.vehicle
     flight = FlightController(gains, veh, params.tether, g)
     nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m)
-    host, _, port = args.sim.rpartition(":")
-    client = SimLinkClient(host, int(port), tuple(args.home))
+    if isinstance(args.sim, str):
+        client = SimLinkClient(home=tuple(args.home), unix_path=args.sim)
+    else:
+        client = SimLinkClient(*args.sim, tuple(args.home))
     try:
         client.connect(timeout_s=args.connect_timeout)
     except TimeoutError as exc:
@@ -196,7 +208,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGINT, lambda s, _f: stop.update(signal=s))
     udp_text = ", ".join(f"udp:{h}:{p}" for h, p in udp) or "no udp"
     tcp_text = f"tcp:127.0.0.1:{endpoints.tcp_port}" if endpoints.tcp_port else "no tcp"
-    print(f"companion: connected to the plant at {args.sim}; MAVLink on {tcp_text}, "
+    print(f"companion: connected to the plant at {client.address}; MAVLink on {tcp_text}, "
           f"{udp_text}"
           + (f"; component link on tcp:127.0.0.1:{components.port}" if components else ""),
           flush=True)

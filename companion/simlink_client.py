@@ -1,4 +1,5 @@
-"""The companion's end of the simulator link (PX4 simulator MAVLink API over TCP).
+"""The companion's end of the simulator link (PX4 simulator MAVLink API over TCP or a
+Unix-domain socket).
 
 Pure I/O: :class:`SimLinkClient` connects to the plant (127.0.0.1:4560 by default),
 returns each step's sensor batch as a :class:`SimState` in the project frames (inertial ENU
@@ -92,7 +93,8 @@ class SimState(NamedTuple):
 
 
 class SimLinkClient:
-    """TCP client of the plant's simulator link.
+    """Client of the plant's simulator link: TCP to ``host``:``port``, or with ``unix_path``
+    the plant's Unix-domain socket (``@NAME``: Linux's abstract namespace).
 
     ``home`` (lat deg, lon deg, alt m AMSL) is the inertial origin the plant uses, needed to
     turn latitude/longitude back into positions. Connection problems raise
@@ -100,9 +102,14 @@ class SimLinkClient:
     """
 
     def __init__(self, host: str = sl.SIM_HOST_DEFAULT, port: int = sl.SIM_PORT_DEFAULT,
-                 home: tuple[float, float, float] = sl.HOME_DEFAULT) -> None:
+                 home: tuple[float, float, float] = sl.HOME_DEFAULT, *,
+                 unix_path: str | None = None) -> None:
         self.host = host
         self.port = port
+        self.unix_path = unix_path
+        #: The plant's address, as :func:`tuavdefs.simlink.parse_sim_address` reads it.
+        self.address = sl.format_sim_address(unix_path if unix_path is not None
+                                              else (host, port))
         self.home = tuple(float(v) for v in home)
         self._home_map = sl.home_map(self.home)
         self._sock: socket.socket | None = None
@@ -122,19 +129,32 @@ class SimLinkClient:
         end = time.monotonic() + timeout_s
         while True:
             try:
-                sock = socket.create_connection((self.host, self.port),
-                                                timeout=max(end - time.monotonic(), 0.01))
+                sock = self._open(max(end - time.monotonic(), 0.01))
                 break
             except OSError as e:
                 if time.monotonic() >= end:
-                    raise TimeoutError(f"no simulator at {self.host}:{self.port}") from e
+                    raise TimeoutError(f"no simulator at {self.address}") from e
                 time.sleep(0.02)
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         # a blocking socket whose timeouts the kernel keeps (one system call a recv)
         sock.settimeout(None)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, sl.timeval(_SEND_TIMEOUT_S))
         self._recv_timeout_ms = None
         self._sock = sock
+
+    def _open(self, timeout_s: float) -> socket.socket:
+        """One attempt to connect, within ``timeout_s`` [s]."""
+        if self.unix_path is None:
+            sock = socket.create_connection((self.host, self.port), timeout=timeout_s)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            return sock
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            sock.settimeout(timeout_s)
+            sock.connect(sl.unix_sockaddr(self.unix_path))
+        except OSError:
+            sock.close()
+            raise
+        return sock
 
     @property
     def connected(self) -> bool:

@@ -71,6 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m sitl", description=__doc__)
     ap.add_argument("--port", type=int, default=sl.SIM_PORT_DEFAULT,
                     help="TCP port of the simulator link on 127.0.0.1")
+    ap.add_argument("--socket", default=None, metavar="PATH",
+                    help="listen on a Unix-domain socket at PATH instead of TCP (@NAME: a "
+                         "name in Linux's abstract namespace); the companion connects with "
+                         "--sim unix:PATH")
     ap.add_argument("--control-rate", type=float, default=sl.CONTROL_RATE_HZ_DEFAULT,
                     help="control periods per simulated second [Hz]")
     ap.add_argument("--real-time", action="store_true", help="pace by the wall clock")
@@ -145,16 +149,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                                real_time=real_time, speedup=args.speedup,
                                sensor_noise=SensorNoise.off() if args.no_noise else None,
                                on_step=on_step,
-                               before_physics=before_physics if node is not None else None)
+                               before_physics=before_physics if node is not None else None,
+                               unix_path=args.socket)
     except OSError as exc:
-        print(f"plant: cannot listen on 127.0.0.1:{args.port}: {exc.strerror}",
-              file=sys.stderr)
+        where = sl.format_sim_address(args.socket if args.socket is not None
+                                      else (sl.SIM_HOST_DEFAULT, args.port))
+        print(f"plant: cannot listen on {where}: {exc.strerror}", file=sys.stderr)
         return 1
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     can_text = f", winder on CAN {node.link.description}" if node else ", winder braked"
-    print(f"plant: listening on tcp:127.0.0.1:{server.port} "
+    print(f"plant: listening on {server.address} "
           f"({server.pacing.replace('-', ' ')}{can_text})", flush=True)
     # the start-up's objects (numpy, numba, pymavlink and their modules: most of the heap)
     # move to the collector's permanent generation, so its full collections during the
@@ -165,6 +171,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         summary = server.serve(max_sim_time_s=args.duration, stop_event=stop,
                                accept_timeout_s=args.accept_timeout)
     finally:
+        server.close()    # (a Unix-domain socket's file goes with it)
         if log_file:
             log_file.close()
         if node is not None:

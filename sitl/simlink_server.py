@@ -1,7 +1,7 @@
-"""The plant's end of the simulator link: PX4's simulator MAVLink API over TCP, lockstep.
+"""The plant's end of the simulator link: PX4's simulator MAVLink API, lockstep.
 
-:class:`SimLinkServer` listens on 127.0.0.1 (port 4560 by default), accepts one companion
-and runs the loop (conventions in :mod:`tuavdefs.simlink`)::
+:class:`SimLinkServer` listens on 127.0.0.1 (port 4560 by default) or on a Unix-domain
+socket, accepts one companion and runs the loop (conventions in :mod:`tuavdefs.simlink`)::
 
     k = 0, t = t0
     repeat:
@@ -35,10 +35,13 @@ companion, ``stop_event`` or ``max_sim_time_s`` ends :meth:`SimLinkServer.serve`
 
 from __future__ import annotations
 
+import errno
 import ipaddress
 import math
+import os
 import select
 import socket
+import stat
 import threading
 import time
 from array import array
@@ -152,13 +155,37 @@ def _check_loopback(host: str) -> None:
         raise ValueError(f"the simulator link stays on the loopback interface, not {host!r}")
 
 
+def _listen_unix(path: str) -> socket.socket:
+    """A Unix-domain socket listening at ``path`` (``@NAME``: Linux's abstract namespace).
+
+    A file already at the path is left alone and the bind fails with EADDRINUSE, as a TCP
+    port in use does: it may be another plant's socket, and probing it would connect to that
+    plant as its companion. The plant removes its own socket file when it closes.
+    """
+    if not path.startswith("@") and os.path.lexists(path):
+        kind = "a socket" if stat.S_ISSOCK(os.lstat(path).st_mode) else "a file"
+        raise OSError(errno.EADDRINUSE, f"{kind} is already there (another plant, or left "
+                      "by one that was killed: remove it)", path)
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        sock.bind(sl.unix_sockaddr(path))
+        sock.listen(1)
+    except OSError:
+        sock.close()
+        raise
+    return sock
+
+
 class SimLinkServer:
-    """The plant's simulator-link server (PX4 simulator MAVLink API, TCP, one companion).
+    """The plant's simulator-link server (PX4 simulator MAVLink API, one companion).
 
     ``plant`` is stepped in place; ``control_rate_hz`` [Hz] is the lockstep rate (its period
     must be a whole number of the plant's steps); ``home`` (lat deg, lon deg, alt m AMSL)
-    places the inertial origin; ``port=0`` picks a free port (see :attr:`port`); the socket
-    is bound and listening when the constructor returns. ``sensor_noise`` configures the
+    places the inertial origin. The link is TCP on ``host``:``port`` (``port=0`` picks a
+    free port, see :attr:`port`), or with ``unix_path`` a Unix-domain socket at that path
+    (``@NAME``: a name in Linux's abstract namespace), which costs the two ends less per
+    period than TCP on the loopback interface. :attr:`address` says which; the socket is
+    bound and listening when the constructor returns. ``sensor_noise`` configures the
     sensor errors (None: :class:`sitl.sensors.SensorNoise` defaults; ``SensorNoise.off()``
     for exact readings). ``gps_rate_hz`` [Hz] is the rate of HIL_GPS.
     """
@@ -172,8 +199,10 @@ class SimLinkServer:
                  earth_field_ned_gauss: tuple[float, float, float] | None = None,
                  on_step: Callable[[SimLinkServer], None] | None = None,
                  speedup: float | None = None,
-                 before_physics: Callable[[SimLinkServer], None] | None = None) -> None:
-        _check_loopback(host)
+                 before_physics: Callable[[SimLinkServer], None] | None = None,
+                 unix_path: str | None = None) -> None:
+        if unix_path is None:
+            _check_loopback(host)
         self.plant = plant
         self.control_rate_hz = float(control_rate_hz)
         self.period_us = sl.control_period_us(control_rate_hz)
@@ -214,15 +243,29 @@ class SimLinkServer:
         self._poller: select.poll | None = None
         self._home_map = sl.home_map(self.home)
         self._last_gps_us: int | None = None
-        self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            self._listener.bind((host, port))
-            self._listener.listen(1)
-        except OSError:
-            self._listener.close()
-            raise
-        self.host, self.port = self._listener.getsockname()[:2]
+        #: The Unix-domain path listened on (None: TCP).
+        self.unix_path = unix_path
+        address: tuple[str, int] | str
+        if unix_path is not None:
+            self._listener = _listen_unix(unix_path)
+            self.host, self.port = "", 0
+            # (close removes the file only if it is still this socket's)
+            self._unix_file = None if unix_path.startswith("@") else os.stat(unix_path)
+            address = unix_path
+        else:
+            self._unix_file = None
+            self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                self._listener.bind((host, port))
+                self._listener.listen(1)
+            except OSError:
+                self._listener.close()
+                raise
+            self.host, self.port = self._listener.getsockname()[:2]
+            address = (self.host, self.port)
+        #: Where the link listens, as :func:`tuavdefs.simlink.parse_sim_address` reads it.
+        self.address = sl.format_sim_address(address)
 
     # ----- lifecycle
     @property
@@ -233,9 +276,17 @@ class SimLinkServer:
         return "lockstep" if self.speedup is None else f"lockstep at {self.speedup:g}x"
 
     def close(self) -> None:
-        """Close the listening socket (and a connection, if any)."""
+        """Close the listening socket (and a connection, if any); remove its socket file."""
         self._close_client()
         self._listener.close()
+        made, self._unix_file = self._unix_file, None
+        if made is not None and self.unix_path is not None:
+            try:
+                now = os.stat(self.unix_path)
+            except OSError:
+                return
+            if (now.st_dev, now.st_ino) == (made.st_dev, made.st_ino):
+                os.unlink(self.unix_path)
 
     def __enter__(self) -> SimLinkServer:
         return self
@@ -381,7 +432,8 @@ class SimLinkServer:
             ready, _, _ = select.select([self._listener], [], [], wait)
             if ready:
                 sock, _ = self._listener.accept()
-                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                if sock.family != socket.AF_UNIX:
+                    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                 sock.setblocking(True)
                 # lockstep: recv itself waits for the answer, _POLL_S at a time
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, sl.timeval(_POLL_S))

@@ -13,19 +13,26 @@ GOAL = (5.0, 1.0, 11.0)
 
 
 
-def _fly(tmp: Path, duration: float = 12.0) -> tuple[np.ndarray, str, str]:
+def _fly(tmp: Path, duration: float = 12.0, unix: bool = False
+         ) -> tuple[np.ndarray, str, str]:
+    """The flight with the simulator link on TCP, or (``unix``) on a Unix-domain socket
+    file in ``tmp``, which the plant removes when it ends."""
     port = free_port()
+    sock = tmp / "sim.sock"
+    listen, sim, banner = ((["--socket", str(sock)], f"unix:{sock}", f"listening on unix:{sock}")
+                           if unix else (["--port", str(port)], f"127.0.0.1:{port}",
+                                         "listening on tcp:127.0.0.1:"))
     log = tmp / "truth.csv"
     plant = subprocess.Popen(
-        [sys.executable, "-m", "sitl", "--port", str(port), "--duration", str(duration),
+        [sys.executable, "-m", "sitl", *listen, "--duration", str(duration),
          "--truth-log", str(log), "--no-noise", "--position", "4", "0", "10",
          "--accept-timeout", "60"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         ready = plant.stdout.readline()
-        assert "listening on tcp:127.0.0.1:" in ready, ready
+        assert banner in ready, ready
         comp = subprocess.run(
-            [sys.executable, "-m", "companion", "--sim", f"127.0.0.1:{port}",
+            [sys.executable, "-m", "companion", "--sim", sim,
              "--component-port", "0", "--gcs-tcp", "0", "--gcs-udp", "none",
              "--goto", *map(str, GOAL)],
             cwd=ROOT, capture_output=True, text=True, timeout=180)
@@ -35,6 +42,7 @@ def _fly(tmp: Path, duration: float = 12.0) -> tuple[np.ndarray, str, str]:
             plant.kill()
     assert plant.returncode == 0, out
     assert comp.returncode == 0, comp.stderr
+    assert not sock.exists()
     with open(log) as f:
         rows = list(csv.DictReader(f))
     data = np.array([[float(r[k]) for k in ("t_s", "x_m", "y_m", "z_m", "tether_length_m",
@@ -52,10 +60,15 @@ def test_companion_flies_the_plant_in_lockstep(tmp_path):
     assert np.all(pos[:, 2] > 9.5)                   # no sagging on the way
     assert np.ptp(data[:, 4]) == 0.0                 # the winder stays braked (no ground station)
     assert "max_sim_time: 3000 periods" in out and "0 bad frames" in out
-    # lockstep: a second flight is identical to the bit
+    # lockstep: a second flight is identical to the bit, and so is one over a Unix-domain
+    # socket (the transport carries the same bytes)
     (tmp_path / "again").mkdir()
     _, text2, _ = _fly(tmp_path / "again")
     assert text2 == text
+    (tmp_path / "unix").mkdir()
+    _, text3, out3 = _fly(tmp_path / "unix", unix=True)
+    assert text3 == text
+    assert "connected to the plant at unix:" in out3
 
 
 def test_plant_without_a_companion_gives_up_cleanly():

@@ -1,10 +1,14 @@
 """The simulator link: field packing round trips, framing, and the plant's lockstep server
-against the companion's client over loopback TCP."""
+against the companion's client over loopback TCP and Unix-domain sockets."""
 
 from __future__ import annotations
 
+import errno
 import math
+import os
 import socket
+import stat
+import sys
 import threading
 import time
 from contextlib import contextmanager
@@ -81,7 +85,10 @@ def _finish(out: dict, client: SimLinkClient):
 
 
 def _client(server: SimLinkServer) -> SimLinkClient:
-    c = SimLinkClient(port=server.port, home=HOME)
+    if server.unix_path is not None:
+        c = SimLinkClient(home=HOME, unix_path=server.unix_path)
+    else:
+        c = SimLinkClient(port=server.port, home=HOME)
     c.connect(timeout_s=10.0)
     return c
 
@@ -376,10 +383,11 @@ def test_raw_stream_decodes_with_pymavlink_and_hover_accel():
     assert server.last_inputs.rotor_commands == pytest.approx(u.rotor_commands, rel=1e-6)
 
 
-def _fly(noise: SensorNoise, n: int):
-    """n lockstep periods with varying commands; returns (batches, final state, server)."""
+def _fly(noise: SensorNoise, n: int, unix_path: str | None = None):
+    """n lockstep periods with varying commands (over TCP, or the Unix-domain socket
+    ``unix_path``); returns (batches, final state, server)."""
     plant, u = _hover()
-    server = SimLinkServer(plant, port=0, home=HOME, sensor_noise=noise)
+    server = SimLinkServer(plant, port=0, home=HOME, sensor_noise=noise, unix_path=unix_path)
     seen = []
     with serving(server) as out:
         client = _client(server)
@@ -411,6 +419,82 @@ def test_determinism_and_no_perturbation_of_the_plant():
             plant.step(step_u)
     assert np.array_equal(plant.x, xa)
     assert np.linalg.norm(plant.position_m - HOVER_AT) > 1e-3   # the commands did something
+
+
+ABSTRACT = pytest.mark.skipif(not sys.platform.startswith("linux"),
+                              reason="abstract socket names are Linux's")
+
+
+@pytest.mark.parametrize("where", ["file", pytest.param("abstract", marks=ABSTRACT)])
+def test_a_unix_domain_link_carries_the_same_lockstep(tmp_path, where):
+    """Over a Unix-domain socket (a file, or an abstract name) the batches and the flight
+    are those over TCP, to the bit; the socket file goes with the server."""
+    noise = SensorNoise(seed=3)
+    tcp, x_tcp, _ = _fly(noise, 60)
+    path = str(tmp_path / "sim.sock") if where == "file" else f"@tuav-test-{os.getpid()}"
+    unix, x_unix, server = _fly(noise, 60, unix_path=path)
+    assert unix == tcp and np.array_equal(x_unix, x_tcp)
+    assert server.address == f"unix:{path}" and server.port == 0
+    assert not os.path.lexists(path)
+
+
+def test_a_unix_socket_path_in_use_is_refused_and_left_alone(tmp_path):
+    """A second plant on the same path fails as on a TCP port in use (EADDRINUSE) without
+    touching the first, which still serves; a plain file there is not replaced either."""
+    path = tmp_path / "sim.sock"
+    plant, u = _hover()
+    first = SimLinkServer(plant, home=HOME, unix_path=str(path))
+    assert stat.S_ISSOCK(os.lstat(path).st_mode)
+    with pytest.raises(OSError) as info:
+        SimLinkServer(_hover()[0], home=HOME, unix_path=str(path))
+    assert info.value.errno == errno.EADDRINUSE and "a socket is already there" in str(
+        info.value)
+    with serving(first) as out:
+        client = _client(first)
+        s = client.receive_state(timeout_s=10)
+        client.send_actuators(s.time_usec, u.rotor_commands, armed=True)
+        assert client.receive_state(timeout_s=10).time_usec == s.time_usec + first.period_us
+        _finish(out, client)
+    assert not path.exists()
+    other = tmp_path / "notes.txt"
+    other.write_text("keep me")
+    with pytest.raises(OSError, match="a file is already there"):
+        SimLinkServer(plant, home=HOME, unix_path=str(other))
+    assert other.read_text() == "keep me"
+
+
+def test_close_leaves_a_socket_file_that_is_no_longer_its_own(tmp_path):
+    path = tmp_path / "sim.sock"
+    server = SimLinkServer(_hover()[0], home=HOME, unix_path=str(path))
+    os.unlink(path)
+    path.write_text("someone else's")
+    server.close()
+    assert path.read_text() == "someone else's"
+
+
+def test_client_names_the_unix_socket_it_did_not_find(tmp_path):
+    client = SimLinkClient(home=HOME, unix_path=str(tmp_path / "none.sock"))
+    with pytest.raises(TimeoutError, match=f"no simulator at unix:{tmp_path}/none.sock"):
+        client.connect(timeout_s=0.1)
+
+
+@pytest.mark.parametrize(("text", "address"), [
+    ("127.0.0.1:4560", ("127.0.0.1", 4560)), ("tcp:127.0.0.1:5000", ("127.0.0.1", 5000)),
+    (":4570", ("127.0.0.1", 4570)), ("unix:/run/tuav/sim.sock", "/run/tuav/sim.sock"),
+    ("unix:@tuav-sitl-sim-0", "@tuav-sitl-sim-0"), ("unix:rel/sim.sock", "rel/sim.sock")])
+def test_sim_addresses_parse_and_print_back(text, address):
+    assert sl.parse_sim_address(text) == address
+    assert sl.parse_sim_address(sl.format_sim_address(address)) == address
+    if isinstance(address, str):
+        want = "\0" + address[1:] if address.startswith("@") else address
+        assert sl.unix_sockaddr(address) == want
+
+
+@pytest.mark.parametrize("text", ["", "unix:", "unix:@", "4560", "host:port", "h:0",
+                                  "h:65536", "tcp:", "unix:a\0b"])
+def test_bad_sim_addresses_are_refused(text):
+    with pytest.raises(ValueError):
+        sl.parse_sim_address(text)
 
 
 def test_disarmed_commands_stop_the_rotors():

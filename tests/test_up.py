@@ -21,6 +21,7 @@ def test_a_run_ends_cleanly_with_its_folder(session):
     assert n["rc"] == 0, n["stderr"]
     assert "plant, companion and ground station are running" in n["stdout"]
     assert "plant finished" in n["stdout"]
+    assert "simulator link (plant <-> companion): unix:@tuav-sitl-sim-0" in n["stdout"]
     assert {"plant.log", "companion.log", "groundstation.log", "truth.csv",
             "params.toml", "can.log"} <= set(n["files"])
     assert n["can_decoded_torques"] > 10     # the bus recording decodes with the DBC
@@ -52,4 +53,7 @@ def test_a_dying_process_stops_the_others(session):
 def test_a_busy_port_names_the_port_and_the_way_out(session):
     b = session["busy"]
     assert b["rc"] == 1
-    assert "port 4590 is in use" in b["stderr"] and "--instance 4" in b["stderr"]
+    assert "port 5792 is in use" in b["stderr"] and "--instance 4" in b["stderr"]
+    b = session["busy_sim"]
+    assert b["rc"] == 1
+    assert "unix:@tuav-sitl-sim-3 is in use" in b["stderr"] and "--instance 4" in b["stderr"]

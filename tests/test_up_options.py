@@ -8,9 +8,19 @@ import sys
 
 import pytest
 
-from tuav_sitl.up import _home, _speedup, _system_params, _wind, add_arguments, ports_for
+from tuav_sitl.up import (
+    SIM_LINK_DEFAULT,
+    _home,
+    _speedup,
+    _system_params,
+    _wind,
+    add_arguments,
+    ports_for,
+    sim_address,
+)
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import ParameterError
+from tuavdefs.simlink import format_sim_address, parse_sim_address
 
 
 def parse(*argv: str) -> argparse.Namespace:
@@ -68,6 +78,20 @@ def test_every_port_moves_per_instance():
     # no instance's API port is another's ground-station port
     gcs = {ports_for(i).udp_gcs for i in range(10)}
     assert not gcs & {ports_for(i).udp_api for i in range(10)}
+
+
+def test_the_simulator_link_per_instance():
+    """On Linux an abstract Unix-domain name per instance (no file to clean up), else TCP
+    on the instance's port; either way what the companion's --sim reads."""
+    assert ("unix" if sys.platform.startswith("linux") else "tcp") == SIM_LINK_DEFAULT
+    assert parse().sim_link == SIM_LINK_DEFAULT
+    assert sim_address("unix", 3) == "@tuav-sitl-sim-3"
+    assert sim_address("tcp", 3) == ("127.0.0.1", 4590)
+    for kind in ("unix", "tcp"):
+        address = sim_address(kind, 3)
+        assert parse_sim_address(format_sim_address(address)) == address
+    with pytest.raises(SystemExit):
+        parse("--sim-link", "udp")
 
 
 def test_lockstep_gives_the_plant_a_cpu_of_its_own():

@@ -52,6 +52,12 @@ class UpError(RuntimeError):
     """A problem starting the stack, said in one line."""
 
 
+#: Whether this system has Linux's abstract namespace of Unix-domain socket names.
+ABSTRACT_UNIX = sys.platform.startswith("linux") and hasattr(socket, "AF_UNIX")
+#: The simulator link by default: a Unix-domain socket where names need no file (Linux).
+SIM_LINK_DEFAULT = "unix" if ABSTRACT_UNIX else "tcp"
+
+
 def _port_free(port: int) -> bool:
     with socket.socket() as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -60,6 +66,25 @@ def _port_free(port: int) -> bool:
         except OSError:
             return False
     return True
+
+
+def _abstract_name_free(name: str) -> bool:
+    """Whether no socket holds the abstract Unix-domain name ``@NAME`` (binding one and
+    closing it leaves nothing behind: abstract names have no file)."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        try:
+            s.bind(sl.unix_sockaddr(name))
+        except OSError:
+            return False
+    return True
+
+
+def sim_address(kind: str, instance: int) -> tuple[str, int] | str:
+    """The simulator link of an instance: the abstract Unix-domain name
+    ``@tuav-sitl-sim-I`` (``kind`` "unix"), or (127.0.0.1, 4560 + 10 I) ("tcp")."""
+    if kind == "unix":
+        return f"@tuav-sitl-sim-{instance}"
+    return (sl.SIM_HOST_DEFAULT, ports_for(instance).sim)
 
 
 def _can_spec(spec: str, instance: int) -> str:
@@ -228,6 +253,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--logdir", default="runs", help="where run folders go")
     ap.add_argument("--instance", type=int, default=0,
                     help="offset every port (by 10 per instance) to run stacks side by side")
+    ap.add_argument("--sim-link", choices=("unix", "tcp"), default=SIM_LINK_DEFAULT,
+                    help="the simulator link between plant and companion: a Unix-domain "
+                         "socket named @tuav-sitl-sim-I in Linux's abstract namespace (the "
+                         "default on Linux: it costs both ends less per period), or TCP "
+                         "127.0.0.1:4560 + 10 I")
     ap.add_argument("--no-rt-priority", action="store_true",
                     help="in real time, leave the processes at normal scheduling (by "
                          "default they get SCHED_FIFO where permitted)")
@@ -289,11 +319,21 @@ def run_up(args: argparse.Namespace) -> int:
     """Start, supervise and stop the stack; returns the exit code."""
     speedup = args.speedup
     ports = ports_for(args.instance)
-    for port in (ports.sim, ports.component, ports.gcs_tcp):
+    if args.sim_link == "unix" and not ABSTRACT_UNIX:
+        print("tuav-sitl up: --sim-link unix needs Linux (abstract socket names); use "
+              "--sim-link tcp", file=sys.stderr)
+        return 2
+    sim = sim_address(args.sim_link, args.instance)
+    for port in (*([ports.sim] if args.sim_link == "tcp" else []), ports.component,
+                 ports.gcs_tcp):
         if not _port_free(port):
             print(f"tuav-sitl up: port {port} is in use (another stack?); "
                   f"try --instance {args.instance + 1}", file=sys.stderr)
             return 1
+    if isinstance(sim, str) and not _abstract_name_free(sim):
+        print(f"tuav-sitl up: {sl.format_sim_address(sim)} is in use (another stack?); "
+              f"try --instance {args.instance + 1}", file=sys.stderr)
+        return 1
     try:
         params = _system_params(args)
     except ParameterError as exc:
@@ -314,14 +354,15 @@ def run_up(args: argparse.Namespace) -> int:
     can = _can_spec(args.can, args.instance)
     home = [str(v) for v in args.home]
     common = ["--params", str(run_dir / "params.toml")]
-    plant_args = ["-m", "sitl", "--port", str(ports.sim), "--can", can, "--home", *home,
+    listen = ["--socket", sim] if isinstance(sim, str) else ["--port", str(sim[1])]
+    plant_args = ["-m", "sitl", *listen, "--can", can, "--home", *home,
                   "--position", *map(str, args.position),
                   "--truth-log", str(run_dir / "truth.csv"), *common]
     if math.isfinite(speedup):
         plant_args += ["--speedup", repr(speedup)]
     if args.duration is not None:
         plant_args += ["--duration", str(args.duration)]
-    comp_args = ["-m", "companion", "--sim", f"127.0.0.1:{ports.sim}", "--component-port",
+    comp_args = ["-m", "companion", "--sim", sl.format_sim_address(sim), "--component-port",
                  str(ports.component), "--home", *home, "--gcs-tcp", str(ports.gcs_tcp),
                  "--gcs-udp", f"127.0.0.1:{ports.udp_gcs}",
                  "--gcs-udp", f"127.0.0.1:{ports.udp_api}",
@@ -361,7 +402,7 @@ def run_up(args: argparse.Namespace) -> int:
         elif speedup != 1.0 and not args.no_pin:
             sched = _pin(stack)
         if not args.headless:
-            print(_banner(run_dir, ports, can, args, speedup, sched), flush=True)
+            print(_banner(run_dir, ports, sim, can, args, speedup, sched), flush=True)
         while stopping["signal"] is None:
             stack.echo_new()
             ended = stack.first_exit()
@@ -426,8 +467,8 @@ def _pin(stack: Stack) -> str:
             f"{plant}")
 
 
-def _banner(run_dir: Path, ports: Ports, can: str, args: argparse.Namespace,
-            speedup: float, sched: str = "normal") -> str:
+def _banner(run_dir: Path, ports: Ports, sim: tuple[str, int] | str, can: str,
+            args: argparse.Namespace, speedup: float, sched: str = "normal") -> str:
     interface, channel = resolve_spec(can)
     watch = (f"candump {channel}   (or: tuav-sitl candump --can {interface}:{channel})"
              if interface == "socketcan" else
@@ -442,7 +483,7 @@ def _banner(run_dir: Path, ports: Ports, can: str, args: argparse.Namespace,
         f"    UDP pushed to udp:127.0.0.1:{ports.udp_gcs} (ground stations) and "
         f"udp:127.0.0.1:{ports.udp_api} (APIs)",
         f"    e.g. mavproxy.py --master tcp:127.0.0.1:{ports.gcs_tcp}",
-        f"  simulator link (plant <-> companion): tcp:127.0.0.1:{ports.sim}",
+        f"  simulator link (plant <-> companion): {sl.format_sim_address(sim)}",
         f"  component link (companion <-> winch): tcp:127.0.0.1:{ports.component}",
         f"  winder CAN bus: {interface}:{channel}   watch it: {watch}",
         f"  home: {lat:.7f}, {lon:.7f}, {alt:.1f} m AMSL (the winder)",

@@ -1,8 +1,9 @@
 """The simulator link: PX4's simulator MAVLink API between the plant and the companion.
 
 The plant plays the part Gazebo plays for PX4 SITL: it listens on TCP (port
-:data:`SIM_PORT_DEFAULT`, 127.0.0.1 only) and, once per control period, sends the sensor
-readings and the truth state; the companion answers with the rotor commands. Both ends use
+:data:`SIM_PORT_DEFAULT`, 127.0.0.1 only), or on a Unix-domain socket (addresses in
+:func:`parse_sim_address`), and, once per control period, sends the sensor readings and the
+truth state; the companion answers with the rotor commands. Both ends use
 this module for the wire conventions, so the frame and unit conversions exist once:
 
 ==================== ========================================================================
@@ -74,6 +75,11 @@ from tuavdefs.frames import (
 SIM_PORT_DEFAULT = 4560
 #: The only host the link binds to or connects to.
 SIM_HOST_DEFAULT = "127.0.0.1"
+#: The scheme of a simulator link on a Unix-domain socket: ``unix:PATH``, or ``unix:@NAME``
+#: for NAME in Linux's abstract namespace (no file; the name goes with the socket).
+UNIX_SCHEME = "unix:"
+#: The scheme of a simulator link on TCP: ``tcp:HOST:PORT`` (the scheme may be left out).
+TCP_SCHEME = "tcp:"
 #: Control (lockstep) rate [Hz]: one sensor batch and one actuator answer per period.
 CONTROL_RATE_HZ_DEFAULT = 250.0
 #: Rate of HIL_GPS [Hz].
@@ -130,6 +136,37 @@ _UINT16 = 65535
 
 # ----- sockets
 _TIMEVAL = struct.Struct("@ll")
+
+
+def parse_sim_address(text: str) -> tuple[str, int] | str:
+    """A simulator-link address: ``HOST:PORT`` or ``tcp:HOST:PORT`` gives (host, port);
+    ``unix:PATH`` or ``unix:@NAME`` gives the path as written (see :func:`unix_sockaddr`).
+    ValueError says what is wrong."""
+    if text.startswith(UNIX_SCHEME):
+        path = text[len(UNIX_SCHEME):]
+        if path in ("", "@"):
+            raise ValueError(f"{text!r}: no path after {UNIX_SCHEME!r}")
+        if "\0" in path:
+            raise ValueError(f"{text!r}: a NUL in the path")
+        return path
+    rest = text[len(TCP_SCHEME):] if text.startswith(TCP_SCHEME) else text
+    host, sep, port = rest.rpartition(":")
+    if not sep or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ValueError(f"{text!r} is not HOST:PORT, tcp:HOST:PORT or unix:PATH")
+    return (host or SIM_HOST_DEFAULT, int(port))
+
+
+def format_sim_address(address: tuple[str, int] | str) -> str:
+    """The text of an address as :func:`parse_sim_address` reads it back, with its scheme."""
+    if isinstance(address, str):
+        return UNIX_SCHEME + address
+    return f"{TCP_SCHEME}{address[0]}:{address[1]}"
+
+
+def unix_sockaddr(path: str) -> str:
+    """What ``bind`` and ``connect`` take for a Unix-domain path: the path itself, or for
+    ``@NAME`` the abstract name (a leading NUL byte; Linux only)."""
+    return "\0" + path[1:] if path.startswith("@") else path
 
 
 def timeval(seconds: float) -> bytes:

@@ -64,7 +64,7 @@ def main() -> int:
                      "left": processes_mentioning(str(d1))}
     # 2. Ctrl-C in real time
     d2 = base / "sigint"
-    p = up(d2)
+    p = up(d2, "--sim-link", "tcp")
     banner = wait_banner(p)
     t0 = time.monotonic()
     p.send_signal(signal.SIGINT)
@@ -83,13 +83,19 @@ def main() -> int:
     so, se = p.communicate(timeout=30)
     out["dies"] = {"rc": p.returncode, "stderr": se, "killed": len(victims),
                    "left": processes_mentioning(str(d3))}
-    # 4. a port in use
+    # 4. a port in use, and the simulator link's socket name in use
     with socket.socket() as s:
-        s.bind(("127.0.0.1", 4560 + 10 * 3))
+        s.bind(("127.0.0.1", 5762 + 10 * 3))
         s.listen(1)
         p = up(base / "busy", "--instance", "3")
         so, se = p.communicate(timeout=60)
     out["busy"] = {"rc": p.returncode, "stderr": se}
+    with socket.socket(socket.AF_UNIX) as s:
+        s.bind("\0tuav-sitl-sim-3")
+        s.listen(1)
+        p = up(base / "busy-sim", "--instance", "3")
+        so, se = p.communicate(timeout=60)
+    out["busy_sim"] = {"rc": p.returncode, "stderr": se}
     print(json.dumps(out))
     return 0
 
