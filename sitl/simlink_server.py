@@ -163,9 +163,10 @@ def _listen_unix(path: str) -> socket.socket:
     plant as its companion. The plant removes its own socket file when it closes.
     """
     if not path.startswith("@") and os.path.lexists(path):
-        kind = "a socket" if stat.S_ISSOCK(os.lstat(path).st_mode) else "a file"
-        raise OSError(errno.EADDRINUSE, f"{kind} is already there (another plant, or left "
-                      "by one that was killed: remove it)", path)
+        why = ("a socket is already there (another plant's, or one left by a plant that "
+               "was killed: then remove it)" if stat.S_ISSOCK(os.lstat(path).st_mode)
+               else "a file is already there, and it is not a socket")
+        raise OSError(errno.EADDRINUSE, why, path)
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
         sock.bind(sl.unix_sockaddr(path))

@@ -80,6 +80,21 @@ def test_plant_without_a_companion_gives_up_cleanly():
     assert "no_client" in res.stdout
 
 
+def test_bad_simulator_link_addresses_are_refused_by_name(tmp_path):
+    """A file where the plant would put its socket is left alone (exit 1, saying where);
+    a --sim the companion cannot read is a usage error (exit 2)."""
+    taken = tmp_path / "taken"
+    taken.write_text("not a socket")
+    res = subprocess.run([sys.executable, "-m", "sitl", "--socket", str(taken)], cwd=ROOT,
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 1
+    assert f"cannot listen on unix:{taken}: a file is already there" in res.stderr
+    assert taken.read_text() == "not a socket"
+    res = subprocess.run([sys.executable, "-m", "companion", "--sim", "unix:"], cwd=ROOT,
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and "argument --sim: 'unix:': no path" in res.stderr
+
+
 def test_processes_reject_bad_parameters_by_name(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[vehicle]\nmass_kg = -1.0\n")
