@@ -21,6 +21,7 @@ from tuavdefs.can_protocol import (
     WINCH_SENSOR_NODE_ID_DEFAULT,
     Cmd,
     frame_id,
+    split_id,
 )
 from tuavdefs.canbus import CanLink, RxFrame
 
@@ -77,7 +78,8 @@ class WinderCanNode:
             # a 29-bit frame of another protocol on the same bus: not CAN Simple, and not
             # for this node (the axis counts nothing either)
             return
-        if fid >> 5 == self.axis.node_id and not rx.is_remote and (fid & 0x1F) in _HOST_COMMANDS:
+        node, cmd = split_id(fid)
+        if node == self.axis.node_id and not rx.is_remote and cmd in _HOST_COMMANDS:
             self.host_seen = True
             self._awaiting = False
         self._send(self.axis.handle(t_s, rx.arbitration_id, rx.data, rx.is_remote,
