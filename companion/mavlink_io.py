@@ -214,11 +214,9 @@ class MavlinkEndpoints:
         held = self._held
         now = time.monotonic() if held else 0.0
         for fd in list(self._backlogged):
-            if fd in held:
-                if now - self._last_write.get(fd, -math.inf) < self.batch_s:
-                    continue
-                held.discard(fd)
-            self._flush_tcp(("tcp", fd))
+            if fd in held and now - self._last_write.get(fd, -math.inf) < self.batch_s:
+                continue
+            self._flush_tcp(("tcp", fd))    # (which un-holds it)
 
     def _accept(self) -> None:
         assert self.listener is not None
@@ -319,11 +317,8 @@ class MavlinkEndpoints:
         if self.tlog is not None:
             for frame in frames:
                 self.tlog.write(frame)
-        data = frames[0] if len(frames) == 1 else b"".join(frames)
-        if peer[0] == "tcp":
-            self._send_tcp(peer, data, unasked=True)
-        elif peer[0] == "udp":
-            self._send_udp(self.udp[peer[1]], peer[2], data)
+        self._send_to(peer, frames[0] if len(frames) == 1 else b"".join(frames),
+                      unasked=True)
 
     def send_bytes(self, data: bytes, peer: Peer | None = None) -> None:
         """Send packed frames as they are (used to forward other components' messages)."""
@@ -336,8 +331,14 @@ class MavlinkEndpoints:
             for sock, targets in zip(self.udp, self._broadcast, strict=True):
                 for addr in targets:
                     self._send_udp(sock, addr, data)
-        elif peer[0] == "tcp":
-            self._send_tcp(peer, data)
+        else:
+            self._send_to(peer, data)
+
+    def _send_to(self, peer: Peer, data: bytes, unasked: bool = False) -> None:
+        """``data`` to one link: a TCP client (``unasked``: see ``batch_s``) or a UDP
+        peer."""
+        if peer[0] == "tcp":
+            self._send_tcp(peer, data, unasked)
         elif peer[0] == "udp":
             self._send_udp(self.udp[peer[1]], peer[2], data)
 
