@@ -52,7 +52,12 @@ from tuav_sitl.realtime import (
     set_background,
     set_nice,
 )
-from tuav_sitl.up import RECORDER_INTERVAL_S, SIM_LINK_DEFAULT, TELEMETRY_BATCH_S
+from tuav_sitl.up import (
+    RECORDER_INTERVAL_S,
+    SIM_LINK_DEFAULT,
+    TELEMETRY_BATCH_S,
+    plant_listen_args,
+)
 from tuavdefs.simlink import SIM_HOST_DEFAULT, format_sim_address
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -332,8 +337,7 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
         (work / "gains.toml").write_text(f"rate_hz = {float(control_rate_hz)!r}\n")
         gains = ["--gains", str(work / "gains.toml")]
     commands = {
-        "plant": ["-m", "sitl", *(["--socket", sim] if isinstance(sim, str)
-                                  else ["--port", str(sim[1])]), "--can", can, "--position",
+        "plant": ["-m", "sitl", *plant_listen_args(sim), "--can", can, "--position",
                   *map(str, flight.start_m),
                   *(["--duration", str(duration_s)] if duration_s is not None else []),
                   "--control-rate", str(float(control_rate_hz)),

@@ -87,6 +87,12 @@ def sim_address(kind: str, instance: int) -> tuple[str, int] | str:
     return (sl.SIM_HOST_DEFAULT, ports_for(instance).sim)
 
 
+def plant_listen_args(sim: tuple[str, int] | str) -> list[str]:
+    """The plant's options to listen on the simulator link ``sim`` (a Unix-domain path or
+    name, or (host, port))."""
+    return ["--socket", sim] if isinstance(sim, str) else ["--port", str(sim[1])]
+
+
 def _can_spec(spec: str, instance: int) -> str:
     """The bus spec for this instance: its own multicast group or vcan interface."""
     interface, channel = resolve_spec(spec)
@@ -354,8 +360,7 @@ def run_up(args: argparse.Namespace) -> int:
     can = _can_spec(args.can, args.instance)
     home = [str(v) for v in args.home]
     common = ["--params", str(run_dir / "params.toml")]
-    listen = ["--socket", sim] if isinstance(sim, str) else ["--port", str(sim[1])]
-    plant_args = ["-m", "sitl", *listen, "--can", can, "--home", *home,
+    plant_args = ["-m", "sitl", *plant_listen_args(sim), "--can", can, "--home", *home,
                   "--position", *map(str, args.position),
                   "--truth-log", str(run_dir / "truth.csv"), *common]
     if math.isfinite(speedup):
