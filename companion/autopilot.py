@@ -50,6 +50,7 @@ from tuavdefs.frames import (
     yaw_enu_to_ned,
     yaw_ned_to_enu,
 )
+from tuavdefs.mav_frames import GLOBAL_FRAMES, altitude_to_z, global_to_local
 
 M = mavlink2
 Vec3 = tuple[float, float, float]
@@ -75,12 +76,6 @@ _SENSORS = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
             | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | M.MAV_SYS_STATUS_AHRS
             | M.MAV_SYS_STATUS_SENSOR_BATTERY | M.MAV_SYS_STATUS_PREARM_CHECK)
 
-_GLOBAL_FRAMES = {
-    M.MAV_FRAME_GLOBAL: "amsl", M.MAV_FRAME_GLOBAL_INT: "amsl",
-    M.MAV_FRAME_GLOBAL_RELATIVE_ALT: "rel", M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: "rel",
-    # flat ground: above terrain is above the ground the winder stands on
-    M.MAV_FRAME_GLOBAL_TERRAIN_ALT: "rel", M.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT: "rel",
-}
 
 #: Default telemetry: message name -> rate [Hz of simulated time].
 DEFAULT_RATES_HZ: dict[str, float] = {
@@ -388,8 +383,8 @@ class Autopilot:
                 send_hb = why is None
         elif cmd == M.MAV_CMD_NAV_TAKEOFF:
             alt = p[6]
-            if frame is not None and frame in _GLOBAL_FRAMES and _GLOBAL_FRAMES[frame] == "amsl":
-                alt = alt - self.origin[2]
+            if frame is not None and frame in GLOBAL_FRAMES:
+                alt = altitude_to_z(alt, frame, self.origin)
             here = self._pos()
             if not (_finite(alt) and alt > 0.0):
                 why, result = f"Takeoff: bad altitude {alt}", M.MAV_RESULT_DENIED
@@ -468,13 +463,11 @@ class Autopilot:
             self.send_heartbeat()
 
     def _global_to_local(self, lat: float, lon: float, alt: float, frame: int | None) -> Vec3:
-        kind = _GLOBAL_FRAMES.get(frame if frame is not None else M.MAV_FRAME_GLOBAL, "amsl")
-        x, y, z = global_to_local_enu(lat, lon, alt, self.origin)
-        return (x, y, z if kind == "amsl" else alt)
+        return global_to_local(lat, lon, alt, frame, self.origin)
 
     def _reposition(self, p: list[float], frame: int | None) -> tuple[str | None, int]:
         nav = self.nav
-        if frame is not None and frame not in _GLOBAL_FRAMES:
+        if frame is not None and frame not in GLOBAL_FRAMES:
             return "Reposition: unsupported frame", M.MAV_RESULT_DENIED
         lat, lon, alt = p[4], p[5], p[6]
         if not (_finite(lat) and _finite(lon)) or (lat == 0.0 and lon == 0.0):
@@ -596,7 +589,7 @@ class Autopilot:
             item = mission_from_message(msg)
         except ValueError:
             item = None
-        if item is None or item.frame not in _GLOBAL_FRAMES:
+        if item is None or item.frame not in GLOBAL_FRAMES:
             result, why = M.MAV_MISSION_UNSUPPORTED_FRAME, "Guided: frame not supported"
         else:
             target = self._global_to_local(item.x * 1e-7, item.y * 1e-7, item.z, item.frame)
@@ -647,7 +640,7 @@ class Autopilot:
                             msg.yaw_rate)
 
     def _on_set_position_target_global_int(self, peer: Peer, msg: Any) -> None:
-        if msg.coordinate_frame not in _GLOBAL_FRAMES:
+        if msg.coordinate_frame not in GLOBAL_FRAMES:
             self._reject_target(f"Guided: frame {msg.coordinate_frame} not supported")
             return
         mask = msg.type_mask
@@ -720,7 +713,7 @@ class Autopilot:
         kind = kinds.get(cmd)
         if kind is None:
             raise _ItemError(M.MAV_MISSION_UNSUPPORTED, f"command {cmd} not supported")
-        if frame not in _GLOBAL_FRAMES:
+        if frame not in GLOBAL_FRAMES:
             raise _ItemError(M.MAV_MISSION_UNSUPPORTED_FRAME, f"frame {frame} not supported")
         lat, lon = it.x * 1e-7, it.y * 1e-7
         if not _finite(it.z):

@@ -85,6 +85,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from tuavdefs.mav_frames import GLOBAL_FRAMES, LOCAL_FRAMES
+
 __all__ = [
     "MissionItem", "MissionItemError", "MissionProtocol", "from_message", "to_message",
     "check_item", "home_item", "degrees_to_e7", "e7_to_degrees", "GLOBAL_FRAMES",
@@ -101,21 +103,6 @@ OWN_COMPONENT_ID = 1
 INT32_MAX = 2**31 - 1
 INT32_MIN = -(2**31)
 
-#: Frames whose x, y are latitude, longitude: degrees x 1e7 in MISSION_ITEM_INT. The non-INT
-#: variants are included because QGC and MAVProxy send them with scaled integers too.
-GLOBAL_FRAMES = frozenset({
-    mavlink2.MAV_FRAME_GLOBAL, mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT,
-    mavlink2.MAV_FRAME_GLOBAL_INT, mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-    mavlink2.MAV_FRAME_GLOBAL_TERRAIN_ALT, mavlink2.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
-})
-#: Frames whose x, y are positions in metres: metres x 1e4 in MISSION_ITEM_INT (13-19 are the
-#: retired local frames, now reserved).
-LOCAL_FRAMES = frozenset({
-    mavlink2.MAV_FRAME_LOCAL_NED, mavlink2.MAV_FRAME_LOCAL_ENU,
-    mavlink2.MAV_FRAME_LOCAL_OFFSET_NED, mavlink2.MAV_FRAME_BODY_NED,
-    mavlink2.MAV_FRAME_BODY_OFFSET_NED, mavlink2.MAV_FRAME_BODY_FRD,
-    *range(13, 20), mavlink2.MAV_FRAME_LOCAL_FRD, mavlink2.MAV_FRAME_LOCAL_FLU,
-})
 _DEG_SCALE = 1e7
 _LOCAL_SCALE = 1e4
 

@@ -167,3 +167,32 @@ def test_the_yaw_alone_is_the_euler_yaw():
     cases += [(1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), (math.nan, 0.0, 0.0, 0.0)]
     for q in cases:
         assert struct.pack("<d", fr.quat_to_yaw(q)) == struct.pack("<d", fr.quat_to_euler(q)[2])
+
+
+def test_mav_frames_table_reads_each_altitude_reference():
+    """The one frame table: AMSL frames subtract the winder's altitude, relative and
+    terrain frames are heights above its (flat) ground, local frames are not global, and a
+    position 100 m north of the winder lands 100 m along +y."""
+    from pymavlink.dialects.v20 import common as mav
+
+    from tuavdefs.frames import local_enu_to_global
+    from tuavdefs.mav_frames import (
+        GLOBAL_FRAMES,
+        LOCAL_FRAMES,
+        AltitudeReference,
+        altitude_to_z,
+        global_to_local,
+    )
+
+    origin = (47.0, 8.0, 500.0)
+    assert altitude_to_z(510.0, mav.MAV_FRAME_GLOBAL, origin) == 10.0
+    assert altitude_to_z(510.0, None, origin) == 10.0          # COMMAND_LONG: AMSL
+    for frame in (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT):
+        assert GLOBAL_FRAMES[frame] is AltitudeReference.HOME
+        assert altitude_to_z(10.0, frame, origin) == 10.0
+    assert not set(GLOBAL_FRAMES) & LOCAL_FRAMES
+    lat, lon, _ = local_enu_to_global((0.0, 100.0, 0.0), origin)
+    x, y, z = global_to_local(lat, lon, 12.0, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, origin)
+    assert abs(x) < 1e-6 and abs(y - 100.0) < 1e-6 and z == 12.0
+    with pytest.raises(KeyError):
+        altitude_to_z(1.0, mav.MAV_FRAME_LOCAL_NED, origin)

@@ -69,7 +69,8 @@ from tuav_sitl.scenario import (
     WaypointParams,
 )
 from tuavdefs.can_protocol import dbc_path
-from tuavdefs.frames import global_to_local_enu, local_enu_to_global, ned_to_enu
+from tuavdefs.frames import local_enu_to_global, ned_to_enu
+from tuavdefs.mav_frames import GLOBAL_FRAMES, altitude_to_z, global_to_local
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import ParameterError, load_toml, to_dict
 from tuavdefs.simlink import HOME_DEFAULT
@@ -112,9 +113,6 @@ _CMD_DO_REPOSITION = 192
 _NAV_COMMANDS = (_CMD_NAV_WAYPOINT, _CMD_NAV_LOITER_TURNS, _CMD_NAV_LOITER_TIME,
                  _CMD_NAV_LAND, _CMD_NAV_TAKEOFF)
 _FRAME_LOCAL_NED = 1
-#: Global frames -> "amsl" (altitude above mean sea level) or "rel" (above the ground the
-#: winder stands on; terrain frames count as that, the ground being flat), as the companion.
-_GLOBAL_FRAMES = {0: "amsl", 5: "amsl", 3: "rel", 6: "rel", 10: "rel", 11: "rel"}
 _POS_IGNORE_MASK = 0b111   # POSITION_TARGET_TYPEMASK_X/Y/Z_IGNORE
 _TELEMETRY_CLOCK = ("ATTITUDE", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED")
 _WINCH_COMPONENT = 169
@@ -395,7 +393,7 @@ class _TlogParser:
             self.targets.append({"wall": wall, "ned": (msg.x, msg.y, msg.z),
                                  "refused": False})
         elif kind == "SET_POSITION_TARGET_GLOBAL_INT" \
-                and msg.coordinate_frame in _GLOBAL_FRAMES:
+                and msg.coordinate_frame in GLOBAL_FRAMES:
             self.targets.append({"wall": wall, "global": (msg.lat_int * 1e-7,
                                                           msg.lon_int * 1e-7, msg.alt),
                                  "frame": int(msg.coordinate_frame), "refused": False})
@@ -417,20 +415,6 @@ class _TlogParser:
                 return _origin_from(g.lat * 1e-7, g.lon * 1e-7, g.alt * 1e-3,
                                     enu), "GLOBAL_POSITION_INT"
         return HOME_DEFAULT, "default"
-
-
-def _alt_to_z(alt_m: float, frame: int | None, origin: tuple[float, float, float]) -> float:
-    """Height [m] above the winder's ground of an altitude given in ``frame``: AMSL for
-    the global frames that say so and for None (as the companion reads it), else relative."""
-    kind = _GLOBAL_FRAMES.get(frame if frame is not None else 0, "rel")
-    return alt_m - origin[2] if kind == "amsl" else alt_m
-
-
-def _global_to_local(lat: float, lon: float, alt: float, frame: int | None,
-                     origin: tuple[float, float, float]) -> tuple[float, float, float]:
-    """A global position to the z-up frame [m], the altitude read as :func:`_alt_to_z`."""
-    x, y, _ = global_to_local_enu(lat, lon, alt, origin)
-    return (x, y, _alt_to_z(alt, frame, origin))
 
 
 class _TruthAt:
@@ -489,11 +473,11 @@ def read_tlog(path: Path, truth_t: np.ndarray, truth_pos: np.ndarray) -> TlogDat
             t_item = times.get(seq, math.nan)
             here = at(t_item) if math.isfinite(t_item) else prev
             if item.x != 0 or item.y != 0:
-                x, y, z = _global_to_local(item.x * 1e-7, item.y * 1e-7, item.z, item.frame,
+                x, y, z = global_to_local(item.x * 1e-7, item.y * 1e-7, item.z, item.frame,
                                            origin)
             else:   # flown from where the vehicle is
                 x, y = here[0], here[1]
-                z = _alt_to_z(item.z, item.frame, origin)
+                z = altitude_to_z(item.z, item.frame, origin)
             if item.command == _CMD_NAV_LAND:
                 z = here[2] if math.isfinite(t_item) else 0.0
             prev = (x, y, z)
@@ -504,11 +488,11 @@ def read_tlog(path: Path, truth_t: np.ndarray, truth_pos: np.ndarray) -> TlogDat
         t = float(clock.sim(wall))
         if cmd == _CMD_NAV_TAKEOFF:   # straight up from where the vehicle is
             here = at(t)
-            alt = _alt_to_z(p[6], frame if frame is not None else 3, origin)
+            alt = altitude_to_z(p[6], frame if frame is not None else 3, origin)
             guided.append((wall, Goal(t, (here[0], here[1], alt), "NAV_TAKEOFF")))
         else:
             lat, lon, alt = p[4], p[5], p[6]
-            target = _global_to_local(lat, lon, alt if math.isfinite(alt) else 0.0, frame,
+            target = global_to_local(lat, lon, alt if math.isfinite(alt) else 0.0, frame,
                                       origin)
             if not math.isfinite(alt):
                 target = (target[0], target[1], at(t)[2])
@@ -522,7 +506,7 @@ def read_tlog(path: Path, truth_t: np.ndarray, truth_pos: np.ndarray) -> TlogDat
             source = "SET_POSITION_TARGET_LOCAL_NED"
         else:
             lat, lon, alt = tgt["global"]
-            pos = _global_to_local(lat, lon, alt, tgt["frame"], origin)
+            pos = global_to_local(lat, lon, alt, tgt["frame"], origin)
             source = "SET_POSITION_TARGET_GLOBAL_INT"
         guided.append((tgt["wall"], Goal(t, pos, source)))
     guided.sort(key=lambda g: g[0])
