@@ -1,9 +1,9 @@
 """``python -m companion``: the onboard flight computer process.
 
-Connects to the plant's simulator link and, at every control period, runs the shared
-:class:`companion.navigation.Navigator` (modes, arming, take-off, landing, guided targets,
-missions) and :class:`companion.flight_controller.FlightController` on the truth state it
-receives (HIL_STATE_QUATERNION), and answers with the rotor commands. Ground stations and
+Connects to the plant's simulator link and, at every control period, steps the onboard
+software, :class:`companion.onboard.Companion` (navigation and flight control: the same
+object the offline runner steps), on the state it receives (HIL_STATE_QUATERNION), and
+answers with the rotor commands. Ground stations and
 scripts drive it as an ArduCopter (``companion.autopilot``) on TCP 127.0.0.1:5760 and UDP
 pushed to 127.0.0.1:14550 and 14540; every frame is logged to ``--tlog``.
 
@@ -31,7 +31,7 @@ from typing import Any
 
 from companion.autopilot import Autopilot, Telemetry
 from companion.component_server import ComponentServer
-from companion.flight_controller import FlightController, VehicleState
+from companion.flight_controller import VehicleState
 from companion.gains import FlightControlParams
 from companion.mavlink_io import (
     GCS_TCP_PORT_DEFAULT,
@@ -40,12 +40,12 @@ from companion.mavlink_io import (
     MavlinkEndpoints,
     TelemetryLog,
 )
-from companion.navigation import NavigationParams, Navigator
+from companion.navigation import NavigationParams
+from companion.onboard import Companion, OnboardInputs
 from companion.param_protocol import params_to_defs
 from companion.simlink_client import SimLinkClient
 from tuavdefs import component_link as cl
 from tuavdefs import simlink as sl
-from tuavdefs.frames import quat_to_yaw
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
 
@@ -169,11 +169,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:
         print(f"companion: cannot listen: {exc.strerror} ({exc})", file=sys.stderr)
         return 1
-    # the controllers (and their compiled code) are ready before the plant's clock starts
+    # the onboard software (and its compiled code) is ready before the plant's clock starts
     g = params.environment.gravity_m_s2
-    veh = params.vehicle
-    flight = FlightController(gains, veh, params.tether, g)
-    nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m)
+    onboard = Companion(params, gains, nav_params)
+    nav = onboard.nav
     if isinstance(args.sim, str):
         client = SimLinkClient(home=tuple(args.home), unix_path=args.sim)
     else:
@@ -184,24 +183,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"companion: {exc}", file=sys.stderr)
         return 1
 
-    def set_nav(new: NavigationParams) -> None:
-        nav.p = new
-
     def read_only_rate(value: float) -> str | None:
         if value == gains.rate_hz:
             return None
         return "CTL_RATE_HZ is read-only: the plant sets the control rate"
 
     defs = [d if d.name != "CTL_RATE_HZ" else dataclasses.replace(d, set=read_only_rate)
-            for d in params_to_defs(gains, GAIN_NAMES, flight.set_gains)]
-    defs += params_to_defs(nav_params, NAV_NAMES, set_nav)
+            for d in params_to_defs(gains, GAIN_NAMES, onboard.set_gains)]
+    defs += params_to_defs(nav_params, NAV_NAMES, onboard.set_nav_params)
     autopilot = Autopilot(endpoints, nav, tuple(args.home), defs,
                           param_file=Path(args.param_file) if args.param_file else None,
                           component=components)
     if args.param_file and Path(args.param_file).exists():
         for warning in autopilot.params.load() or []:
             print(f"companion: {warning}", flush=True)
-    autopilot.on_winch_status(lambda m: flight.winch_report(
+    autopilot.on_winch_status(lambda m: onboard.winch_report(
         last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None))
     stop = {"signal": None}
     signal.signal(signal.SIGTERM, lambda s, _f: stop.update(signal=s))
@@ -213,14 +209,7 @@ def main(argv: Sequence[str] | None = None) -> int:
           + (f"; component link on tcp:127.0.0.1:{components.port}" if components else ""),
           flush=True)
     last_t = [0.0]
-    min_speed = veh.rotor_speed_min_rad_s
-    hover_speed = math.sqrt(veh.mass_kg * g / (4.0 * veh.rotor_thrust_coeff))
-    dt = 1.0 / gains.rate_hz
-    started = False
-    was_flying = False
     was_armed = False
-    throttle = 0.0
-    steps = 0
     last_state_wall = time.monotonic()
     reason = "link closed"
     sim_fd = client.fileno()
@@ -256,30 +245,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                 continue
             t = sim.sim_time_s
             last_t[0] = t
-            state = VehicleState(truth.position_enu_m, truth.velocity_enu_m_s,
-                                 truth.quaternion, truth.body_rates_flu_rad_s)
-            yaw = quat_to_yaw(state.quat)
-            if not started:
-                started = True
-                nav.start(t, state.pos_m, state.vel_m_s, yaw)
-                if nav.flying:
-                    flight.reset(state, (hover_speed,) * 4)
-                    was_flying = True
-                    if args.goto is not None:
-                        why = nav.goto(tuple(args.goto))
-                        if why is not None:
-                            print(f"companion: --goto refused: {why}", flush=True)
+            inputs = OnboardInputs(t, VehicleState(truth.position_enu_m, truth.velocity_enu_m_s,
+                                                   truth.quaternion, truth.body_rates_flu_rad_s))
+            first = not onboard.started
+            if first:
+                onboard.start(inputs)
+                if nav.flying and args.goto is not None:
+                    why = nav.goto(tuple(args.goto))
+                    if why is not None:
+                        print(f"companion: --goto refused: {why}", flush=True)
                 autopilot.armed_changed()
-            ref, motors = nav.step(t, state.pos_m, state.vel_m_s, yaw, dt)
-            if motors == "fly" and ref is not None:
-                if not was_flying:
-                    flight.reset(state, (min_speed,) * 4)
-                was_flying = True
-                cmds = flight.commands(t, state, ref)
-            else:
-                was_flying = False
-                cmds = (0.0, 0.0, 0.0, 0.0)
-            armed = motors != "off"
+            out = onboard.step(inputs)
+            cmds, armed, state = out.rotor_commands, out.armed, out.state
             client.send_actuators(sim.time_usec, cmds, armed=armed)
             # the answer is out (in lockstep the plant waits for it); now the ground
             # stations and the winch: what they ask applies from the next period
@@ -293,7 +270,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             was_armed = nav.armed
             if components is not None:
                 components.send_position(t, state.pos_m, state.vel_m_s)
-            steps += 1
     except ConnectionError:
         pass
     finally:
@@ -306,7 +282,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if stop["signal"] is not None:
         reason = "stopped"
     c = autopilot.counters
-    print(f"companion: {reason} after {steps} control periods; {c['commands']} commands "
+    print(f"companion: {reason} after {onboard.steps} control periods; {c['commands']} commands "
           f"({c['unsupported']} unsupported), {c['rejected_targets']} targets refused; "
           f"{endpoints.bad_frames} bad MAVLink frames dropped", flush=True)
     return 0

@@ -36,7 +36,15 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.mavlink_io import MavlinkEndpoints, Peer
 from companion.mission_protocol import MissionItem, MissionProtocol
 from companion.mission_protocol import from_message as mission_from_message
-from companion.navigation import FlightMode, NavCommand, NavEvent, Navigator
+from companion.navigation import (
+    FlightMode,
+    NavCommand,
+    NavEvent,
+    Navigator,
+    NavKind,
+    Reason,
+    Refusal,
+)
 from companion.param_protocol import ParamDef, ParamProtocol
 from tuavdefs import component_link as cl
 from tuavdefs.frames import (
@@ -170,9 +178,10 @@ class Autopilot:
     def _send_to(self, peer: Peer | None, msg: Any) -> None:
         self.io.send(msg, peer)
 
-    def statustext(self, severity: int, text: str) -> None:
+    def statustext(self, severity: int, text: str | Refusal) -> None:
         """STATUSTEXT to every link (chunked past 50 characters, as MAVLink 2 allows) and
         the process log."""
+        text = str(text)
         self.log(text)
         data = text.encode("utf-8", "replace")
         if len(data) <= 50:
@@ -362,7 +371,7 @@ class Autopilot:
         self.counters["commands"] += 1
         nav = self.nav
         result = M.MAV_RESULT_ACCEPTED
-        why: str | None = None
+        why: str | Refusal | None = None
         send_hb = False
         if cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
             force = _finite(p[1]) and abs(p[1] - FORCE_MAGIC) < 0.5
@@ -599,9 +608,9 @@ class Autopilot:
                 target = (here[0], here[1], target[2])
             why = self.nav.check_target(target)
             if why is not None:
-                result = (M.MAV_MISSION_INVALID_PARAM7 if "ground" in why
-                          else M.MAV_MISSION_INVALID_PARAM5_X if "reach" in why
-                          else M.MAV_MISSION_INVALID)
+                result = (M.MAV_MISSION_INVALID_PARAM7 if why.reason is Reason.BELOW_GROUND
+                          else M.MAV_MISSION_INVALID_PARAM5_X
+                          if why.reason is Reason.BEYOND_REACH else M.MAV_MISSION_INVALID)
                 self.counters["rejected_targets"] += 1
             else:
                 why = self.nav.goto(target)
@@ -663,6 +672,7 @@ class Autopilot:
         if nav.mode != FlightMode.GUIDED:
             self._reject_target("Guided: not in GUIDED", count=False)
             return
+        why: Refusal | str | None
         if not pos_ignored:
             why = nav.goto(pos, yaw)
         elif not vel_ignored:
@@ -673,11 +683,13 @@ class Autopilot:
                 if nav.check_target(ahead) is not None and nav.check_target(
                         self._pos()) is None:
                     nav.set_velocity((0.0, 0.0, 0.0))
-                    why = f"velocity leads {nav.check_target(ahead)}"
+                    why = f"Guided: velocity leads {nav.check_target(ahead)}"
         else:
             why = "Guided: acceleration-only targets not supported"
-        if why is not None:
-            self._reject_target(f"Guided: {why}" if not why.startswith("Guided") else why)
+        if isinstance(why, Refusal):
+            self._reject_target(f"Guided: {why}")
+        elif why is not None:
+            self._reject_target(why)
 
     def _reject_target(self, why: str, count: bool = True) -> None:
         if count:
@@ -704,9 +716,9 @@ class Autopilot:
         if cmd == M.MAV_CMD_DO_CHANGE_SPEED:
             if not (_finite(it.param2) and it.param2 > 0):
                 raise _ItemError(M.MAV_MISSION_INVALID_PARAM2, "speed must be > 0")
-            return NavCommand(seq, "speed", speed_m_s=float(it.param2))
+            return NavCommand(seq, NavKind.SPEED, speed_m_s=float(it.param2))
         if cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            return NavCommand(seq, "rtl")
+            return NavCommand(seq, NavKind.RTL)
         kinds = {M.MAV_CMD_NAV_WAYPOINT: "waypoint", M.MAV_CMD_NAV_LOITER_TURNS: "loiter_turns",
                  M.MAV_CMD_NAV_TAKEOFF: "takeoff", M.MAV_CMD_NAV_LAND: "land",
                  M.MAV_CMD_NAV_LOITER_TIME: "waypoint"}
@@ -725,22 +737,22 @@ class Autopilot:
             x, y, _ = self._global_to_local(lat, lon, it.z, frame)
             xy = (x, y)
         if kind == "land":
-            return NavCommand(seq, "land", xy)
+            return NavCommand(seq, NavKind.LAND, xy)
         if kind == "takeoff" and z <= 0.0:
             raise _ItemError(M.MAV_MISSION_INVALID_PARAM7, "take-off altitude <= 0")
         check_xy = xy if xy is not None else (0.0, 0.0)
         reach = self.nav.check_target((*check_xy, z))
         if reach is not None:
-            code = (M.MAV_MISSION_INVALID_PARAM7 if "ground" in reach or
+            code = (M.MAV_MISSION_INVALID_PARAM7 if reach.reason is Reason.BELOW_GROUND or
                     math.hypot(*check_xy) <= self.nav.reach_m else
                     M.MAV_MISSION_INVALID_PARAM5_X)
             raise _ItemError(code, reach)
         if kind == "takeoff":
-            return NavCommand(seq, "takeoff", None, z)
+            return NavCommand(seq, NavKind.TAKEOFF, None, z)
         hold = float(it.param1) if _finite(it.param1) and it.param1 > 0 else 0.0
         if kind == "waypoint":
             accept = float(it.param2) if _finite(it.param2) and it.param2 > 0 else None
-            return NavCommand(seq, "waypoint", xy, z, hold_s=hold, accept_m=accept)
+            return NavCommand(seq, NavKind.WAYPOINT, xy, z, hold_s=hold, accept_m=accept)
         # loiter turns: param1 turns, param3 radius (positive: clockwise)
         radius = float(it.param3)
         turns = float(it.param1)
@@ -753,7 +765,7 @@ class Autopilot:
             raise _ItemError(M.MAV_MISSION_INVALID_PARAM3,
                              f"circle beyond tether reach ({far:.1f} > "
                              f"{self.nav.reach_m:.1f} m)")
-        return NavCommand(seq, "loiter_turns", xy, z, turns=turns,
+        return NavCommand(seq, NavKind.LOITER_TURNS, xy, z, turns=turns,
                           circle_radius_m=abs(radius), clockwise=radius > 0)
 
     def _update_mission_home(self) -> None:

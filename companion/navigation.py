@@ -32,9 +32,10 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from enum import IntEnum
+from enum import Enum, IntEnum
 
 from companion.trajectory import (
+    EVENT_REACHED,
     Circle,
     CircleItem,
     GotoItem,
@@ -125,16 +126,31 @@ class NavigationParams(Params):
 
 # ----- mission commands (the autopilot converts MAVLink items into these)
 
+class NavKind(Enum):
+    """What a mission step does (the MAV_CMD it comes from)."""
+
+    TAKEOFF = "takeoff"              # NAV_TAKEOFF
+    WAYPOINT = "waypoint"            # NAV_WAYPOINT, NAV_LOITER_TIME
+    LOITER_TURNS = "loiter_turns"    # NAV_LOITER_TURNS
+    LAND = "land"                    # NAV_LAND
+    RTL = "rtl"                      # NAV_RETURN_TO_LAUNCH
+    SPEED = "speed"                  # DO_CHANGE_SPEED
+
+
+#: Steps that move the vehicle (a mission of none has nothing to fly).
+NAV_MOVES = frozenset({NavKind.TAKEOFF, NavKind.WAYPOINT, NavKind.LOITER_TURNS,
+                       NavKind.LAND, NavKind.RTL})
+
+
 @dataclass(frozen=True)
 class NavCommand:
     """One mission step, inertial z-up frame.
 
-    ``kind``: "takeoff", "waypoint", "loiter_turns", "land", "rtl" or "speed".
     ``xy_m`` None means "where the vehicle is when the step begins".
     """
 
     seq: int
-    kind: str
+    kind: NavKind
     xy_m: tuple[float, float] | None = None
     z_m: float | None = None
     hold_s: float = 0.0
@@ -145,16 +161,68 @@ class NavCommand:
     speed_m_s: float | None = None
 
 
-class NavEvent:
-    """Event kinds the navigator reports (:meth:`Navigator.pop_events`)."""
+class NavEvent(Enum):
+    """Event kinds the navigator reports (:meth:`Navigator.pop_events`) and their value."""
 
     CURRENT = "current"          # a mission item became current (seq)
     REACHED = "reached"          # a mission item was reached (seq)
     MISSION_DONE = "mission_done"
     TAKEOFF_DONE = "takeoff_done"
-    LANDED = "landed"
+    LANDED = "landed"            # (the landing item's seq, or None)
     DISARMED = "disarmed"
     ERROR = "error"              # a plan could not be flown; holding instead (text)
+
+
+class MotorState(Enum):
+    """What the rotors do this period."""
+
+    OFF = "off"                  # disarmed: stopped
+    IDLE = "idle"                # armed on the ground: idling
+    FLY = "fly"                  # flying the reference
+
+
+class LegTag(Enum):
+    """Why a leg is flown (what happens when it ends)."""
+
+    HOLD = "hold"
+    GOTO = "goto"                # a guided target
+    TAKEOFF = "takeoff"          # a guided take-off
+    MISSION = "mission"          # a mission item
+    LAND_APPROACH = "land_approach"   # to above a mission landing's point
+    LAND_HIGH = "land_high"      # the descent to land_alt_low_m
+    LAND = "land"                # the final descent
+    RTL_CLIMB = "rtl_climb"
+    RTL_HOME = "rtl_home"
+
+
+class Reason(Enum):
+    """Why the navigator refused a command."""
+
+    NOT_A_NUMBER = "not a number"
+    BELOW_GROUND = "below the ground"
+    BEYOND_REACH = "beyond the tether's reach"
+    MODE_NOT_ARMABLE = "mode not armable"
+    MISSION_EMPTY = "mission empty"
+    MISSING_TAKEOFF = "mission does not start with a take-off"
+    FLYING = "flying"
+    NOT_FLYING = "not flying"
+    UNKNOWN_MODE = "unknown mode"
+    UNSUPPORTED_MODE = "mode not supported"
+    WRONG_MODE = "not in the mode the command needs"
+    NOT_ARMED = "not armed"
+    BAD_VALUE = "bad value"
+    NO_SUCH_ITEM = "no such mission item"
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """A refused command: the reason (for logic) and the text (for STATUSTEXT)."""
+
+    reason: Reason
+    text: str
+
+    def __str__(self) -> str:
+        return self.text
 
 
 # ----- legs: one planned movement each
@@ -163,7 +231,8 @@ class _Leg:
     """A planned movement: a WaypointFollower over one item, optionally open-ended."""
 
     def __init__(self, follower: WaypointFollower, item: GotoItem | CircleItem,
-                 landing: bool = False, seq: int | None = None, tag: str = "") -> None:
+                 landing: bool = False, seq: int | None = None,
+                 tag: LegTag = LegTag.HOLD) -> None:
         self.follower = follower
         self.item = item
         self.landing = landing
@@ -217,7 +286,7 @@ class Navigator:
 
     def __init__(self, params: NavigationParams, gear_height_m: float,
                  tether_length_m: float,
-                 on_event: Callable[[str, object], None] | None = None) -> None:
+                 on_event: Callable[[NavEvent, object], None] | None = None) -> None:
         self.p = params
         self.gear_height_m = gear_height_m
         self.tether_length_m = tether_length_m
@@ -231,10 +300,11 @@ class Navigator:
         self.mission_index = 0
         """Index into :attr:`mission` of the current item."""
         self.mission_running = False
-        self._events: list[tuple[str, object]] = []
+        self._events: list[tuple[NavEvent, object]] = []
         self._leg: _Leg | None = None
         self._legs: list[_Leg] = []
         self._vel: _VelocityRef | None = None
+        self._script: Callable[[float, Vec3], RefSample] | None = None
         self._vel_deadline = math.inf      # a velocity target stops after this [s]
         self._ref: RefSample | None = None
         self._t = 0.0
@@ -284,28 +354,29 @@ class Navigator:
         """Whether :meth:`pop_events` has events to hand out."""
         return bool(self._events)
 
-    def pop_events(self) -> list[tuple[str, object]]:
+    def pop_events(self) -> list[tuple[NavEvent, object]]:
         """(kind, value) events since the last call."""
         out, self._events = self._events, []
         return out
 
-    def _emit(self, kind: str, value: object = None) -> None:
+    def _emit(self, kind: NavEvent, value: object = None) -> None:
         self._events.append((kind, value))
         if self.on_event is not None:
             self.on_event(kind, value)
 
     # ----- checks
 
-    def check_target(self, pos_m: Iterable[float]) -> str | None:
+    def check_target(self, pos_m: Iterable[float]) -> Refusal | None:
         """Why ``pos_m`` [m] cannot be flown to, or None if it can."""
         p = tuple(float(v) for v in pos_m)
         if len(p) != 3 or not all(math.isfinite(v) for v in p):
-            return "target is not a number"
+            return Refusal(Reason.NOT_A_NUMBER, "target is not a number")
         if p[2] < 0.0:
-            return f"target {p[2]:.1f} m below the ground"
+            return Refusal(Reason.BELOW_GROUND, f"target {p[2]:.1f} m below the ground")
         d = math.sqrt(p[0] ** 2 + p[1] ** 2 + p[2] ** 2)
         if d > self.reach_m:
-            return f"beyond tether reach ({d:.1f} > {self.reach_m:.1f} m)"
+            return Refusal(Reason.BEYOND_REACH,
+                           f"beyond tether reach ({d:.1f} > {self.reach_m:.1f} m)")
         return None
 
     # ----- commands (return None when done, else the reason it was refused)
@@ -322,14 +393,14 @@ class Navigator:
             self._ref = RefSample(pos, _ZERO3, _ZERO3, _ZERO3, yaw, 0.0)
             self._hold()
 
-    def arm(self, force: bool = False) -> str | None:
+    def arm(self, force: bool = False) -> Refusal | None:
         """Arm (ArduCopter's checks: an armable mode; with force, any)."""
         if self.armed:
             return None
         if not force and self.mode not in ARMABLE_MODES:
-            return f"Arm: Mode not armable ({self.mode.name})"
+            return Refusal(Reason.MODE_NOT_ARMABLE, f"Arm: Mode not armable ({self.mode.name})")
         if not force and self.mode == FlightMode.AUTO and not self._mission_has_items():
-            return "Arm: mission is empty"
+            return Refusal(Reason.MISSION_EMPTY, "Arm: mission is empty")
         self.armed = True
         if self.landed:
             self.home_m = self._pos
@@ -338,36 +409,36 @@ class Navigator:
                 self._auto_takeoff_pending = True
         return None
 
-    def disarm(self, force: bool = False) -> str | None:
+    def disarm(self, force: bool = False) -> Refusal | None:
         """Disarm; in flight only with force (the rotors stop and it falls)."""
         if not self.armed:
             return None
         if self.flying and not force:
-            return "Disarm: vehicle is flying (use force)"
+            return Refusal(Reason.FLYING, "Disarm: vehicle is flying (use force)")
         self._disarm()
         return None
 
     def _disarm(self) -> None:
         self.armed = False
-        self._leg, self._legs, self._vel = None, [], None
+        self._leg, self._legs, self._vel, self._script = None, [], None, None
         self.mission_running = False
         self._armed_on_ground_since = None
         self._auto_takeoff_pending = False
         self._emit(NavEvent.DISARMED)
 
-    def set_mode(self, mode: int) -> str | None:
+    def set_mode(self, mode: int) -> Refusal | None:
         """Change the flight mode."""
         try:
             m = FlightMode(int(mode))
         except ValueError:
-            return f"unknown mode {mode}"
+            return Refusal(Reason.UNKNOWN_MODE, f"unknown mode {mode}")
         if m not in SUPPORTED_MODES:
-            return f"mode {m.name} not supported"
+            return Refusal(Reason.UNSUPPORTED_MODE, f"mode {m.name} not supported")
         if m == FlightMode.AUTO and not self._mission_has_items():
-            return "Auto: mission is empty"
+            return Refusal(Reason.MISSION_EMPTY, "Auto: mission is empty")
         if (m == FlightMode.AUTO and self.landed and self.armed
-                and self._first_nav().kind != "takeoff"):
-            return "Auto: Missing Takeoff Cmd"
+                and self._first_nav().kind is not NavKind.TAKEOFF):
+            return Refusal(Reason.MISSING_TAKEOFF, "Auto: Missing Takeoff Cmd")
         self.mode = m
         self._vel = None
         if m == FlightMode.AUTO:
@@ -389,16 +460,16 @@ class Navigator:
                 self._hold()
         return None
 
-    def takeoff(self, alt_m: float) -> str | None:
+    def takeoff(self, alt_m: float) -> Refusal | None:
         """GUIDED take-off to ``alt_m`` [m above the ground]."""
         if not math.isfinite(alt_m) or alt_m <= 0.0:
-            return f"Takeoff: bad altitude {alt_m}"
+            return Refusal(Reason.BAD_VALUE, f"Takeoff: bad altitude {alt_m}")
         if self.mode != FlightMode.GUIDED:
-            return "Takeoff: not in GUIDED"
+            return Refusal(Reason.WRONG_MODE, "Takeoff: not in GUIDED")
         if not self.armed:
-            return "Takeoff: not armed"
+            return Refusal(Reason.NOT_ARMED, "Takeoff: not armed")
         if not self.landed:
-            return "Takeoff: already flying"
+            return Refusal(Reason.FLYING, "Takeoff: already flying")
         target = (self._pos[0], self._pos[1], alt_m)
         why = self.check_target(target)
         if why is not None:
@@ -407,15 +478,15 @@ class Navigator:
         return None
 
     def goto(self, pos_m: Vec3, yaw_rad: float | None = None,
-             speed_m_s: float | None = None) -> str | None:
+             speed_m_s: float | None = None) -> Refusal | None:
         """GUIDED: fly to ``pos_m`` [m] (``yaw_rad`` there if given)."""
         why = self.check_target(pos_m)
         if why is not None:
             return why
         if self.mode != FlightMode.GUIDED:
-            return "not in GUIDED"
+            return Refusal(Reason.WRONG_MODE, "not in GUIDED")
         if not self.flying:
-            return "not flying (take off first)"
+            return Refusal(Reason.NOT_FLYING, "not flying (take off first)")
         if speed_m_s is not None and speed_m_s > 0 and math.isfinite(speed_m_s):
             self._speed_override = float(speed_m_s)
         self._vel = None
@@ -423,19 +494,19 @@ class Navigator:
         return None
 
     def set_velocity(self, vel_m_s: Vec3, yaw_rad: float | None = None,
-                     yaw_rate_rad_s: float | None = None) -> str | None:
+                     yaw_rate_rad_s: float | None = None) -> Refusal | None:
         """GUIDED: fly at ``vel_m_s`` [m/s] until a new target, or a stop after
         ``guided_velocity_timeout_s`` without an update."""
         if not all(math.isfinite(v) for v in vel_m_s):
-            return "velocity is not a number"
+            return Refusal(Reason.NOT_A_NUMBER, "velocity is not a number")
         if self.mode != FlightMode.GUIDED:
-            return "not in GUIDED"
+            return Refusal(Reason.WRONG_MODE, "not in GUIDED")
         if not self.flying:
-            return "not flying (take off first)"
+            return Refusal(Reason.NOT_FLYING, "not flying (take off first)")
         ref = self._current_ref()
         if self._vel is None:
             self._vel = _VelocityRef(ref, self.p.acc_m_s2)
-            self._leg, self._legs = None, []
+            self._leg, self._legs, self._script = None, [], None
         self._vel.cmd = tuple(float(v) for v in vel_m_s)
         if yaw_rad is not None and math.isfinite(yaw_rad):
             self._vel.yaw = yaw_rad
@@ -444,12 +515,27 @@ class Navigator:
         self._vel_deadline = self._t + self.p.guided_velocity_timeout_s
         return None
 
-    def set_yaw(self, yaw_rad: float) -> str | None:
+    def follow(self, source: Callable[[float, Vec3], RefSample]) -> Refusal | None:
+        """GUIDED: fly, at every control period, the reference ``source(t, pos)`` gives
+        for time ``t`` [s] with the vehicle at ``pos`` [m]: position, velocity,
+        acceleration and yaw together, as a script streaming full set-points at the control
+        rate does (ArduCopter's GUIDED with position, velocity and acceleration targets).
+        Any other command or mode ends it; a sample beyond the tether's reach or below the
+        ground ends it with a hold (a NavEvent.ERROR)."""
+        if self.mode != FlightMode.GUIDED:
+            return Refusal(Reason.WRONG_MODE, "not in GUIDED")
+        if not self.flying:
+            return Refusal(Reason.NOT_FLYING, "not flying (take off first)")
+        self._leg, self._legs, self._vel = None, [], None
+        self._script = source
+        return None
+
+    def set_yaw(self, yaw_rad: float) -> Refusal | None:
         """Turn to ``yaw_rad`` [rad] where it is (CONDITION_YAW)."""
         if not math.isfinite(yaw_rad):
-            return "yaw is not a number"
+            return Refusal(Reason.NOT_A_NUMBER, "yaw is not a number")
         if not self.flying:
-            return "not flying"
+            return Refusal(Reason.NOT_FLYING, "not flying")
         ref = self._current_ref()
         if self._vel is not None:
             self._vel.yaw = yaw_rad
@@ -458,15 +544,15 @@ class Navigator:
         self._fly_to(target if target is not None else ref.pos_m, yaw_rad)
         return None
 
-    def change_speed(self, speed_m_s: float) -> str | None:
+    def change_speed(self, speed_m_s: float) -> Refusal | None:
         """DO_CHANGE_SPEED: the horizontal speed of planned moves from now on [m/s]."""
         if not (math.isfinite(speed_m_s) and speed_m_s > 0.0):
-            return f"bad speed {speed_m_s}"
+            return Refusal(Reason.BAD_VALUE, f"bad speed {speed_m_s}")
         self._speed_override = min(float(speed_m_s), 20.0)
         if self.flying and self._leg is not None and not self._leg.landing \
-                and self._leg.tag in ("goto", "mission"):
+                and self._leg.tag in (LegTag.GOTO, LegTag.MISSION):
             target = self._leg.follower.target_m
-            if target is not None and self._leg.tag == "goto":
+            if target is not None and self._leg.tag is LegTag.GOTO:
                 self._fly_to(target, None)
         return None
 
@@ -481,7 +567,7 @@ class Navigator:
                 self.mission_running = False
                 self._hold()
 
-    def set_current(self, seq: int) -> str | None:
+    def set_current(self, seq: int) -> Refusal | None:
         """MISSION_SET_CURRENT: fly item ``seq`` next."""
         for i, c in enumerate(self.mission):
             if c.seq == seq:
@@ -491,22 +577,22 @@ class Navigator:
                     self.mission_index = i
                     self._emit(NavEvent.CURRENT, c.seq)
                 return None
-        return f"no mission item {seq}"
+        return Refusal(Reason.NO_SUCH_ITEM, f"no mission item {seq}")
 
-    def start_mission(self, first_seq: int = 0) -> str | None:
+    def start_mission(self, first_seq: int = 0) -> Refusal | None:
         """MISSION_START: AUTO, from ``first_seq`` (0: from the start)."""
         if not self._mission_has_items():
-            return "Auto: mission is empty"
+            return Refusal(Reason.MISSION_EMPTY, "Auto: mission is empty")
         if not self.armed:
-            return "MISSION_START: not armed"
+            return Refusal(Reason.NOT_ARMED, "MISSION_START: not armed")
         index = 0
         if first_seq > 0:
             for i, c in enumerate(self.mission):
                 if c.seq == first_seq:
                     index = i
                     break
-        if self.landed and self.mission[index].kind != "takeoff":
-            return "Auto: Missing Takeoff Cmd"
+        if self.landed and self.mission[index].kind is not NavKind.TAKEOFF:
+            return Refusal(Reason.MISSING_TAKEOFF, "Auto: Missing Takeoff Cmd")
         self.mode = FlightMode.AUTO
         self._vel = None
         self._start_mission(index)
@@ -515,19 +601,19 @@ class Navigator:
     # ----- stepping
 
     def step(self, t: float, pos: Vec3, vel: Vec3, yaw: float, dt: float
-             ) -> tuple[RefSample | None, str]:
+             ) -> tuple[RefSample | None, MotorState]:
         """Advance to ``t`` [s] with the vehicle at ``pos`` [m], ``vel`` [m/s], ``yaw``
-        [rad]. Returns (reference or None, motors) with motors "off", "idle" or "fly"."""
+        [rad]. Returns (the reference, or None when not flying, and the motors' state)."""
         self._t, self._pos, self._vel_now, self._yaw = t, pos, vel, yaw
         if not self.armed:
             self._ref = None
             if not self.landed and pos[2] <= self.gear_height_m + 0.05:
                 self.landed = True
-            return None, "off"
+            return None, MotorState.OFF
         if self.landed:
             if self._auto_takeoff_pending and self.mode == FlightMode.AUTO:
                 self._auto_takeoff_pending = False
-                if self._mission_has_items() and self._first_nav().kind == "takeoff":
+                if self._mission_has_items() and self._first_nav().kind is NavKind.TAKEOFF:
                     self._start_mission(0)
             if self.landed:
                 since = self._armed_on_ground_since
@@ -535,8 +621,8 @@ class Navigator:
                     self._armed_on_ground_since = since = t
                 if self.p.disarm_delay_s > 0 and t - since >= self.p.disarm_delay_s:
                     self._disarm()
-                    return None, "off"
-                return None, "idle"
+                    return None, MotorState.OFF
+                return None, MotorState.IDLE
         self._armed_on_ground_since = None
         try:
             ref = self._advance(t, dt)
@@ -550,10 +636,19 @@ class Navigator:
         self._ref = ref
         self._land_detector(t, pos, vel)
         if not self.armed:
-            return None, "off"
-        return ref, "fly"
+            return None, MotorState.OFF
+        return ref, MotorState.FLY
 
     def _advance(self, t: float, dt: float) -> RefSample:
+        if self._script is not None:
+            ref = self._script(t, self._pos)
+            x, y, z = ref.pos_m
+            reach = self.reach_m
+            if not (z >= 0.0 and x * x + y * y + z * z <= reach * reach):   # NaN too
+                self._emit(NavEvent.ERROR, f"scripted reference {self.check_target(ref.pos_m)}")
+                self._hold()
+                return self._advance(t, dt)
+            return ref
         if self._vel is not None:
             if t > self._vel_deadline:
                 self._vel.cmd = _ZERO3
@@ -566,7 +661,7 @@ class Navigator:
         ref = follower.update(t, self._pos)
         if follower.has_events:
             for ev in follower.pop_events():
-                if ev.kind == "reached" and leg.seq is not None and leg.tag == "mission":
+                if ev.kind == EVENT_REACHED and leg.seq is not None and leg.tag is LegTag.MISSION:
                     self._emit(NavEvent.REACHED, leg.seq)
         if follower.done and not leg.landing and not leg.finished:
             leg.finished = True
@@ -574,16 +669,16 @@ class Navigator:
         return ref
 
     def _leg_done(self, t: float, leg: _Leg) -> None:
-        if leg.tag == "takeoff":
+        if leg.tag is LegTag.TAKEOFF:
             self._emit(NavEvent.TAKEOFF_DONE)
         if self._legs:
             self._leg = self._legs.pop(0)
             self._start_leg(self._leg)
             return
-        if leg.tag in ("rtl_home", "land_approach"):
+        if leg.tag in (LegTag.RTL_HOME, LegTag.LAND_APPROACH):
             item = leg.item
             self._queue(self._landing_legs((item.pos_m[0], item.pos_m[1]), leg.seq))
-        elif leg.tag == "mission" and self.mission_running:
+        elif leg.tag is LegTag.MISSION and self.mission_running:
             self._next_mission_item(t)
         # otherwise the finished leg's reference rests at its target: a hold
 
@@ -627,6 +722,7 @@ class Navigator:
 
     def _queue(self, legs: list[_Leg]) -> None:
         """Fly these legs in order, the first from the current reference."""
+        self._script = None
         self._legs = legs[1:]
         self._start_leg(legs[0])
 
@@ -634,17 +730,18 @@ class Navigator:
         ref = self._current_ref()
         self._vel = None
         self._queue([_Leg(self._follower(self.speed_m_s),
-                          GotoItem(_stop_point(ref, self.p.acc_m_s2), ref.yaw_rad), tag="hold")])
+                          GotoItem(_stop_point(ref, self.p.acc_m_s2), ref.yaw_rad),
+                          tag=LegTag.HOLD)])
 
     def _fly_to(self, pos: Vec3, yaw: float | None) -> None:
         self._queue([_Leg(self._follower(self.speed_m_s), GotoItem(tuple(pos), yaw),
-                          tag="goto")])
+                          tag=LegTag.GOTO)])
 
     def _takeoff(self, target: Vec3, seq: int | None = None) -> None:
         self.landed = False
         self._armed_on_ground_since = None
         self._ref = RefSample(self._pos, _ZERO3, _ZERO3, _ZERO3, self._yaw, 0.0)
-        tag = "mission" if seq is not None else "takeoff"
+        tag = LegTag.MISSION if seq is not None else LegTag.TAKEOFF
         self._queue([_Leg(self._follower(self.p.speed_up_m_s, self.p.takeoff_accept_m),
                           GotoItem(target, None), seq=seq, tag=tag)])
 
@@ -655,11 +752,11 @@ class Navigator:
         low = self.gear_height_m + self.p.land_alt_low_m
         if ref.pos_m[2] > low + 0.5:
             legs.append(_Leg(self._follower(self.p.speed_down_m_s, 1.0),
-                             GotoItem((xy[0], xy[1], low), None), seq=seq, tag="land_high"))
+                             GotoItem((xy[0], xy[1], low), None), seq=seq, tag=LegTag.LAND_HIGH))
         # the final descent aims below the ground: the land detector ends it
         legs.append(_Leg(self._follower(self.p.land_speed_m_s),
                          GotoItem((xy[0], xy[1], -1.0), None), landing=True, seq=seq,
-                         tag="land"))
+                         tag=LegTag.LAND))
         return legs
 
     def _land_here(self, seq: int | None = None) -> None:
@@ -677,21 +774,20 @@ class Navigator:
         if alt > stop[2] + 0.5:
             legs.append(_Leg(self._follower(self.p.speed_up_m_s),
                              GotoItem((stop[0], stop[1], alt), None), seq=seq,
-                             tag="rtl_climb"))
+                             tag=LegTag.RTL_CLIMB))
         legs.append(_Leg(self._follower(self.speed_m_s, hold_s=self.p.rtl_loiter_s),
-                         GotoItem((home[0], home[1], alt), None), seq=seq, tag="rtl_home"))
+                         GotoItem((home[0], home[1], alt), None), seq=seq, tag=LegTag.RTL_HOME))
         self._vel = None
         self._queue(legs)
 
     # ----- missions
 
     def _mission_has_items(self) -> bool:
-        return any(c.kind in ("takeoff", "waypoint", "loiter_turns", "land", "rtl")
-                   for c in self.mission)
+        return any(c.kind in NAV_MOVES for c in self.mission)
 
     def _first_nav(self) -> NavCommand:
         for c in self.mission[self.mission_index:] or self.mission:
-            if c.kind != "speed":
+            if c.kind is not NavKind.SPEED:
                 return c
         return self.mission[0]
 
@@ -708,7 +804,7 @@ class Navigator:
         while self.mission_index < len(self.mission):
             c = self.mission[self.mission_index]
             self._emit(NavEvent.CURRENT, c.seq)
-            if c.kind == "speed":
+            if c.kind is NavKind.SPEED:
                 if c.speed_m_s is not None and c.speed_m_s > 0:
                     self._speed_override = c.speed_m_s
                 self.mission_index += 1
@@ -729,7 +825,7 @@ class Navigator:
 
     def _fly_item(self, c: NavCommand) -> None:
         xy = self._item_xy(c)
-        if c.kind == "takeoff":
+        if c.kind is NavKind.TAKEOFF:
             z = c.z_m if c.z_m is not None else self.p.rtl_alt_m
             if self.landed:
                 self._takeoff((self._pos[0], self._pos[1], z), seq=c.seq)
@@ -739,12 +835,12 @@ class Navigator:
                 self._queue([_Leg(self._follower(self.p.speed_up_m_s,
                                                  self.p.takeoff_accept_m),
                                   GotoItem((ref.pos_m[0], ref.pos_m[1], max(z, ref.pos_m[2])),
-                                           None), seq=c.seq, tag="mission")])
-        elif c.kind == "waypoint":
+                                           None), seq=c.seq, tag=LegTag.MISSION)])
+        elif c.kind is NavKind.WAYPOINT:
             z = c.z_m if c.z_m is not None else self._current_ref().pos_m[2]
             self._queue([_Leg(self._follower(self.speed_m_s, c.accept_m, c.hold_s),
-                              GotoItem((xy[0], xy[1], z), None), seq=c.seq, tag="mission")])
-        elif c.kind == "loiter_turns":
+                              GotoItem((xy[0], xy[1], z), None), seq=c.seq, tag=LegTag.MISSION)])
+        elif c.kind is NavKind.LOITER_TURNS:
             z = c.z_m if c.z_m is not None else self._current_ref().pos_m[2]
             radius = abs(c.circle_radius_m)
             # as ArduCopter's circle does, the speed is cut to what the acceleration limit
@@ -754,16 +850,16 @@ class Navigator:
             item = CircleItem(xy, radius, z, speed, turns=c.turns, clockwise=c.clockwise,
                               lead_in_s=lead_in)
             self._queue([_Leg(self._follower(speed, c.accept_m), item, seq=c.seq,
-                              tag="mission")])
-        elif c.kind == "land":
+                              tag=LegTag.MISSION)])
+        elif c.kind is NavKind.LAND:
             if c.xy_m is None:
                 self._land_here(seq=c.seq)
             else:
                 ref = self._current_ref()
                 self._queue([_Leg(self._follower(self.speed_m_s),
                                   GotoItem((xy[0], xy[1], ref.pos_m[2]), None), seq=c.seq,
-                                  tag="land_approach")])
-        elif c.kind == "rtl":
+                                  tag=LegTag.LAND_APPROACH)])
+        elif c.kind is NavKind.RTL:
             self._rtl(seq=c.seq)
 
 

@@ -1,19 +1,20 @@
-"""A closed loop for flight-logic tests: the plant's truth model, the companion's
-FlightController driven by a Navigator, and the ground station's WinderHost, stepped in one
-process at their own rates (as the offline runner does)."""
+"""A closed loop for flight-logic tests: the plant's truth model, the companion's onboard
+step (:class:`companion.onboard.Companion`: navigator and flight controller) and the ground
+station's WinderHost, stepped in one process at their own rates (as the offline runner
+does)."""
 
 from __future__ import annotations
 
 import math
 
-from companion.flight_controller import FlightController, VehicleState
+from companion.flight_controller import VehicleState
 from companion.gains import FlightControlParams
-from companion.navigation import NavigationParams, Navigator
+from companion.navigation import MotorState, NavigationParams
+from companion.onboard import Companion, OnboardInputs
 from groundstation.lbar import LBarParams
 from groundstation.winder_control import WinderControlParams
 from groundstation.winder_host import WinderHost
 from sitl.plant import POS, QUAT, RATES, VEL, Plant, PlantInputs, initial_state
-from tuavdefs.frames import quat_to_euler
 from tuavdefs.params import SystemParams
 
 
@@ -32,24 +33,22 @@ class Loop:
                                  params.tether, g)
         length0, _ = self.winder.lbar.length(pos0)
         self.plant.x[:] = initial_state(model, pos0, tether_length_m=length0)
-        self.flight = FlightController(gains, params.vehicle, params.tether, g)
-        self.nav = Navigator(nav or NavigationParams(), params.vehicle.gear_height_m,
-                             params.tether.total_length_m)
+        self.companion = Companion(params, gains, nav or NavigationParams())
+        self.nav = self.companion.nav
         self.n_ctrl = round(1.0 / (self.plant.dt_s * gains.rate_hz))
         self.n_wind = round(1.0 / (self.plant.dt_s * WinderControlParams().rate_hz))
         self.dt_ctrl = 1.0 / gains.rate_hz
         self.k = 0
         self.inputs = PlantInputs()
         self.torque = 0.0
-        self.motors = "off"
-        self.events: list[tuple[float, str, object]] = []
+        self.motors = MotorState.OFF
+        self.events: list[tuple[float, object, object]] = []
         self.max_taut = -math.inf
-        self.nav.start(0.0, *self._pos_vel_yaw())
-        self._was_flying = False
+        self.companion.start(OnboardInputs(0.0, self._state()))
 
-    def _pos_vel_yaw(self) -> tuple:
+    def _state(self) -> VehicleState:
         x = self.plant.x.tolist()
-        return tuple(x[POS]), tuple(x[VEL]), quat_to_euler(tuple(x[QUAT]))[2]
+        return VehicleState(tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]), tuple(x[RATES]))
 
     @property
     def t(self) -> float:
@@ -71,28 +70,17 @@ class Loop:
             ws = self.winder.update(plant.tether_length_m, plant.drum_rate_rad_s, tension,
                                     tuple(x[POS]), tuple(x[VEL]))
             self.torque = ws.torque_n_m
-            self.flight.winch_report(t, plant.tether_length_m,
+            self.companion.winch_report(t, plant.tether_length_m,
                                      plant.drum_rate_rad_s * self.params.winder.drum_radius_m,
                                      tension)
             d = math.dist(tuple(x[POS]), (0.0, 0.0, 0.0))
             self.max_taut = max(self.max_taut, d - plant.tether_length_m)
         if k % self.n_ctrl == 0:
-            x = plant.x.tolist()
-            pos, vel, yaw = tuple(x[POS]), tuple(x[VEL]), quat_to_euler(tuple(x[QUAT]))[2]
-            ref, motors = self.nav.step(t, pos, vel, yaw, self.dt_ctrl)
+            out = self.companion.step(OnboardInputs(t, self._state()))
             for kind, value in self.nav.pop_events():
                 self.events.append((t, kind, value))
-            state = VehicleState(pos, vel, tuple(x[QUAT]), tuple(x[RATES]))
-            if motors == "fly" and ref is not None:
-                if not self._was_flying:
-                    self.flight.reset(state, tuple(plant.rotor_speeds_rad_s))
-                self._was_flying = True
-                cmds = self.flight.update(t, state, ref).rotor_commands
-            else:
-                self._was_flying = False
-                cmds = (0.0, 0.0, 0.0, 0.0)
-            self.motors = motors
-            self.inputs = PlantInputs(cmds, motors != "off", self.torque, True)
+            self.motors = out.motors
+            self.inputs = PlantInputs(out.rotor_commands, out.armed, self.torque, True)
         else:
             self.inputs = self.inputs._replace(winder_torque_n_m=self.torque)
         plant.step(self.inputs)
@@ -114,6 +102,6 @@ class Loop:
                 return True
         return False
 
-    def kinds(self) -> list[str]:
+    def kinds(self) -> list[object]:
         """Event kinds so far, in order."""
         return [k for _, k, _ in self.events]

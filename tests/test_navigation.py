@@ -9,7 +9,15 @@ import math
 import pytest
 from nav_harness import Loop
 
-from companion.navigation import FlightMode, NavCommand, NavEvent, NavigationParams
+from companion.navigation import (
+    FlightMode,
+    MotorState,
+    NavCommand,
+    NavEvent,
+    NavigationParams,
+    NavKind,
+    Reason,
+)
 
 
 def test_takeoff_from_the_ground_goto_and_land() -> None:
@@ -17,16 +25,17 @@ def test_takeoff_from_the_ground_goto_and_land() -> None:
     nav = loop.nav
     assert nav.landed and not nav.armed
     assert loop.pos[2] == pytest.approx(loop.params.vehicle.gear_height_m)
-    assert nav.takeoff(10.0) == "Takeoff: not in GUIDED"
+    why = nav.takeoff(10.0)
+    assert why.reason is Reason.WRONG_MODE and str(why) == "Takeoff: not in GUIDED"
     assert nav.set_mode(FlightMode.GUIDED) is None
-    assert nav.takeoff(10.0) == "Takeoff: not armed"
+    assert nav.takeoff(10.0).reason is Reason.NOT_ARMED
     assert nav.arm() is None
     loop.run_until(lambda lp: False, 1.0)
-    assert loop.motors == "idle" and loop.pos[2] == pytest.approx(0.2, abs=1e-6)
+    assert loop.motors is MotorState.IDLE and loop.pos[2] == pytest.approx(0.2, abs=1e-6)
     assert nav.takeoff(10.0) is None
     assert loop.run_until(lambda lp: NavEvent.TAKEOFF_DONE in lp.kinds(), 30.0)
     assert loop.pos[2] == pytest.approx(10.0, abs=0.3)
-    assert nav.takeoff(12.0) == "Takeoff: already flying"
+    assert nav.takeoff(12.0).reason is Reason.FLYING
     assert nav.disarm() is not None          # not in flight without force
     assert nav.goto((8.0, 6.0, 12.0)) is None
     assert loop.run_until(lambda lp: math.dist(lp.pos, (8.0, 6.0, 12.0)) < 0.05, 30.0)
@@ -35,7 +44,7 @@ def test_takeoff_from_the_ground_goto_and_land() -> None:
     assert nav.landed
     assert math.hypot(loop.pos[0] - 8.0, loop.pos[1] - 6.0) < 0.1   # lands where it was
     assert NavEvent.LANDED in loop.kinds() and NavEvent.DISARMED in loop.kinds()
-    assert loop.motors == "off"
+    assert loop.motors is MotorState.OFF
     assert loop.max_taut < 0.0               # the winder kept the tether slack throughout
 
 
@@ -43,13 +52,13 @@ def test_mission_with_circle_reaches_every_item_in_order() -> None:
     loop = Loop()
     nav = loop.nav
     nav.set_mission([
-        NavCommand(1, "takeoff", None, 10.0),
-        NavCommand(2, "speed", speed_m_s=3.0),
-        NavCommand(3, "waypoint", (6.0, 0.0), 10.0),
-        NavCommand(4, "loiter_turns", (6.0, 6.0), 10.0, turns=1.0, circle_radius_m=6.0,
+        NavCommand(1, NavKind.TAKEOFF, None, 10.0),
+        NavCommand(2, NavKind.SPEED, speed_m_s=3.0),
+        NavCommand(3, NavKind.WAYPOINT, (6.0, 0.0), 10.0),
+        NavCommand(4, NavKind.LOITER_TURNS, (6.0, 6.0), 10.0, turns=1.0, circle_radius_m=6.0,
                    clockwise=False),
-        NavCommand(5, "waypoint", (0.0, 12.0), 12.0, hold_s=2.0),
-        NavCommand(6, "land"),
+        NavCommand(5, NavKind.WAYPOINT, (0.0, 12.0), 12.0, hold_s=2.0),
+        NavCommand(6, NavKind.LAND),
     ])
     assert nav.set_mode(FlightMode.AUTO) is None
     assert nav.arm() is None
@@ -95,18 +104,18 @@ def test_targets_beyond_reach_below_ground_or_nan_are_refused() -> None:
     nav = loop.nav
     reach = nav.reach_m
     assert reach == pytest.approx(0.95 * loop.params.tether.total_length_m - 0.5)
-    assert "reach" in nav.check_target((reach + 0.5, 0.0, 0.0))
+    assert nav.check_target((reach + 0.5, 0.0, 0.0)).reason is Reason.BEYOND_REACH
     assert nav.check_target((reach - 0.5, 0.0, 0.0)) is None
-    assert "below the ground" in nav.check_target((1.0, 1.0, -0.5))
-    assert "not a number" in nav.check_target((math.nan, 0.0, 5.0))
+    assert nav.check_target((1.0, 1.0, -0.5)).reason is Reason.BELOW_GROUND
+    assert nav.check_target((math.nan, 0.0, 5.0)).reason is Reason.NOT_A_NUMBER
     nav.set_mode(FlightMode.GUIDED)
     nav.arm()
-    assert "reach" in nav.takeoff(60.0)
+    assert nav.takeoff(60.0).reason is Reason.BEYOND_REACH
     nav.takeoff(5.0)
     assert loop.run_until(lambda lp: NavEvent.TAKEOFF_DONE in lp.kinds(), 30.0)
     before = loop.pos
-    assert "reach" in nav.goto((40.0, 30.0, 10.0))
-    assert "not a number" in nav.set_velocity((math.nan, 0.0, 0.0))
+    assert nav.goto((40.0, 30.0, 10.0)).reason is Reason.BEYOND_REACH
+    assert nav.set_velocity((math.nan, 0.0, 0.0)).reason is Reason.NOT_A_NUMBER
     loop.run_until(lambda lp: False, 3.0)
     assert math.dist(loop.pos, before) < 0.05     # the refused targets changed nothing
 
@@ -115,16 +124,16 @@ def test_arming_rules_and_auto_disarm() -> None:
     loop = Loop(nav=NavigationParams(disarm_delay_s=2.0))
     nav = loop.nav
     assert nav.set_mode(FlightMode.LAND) is None
-    assert "not armable" in nav.arm()
+    assert nav.arm().reason is Reason.MODE_NOT_ARMABLE
     assert nav.arm(force=True) is None
     assert nav.disarm() is None
     nav.set_mode(FlightMode.LOITER)
     assert nav.arm() is None
     assert loop.run_until(lambda lp: not lp.nav.armed, 3.0)
     assert loop.t == pytest.approx(2.0, abs=0.05)
-    assert nav.set_mode(FlightMode.AUTO) == "Auto: mission is empty"
-    assert "not supported" in nav.set_mode(FlightMode.ACRO)
-    assert "unknown" in nav.set_mode(99)
+    assert nav.set_mode(FlightMode.AUTO).reason is Reason.MISSION_EMPTY
+    assert nav.set_mode(FlightMode.ACRO).reason is Reason.UNSUPPORTED_MODE
+    assert nav.set_mode(99).reason is Reason.UNKNOWN_MODE
 
 
 def test_guided_velocity_target_moves_then_stops_after_timeout() -> None:
