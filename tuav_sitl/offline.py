@@ -23,7 +23,9 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from companion.flight_controller import FlightController, VehicleState
+from companion.flight_controller import VehicleState
+from companion.navigation import FlightMode, NavEvent
+from companion.onboard import Companion, OnboardInputs
 from companion.trajectory import (
     GotoItem,
     Hold,
@@ -34,7 +36,17 @@ from companion.trajectory import (
 )
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
-from sitl.plant import DRUM_ANGLE, DRUM_RATE, POS, QUAT, RATES, VEL, Plant, PlantInputs
+from sitl.plant import (
+    DRUM_ANGLE,
+    DRUM_RATE,
+    POS,
+    QUAT,
+    RATES,
+    VEL,
+    Plant,
+    PlantInputs,
+    initial_state,
+)
 from sitl.trim import hover_trim
 from tuav_sitl.scenario import ScenarioParams
 from tuavdefs.frames import quat_to_euler, wrap_pi
@@ -104,7 +116,8 @@ class RunResult:
 
 
 class Reference:
-    """The scenario's reference: a trajectory, or the waypoint mission logic."""
+    """The scenario's trajectory, as the ground station's script streams it to the vehicle
+    (the paper's experiments): a trajectory, or waypoints flown one after the other."""
 
     def __init__(self, sc: ScenarioParams) -> None:
         #: the trajectory segment last sampled, with the times [from, to) it covers
@@ -141,8 +154,7 @@ class Reference:
             self._started = False
         self.traj = b.build()
 
-    def sample(self, t: float, pos: tuple[float, float, float],
-               vel: tuple[float, float, float]) -> RefSample:
+    def sample(self, t: float, pos: tuple[float, float, float]) -> RefSample:
         """The reference at ``t`` [s] for the vehicle at ``pos`` [m]."""
         if self.follower is None:
             lo, hi, segment = self._segment
@@ -178,13 +190,31 @@ def _active_segment(traj: Any, t: float) -> tuple[float, float, Any]:
     return lo, hi, segments[i]
 
 
+#: The flight controller's diagnostics logged for a control period without flight (on the
+#: ground): att_cmd and att_des; thrust and torque; mixer_sat, pos_sat, d_hat, v_pos, v_att.
+_GROUND_ATTITUDE = (math.nan,) * 6
+_GROUND_WRENCH = (math.nan,) * 4
+_GROUND_REST = (0.0, 0.0, math.nan, math.nan, math.nan, math.nan, math.nan)
+_NAN3 = (math.nan,) * 3
+_ORIGIN = (0.0, 0.0, 0.0)
+
+
+class MissionError(ValueError):
+    """A scenario's mission the vehicle refuses (as it would refuse the upload)."""
+
+
 class OfflineRunner:
-    """Plant, companion and ground-station logic stepped together."""
+    """Plant, onboard software and ground-station logic stepped together.
+
+    The onboard software is :class:`companion.onboard.Companion`, the object the companion
+    process steps; a scenario's ground station either uploads its mission and flies it in
+    AUTO from the ground, or streams the scenario's trajectory as full set-points in GUIDED
+    (:meth:`companion.navigation.Navigator.follow`).
+    """
 
     def __init__(self, scenario: ScenarioParams) -> None:
         sc = self.sc = scenario
         params = self.params = sc.system()
-        veh = params.vehicle
         g = params.environment.gravity_m_s2
         self.dt = 1.0 / sc.physics_rate_hz
         self.n_ctrl = round(sc.physics_rate_hz / sc.control.rate_hz)
@@ -192,12 +222,53 @@ class OfflineRunner:
         self.winder_host = WinderHost(sc.winder_control, sc.lbar, params.winder,
                                       params.tether, g)
         start = tuple(sc.initial.position_m)
-        length0, _ = self.winder_host.lbar.length(start)
-        x0, _ = hover_trim(params, start, length0, sc.initial.yaw_rad)
-        self.plant = Plant(params, dt_s=self.dt, state=x0)
-        self.flight = FlightController(sc.control, veh, params.tether, g)
-        self.flight.reset(self._vehicle_state(), tuple(self.plant.rotor_speeds_rad_s))
-        self.reference = Reference(sc)
+        gear = params.vehicle.gear_height_m
+        self.plant = Plant(params, dt_s=self.dt)
+        if start[2] <= gear:
+            # resting on its gear, rotors stopped, the tether lying out to it with a little
+            # slack (as the plant process starts on the ground)
+            start = (start[0], start[1], gear)
+            self.plant.x[:] = initial_state(self.plant.model, start,
+                                            tether_length_m=math.dist(start, _ORIGIN) + 0.1)
+        else:
+            length0, _ = self.winder_host.lbar.length(start)
+            x0, _ = hover_trim(params, start, length0, sc.initial.yaw_rad)
+            self.plant.x[:] = x0
+        #: the navigator's events: (kind, value, time [s])
+        self.nav_events: list[tuple[NavEvent, object, float]] = []
+        self.companion = Companion(params, sc.control, sc.navigation,
+                                   on_event=self._on_nav_event)
+        self._t = 0.0
+        self.companion.start(OnboardInputs(0.0, self._vehicle_state()))
+        self.reference: Reference | None = None
+        self.home: tuple[float, float, float] | None = None
+        if sc.flies_mission:
+            self._upload_mission()
+        else:
+            self.reference = Reference(sc)
+            why = self.companion.nav.follow(self.reference.sample)
+            if why is not None:
+                raise MissionError(f"{sc.name}: the trajectory cannot be flown: {why} "
+                                   "(does [initial] start on the ground?)")
+
+    def _on_nav_event(self, kind: NavEvent, value: object) -> None:
+        self.nav_events.append((kind, value, self._t))
+
+    def _upload_mission(self) -> None:
+        """What a ground station does: upload the mission, AUTO, arm (from the ground; a
+        vehicle already in the air starts the mission)."""
+        nav = self.companion.nav
+        self.home, items = self.sc.mission_items()
+        from companion.mission_items import ItemRefused, nav_commands
+        try:
+            commands = nav_commands(items, self.home, nav)
+        except ItemRefused as exc:
+            raise MissionError(f"{self.sc.name}: mission: {exc}") from None
+        nav.set_mission(commands)
+        for why in ((nav.set_mode(FlightMode.AUTO), nav.arm()) if nav.landed
+                    else (nav.start_mission(),)):
+            if why is not None:
+                raise MissionError(f"{self.sc.name}: mission refused: {why}")
 
     def _vehicle_state(self) -> VehicleState:
         """What the companion receives: the truth state (docs/architecture.md)."""
@@ -206,9 +277,11 @@ class OfflineRunner:
 
     def run(self, progress: TextIO | None = None,
             on_sample: Callable[[float], None] | None = None) -> RunResult:
-        """Run the scenario; returns the time series and metrics."""
+        """Run the scenario; returns the time series and metrics. A mission ends when the
+        vehicle has landed and disarmed (or at ``duration_s``)."""
         sc, plant = self.sc, self.plant
-        flight, winder_host, reference = self.flight, self.winder_host, self.reference
+        companion, winder_host = self.companion, self.winder_host
+        nav = companion.nav
         r_w = self.params.winder.drum_radius_m
         dt, n_wind, n_ctrl = self.dt, self.n_wind, self.n_ctrl
         n_steps = round(sc.duration_s / dt)
@@ -217,12 +290,11 @@ class OfflineRunner:
         bar = ProgressBar(sc.duration_s, progress)
         inputs = PlantInputs()
         winder_torque, winder_lyap, lbar_m, lbar_rate = 0.0, 0.0, 0.0, 0.0
-        flight.winch_report(0.0, plant.tether_length_m, 0.0,
-                            plant.tether_forces().drum_tension_n)
-        events: list[tuple[str, int, float]] = []
-        sample, follower = reference.sample, reference.follower
+        companion.winch_report(0.0, plant.tether_length_m, 0.0,
+                               plant.tether_forces().drum_tension_n)
+        mission = sc.flies_mission
         advance, tether_forces = plant.advance, plant.tether_forces
-        update, add_row = flight.update, log.add
+        step, add_row = companion.step, log.add
         wall0 = time.perf_counter()
         k = 0
         while True:
@@ -238,32 +310,42 @@ class OfflineRunner:
                 winder_torque, winder_lyap = ws.torque_n_m, ws.command.lyapunov
                 lbar_m, lbar_rate = ws.lbar_m, ws.lbar_rate_m_s
                 # ... and the winch's report reaches the companion
-                flight.winch_report(t, length, drum_rate * r_w, drum_tension)
+                companion.winch_report(t, length, drum_rate * r_w, drum_tension)
             if k % n_ctrl == 0:
                 x = plant.x.tolist()
-                state = VehicleState(tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]),
-                                     tuple(x[RATES]))
-                pos, vel = state.pos_m, state.vel_m_s
-                ref = sample(t, pos, vel)
-                if follower is not None:
-                    events.extend(reference.events())
-                fs = update(t, state, ref)
-                po, ao = fs.position, fs.attitude
-                inputs = PlantInputs(fs.rotor_commands, True, winder_torque, True)
+                self._t = t
+                out = step(OnboardInputs(t, VehicleState(tuple(x[POS]), tuple(x[VEL]),
+                                                         tuple(x[QUAT]), tuple(x[RATES]))),
+                           diagnostics=True)
+                state, fs, ref = out.state, out.flight, out.reference
+                inputs = PlantInputs(out.rotor_commands, out.armed, winder_torque, True)
                 truth = tether_forces()
                 info = truth.info
-                add_row(t, *pos, *vel, *ref.pos_m, *ref.vel_m_s, *quat_to_euler(state.quat),
-                        *ao.attitude_cmd_rad, *po.attitude_rad, *state.rates_rad_s,
-                        po.thrust_n, *ao.torque_n_m, *fs.rotor_commands, fs.mixer_saturated,
-                        po.saturated, *po.disturbance_m_s2, po.lyapunov, ao.lyapunov,
-                        winder_lyap, po.lyapunov_raw, ao.lyapunov_raw, r_w * x[DRUM_ANGLE],
-                        lbar_m, lbar_rate, fresh, x[DRUM_RATE], winder_torque,
-                        truth.drum_tension_n, truth.top_tension_n, int(info.regime),
-                        info.lowest_point_height_m, *plant.wind_m_s, *truth.on_uav_n,
-                        *fs.tether_force_est_n)
+                if fs is not None:
+                    po, ao = fs.position, fs.attitude
+                    control = (*ao.attitude_cmd_rad, *po.attitude_rad, *state.rates_rad_s,
+                               po.thrust_n, *ao.torque_n_m, *fs.rotor_commands,
+                               fs.mixer_saturated, po.saturated, *po.disturbance_m_s2,
+                               po.lyapunov, ao.lyapunov)
+                    lyap_raw = (po.lyapunov_raw, ao.lyapunov_raw)
+                    est = fs.tether_force_est_n
+                else:
+                    control = (*_GROUND_ATTITUDE, *state.rates_rad_s, *_GROUND_WRENCH,
+                               *out.rotor_commands, *_GROUND_REST)
+                    lyap_raw, est = (math.nan, math.nan), _NAN3
+                ref_pos, ref_vel = ((ref.pos_m, ref.vel_m_s) if ref is not None
+                                    else (_NAN3, _NAN3))
+                add_row(t, *state.pos_m, *state.vel_m_s, *ref_pos, *ref_vel,
+                        *quat_to_euler(state.quat), *control, winder_lyap, *lyap_raw,
+                        r_w * x[DRUM_ANGLE], lbar_m, lbar_rate, fresh, x[DRUM_RATE],
+                        winder_torque, truth.drum_tension_n, truth.top_tension_n,
+                        int(info.regime), info.lowest_point_height_m, *plant.wind_m_s,
+                        *truth.on_uav_n, *est)
                 bar.update(t)
                 if on_sample is not None:
                     on_sample(t)
+                if mission and nav.landed and not nav.armed and nav.mission:
+                    break   # landed and disarmed: the mission is over
             elif fresh:   # the winder's new torque, the rotors' commands held
                 inputs = PlantInputs(inputs.rotor_commands, inputs.armed, winder_torque,
                                      inputs.winder_enabled)
@@ -278,8 +360,18 @@ class OfflineRunner:
         bar.close()
         series = log.arrays()
         metrics = compute_metrics(sc, series, self.reference, wall)
-        metrics["waypoints_reached"] = [
-            {"index": i, "t_s": round(ts, 3)} for kind, i, ts in events if kind == "reached"]
+        events: list[tuple[str, int, float]] = []
+        if self.reference is not None and self.reference.follower is not None:
+            events = self.reference.events()
+            metrics["waypoints_reached"] = [
+                {"index": i, "t_s": round(ts, 3)} for kind, i, ts in events
+                if kind == "reached"]
+        if mission:
+            metrics["items_reached"] = [int(v) for kind, v, _ in self.nav_events
+                                        if kind is NavEvent.REACHED]
+            metrics["items_reached_t_s"] = [round(ts, 3) for kind, _, ts in self.nav_events
+                                            if kind is NavEvent.REACHED]
+            metrics["landed_disarmed"] = bool(nav.landed and not nav.armed)
         return RunResult(sc, series, metrics, events)
 
 
@@ -322,11 +414,13 @@ class _Log:
         return out
 
 
-def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray], reference: Reference,
-                    wall_s: float) -> dict[str, Any]:
+def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray],
+                    reference: Reference | None, wall_s: float) -> dict[str, Any]:
     """The run's figures of merit (see docs/results.md for their definitions)."""
     t = s["t"]
-    win = t >= sc.metrics_after_s
+    # tracking counts while flying a reference (a mission's time on the ground has none)
+    flying = np.isfinite(s["ref_pos"]).all(axis=1)
+    win = (t >= sc.metrics_after_s) & flying
     pos_err = np.linalg.norm(s["pos"] - s["ref_pos"], axis=1)
     e_att = s["euler"] - s["att_cmd"]
     e_att[:, 2] = (e_att[:, 2] + np.pi) % (2 * np.pi) - np.pi
@@ -351,8 +445,8 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray], reference: Ref
         "max_tension_n": float(s["top_tension"].max()),
         "max_drum_tension_n": float(s["drum_tension"].max()),
         "tether_ground_contact_fraction": float(np.isin(s["regime"], GROUND_REGIMES).mean()),
-        "motor_saturation_fraction": float(motor_sat.mean()),
-        "position_loop_saturation_fraction": float(s["pos_sat"].astype(bool).mean()),
+        "motor_saturation_fraction": float(motor_sat[flying].mean()),
+        "position_loop_saturation_fraction": float(s["pos_sat"].astype(bool)[flying].mean()),
         "settling_time_s": None,
         "overshoot_percent": None,
         "metrics_after_s": sc.metrics_after_s,
@@ -360,7 +454,8 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray], reference: Ref
         "wall_time_s": round(wall_s, 3),
         "realtime_factor": round(float(t[-1]) / wall_s, 2) if wall_s > 0 else None,
     }
-    if sc.trajectory.kind in ("setpoint", "step") and reference.goal is not None:
+    if (reference is not None and sc.trajectory.kind in ("setpoint", "step")
+            and reference.goal is not None):
         goal = np.array(reference.goal)
         start = np.array(sc.initial.position_m)
         dist_goal = np.linalg.norm(s["pos"] - goal, axis=1)

@@ -1,11 +1,15 @@
 """Scenarios of the offline runner: the paper's experiments as TOML files.
 
 A scenario file has top-level ``name``, ``description``, ``duration_s``,
-``metrics_after_s``, and the tables ``[initial]``, ``[trajectory]`` (with
-``[[trajectory.waypoints]]`` for waypoint missions), and optionally ``[vehicle]``,
+``metrics_after_s``, and the tables ``[initial]`` and either ``[trajectory]`` (the paper's
+experiments: a reference streamed to the vehicle in GUIDED; ``[[trajectory.waypoints]]``
+for waypoint runs) or a mission flown in AUTO, as ArduPilot users write one: ``[[mission]]``
+items (MAV_CMD names, frames and parameters) or ``mission_file`` (QGC WPL 110, as
+MAVProxy's ``wp save`` writes it; home is its item 0 and the winder's position). Optionally
+``home``, ``[navigation]`` (the flight logic's speeds and limits), ``[vehicle]``,
 ``[tether]``, ``[winder]``, ``[environment]``, ``[wind]``, ``[control]``,
-``[winder_control]``, ``[lbar]`` to override the defaults. Every field is checked at load
-time and an error names it (``circle.trajectory.radius_m: must be > 0 m, got -1.0``).
+``[winder_control]``, ``[lbar]`` override the defaults. Every field is checked at load time
+and an error names it (``circle.trajectory.radius_m: must be > 0 m, got -1.0``).
 """
 
 from __future__ import annotations
@@ -15,9 +19,15 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion import mission_file
 from companion.gains import FlightControlParams
+from companion.mission_protocol import MissionItem, degrees_to_e7, home_item
+from companion.navigation import NavigationParams
 from groundstation.lbar import LBarParams
 from groundstation.winder_control import WinderControlParams
+from tuavdefs.frames import local_enu_to_global
 from tuavdefs.params import (
     EnvironmentParams,
     SystemParams,
@@ -27,6 +37,7 @@ from tuavdefs.params import (
     WindParams,
 )
 from tuavdefs.paramspec import ParameterError, Params, load_toml, quantity
+from tuavdefs.simlink import HOME_DEFAULT
 
 TRAJECTORY_KINDS = ("hold", "step", "setpoint", "line", "circle", "waypoints")
 
@@ -75,6 +86,62 @@ class TrajectoryParams(Params):
             raise ValueError("waypoints: a waypoint mission needs at least one waypoint")
 
 
+#: The MAV_CMD names a scenario's ``[[mission]]`` may use (without ``MAV_CMD_``).
+MISSION_COMMANDS: dict[str, int] = {
+    name: getattr(mavlink2, f"MAV_CMD_{name}")
+    for name in ("NAV_TAKEOFF", "NAV_WAYPOINT", "NAV_LOITER_TURNS", "NAV_LOITER_TIME",
+                 "NAV_LAND", "NAV_RETURN_TO_LAUNCH", "DO_CHANGE_SPEED")}
+#: The global frames a mission item may be given in (without ``MAV_FRAME_``).
+MISSION_FRAMES: dict[str, int] = {
+    name: getattr(mavlink2, f"MAV_FRAME_{name}")
+    for name in ("GLOBAL", "GLOBAL_RELATIVE_ALT", "GLOBAL_TERRAIN_ALT", "GLOBAL_INT",
+                 "GLOBAL_RELATIVE_ALT_INT", "GLOBAL_TERRAIN_ALT_INT")}
+
+
+@dataclass(frozen=True)
+class MissionItemParams(Params):
+    """One mission item, as a ground station would upload it (MISSION_ITEM_INT)."""
+
+    command: str = quantity("NAV_WAYPOINT", "", "the MAV_CMD, without MAV_CMD_",
+                            choices=tuple(MISSION_COMMANDS))
+    frame: str = quantity("GLOBAL_RELATIVE_ALT", "", "the MAV_FRAME of latitude_deg, "
+                          "longitude_deg, altitude_m, without MAV_FRAME_",
+                          choices=tuple(MISSION_FRAMES))
+    param1: float = quantity(0.0, "", "the command's param1 (hold time [s], turns, ...)")
+    param2: float = quantity(0.0, "", "param2 (acceptance radius [m], speed [m/s], ...)")
+    param3: float = quantity(0.0, "", "param3 (loiter radius [m], > 0 clockwise, ...)")
+    param4: float = quantity(0.0, "", "param4 (yaw [deg], ...)")
+    position_m: tuple[float, ...] = quantity(
+        (), "m", "the item's place in the local frame (x east, y north, z up from the "
+        "winder); latitude and longitude follow from home, z is the height above the "
+        "winder's ground. Empty: latitude_deg, longitude_deg, altitude_m instead")
+    latitude_deg: float = quantity(0.0, "deg", "latitude (with longitude_deg 0: where the "
+                                   "vehicle is when the item begins)", ge=-90, le=90)
+    longitude_deg: float = quantity(0.0, "deg", "longitude", ge=-180, le=180)
+    altitude_m: float = quantity(0.0, "m", "altitude in the frame's reference")
+
+    def check(self) -> None:
+        if len(self.position_m) not in (0, 3):
+            raise ValueError("position_m: expected 3 elements (x, y, z) or none")
+        if self.position_m and (self.latitude_deg or self.longitude_deg):
+            raise ValueError("position_m: give the position or latitude_deg and "
+                             "longitude_deg, not both")
+
+    def to_item(self, home: tuple[float, float, float]) -> MissionItem:
+        """The stored mission item, latitude and longitude from ``home`` (the winder's
+        latitude [deg], longitude [deg], ground altitude AMSL [m]) for a local position."""
+        frame, lat, lon, alt = (MISSION_FRAMES[self.frame], self.latitude_deg,
+                                self.longitude_deg, self.altitude_m)
+        if self.position_m:
+            x, y, z = self.position_m
+            lat, lon, _ = local_enu_to_global((x, y, 0.0), home)
+            frame, alt = mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, z
+        return MissionItem(command=MISSION_COMMANDS[self.command], frame=frame,
+                           param1=self.param1, param2=self.param2, param3=self.param3,
+                           param4=self.param4, x=degrees_to_e7(lat), y=degrees_to_e7(lon),
+                           z=alt)
+
+
 @dataclass(frozen=True)
 class ScenarioParams(Params):
     """A complete offline experiment."""
@@ -86,7 +153,17 @@ class ScenarioParams(Params):
         0.0, "s", "tracking metrics ignore the time before this (a lead-in)", ge=0)
     physics_rate_hz: float = quantity(1000.0, "Hz", "RK4 integration rate", gt=0, le=20000)
     initial: InitialParams = quantity(InitialParams(), "", "initial state")
-    trajectory: TrajectoryParams = quantity(TrajectoryParams(), "", "the reference")
+    trajectory: TrajectoryParams = quantity(TrajectoryParams(), "", "the reference (when "
+                                            "there is no mission)")
+    home: tuple[float, ...] = quantity(
+        HOME_DEFAULT, "deg, deg, m", "the winder's global position: latitude, longitude, "
+        "ground altitude AMSL (a mission_file's item 0 replaces it)", length=3)
+    mission: tuple[MissionItemParams, ...] = quantity(
+        (), "", "a mission flown in AUTO from the ground (home is seq 0; these are 1, 2, ...)")
+    mission_file: str = quantity("", "", "a QGC WPL 110 mission file, flown in AUTO (path "
+                                 "relative to the scenario file)")
+    navigation: NavigationParams = quantity(NavigationParams(), "", "the flight logic: "
+                                            "speeds, acceptance radius, landing")
     environment: EnvironmentParams = quantity(EnvironmentParams(), "", "gravity and air")
     vehicle: VehicleParams = quantity(VehicleParams(), "", "the quadrotor")
     tether: TetherParams = quantity(TetherParams(), "", "the tether")
@@ -98,6 +175,9 @@ class ScenarioParams(Params):
     lbar: LBarParams = quantity(LBarParams(), "", "the L-bar estimator")
 
     def check(self) -> None:
+        if self.mission and self.mission_file:
+            raise ValueError("mission_file: give [[mission]] items or a mission_file, "
+                             "not both")
         if self.metrics_after_s >= self.duration_s:
             raise ValueError("metrics_after_s: must be below duration_s")
         steps = self.physics_rate_hz / self.control.rate_hz
@@ -108,6 +188,22 @@ class ScenarioParams(Params):
             raise ValueError("physics_rate_hz: must be a multiple of winder_control.rate_hz")
         if not math.isfinite(self.duration_s * self.physics_rate_hz):
             raise ValueError("duration_s: too long")
+
+    @property
+    def flies_mission(self) -> bool:
+        """Whether the scenario flies a mission (else its trajectory)."""
+        return bool(self.mission or self.mission_file)
+
+    def mission_items(self) -> tuple[tuple[float, float, float], list[MissionItem]]:
+        """(home, items): the winder's global position (latitude deg, longitude deg,
+        altitude m AMSL) and the mission as stored, home at seq 0. MissionFileError for a
+        mission file that cannot be read."""
+        if self.mission_file:
+            items = mission_file.load(self.mission_file)
+            h = items[0]
+            return (h.x * 1e-7, h.y * 1e-7, h.z), items
+        home = (self.home[0], self.home[1], self.home[2])
+        return home, [home_item(*home), *(m.to_item(home) for m in self.mission)]
 
     def system(self) -> SystemParams:
         """The plant's parameters."""
@@ -132,4 +228,7 @@ def load_scenario(name_or_path: str) -> ScenarioParams:
         if not path.is_file():
             raise ParameterError(name_or_path, "no such scenario: give a file or one of "
                                  + ", ".join(sorted(shipped)))
-    return load_toml(ScenarioParams, path)
+    sc = load_toml(ScenarioParams, path)
+    if sc.mission_file and not Path(sc.mission_file).is_absolute():
+        sc = sc.replace(mission_file=str((Path(path).parent / sc.mission_file).resolve()))
+    return sc
