@@ -34,13 +34,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from enum import IntEnum
 
-from companion.trajectory import (
-    Circle,
-    CircleItem,
-    GotoItem,
-    RefSample,
-    WaypointFollower,
-)
+from companion.legs import CircleItem, GotoItem, WaypointFollower
+from companion.reference import Circle, RefSample
 from tuavdefs.paramspec import Params, quantity
 
 Vec3 = tuple[float, float, float]

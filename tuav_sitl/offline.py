@@ -24,14 +24,8 @@ from typing import Any, TextIO
 import numpy as np
 
 from companion.flight_controller import FlightController, VehicleState
-from companion.trajectory import (
-    GotoItem,
-    Hold,
-    RefSample,
-    Sequence,
-    SequenceBuilder,
-    WaypointFollower,
-)
+from companion.legs import GotoItem, WaypointFollower
+from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
 from sitl.plant import DRUM_ANGLE, DRUM_RATE, POS, QUAT, RATES, VEL, Plant, PlantInputs
