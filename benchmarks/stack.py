@@ -107,7 +107,8 @@ def _category(file: str, func: str) -> str:
         return "physics"
     if f.endswith(("companion/flight_controller.py", "companion/position.py",
                    "companion/attitude.py", "companion/actuators.py",
-                   "companion/tether_model.py", "companion/trajectory.py",
+                   "companion/tether_model.py", "companion/planner.py",
+                   "companion/reference.py", "companion/legs.py",
                    "companion/navigation.py", "groundstation/winder_host.py",
                    "groundstation/lbar.py", "groundstation/winder_control.py",
                    "groundstation/winch.py", "tuavdefs/airframe.py")):

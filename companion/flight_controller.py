@@ -20,8 +20,8 @@ from companion.actuators import ActuatorModel, advance_kernel, wrench_kernel
 from companion.attitude import AttitudeController, AttitudeOutput, attitude_law
 from companion.gains import FlightControlParams
 from companion.position import PositionController, PositionOutput, position_law
+from companion.reference import RefSample
 from companion.tether_model import TetherModel, WinchReport, estimate_kernel
-from companion.trajectory import RefSample
 from tuavdefs.airframe import Mixer, mix_kernel, rotor_speed_setpoints
 from tuavdefs.frames import Quat, Vec3, quat_to_euler, quat_to_euler_kernel, quat_to_matrix_kernel
 from tuavdefs.jit import entry_point, njit

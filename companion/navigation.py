@@ -34,14 +34,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 
-from companion.trajectory import (
-    EVENT_REACHED,
-    Circle,
-    CircleItem,
-    GotoItem,
-    RefSample,
-    WaypointFollower,
-)
+from companion.legs import EVENT_REACHED, CircleItem, GotoItem, WaypointFollower
+from companion.reference import Circle, RefSample
 from tuavdefs.paramspec import Params, quantity
 
 Vec3 = tuple[float, float, float]

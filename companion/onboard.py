@@ -22,7 +22,7 @@ from typing import NamedTuple
 from companion.flight_controller import FlightController, FlightStep, VehicleState
 from companion.gains import FlightControlParams
 from companion.navigation import MotorState, NavEvent, NavigationParams, Navigator
-from companion.trajectory import RefSample
+from companion.reference import RefSample
 from tuavdefs.frames import quat_to_yaw
 from tuavdefs.params import SystemParams
 

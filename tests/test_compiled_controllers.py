@@ -12,7 +12,7 @@ from jit_util import run_script
 from companion.flight_controller import FlightController, VehicleState
 from companion.gains import FlightControlParams
 from companion.position import PositionController
-from companion.trajectory import RefSample
+from companion.reference import RefSample
 from groundstation.lbar import LBarParams, _a_for_exit_slope, _exit_slope_root
 from groundstation.winder_control import WinderControlParams
 from groundstation.winder_host import WinderHost

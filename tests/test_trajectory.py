@@ -1,4 +1,5 @@
-"""Tests of companion.trajectory: reference trajectories and the waypoint follower.
+"""Tests of companion.planner, companion.reference and companion.legs: reference trajectories
+and the waypoint follower.
 
 Derivatives are checked independently by central finite differences of the returned
 position, velocity and acceleration; continuity by sampling either side of every knot;
@@ -14,18 +15,25 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from companion.trajectory import (
+from companion.legs import (
+    EVENT_CURRENT,
+    EVENT_REACHED,
+    CircleItem,
+    GotoItem,
+    WaypointFollower,
+)
+from companion.planner import (
     _BISECT_RTOL,
+    QUINTIC_PEAK_ACC,
+    QUINTIC_PEAK_SPEED,
+    _bracket_boundary,
+    _peak_norm,
+)
+from companion.reference import (
     DEFAULT_MAX_YAW_ACC_RAD_S2,
     DEFAULT_MAX_YAW_RATE_RAD_S,
     DEFAULT_MIN_DURATION_S,
-    EVENT_CURRENT,
-    EVENT_REACHED,
-    QUINTIC_PEAK_ACC,
-    QUINTIC_PEAK_SPEED,
     Circle,
-    CircleItem,
-    GotoItem,
     Hold,
     Line,
     RefSample,
@@ -33,9 +41,6 @@ from companion.trajectory import (
     SequenceBuilder,
     Trajectory,
     Transition,
-    WaypointFollower,
-    _bracket_boundary,
-    _peak_norm,
 )
 from tuavdefs.frames import wrap_pi
 

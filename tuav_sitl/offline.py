@@ -24,16 +24,10 @@ from typing import Any, TextIO
 import numpy as np
 
 from companion.flight_controller import VehicleState
+from companion.legs import GotoItem, WaypointFollower
 from companion.navigation import FlightMode, NavEvent
 from companion.onboard import Companion, OnboardInputs
-from companion.trajectory import (
-    GotoItem,
-    Hold,
-    RefSample,
-    Sequence,
-    SequenceBuilder,
-    WaypointFollower,
-)
+from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
 from sitl.plant import (
@@ -177,7 +171,7 @@ class Reference:
 
 def _active_segment(traj: Any, t: float) -> tuple[float, float, Any]:
     """(from [s], to [s], segment): what ``traj.sample`` samples at ``t`` and the times
-    for which it samples the same. A :class:`companion.trajectory.Sequence` samples its
+    for which it samples the same. A :class:`companion.reference.Sequence` samples its
     segment that started last at or before ``t`` (the first before it starts, the last
     after it ends); anything else is one segment for all times."""
     segments = getattr(traj, "segments", None)

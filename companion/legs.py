@@ -1,0 +1,308 @@
+"""Mission legs: the items a mission is made of (:class:`GotoItem`, :class:`CircleItem`),
+the events it reports (:class:`MissionEvent`), and :class:`WaypointFollower`, the mission
+logic shared by the companion's AUTO/GUIDED modes and the offline runner, which flies each
+item as :mod:`companion.reference` trajectories. Inertial frame (z up, x east, y north,
+origin at the winder), positions in m, speeds in m/s, times in s, angles in rad.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from companion.reference import (
+    DEFAULT_MAX_YAW_ACC_RAD_S2,
+    DEFAULT_MAX_YAW_RATE_RAD_S,
+    DEFAULT_MIN_DURATION_S,
+    ZERO3,
+    Circle,
+    RefSample,
+    Trajectory,
+    Transition,
+    Vec3,
+    nearest_angle,
+    positive,
+    vec3,
+)
+from tuavdefs.frames import wrap_pi
+
+
+@dataclass(frozen=True)
+class GotoItem:
+    """Fly to ``pos_m`` [m]; ``yaw_rad`` [rad] there, or keep the current yaw if None."""
+
+    pos_m: Vec3
+    yaw_rad: float | None = None
+
+
+@dataclass(frozen=True)
+class CircleItem:
+    """Circle ``turns`` times (NAV_LOITER_TURNS) about ``centre_xy_m`` [m] at radius
+    ``radius_m`` [m], altitude ``altitude_m`` [m], tangential speed ``speed_m_s`` [m/s]
+    (clamped to the follower's max speed), starting at ``start_angle_rad`` (None: the point
+    nearest the vehicle). ``turns`` may be ``math.inf`` (loiter until retargeted)."""
+
+    centre_xy_m: tuple[float, float]
+    radius_m: float
+    altitude_m: float
+    speed_m_s: float
+    turns: float = 1.0
+    clockwise: bool = False
+    start_angle_rad: float | None = None
+    lead_in_s: float = 5.0
+    yaw_rad: float | None = None
+    face_travel: bool = False
+
+
+MissionItem = GotoItem | CircleItem
+
+EVENT_CURRENT = "current"
+"""An item became the one being flown (MISSION_CURRENT)."""
+EVENT_REACHED = "reached"
+"""An item was reached (MISSION_ITEM_REACHED)."""
+
+
+class MissionEvent(NamedTuple):
+    """Something the companion reports: ``kind`` is EVENT_CURRENT or EVENT_REACHED."""
+
+    kind: str
+    index: int
+    t_s: float
+
+
+def as_mission_item(item: MissionItem | Iterable[float]) -> MissionItem:
+    """A GotoItem or CircleItem from an item or an (x, y, z) / (x, y, z, yaw) tuple."""
+    if isinstance(item, GotoItem | CircleItem):
+        return item
+    vals = tuple(float(x) for x in item)
+    if len(vals) == 3:
+        return GotoItem(vec3(vals, "waypoint"))
+    if len(vals) == 4:
+        return GotoItem(vec3(vals[:3], "waypoint"), vals[3])
+    raise ValueError(f"a waypoint is (x, y, z) or (x, y, z, yaw), got {item!r}")
+
+
+_TRANSIT, _CIRCLE, _HOLD, _DONE = "transit", "circle", "hold", "done"
+
+
+class WaypointFollower:
+    """Mission logic shared by the companion's AUTO/GUIDED modes and the offline runner.
+
+    Flies a :class:`Transition` (within ``max_speed_m_s`` [m/s], ``max_acc_m_s2``
+    [m/s^2]) to each item in turn. A goto item is reached when its transition has finished
+    and the vehicle is within ``acceptance_radius_m`` [m] of it; a circle item is flown as
+    a transition to the circle's start point (entered when reached the same way), then the
+    :class:`Circle`, and is reached when the circle has stopped and the vehicle is within
+    the radius of its end point. After ``hold_s`` [s] at a reached item the next one starts.
+    Until then the reference holds (at rest) at the item, whatever the vehicle does.
+
+    Events (EVENT_CURRENT, EVENT_REACHED) go to ``on_event`` if given and are queued for
+    :meth:`pop_events`; ``reached`` lists (index, time) pairs.
+    """
+
+    def __init__(self, max_speed_m_s: float, max_acc_m_s2: float, acceptance_radius_m: float,
+                 hold_s: float = 0.0, *, max_yaw_rate: float = DEFAULT_MAX_YAW_RATE_RAD_S,
+                 max_yaw_acc_rad_s2: float = DEFAULT_MAX_YAW_ACC_RAD_S2,
+                 min_duration_s: float = DEFAULT_MIN_DURATION_S,
+                 on_event: Callable[[MissionEvent], None] | None = None) -> None:
+        self.max_speed_m_s = positive(max_speed_m_s, "max_speed_m_s")
+        self.max_acc_m_s2 = positive(max_acc_m_s2, "max_acc_m_s2")
+        self.acceptance_radius_m = positive(acceptance_radius_m, "acceptance_radius_m")
+        if not (hold_s >= 0.0 and math.isfinite(hold_s)):
+            raise ValueError(f"hold_s must be >= 0 and finite, got {hold_s!r}")
+        self.hold_s = float(hold_s)
+        self._transition_kw = dict(max_yaw_rate=max_yaw_rate,
+                                   max_yaw_acc_rad_s2=max_yaw_acc_rad_s2,
+                                   min_duration_s=min_duration_s)
+        self.on_event = on_event
+        self.reached: list[tuple[int, float]] = []
+        """(item index, time [s]) of each item reached, in order."""
+        self._events: list[MissionEvent] = []
+        self._items: list[MissionItem] = []
+        self._index = 0
+        self._phase = _DONE
+        self._traj: Trajectory | None = None
+        self._target: Vec3 | None = None
+        self._hold_until = 0.0
+        self._circle_kw: dict | None = None
+
+    # -- state --
+
+    @property
+    def items(self) -> tuple[MissionItem, ...]:
+        """The mission items (retargets replace or insert items)."""
+        return tuple(self._items)
+
+    @property
+    def current_index(self) -> int:
+        """Index of the item being flown or held at; len(items) when done."""
+        return self._index
+
+    @property
+    def done(self) -> bool:
+        """True when every item has been reached and its hold is over."""
+        return self._phase == _DONE
+
+    @property
+    def phase(self) -> str:
+        """"transit", "circle", "hold" or "done"."""
+        return self._phase
+
+    @property
+    def trajectory(self) -> Trajectory:
+        """The trajectory being flown."""
+        if self._traj is None:
+            raise RuntimeError("WaypointFollower.start() has not been called")
+        return self._traj
+
+    @property
+    def target_m(self) -> Vec3 | None:
+        """Point [m] the acceptance test currently uses (None while on an endless circle)."""
+        return self._target
+
+    @property
+    def has_events(self) -> bool:
+        """Whether :meth:`pop_events` has events to hand out."""
+        return bool(self._events)
+
+    def pop_events(self) -> list[MissionEvent]:
+        """Events since the last call, oldest first."""
+        out, self._events = self._events, []
+        return out
+
+    # -- control --
+
+    def start(self, t: float, current_pos: Iterable[float],
+              current_vel: Iterable[float] = ZERO3,
+              waypoints: Iterable[MissionItem | Iterable[float]] = (), *,
+              current_yaw: float = 0.0, current_acc: Iterable[float] = ZERO3) -> None:
+        """Start the mission at time ``t`` [s] from the vehicle state (position [m],
+        velocity [m/s], yaw [rad], acceleration [m/s^2]). With no items the reference just
+        comes to rest at ``current_pos``. Raises ValueError on an impossible circle item."""
+        items = [as_mission_item(w) for w in waypoints]
+        for it in items:
+            if isinstance(it, CircleItem):
+                self._check_circle(it)
+        pos = vec3(current_pos, "current_pos")
+        state = RefSample(pos, vec3(current_vel, "current_vel"),
+                          vec3(current_acc, "current_acc"), ZERO3, wrap_pi(current_yaw), 0.0)
+        self._items = items
+        self.reached = []
+        self._events = []
+        self._index = 0
+        if items:
+            self._begin_item(float(t), state, 0.0)
+        else:
+            self._traj = Transition(pos, pos, t, self.max_speed_m_s, self.max_acc_m_s2,
+                                    state.vel_m_s, state.acc_m_s2, state.yaw_rad,
+                                    **self._transition_kw)
+            self._phase, self._target = _DONE, pos
+
+    def update(self, t: float, current_pos: Iterable[float]) -> RefSample:
+        """Advance the mission with the vehicle at ``current_pos`` [m] at time ``t`` [s]
+        (non-decreasing) and return the reference at ``t``."""
+        traj = self.trajectory
+        phase = self._phase
+        if (t < traj.end_s and phase in (_TRANSIT, _CIRCLE)
+                or phase == _HOLD and t < self._hold_until or phase == _DONE):
+            return traj.sample(t)   # nothing to decide (most calls)
+        pos = tuple(current_pos)
+        for _ in range(2 * len(self._items) + 4):  # each pass changes phase or stops
+            traj = self.trajectory
+            if self._phase in (_TRANSIT, _CIRCLE):
+                if not (t >= traj.end_s and self._target is not None
+                        and math.dist(pos, self._target) <= self.acceptance_radius_m):
+                    break
+                if self._phase == _TRANSIT and self._circle_kw is not None:
+                    circle = Circle(t0=t, **self._circle_kw)
+                    self._circle_kw = None
+                    self._traj, self._phase, self._target = circle, _CIRCLE, circle.final_pos_m
+                    continue
+                self.reached.append((self._index, t))
+                self._emit(EVENT_REACHED, self._index, t)
+                self._phase, self._hold_until = _HOLD, t + self.hold_s
+            elif self._phase == _HOLD:
+                if t < self._hold_until:
+                    break
+                self._index += 1
+                if self._index >= len(self._items):
+                    self._phase = _DONE
+                    break
+                self._begin_item(t, traj.sample(t), traj.yaw_acc_rad_s2(t))
+            else:
+                break
+        return self.trajectory.sample(t)
+
+    def retarget(self, t: float, new_goal: MissionItem | Iterable[float]) -> RefSample:
+        """Fly to ``new_goal`` from the current reference state at ``t`` [s] (position,
+        velocity, acceleration, yaw and its rates), so the reference stays C2. It replaces
+        the item being flown; if that was already reached (holding, or done), it is inserted
+        after it. Later items are kept. Returns the reference at ``t``."""
+        traj = self.trajectory
+        item = as_mission_item(new_goal)
+        if isinstance(item, CircleItem):
+            self._check_circle(item)
+        if self._phase in (_HOLD, _DONE):
+            self._index = min(self._index + 1, len(self._items)) if self._phase == _HOLD \
+                else len(self._items)
+            self._items.insert(self._index, item)
+        else:
+            self._items[self._index] = item
+        self._begin_item(float(t), traj.sample(t), traj.yaw_acc_rad_s2(t))
+        return self.trajectory.sample(t)
+
+    # -- internals --
+
+    def _emit(self, kind: str, index: int, t: float) -> None:
+        ev = MissionEvent(kind, index, t)
+        self._events.append(ev)
+        if self.on_event is not None:
+            self.on_event(ev)
+
+    def _circle_args(self, item: CircleItem, pos: Iterable[float], yaw: float) -> dict:
+        theta0 = (nearest_angle(item.centre_xy_m, pos) if item.start_angle_rad is None
+                  else float(item.start_angle_rad))
+        sgn = -1.0 if item.clockwise else 1.0
+        if item.face_travel:
+            yaw = wrap_pi(theta0 + sgn * 0.5 * math.pi)
+        elif item.yaw_rad is not None:
+            yaw = item.yaw_rad
+        return dict(centre_xy=item.centre_xy_m, radius_m=item.radius_m,
+                    altitude_m=item.altitude_m,
+                    speed_m_s=min(item.speed_m_s, self.max_speed_m_s),
+                    lead_in_s=item.lead_in_s, turns=item.turns, start_angle_rad=theta0,
+                    clockwise=item.clockwise, max_acc_m_s2=self.max_acc_m_s2, yaw=yaw,
+                    face_travel=item.face_travel)
+
+    def _check_circle(self, item: CircleItem) -> None:
+        Circle(t0=0.0, **self._circle_args(item, (item.centre_xy_m[0] + 1.0,
+                                                  item.centre_xy_m[1]), 0.0))
+
+    def _begin_item(self, t: float, state: RefSample, yaw_acc: float) -> None:
+        item = self._items[self._index]
+        if isinstance(item, CircleItem):
+            self._circle_kw = self._circle_args(item, state.pos_m, state.yaw_rad)
+            kw = self._circle_kw
+            cx, cy = kw["centre_xy"]
+            th = kw["start_angle_rad"]
+            goal: Vec3 = (cx + kw["radius_m"] * math.cos(th), cy + kw["radius_m"] * math.sin(th),
+                          kw["altitude_m"])
+            yaw_goal = kw["yaw"]
+        else:
+            self._circle_kw = None
+            goal = item.pos_m
+            yaw_goal = state.yaw_rad if item.yaw_rad is None else item.yaw_rad
+        self._traj = Transition(state.pos_m, goal, t, self.max_speed_m_s, self.max_acc_m_s2,
+                                state.vel_m_s, state.acc_m_s2, state.yaw_rad, yaw_goal,
+                                start_yaw_rate_rad_s=state.yaw_rate_rad_s,
+                                start_yaw_acc_rad_s2=yaw_acc, **self._transition_kw)
+        self._phase, self._target = _TRANSIT, goal
+        self._emit(EVENT_CURRENT, self._index, t)
+
+
+__all__ = [
+    "EVENT_CURRENT", "EVENT_REACHED", "CircleItem", "GotoItem", "MissionEvent", "MissionItem",
+    "WaypointFollower", "as_mission_item",
+]
