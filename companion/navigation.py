@@ -36,6 +36,7 @@ from enum import Enum, IntEnum
 
 from companion.legs import EVENT_REACHED, CircleItem, GotoItem, WaypointFollower
 from companion.reference import Circle, RefSample
+from tuavdefs.frames import quat_to_yaw
 from tuavdefs.paramspec import Params, quantity
 
 Vec3 = tuple[float, float, float]
@@ -307,10 +308,15 @@ class Navigator:
         self._speed_override: float | None = None
         self._pos: Vec3 = _ZERO3
         self._vel_now: Vec3 = _ZERO3
-        self._yaw = 0.0
+        self._quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
         self._auto_takeoff_pending = False
 
     # ----- state
+
+    @property
+    def _yaw(self) -> float:
+        """The vehicle's heading now [rad] (from its attitude quaternion, when needed)."""
+        return quat_to_yaw(self._quat)
 
     @property
     def flying(self) -> bool:
@@ -375,10 +381,11 @@ class Navigator:
 
     # ----- commands (return None when done, else the reason it was refused)
 
-    def start(self, t: float, pos: Vec3, vel: Vec3, yaw: float) -> None:
+    def start(self, t: float, pos: Vec3, vel: Vec3, quat: tuple[float, ...]) -> None:
         """Initialise from the first state: on the ground (disarmed) or in the air (armed,
         GUIDED, holding where it is, as when a simulation starts airborne)."""
-        self._t, self._pos, self._vel_now, self._yaw = t, pos, vel, yaw
+        self._t, self._pos, self._vel_now, self._quat = t, pos, vel, quat
+        yaw = self._yaw
         self.landed = pos[2] <= self.gear_height_m + 0.3
         self.home_m = pos if self.landed else (pos[0], pos[1], self.gear_height_m)
         if not self.landed:
@@ -594,11 +601,11 @@ class Navigator:
 
     # ----- stepping
 
-    def step(self, t: float, pos: Vec3, vel: Vec3, yaw: float, dt: float
+    def step(self, t: float, pos: Vec3, vel: Vec3, quat: tuple[float, ...], dt: float
              ) -> tuple[RefSample | None, MotorState]:
-        """Advance to ``t`` [s] with the vehicle at ``pos`` [m], ``vel`` [m/s], ``yaw``
-        [rad]. Returns (the reference, or None when not flying, and the motors' state)."""
-        self._t, self._pos, self._vel_now, self._yaw = t, pos, vel, yaw
+        """Advance to ``t`` [s] with the vehicle at ``pos`` [m], ``vel`` [m/s], attitude
+        ``quat`` (body to inertial, w x y z). Returns (the reference, or None when not flying, and the motors' state)."""
+        self._t, self._pos, self._vel_now, self._quat = t, pos, vel, quat
         if not self.armed:
             self._ref = None
             if not self.landed and pos[2] <= self.gear_height_m + 0.05:

@@ -23,7 +23,6 @@ from companion.flight_controller import FlightController, FlightStep, VehicleSta
 from companion.gains import FlightControlParams
 from companion.navigation import MotorState, NavEvent, NavigationParams, Navigator
 from companion.reference import RefSample
-from tuavdefs.frames import quat_to_yaw
 from tuavdefs.params import SystemParams
 
 _STOPPED = (0.0, 0.0, 0.0, 0.0)
@@ -104,7 +103,7 @@ class Companion:
         GUIDED, holding where it is). :meth:`step` calls it on its first call."""
         state = inputs.state
         self.started = True
-        self.nav.start(inputs.t_s, state.pos_m, state.vel_m_s, quat_to_yaw(state.quat))
+        self.nav.start(inputs.t_s, state.pos_m, state.vel_m_s, state.quat)
         if self.nav.flying:
             self.flight.reset(state, (self.hover_speed_rad_s,) * 4)
             self._was_flying = True
@@ -115,8 +114,7 @@ class Companion:
         if not self.started:
             self.start(inputs)
         t, state = inputs
-        ref, motors = self.nav.step(t, state.pos_m, state.vel_m_s, quat_to_yaw(state.quat),
-                                    self.dt_s)
+        ref, motors = self.nav.step(t, state.pos_m, state.vel_m_s, state.quat, self.dt_s)
         fs = None
         if motors is MotorState.FLY and ref is not None:
             if not self._was_flying:
