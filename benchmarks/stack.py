@@ -23,7 +23,7 @@ exits normally: the client when its mission is over, the plant on SIGTERM or at
 SIGTERM), and the profiles are aggregated by category (:data:`CATEGORIES`).
 
 The CAN bus is IPv4 multicast: run this inside a private network namespace, as ``python -m
-benchmarks`` does (``unshare --net``, see :func:`benchmarks.netns.run_in_netns`), so that no
+benchmarks`` does (``unshare --net``, see :func:`tuav_sitl.netns.run_in_netns`), so that no
 datagram and no IGMP report leaves the host. Prints one JSON line.
 """
 
