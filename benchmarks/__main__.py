@@ -285,7 +285,7 @@ def bench_processes(quick: bool) -> list[Row]:
     import tempfile
     from pathlib import Path
 
-    from benchmarks.netns import netns_available, run_in_netns
+    from tuav_sitl.netns import netns_available, run_in_netns
 
     why = netns_available()
     if why is not None:

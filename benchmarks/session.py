@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from benchmarks import latency, stack
+from tuav_sitl.realtime import PRIORITIES
 
 #: The plant's summary of a real-time run (sitl/__main__.py's last line).
 _NUM = r"([\d.]+|nan)"
@@ -86,7 +87,7 @@ def lockstep(work: Path, quick: bool) -> dict:
 def real_time(work: Path, quick: bool, rate_hz: float, priority: str | None = None) -> dict:
     """Real time at ``rate_hz`` [Hz] with a busy loop per core (started when the companion
     connects, so that the processes start as they would); ``priority``: scheduling given to
-    the three processes (:data:`benchmarks.stack.PRIORITIES`; None: as they start)."""
+    the three processes (:data:`tuav_sitl.realtime.PRIORITIES`; None: as they start)."""
     loads: list = []
     try:
         run = stack.run_stack(
@@ -119,7 +120,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     choices=("lockstep", "realtime_250", "realtime_500",
                              "realtime_250_normal", "latency"),
                     help="run only these (repeatable)")
-    ap.add_argument("--priority", choices=stack.PRIORITIES, default=None,
+    ap.add_argument("--priority", choices=PRIORITIES, default=None,
                     help="experiment: give the processes of the real-time runs this "
                          "scheduling (fifo, nice: root; slice: Linux 6.12+)")
     args = ap.parse_args(argv)

@@ -23,7 +23,7 @@ exits normally: the client when its mission is over, the plant on SIGTERM or at
 SIGTERM), and the profiles are aggregated by category (:data:`CATEGORIES`).
 
 The CAN bus is IPv4 multicast: run this inside a private network namespace, as ``python -m
-benchmarks`` does (``unshare --net``, see :func:`benchmarks.netns.run_in_netns`), so that no
+benchmarks`` does (``unshare --net``, see :func:`tuav_sitl.netns.run_in_netns`), so that no
 datagram and no IGMP report leaves the host. Prints one JSON line.
 """
 
@@ -46,11 +46,12 @@ from pathlib import Path
 from tuav_sitl.realtime import (
     BACKGROUND,
     NICENESS,
-    RT_PRIORITY,
+    PRIORITIES,
     cpu_split,
     set_affinity,
     set_background,
     set_nice,
+    set_priority,
 )
 from tuav_sitl.up import (
     RECORDER_INTERVAL_S,
@@ -249,49 +250,6 @@ def _reap(proc: subprocess.Popen, timeout_s: float) -> tuple[int, float]:
         time.sleep(0.01)
 
 
-#: Scheduling the stack's processes can be given (``priority`` of :func:`run_stack`), for
-#: experiments: ``fifo``: SCHED_FIFO priority 10 (root, or CAP_SYS_NICE / RLIMIT_RTPRIO);
-#: ``nice``: nice -10 (the same); ``slice``: a 0.1 ms EEVDF slice (``sched_setattr``
-#: ``sched_runtime`` of a SCHED_OTHER task, Linux 6.12 and later, unprivileged), which lets
-#: a woken process preempt a task running a longer slice.
-PRIORITIES = ("fifo", "nice", "slice")
-#: The requested slice of ``slice`` [ns].
-SLICE_NS = 100_000
-_SYS_SCHED_SETATTR = {"x86_64": 314, "aarch64": 274}
-
-
-def _set_slice(tid: int, slice_ns: int) -> None:
-    """Ask for an EEVDF slice of ``slice_ns`` [ns] for thread ``tid`` (SCHED_OTHER, nice 0)."""
-    import ctypes
-    import platform
-    import struct
-
-    number = _SYS_SCHED_SETATTR.get(platform.machine())
-    if number is None:
-        raise OSError(f"sched_setattr: unknown system call number on {platform.machine()}")
-    # struct sched_attr (SCHED_ATTR_SIZE_VER1, 56 bytes): size, policy, flags, nice,
-    # priority, runtime, deadline, period, util_min, util_max
-    attr = ctypes.create_string_buffer(struct.pack("IIQiIQQQII", 56, 0, 0, 0, 0, slice_ns,
-                                                   0, 0, 0, 0))
-    libc = ctypes.CDLL(None, use_errno=True)
-    if libc.syscall(number, tid, attr, 0) != 0:
-        err = ctypes.get_errno()
-        raise OSError(err, f"sched_setattr: {os.strerror(err)}")
-
-
-def set_priority(pid: int, how: str) -> None:
-    """Give every thread of process ``pid`` the scheduling ``how`` (:data:`PRIORITIES`)."""
-    for tid in map(int, os.listdir(f"/proc/{pid}/task")):
-        if how == "fifo":    # what tuav-sitl up gives in real time (tuav_sitl/realtime.py)
-            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
-        elif how == "nice":
-            os.setpriority(os.PRIO_PROCESS, tid, -10)
-        elif how == "slice":
-            _set_slice(tid, SLICE_NS)
-        else:
-            raise ValueError(f"unknown priority {how!r}")
-
-
 def busy_loads(n: int) -> list[subprocess.Popen]:
     """``n`` processes that spin on a CPU each (the second load of the real-time runs)."""
     return [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
@@ -313,16 +271,16 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
     they did: in lockstep, or paced by the wall clock (``real_time``), at
     ``control_rate_hz`` [Hz] (the companion's gains get the same rate), flying ``flight``
     (default :func:`goto_flight`). The plant stops after ``duration_s`` [s] of simulated
-    time without a client, and once the flight's client has exited with one (then without
-    a duration). ``priority`` (:data:`PRIORITIES`) is given to the three processes when the
-    companion has connected; ``on_connected`` is called then too (the flight begins).
-    As ``tuav-sitl up`` runs them: the bus recorder (``tuav-sitl candump -L`` to a log)
-    listens too unless ``recorder`` is False, and in lockstep the plant gets a CPU of its
-    own, the companion and the ground station (at :data:`tuav_sitl.realtime.NICENESS`)
-    share the rest and the recorder runs at idle priority beside the plant
-    (:mod:`tuav_sitl.realtime`) unless ``pin`` is False (None: pin in lockstep only), and
-    the simulator link is ``sim_link``: "unix" (an abstract Unix-domain name of this
-    process's own) or "tcp" (a free port)."""
+    time without a client, and once the flight's client has exited with one (then without a
+    duration). ``priority`` (:data:`tuav_sitl.realtime.PRIORITIES`) is given to the three
+    processes when the companion has connected; ``on_connected`` is called then too (the
+    flight begins). As ``tuav-sitl up`` runs them: the bus recorder (``tuav-sitl candump
+    -L`` to a log) listens too unless ``recorder`` is False, and in lockstep the plant gets
+    a CPU of its own, the companion and the ground station (at
+    :data:`tuav_sitl.realtime.NICENESS`) share the rest and the recorder runs at idle
+    priority beside the plant (:mod:`tuav_sitl.realtime`) unless ``pin`` is False (None: pin
+    in lockstep only), and the simulator link is ``sim_link``: "unix" (an abstract
+    Unix-domain name of this process's own) or "tcp" (a free port)."""
     flight = flight if flight is not None else goto_flight()
     if (duration_s is None) == (not flight.client):
         raise ValueError("a flight without a client needs a duration; one with a client "

@@ -1,14 +1,14 @@
 """Running a command in a private network namespace with only loopback (multicast enabled),
 so that python-can's udp_multicast bus and every socket stay on this host: joining a
 multicast group sends IGMP by the default route, which must not leave the machine. The
-same helper the benchmarks use (``benchmarks/netns.py``)."""
+same helper the benchmarks use (``tuav_sitl/netns.py``)."""
 
 import json
 import sys
 from pathlib import Path
 
-from benchmarks.netns import SETUP, run_in_netns
-from benchmarks.netns import netns_available as _unavailable_because
+from tuav_sitl.netns import SETUP, run_in_netns
+from tuav_sitl.netns import netns_available as _unavailable_because
 
 __all__ = ["PYTHON", "SETUP", "netns_available", "run_in_netns", "run_session"]
 

@@ -36,6 +36,14 @@ def test_import_rule(package):
         assert not bad, f"{f.relative_to(ROOT)} imports {sorted(bad)}"
 
 
+def test_tests_do_not_import_benchmarks():
+    """The test suite runs the benchmarks only as a command (``tuav-sitl bench``); what it
+    shares with them (the network-namespace helper, the schedulings) is in ``tuav_sitl``."""
+    for f in sorted((ROOT / "tests").rglob("*.py")):
+        assert "benchmarks" not in _imported_top_levels(f), \
+            f"{f.relative_to(ROOT)} imports benchmarks"
+
+
 def test_the_checker_sees_imports(tmp_path):
     f = tmp_path / "m.py"
     f.write_text("import os\nfrom companion.x import y\nfrom . import z\n")

@@ -64,7 +64,7 @@ def test_priority_experiments_apply():
 
     import pytest
 
-    from benchmarks.stack import set_priority
+    from tuav_sitl.realtime import set_priority
 
     child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
     try:

@@ -1,4 +1,5 @@
-"""``tuav-sitl plot`` on a ``tuav-sitl up`` run folder (tuav_sitl/run_import.py).
+"""``tuav-sitl plot`` on a ``tuav-sitl up`` run folder (tuav_sitl/run_import.py, with
+tuav_sitl/tlog_read.py, clock_pairing.py and up_series.py).
 
 A small but real up-style run folder is made by flying the plant and companion processes
 (``python -m sitl`` on the ground with a long slack tether and the winder braked, no CAN, and
@@ -42,8 +43,9 @@ from tuav_sitl.candump_format import format_log
 from tuav_sitl.cli import main as cli_main
 from tuav_sitl.figures import load_run, reached_indices, reference_geometry
 from tuav_sitl.offline import _to_toml
-from tuav_sitl.run_import import import_up_run, needs_import, read_tlog, read_truth
+from tuav_sitl.run_import import import_up_run, needs_import, read_truth
 from tuav_sitl.scenario import WaypointParams
+from tuav_sitl.tlog_read import read_tlog
 from tuavdefs.can_protocol import (
     Cmd,
     SensorCmd,

@@ -115,11 +115,9 @@ def _cmd_up(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    try:
-        from benchmarks.__main__ import main as bench_main
-    except ImportError:  # not on the path: the benchmarks live beside this package
-        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-        from benchmarks.__main__ import main as bench_main
+    """``tuav-sitl bench``: ``python -m benchmarks`` (a package installed with this one)."""
+    from benchmarks.__main__ import main as bench_main
+
     return bench_main([*(["--quick"] if args.quick else []),
                        *(["--no-processes"] if args.no_processes else [])])
 

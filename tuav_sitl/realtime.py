@@ -8,6 +8,9 @@ them SCHED_FIFO where the system permits it (root, CAP_SYS_NICE or an rtprio lim
 flight stacks on Linux do; docs/performance.md has the measurements. They block on their
 sockets most of the time, and the kernel's real-time throttling keeps 5 % of each core for
 everything else whatever happens.
+
+:func:`set_priority` gives the other schedulings the real-time experiments compare
+(:data:`PRIORITIES`); unlike the ``set_*`` functions above it raises when it cannot.
 """
 
 from __future__ import annotations
@@ -100,3 +103,49 @@ def set_affinity(pid: int, cpus: set[int]) -> str | None:
     if not hasattr(os, "sched_setaffinity"):
         return "CPU affinity is not available on this system"
     return _each_thread(pid, lambda tid: os.sched_setaffinity(tid, cpus))
+
+
+#: Scheduling the stack's processes can be given for experiments (``--priority`` of the
+#: benchmarks, :func:`benchmarks.stack.run_stack`; :func:`set_priority`): ``fifo``:
+#: SCHED_FIFO at :data:`RT_PRIORITY` (root, or CAP_SYS_NICE / RLIMIT_RTPRIO); ``nice``:
+#: nice -10 (the same); ``slice``: a 0.1 ms EEVDF slice (``sched_setattr``
+#: ``sched_runtime`` of a SCHED_OTHER task, Linux 6.12 and later, unprivileged), which lets
+#: a woken process preempt a task running a longer slice.
+PRIORITIES = ("fifo", "nice", "slice")
+#: The requested slice of ``slice`` [ns].
+SLICE_NS = 100_000
+#: The ``sched_setattr`` system call's number, by machine.
+_SYS_SCHED_SETATTR = {"x86_64": 314, "aarch64": 274}
+
+
+def _set_slice(tid: int, slice_ns: int) -> None:
+    """Ask for an EEVDF slice of ``slice_ns`` [ns] for thread ``tid`` (SCHED_OTHER, nice 0)."""
+    import ctypes
+    import platform
+    import struct
+
+    number = _SYS_SCHED_SETATTR.get(platform.machine())
+    if number is None:
+        raise OSError(f"sched_setattr: unknown system call number on {platform.machine()}")
+    # struct sched_attr (SCHED_ATTR_SIZE_VER1, 56 bytes): size, policy, flags, nice,
+    # priority, runtime, deadline, period, util_min, util_max
+    attr = ctypes.create_string_buffer(struct.pack("IIQiIQQQII", 56, 0, 0, 0, 0, slice_ns,
+                                                   0, 0, 0, 0))
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.syscall(number, tid, attr, 0) != 0:
+        err = ctypes.get_errno()
+        raise OSError(err, f"sched_setattr: {os.strerror(err)}")
+
+
+def set_priority(pid: int, how: str) -> None:
+    """Give every thread of process ``pid`` the scheduling ``how`` (:data:`PRIORITIES`);
+    raises OSError when the system refuses it, ValueError for an unknown ``how``."""
+    for tid in map(int, os.listdir(f"/proc/{pid}/task")):
+        if how == "fifo":    # what tuav-sitl up gives in real time (set_real_time)
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
+        elif how == "nice":
+            os.setpriority(os.PRIO_PROCESS, tid, -10)
+        elif how == "slice":
+            _set_slice(tid, SLICE_NS)
+        else:
+            raise ValueError(f"unknown priority {how!r}")

@@ -1,8 +1,11 @@
-"""Running a benchmark in a private network namespace with only loopback (multicast
+"""Running a command in a private network namespace with only loopback (multicast
 enabled), so that the udp_multicast CAN bus and every socket stay on this host: joining a
 multicast group sends IGMP by the default route, which must not leave the machine. Needs
 root (``unshare --net``); inside a namespace already (``NETNS_RUN_INSIDE=1``) it runs the
-command as it is."""
+command as it is.
+
+The one copy of this helper: ``tuav-sitl bench`` (:mod:`benchmarks`) runs the process
+benchmarks through it, and the test suite its sessions (``tests/netns_util.py``)."""
 
 from __future__ import annotations
 
@@ -27,7 +30,10 @@ def netns_available() -> str | None:
 
 
 def run_in_netns(args: list[str], timeout_s: float, cwd: str) -> subprocess.CompletedProcess:
-    """Run ``args`` in a fresh network namespace; returns the completed process."""
+    """Run ``args`` in a fresh network namespace (``NETNS_RUN_INSIDE=1`` in its
+    environment), from the directory ``cwd``, for at most ``timeout_s`` [s] of wall time
+    (then :class:`subprocess.TimeoutExpired`); returns the completed process, its output
+    captured as text."""
     if os.environ.get("NETNS_RUN_INSIDE") == "1":
         cmd = args
     else:
