@@ -604,7 +604,8 @@ class Navigator:
     def step(self, t: float, pos: Vec3, vel: Vec3, quat: tuple[float, ...], dt: float
              ) -> tuple[RefSample | None, MotorState]:
         """Advance to ``t`` [s] with the vehicle at ``pos`` [m], ``vel`` [m/s], attitude
-        ``quat`` (body to inertial, w x y z). Returns (the reference, or None when not flying, and the motors' state)."""
+        ``quat`` (body to inertial, w x y z). Returns (the reference, or None when not
+        flying, and the motors' state)."""
         self._t, self._pos, self._vel_now, self._quat = t, pos, vel, quat
         if not self.armed:
             self._ref = None
