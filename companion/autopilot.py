@@ -34,9 +34,10 @@ from typing import Any, NamedTuple
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.mavlink_io import MavlinkEndpoints, Peer
+from companion.mission_items import ItemRefused, finite, mission_home, nav_command, nav_commands
 from companion.mission_protocol import MissionItem, MissionProtocol
 from companion.mission_protocol import from_message as mission_from_message
-from companion.navigation import FlightMode, NavCommand, NavEvent, Navigator
+from companion.navigation import FlightMode, NavEvent, Navigator
 from companion.param_protocol import ParamDef, ParamProtocol
 from tuavdefs import component_link as cl
 from tuavdefs.frames import (
@@ -105,7 +106,6 @@ _POS_IGNORE = (M.POSITION_TARGET_TYPEMASK_X_IGNORE | M.POSITION_TARGET_TYPEMASK_
                | M.POSITION_TARGET_TYPEMASK_Z_IGNORE)
 _VEL_IGNORE = (M.POSITION_TARGET_TYPEMASK_VX_IGNORE | M.POSITION_TARGET_TYPEMASK_VY_IGNORE
                | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
-_INT32_MAX = 2**31 - 1
 
 
 class Telemetry(NamedTuple):
@@ -365,17 +365,17 @@ class Autopilot:
         why: str | None = None
         send_hb = False
         if cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
-            force = _finite(p[1]) and abs(p[1] - FORCE_MAGIC) < 0.5
-            if _finite(p[0]) and p[0] >= 0.5:
+            force = finite(p[1]) and abs(p[1] - FORCE_MAGIC) < 0.5
+            if finite(p[0]) and p[0] >= 0.5:
                 why = nav.arm(force)
-            elif _finite(p[0]):
+            elif finite(p[0]):
                 why = nav.disarm(force)
             else:
                 why = "Arm: param1 is not a number"
             result = M.MAV_RESULT_ACCEPTED if why is None else M.MAV_RESULT_FAILED
             send_hb = why is None
         elif cmd == M.MAV_CMD_DO_SET_MODE:
-            if not _finite(p[1]):
+            if not finite(p[1]):
                 why, result = "Mode: not a number", M.MAV_RESULT_DENIED
             else:
                 why = nav.set_mode(int(p[1]))
@@ -386,7 +386,7 @@ class Autopilot:
             if frame is not None and frame in GLOBAL_FRAMES:
                 alt = altitude_to_z(alt, frame, self.origin)
             here = self._pos()
-            if not (_finite(alt) and alt > 0.0):
+            if not (finite(alt) and alt > 0.0):
                 why, result = f"Takeoff: bad altitude {alt}", M.MAV_RESULT_DENIED
             elif (bad := nav.check_target((here[0], here[1], alt))) is not None:
                 why, result = f"Takeoff: {bad}", M.MAV_RESULT_DENIED
@@ -403,7 +403,7 @@ class Autopilot:
             result = M.MAV_RESULT_ACCEPTED if why is None else M.MAV_RESULT_FAILED
             send_hb = why is None
         elif cmd == M.MAV_CMD_MISSION_START:
-            first = int(p[0]) if _finite(p[0]) else 0
+            first = int(p[0]) if finite(p[0]) else 0
             why = nav.start_mission(first)
             result = M.MAV_RESULT_ACCEPTED if why is None else M.MAV_RESULT_FAILED
             send_hb = why is None
@@ -411,8 +411,8 @@ class Autopilot:
             why, result = self._reposition(p, frame)
             send_hb = why is None
         elif cmd == M.MAV_CMD_DO_CHANGE_SPEED:
-            why = nav.change_speed(p[1]) if _finite(p[1]) and p[1] > 0 else None
-            if _finite(p[1]) and p[1] > 0 and why is not None:
+            why = nav.change_speed(p[1]) if finite(p[1]) and p[1] > 0 else None
+            if finite(p[1]) and p[1] > 0 and why is not None:
                 result = M.MAV_RESULT_DENIED
         elif cmd == M.MAV_CMD_CONDITION_YAW:
             why, result = self._condition_yaw(p)
@@ -438,7 +438,7 @@ class Autopilot:
                 return   # acknowledged when the winch answers
             why, result = "Winch: not connected", M.MAV_RESULT_FAILED
         elif cmd == M.MAV_CMD_DO_SET_MISSION_CURRENT:
-            why = nav.set_current(int(p[0])) if _finite(p[0]) else "bad mission item"
+            why = nav.set_current(int(p[0])) if finite(p[0]) else "bad mission item"
             result = M.MAV_RESULT_ACCEPTED if why is None else M.MAV_RESULT_DENIED
         else:
             self.counters["unsupported"] += 1
@@ -470,10 +470,10 @@ class Autopilot:
         if frame is not None and frame not in GLOBAL_FRAMES:
             return "Reposition: unsupported frame", M.MAV_RESULT_DENIED
         lat, lon, alt = p[4], p[5], p[6]
-        if not (_finite(lat) and _finite(lon)) or (lat == 0.0 and lon == 0.0):
+        if not (finite(lat) and finite(lon)) or (lat == 0.0 and lon == 0.0):
             return "Reposition: position is not a number", M.MAV_RESULT_DENIED
         target = self._global_to_local(lat, lon, alt, frame)
-        if not _finite(alt):
+        if not finite(alt):
             ref = nav.reference()
             target = (target[0], target[1], ref.pos_m[2] if ref else self._pos()[2])
         why = nav.check_target(target)
@@ -483,27 +483,27 @@ class Autopilot:
             return "Reposition: not flying", M.MAV_RESULT_FAILED
         if nav.mode != FlightMode.GUIDED:
             nav.set_mode(FlightMode.GUIDED)
-        yaw = yaw_ned_to_enu(math.radians(p[3])) if _finite(p[3]) else None
-        speed = p[0] if _finite(p[0]) and p[0] > 0 else None
+        yaw = yaw_ned_to_enu(math.radians(p[3])) if finite(p[3]) else None
+        speed = p[0] if finite(p[0]) and p[0] > 0 else None
         why = nav.goto(target, yaw, speed)
         return why, (M.MAV_RESULT_ACCEPTED if why is None else M.MAV_RESULT_FAILED)
 
     def _condition_yaw(self, p: list[float]) -> tuple[str | None, int]:
-        if not _finite(p[0]):
+        if not finite(p[0]):
             return "Yaw: not a number", M.MAV_RESULT_DENIED
         heading_ned = math.radians(p[0])
-        if _finite(p[3]) and p[3] >= 0.5:   # relative to the current heading
-            direction = -1.0 if _finite(p[2]) and p[2] < 0 else 1.0
+        if finite(p[3]) and p[3] >= 0.5:   # relative to the current heading
+            direction = -1.0 if finite(p[2]) and p[2] < 0 else 1.0
             yaw_now = quat_to_euler(self._telem.quat)[2] if self._telem else 0.0
             heading_ned = yaw_enu_to_ned(yaw_now) + direction * heading_ned
         why = self.nav.set_yaw(yaw_ned_to_enu(heading_ned))
         return why, (M.MAV_RESULT_ACCEPTED if why is None else M.MAV_RESULT_FAILED)
 
     def _set_home(self, p: list[float]) -> tuple[str | None, int]:
-        if _finite(p[0]) and p[0] >= 0.5:
+        if finite(p[0]) and p[0] >= 0.5:
             self.nav.home_m = self._pos()
         else:
-            if not (_finite(p[4]) and _finite(p[5]) and _finite(p[6])):
+            if not (finite(p[4]) and finite(p[5]) and finite(p[6])):
                 return "Home: not a number", M.MAV_RESULT_DENIED
             home = global_to_local_enu(p[4], p[5], p[6], self.origin)
             why = self.nav.check_target((home[0], home[1], max(home[2], 0.0)))
@@ -515,7 +515,7 @@ class Autopilot:
         return None, M.MAV_RESULT_ACCEPTED
 
     def _request_message(self, peer: Peer, p: list[float]) -> int:
-        if not _finite(p[0]):
+        if not finite(p[0]):
             return M.MAV_RESULT_DENIED
         mid = int(p[0])
         if mid == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
@@ -533,7 +533,7 @@ class Autopilot:
         return M.MAV_RESULT_ACCEPTED
 
     def _set_interval(self, peer: Peer, msg_id: float, interval_us: float) -> int:
-        if not (_finite(msg_id) and _finite(interval_us)):
+        if not (finite(msg_id) and finite(interval_us)):
             return M.MAV_RESULT_DENIED
         name = _MSG_NAMES.get(int(msg_id))
         if name is None:
@@ -656,10 +656,10 @@ class Autopilot:
         nav = self.nav
         pos_ignored = mask & _POS_IGNORE == _POS_IGNORE
         vel_ignored = mask & _VEL_IGNORE == _VEL_IGNORE
-        yaw = None if mask & M.POSITION_TARGET_TYPEMASK_YAW_IGNORE or not _finite(yaw_ned) \
+        yaw = None if mask & M.POSITION_TARGET_TYPEMASK_YAW_IGNORE or not finite(yaw_ned) \
             else yaw_ned_to_enu(yaw_ned)
         yaw_rate = None if mask & M.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE \
-            or not _finite(yaw_rate_ned) else -yaw_rate_ned
+            or not finite(yaw_rate_ned) else -yaw_rate_ned
         if nav.mode != FlightMode.GUIDED:
             self._reject_target("Guided: not in GUIDED", count=False)
             return
@@ -688,83 +688,20 @@ class Autopilot:
 
     def _validate_item(self, seq: int, item: MissionItem) -> tuple[int, str] | None:
         try:
-            self._nav_command(seq, item)
-        except _ItemError as exc:
+            nav_command(seq, item, self.origin, self.nav)
+        except ItemRefused as exc:
             return exc.result, f"Mission: item {seq}: {exc}"
         return None
 
     def _mission_changed(self, items: list[MissionItem]) -> None:
-        cmds = [self._nav_command(seq, it) for seq, it in enumerate(items) if seq > 0]
-        self.nav.set_mission([c for c in cmds if c is not None])
+        self.nav.set_mission(nav_commands(items, self.origin, self.nav))
         self.log(f"mission of {len(items) - 1} items accepted")
-
-    def _nav_command(self, seq: int, it: MissionItem) -> NavCommand | None:
-        """The navigator's form of a mission item; raises _ItemError why it is refused."""
-        cmd, frame = it.command, it.frame
-        if cmd == M.MAV_CMD_DO_CHANGE_SPEED:
-            if not (_finite(it.param2) and it.param2 > 0):
-                raise _ItemError(M.MAV_MISSION_INVALID_PARAM2, "speed must be > 0")
-            return NavCommand(seq, "speed", speed_m_s=float(it.param2))
-        if cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            return NavCommand(seq, "rtl")
-        kinds = {M.MAV_CMD_NAV_WAYPOINT: "waypoint", M.MAV_CMD_NAV_LOITER_TURNS: "loiter_turns",
-                 M.MAV_CMD_NAV_TAKEOFF: "takeoff", M.MAV_CMD_NAV_LAND: "land",
-                 M.MAV_CMD_NAV_LOITER_TIME: "waypoint"}
-        kind = kinds.get(cmd)
-        if kind is None:
-            raise _ItemError(M.MAV_MISSION_UNSUPPORTED, f"command {cmd} not supported")
-        if frame not in GLOBAL_FRAMES:
-            raise _ItemError(M.MAV_MISSION_UNSUPPORTED_FRAME, f"frame {frame} not supported")
-        lat, lon = it.x * 1e-7, it.y * 1e-7
-        if not _finite(it.z):
-            raise _ItemError(M.MAV_MISSION_INVALID_PARAM7, "altitude is not a number")
-        xy: tuple[float, float] | None = None
-        z = self._global_to_local(lat, lon, it.z, frame)[2]
-        # latitude = longitude = 0, or INT32_MAX ("unset"): where the vehicle is then
-        if (it.x != 0 or it.y != 0) and _INT32_MAX not in (it.x, it.y):
-            x, y, _ = self._global_to_local(lat, lon, it.z, frame)
-            xy = (x, y)
-        if kind == "land":
-            return NavCommand(seq, "land", xy)
-        if kind == "takeoff" and z <= 0.0:
-            raise _ItemError(M.MAV_MISSION_INVALID_PARAM7, "take-off altitude <= 0")
-        check_xy = xy if xy is not None else (0.0, 0.0)
-        reach = self.nav.check_target((*check_xy, z))
-        if reach is not None:
-            code = (M.MAV_MISSION_INVALID_PARAM7 if "ground" in reach or
-                    math.hypot(*check_xy) <= self.nav.reach_m else
-                    M.MAV_MISSION_INVALID_PARAM5_X)
-            raise _ItemError(code, reach)
-        if kind == "takeoff":
-            return NavCommand(seq, "takeoff", None, z)
-        hold = float(it.param1) if _finite(it.param1) and it.param1 > 0 else 0.0
-        if kind == "waypoint":
-            accept = float(it.param2) if _finite(it.param2) and it.param2 > 0 else None
-            return NavCommand(seq, "waypoint", xy, z, hold_s=hold, accept_m=accept)
-        # loiter turns: param1 turns, param3 radius (positive: clockwise)
-        radius = float(it.param3)
-        turns = float(it.param1)
-        if not (_finite(radius) and abs(radius) >= 0.5):
-            raise _ItemError(M.MAV_MISSION_INVALID_PARAM3, "circle radius must be >= 0.5 m")
-        if not (_finite(turns) and turns > 0):
-            raise _ItemError(M.MAV_MISSION_INVALID_PARAM1, "turns must be > 0")
-        far = math.hypot(math.hypot(*check_xy) + abs(radius), z)
-        if far > self.nav.reach_m:
-            raise _ItemError(M.MAV_MISSION_INVALID_PARAM3,
-                             f"circle beyond tether reach ({far:.1f} > "
-                             f"{self.nav.reach_m:.1f} m)")
-        return NavCommand(seq, "loiter_turns", xy, z, turns=turns,
-                          circle_radius_m=abs(radius), clockwise=radius > 0)
 
     def _update_mission_home(self) -> None:
         home = self.nav.home_m
         if home is None:
             return
-        lat, lon, _ = local_enu_to_global((home[0], home[1], 0.0), self.origin)
-        self.missions.set_home(MissionItem(
-            command=M.MAV_CMD_NAV_WAYPOINT, frame=M.MAV_FRAME_GLOBAL, param1=0.0, param2=0.0,
-            param3=0.0, param4=0.0, x=round(lat * 1e7), y=round(lon * 1e7),
-            z=float(self.origin[2]), autocontinue=1))
+        self.missions.set_home(mission_home(home, self.origin))
 
     # ----- navigator events
 
@@ -927,21 +864,6 @@ class Autopilot:
         return M.MAVLink_autopilot_version_message(
             CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, list(b"tuavsitl"), [0] * 8, [0] * 8, 0,
             0, 0x7475617600000001)
-
-
-class _ItemError(ValueError):
-    """A mission item refused: ``result`` is its MAV_MISSION_RESULT."""
-
-    def __init__(self, result: int, text: str) -> None:
-        super().__init__(text)
-        self.result = result
-
-
-def _finite(x: Any) -> bool:
-    try:
-        return math.isfinite(float(x))
-    except (TypeError, ValueError):
-        return False
 
 
 def _i16(x: float) -> int:
