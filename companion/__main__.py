@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from companion.autopilot import Autopilot, Telemetry
+from companion.autopilot import Autopilot
 from companion.component_server import ComponentServer
 from companion.flight_controller import FlightController, VehicleState
 from companion.gains import FlightControlParams
@@ -43,6 +43,7 @@ from companion.mavlink_io import (
 from companion.navigation import NavigationParams, Navigator
 from companion.param_protocol import params_to_defs
 from companion.simlink_client import SimLinkClient
+from companion.telemetry import Telemetry
 from tuavdefs import component_link as cl
 from tuavdefs import simlink as sl
 from tuavdefs.frames import quat_to_yaw

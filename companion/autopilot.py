@@ -28,8 +28,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -39,14 +38,12 @@ from companion.mission_protocol import MissionItem, MissionProtocol
 from companion.mission_protocol import from_message as mission_from_message
 from companion.navigation import FlightMode, NavEvent, Navigator
 from companion.param_protocol import ParamDef, ParamProtocol
+from companion.telemetry import DUE_TOLERANCE_S, Telemetry, TelemetryStreams
 from tuavdefs import component_link as cl
 from tuavdefs.frames import (
     enu_to_ned,
-    flu_to_frd,
     global_to_local_enu,
-    local_enu_to_global,
     ned_to_enu,
-    quat_enu_flu_to_ned_frd,
     quat_to_euler,
     yaw_enu_to_ned,
     yaw_ned_to_enu,
@@ -56,75 +53,14 @@ from tuavdefs.mav_frames import GLOBAL_FRAMES, altitude_to_z, global_to_local
 M = mavlink2
 Vec3 = tuple[float, float, float]
 
-#: ArduCopter 4.5.7 official, as AUTOPILOT_VERSION encodes it (major, minor, patch, type).
-FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (7 << 8) | M.FIRMWARE_VERSION_TYPE_OFFICIAL
-CAPABILITIES = (M.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-                | M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
-                | M.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-                | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
 FORCE_MAGIC = 21196.0
 """param2 of MAV_CMD_COMPONENT_ARM_DISARM that forces arming or disarming."""
-
-_SENSORS = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-            | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-            | M.MAV_SYS_STATUS_SENSOR_GPS | M.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
-            | M.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-            | M.MAV_SYS_STATUS_SENSOR_YAW_POSITION
-            | M.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
-            | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
-            | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | M.MAV_SYS_STATUS_AHRS
-            | M.MAV_SYS_STATUS_SENSOR_BATTERY | M.MAV_SYS_STATUS_PREARM_CHECK)
-
-
-#: Default telemetry: message name -> rate [Hz of simulated time].
-DEFAULT_RATES_HZ: dict[str, float] = {
-    "SYS_STATUS": 1.0, "EXTENDED_SYS_STATE": 1.0, "BATTERY_STATUS": 1.0,
-    "GPS_RAW_INT": 2.0, "GLOBAL_POSITION_INT": 5.0, "LOCAL_POSITION_NED": 5.0,
-    "ATTITUDE": 10.0, "VFR_HUD": 2.0, "HOME_POSITION": 0.2, "MISSION_CURRENT": 1.0,
-    "SYSTEM_TIME": 0.5,
-}
-#: A message due within this [s] of a period's time is sent in that period: its due times
-#: are sums of intervals in floating point, and without it messages due at the same instant
-#: (a 5 Hz one on a 10 Hz one's grid) land a period apart as their rounding falls, and a
-#: ground station wakes for each.
-DUE_TOLERANCE_S = 1e-6
-#: REQUEST_DATA_STREAM groups, as ArduPilot assigns messages to them.
-STREAM_GROUPS: dict[int, tuple[str, ...]] = {
-    M.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "GPS_RAW_INT", "MISSION_CURRENT"),
-    M.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
-    M.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
-    M.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
-    M.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "BATTERY_STATUS", "EXTENDED_SYS_STATE"),
-}
-_MSG_IDS = {name: getattr(M, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_RATES_HZ}
-_MSG_NAMES = {v: k for k, v in _MSG_IDS.items()}
 
 _WINCH_ACK_TIMEOUT_S = 0.4
 _POS_IGNORE = (M.POSITION_TARGET_TYPEMASK_X_IGNORE | M.POSITION_TARGET_TYPEMASK_Y_IGNORE
                | M.POSITION_TARGET_TYPEMASK_Z_IGNORE)
 _VEL_IGNORE = (M.POSITION_TARGET_TYPEMASK_VX_IGNORE | M.POSITION_TARGET_TYPEMASK_VY_IGNORE
                | M.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
-
-
-class Telemetry(NamedTuple):
-    """What the vehicle knows of itself at a control period (inertial z-up, body FLU)."""
-
-    t_s: float
-    pos_m: Vec3
-    vel_m_s: Vec3
-    quat: tuple[float, float, float, float]
-    rates_rad_s: Vec3
-    throttle: float
-    """Mean rotor command in [0, 1]."""
-
-
-@dataclass
-class _LinkState:
-    """Per-link telemetry schedule: message name -> [interval s, next due s]."""
-
-    schedule: dict[str, list[float]] = field(default_factory=dict)
 
 
 class Autopilot:
@@ -150,8 +86,12 @@ class Autopilot:
                                         self._validate_item, self._mission_changed)
         self.params = ParamProtocol(params, self._send_to, self.statustext,
                                     persist_path=param_file)
-        self._links: dict[Peer, _LinkState] = {}
-        self._telem: Telemetry | None = None
+        self.streams = TelemetryStreams(endpoints, nav, self.origin, self.missions)
+        # ground-station message type -> handler(peer, msg)
+        self._handlers: dict[str, Callable[[Peer, Any], None]] = {
+            name[4:].upper(): getattr(self, name) for name in dir(type(self))
+            if name.startswith("_on_")}
+        self._handlers.update(self.streams.handlers())
         self._boot_wall = time.monotonic()
         self._last_hb_sim = -math.inf
         self._last_hb_wall = -math.inf
@@ -159,8 +99,6 @@ class Autopilot:
         self._winch_pending: list[tuple[float, Peer, int, int, int]] = []
         self._winch_sink: Callable[[Any], None] | None = None
         self.counters = {"commands": 0, "unsupported": 0, "rejected_targets": 0}
-        self._streams_due = -math.inf     # earliest next message due on any link [s]
-        self._streams_gen = -1            # the endpoints' links when it was computed
         self._watch: list[Any] = []
         self._watch_gen = -1
         self._watch_comp: Any = None
@@ -220,14 +158,15 @@ class Autopilot:
         closed, runs the protocols' timers and the navigator's events, sends heartbeats
         and streams, and writes out what slow TCP clients could not take before. Cheap
         when nothing is due (most periods)."""
+        streams = self.streams
         if telem is not None:
-            self._telem = telem
+            streams.telem = telem
         io = self.io
         if io.closed_pending:
             for peer in io.pop_closed():
                 self.missions.peer_closed(peer)
                 self.params.peer_closed(peer)
-                self._links.pop(peer, None)
+                streams.forget(peer)
         now_wall = time.monotonic()
         self.missions.tick(now_wall)
         self.params.tick(now_wall)
@@ -236,14 +175,14 @@ class Autopilot:
         if self.nav.has_events:
             for kind, value in self.nav.pop_events():
                 self._nav_event(kind, value)
-        tm = self._telem
+        tm = streams.telem
         t = tm.t_s if tm is not None else -math.inf
         if (now_wall - self._last_hb_wall >= 1.0
                 or t - self._last_hb_sim >= 1.0 - DUE_TOLERANCE_S):
             self.send_heartbeat()
-        if tm is not None and (t >= self._streams_due - DUE_TOLERANCE_S
-                               or io.generation != self._streams_gen):
-            self._streams(t)    # something is due on some link (otherwise nothing to do)
+        if tm is not None and (t >= streams.due_s - DUE_TOLERANCE_S
+                               or io.generation != streams.generation):
+            streams.send_due(t)    # something is due on some link (otherwise nothing to do)
         if io.backlogged:
             io.flush()
         if self.component is not None and self.component.backlogged:
@@ -263,8 +202,8 @@ class Autopilot:
             M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA, base, int(nav.mode), status,
             3))
         self._last_hb_wall = time.monotonic()
-        if self._telem is not None:
-            self._last_hb_sim = self._telem.t_s
+        if self.streams.telem is not None:
+            self._last_hb_sim = self.streams.telem.t_s
 
     # ----- routing
 
@@ -284,7 +223,7 @@ class Autopilot:
             return
         if tcomp is not None and tcomp not in (0, cl.AUTOPILOT_COMPONENT_ID):
             return
-        handler = getattr(self, f"_on_{mtype.lower()}", None)
+        handler = self._handlers.get(mtype)
         if handler is not None:
             handler(peer, msg)
 
@@ -385,7 +324,7 @@ class Autopilot:
             alt = p[6]
             if frame is not None and frame in GLOBAL_FRAMES:
                 alt = altitude_to_z(alt, frame, self.origin)
-            here = self._pos()
+            here = self.streams.position()
             if not (finite(alt) and alt > 0.0):
                 why, result = f"Takeoff: bad altitude {alt}", M.MAV_RESULT_DENIED
             elif (bad := nav.check_target((here[0], here[1], alt))) is not None:
@@ -420,15 +359,19 @@ class Autopilot:
             if nav.home_m is None:
                 result = M.MAV_RESULT_TEMPORARILY_REJECTED
             else:
-                self.io.send(self._home_position(), peer)
+                self.io.send(self.streams.home_position(), peer)
         elif cmd == M.MAV_CMD_DO_SET_HOME:
             why, result = self._set_home(p)
         elif cmd == M.MAV_CMD_REQUEST_MESSAGE:
-            result = self._request_message(peer, p)
+            if finite(p[0]) and int(p[0]) == M.MAVLINK_MSG_ID_HEARTBEAT:
+                self.send_heartbeat()
+                result = M.MAV_RESULT_ACCEPTED
+            else:
+                result = self.streams.request_message(peer, p[0])
         elif cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result = self._set_interval(peer, p[0], p[1])
+            result = self.streams.set_interval(peer, p[0], p[1])
         elif cmd == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
-            self.io.send(self._autopilot_version(), peer)
+            self.io.send(self.streams.autopilot_version(), peer)
         elif cmd == M.MAV_CMD_REQUEST_PROTOCOL_VERSION:
             result = M.MAV_RESULT_UNSUPPORTED
         elif cmd == M.MAV_CMD_DO_WINCH:
@@ -475,7 +418,7 @@ class Autopilot:
         target = self._global_to_local(lat, lon, alt, frame)
         if not finite(alt):
             ref = nav.reference()
-            target = (target[0], target[1], ref.pos_m[2] if ref else self._pos()[2])
+            target = (target[0], target[1], ref.pos_m[2] if ref else self.streams.position()[2])
         why = nav.check_target(target)
         if why is not None:
             return f"Reposition: {why}", M.MAV_RESULT_DENIED
@@ -494,14 +437,14 @@ class Autopilot:
         heading_ned = math.radians(p[0])
         if finite(p[3]) and p[3] >= 0.5:   # relative to the current heading
             direction = -1.0 if finite(p[2]) and p[2] < 0 else 1.0
-            yaw_now = quat_to_euler(self._telem.quat)[2] if self._telem else 0.0
+            yaw_now = quat_to_euler(self.streams.telem.quat)[2] if self.streams.telem else 0.0
             heading_ned = yaw_enu_to_ned(yaw_now) + direction * heading_ned
         why = self.nav.set_yaw(yaw_ned_to_enu(heading_ned))
         return why, (M.MAV_RESULT_ACCEPTED if why is None else M.MAV_RESULT_FAILED)
 
     def _set_home(self, p: list[float]) -> tuple[str | None, int]:
         if finite(p[0]) and p[0] >= 0.5:
-            self.nav.home_m = self._pos()
+            self.nav.home_m = self.streams.position()
         else:
             if not (finite(p[4]) and finite(p[5]) and finite(p[6])):
                 return "Home: not a number", M.MAV_RESULT_DENIED
@@ -511,54 +454,8 @@ class Autopilot:
                 return f"Home: {why}", M.MAV_RESULT_DENIED
             self.nav.home_m = (home[0], home[1], self.nav.gear_height_m)
         self._update_mission_home()
-        self.io.send(self._home_position())
+        self.io.send(self.streams.home_position())
         return None, M.MAV_RESULT_ACCEPTED
-
-    def _request_message(self, peer: Peer, p: list[float]) -> int:
-        if not finite(p[0]):
-            return M.MAV_RESULT_DENIED
-        mid = int(p[0])
-        if mid == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
-            self.io.send(self._autopilot_version(), peer)
-        elif mid == M.MAVLINK_MSG_ID_HOME_POSITION:
-            if self.nav.home_m is None:
-                return M.MAV_RESULT_TEMPORARILY_REJECTED
-            self.io.send(self._home_position(), peer)
-        elif mid == M.MAVLINK_MSG_ID_HEARTBEAT:
-            self.send_heartbeat()
-        elif mid in _MSG_NAMES and self._telem is not None:
-            self.io.send(self._build(_MSG_NAMES[mid], self._telem), peer)
-        else:
-            return M.MAV_RESULT_UNSUPPORTED
-        return M.MAV_RESULT_ACCEPTED
-
-    def _set_interval(self, peer: Peer, msg_id: float, interval_us: float) -> int:
-        if not (finite(msg_id) and finite(interval_us)):
-            return M.MAV_RESULT_DENIED
-        name = _MSG_NAMES.get(int(msg_id))
-        if name is None:
-            return M.MAV_RESULT_UNSUPPORTED if int(msg_id) != M.MAVLINK_MSG_ID_HEARTBEAT \
-                else M.MAV_RESULT_ACCEPTED
-        sched = self._link(peer).schedule
-        self._streams_due = -math.inf
-        if interval_us < 0:
-            sched[name] = [0.0, math.inf]
-        else:
-            interval = (1.0 / DEFAULT_RATES_HZ[name] if interval_us == 0
-                        else max(interval_us * 1e-6, 0.002))
-            sched[name] = [interval, self._telem.t_s if self._telem else 0.0]
-        return M.MAV_RESULT_ACCEPTED
-
-    def _on_request_data_stream(self, peer: Peer, msg: Any) -> None:
-        groups = (list(STREAM_GROUPS) if msg.req_stream_id == M.MAV_DATA_STREAM_ALL
-                  else [msg.req_stream_id])
-        rate = msg.req_message_rate if msg.start_stop else 0
-        sched = self._link(peer).schedule
-        self._streams_due = -math.inf
-        t = self._telem.t_s if self._telem else 0.0
-        for g in groups:
-            for name in STREAM_GROUPS.get(g, ()):
-                sched[name] = [1.0 / rate, t] if rate > 0 else [0.0, math.inf]
 
     def _on_timesync(self, peer: Peer, msg: Any) -> None:
         if msg.tc1 == 0:
@@ -568,7 +465,7 @@ class Autopilot:
         why = self.nav.set_current(msg.seq)
         if why is not None:
             self.statustext(M.MAV_SEVERITY_WARNING, why)
-        self.io.send(self._mission_current(), peer)
+        self.io.send(self.streams.mission_current(), peer)
 
     # ----- guided targets as mission items (current = 2: go there; 3: change altitude)
 
@@ -594,7 +491,7 @@ class Autopilot:
         else:
             target = self._global_to_local(item.x * 1e-7, item.y * 1e-7, item.z, item.frame)
             ref = self.nav.reference()
-            here = ref.pos_m if ref is not None else self._pos()
+            here = ref.pos_m if ref is not None else self.streams.position()
             if msg.current == 3:
                 target = (here[0], here[1], target[2])
             why = self.nav.check_target(target)
@@ -617,8 +514,8 @@ class Autopilot:
 
     def _on_set_position_target_local_ned(self, peer: Peer, msg: Any) -> None:
         frame, mask = msg.coordinate_frame, msg.type_mask
-        here = self._pos()
-        yaw_now = quat_to_euler(self._telem.quat)[2] if self._telem else 0.0
+        here = self.streams.position()
+        yaw_now = quat_to_euler(self.streams.telem.quat)[2] if self.streams.telem else 0.0
         pos_ned = (msg.x, msg.y, msg.z)
         vel_ned = (msg.vx, msg.vy, msg.vz)
         if frame == M.MAV_FRAME_LOCAL_NED:
@@ -669,9 +566,9 @@ class Autopilot:
             why = nav.set_velocity(vel, yaw, yaw_rate)
             if why is None:
                 # a velocity target must keep the vehicle within the tether's reach
-                ahead = tuple(self._pos()[i] + 3.0 * vel[i] for i in range(3))
+                ahead = tuple(self.streams.position()[i] + 3.0 * vel[i] for i in range(3))
                 if nav.check_target(ahead) is not None and nav.check_target(
-                        self._pos()) is None:
+                        self.streams.position()) is None:
                     nav.set_velocity((0.0, 0.0, 0.0))
                     why = f"velocity leads {nav.check_target(ahead)}"
         else:
@@ -707,7 +604,7 @@ class Autopilot:
 
     def _nav_event(self, kind: str, value: object) -> None:
         if kind == NavEvent.CURRENT:
-            self.io.send(self._mission_current())
+            self.io.send(self.streams.mission_current())
         elif kind == NavEvent.REACHED:
             self.io.send(M.MAVLink_mission_item_reached_message(int(value)))
             self.statustext(M.MAV_SEVERITY_INFO, f"Reached command #{int(value)}")
@@ -726,146 +623,7 @@ class Autopilot:
     def armed_changed(self) -> None:
         """Call after arming on the ground: home is set there, and announced."""
         self._update_mission_home()
-        self.io.send(self._home_position())
+        self.io.send(self.streams.home_position())
         self.send_heartbeat()
 
     # ----- telemetry
-
-    def _pos(self) -> Vec3:
-        return self._telem.pos_m if self._telem is not None else (0.0, 0.0, 0.0)
-
-    def _link(self, peer: Peer) -> _LinkState:
-        st = self._links.get(peer)
-        if st is None:
-            st = self._links[peer] = _LinkState()
-            t = self._telem.t_s if self._telem is not None else 0.0
-            for name, rate in DEFAULT_RATES_HZ.items():
-                st.schedule[name] = [1.0 / rate, t]
-        return st
-
-    def _streams(self, t: float) -> None:
-        """Send the telemetry due at ``t`` [s] on each link; note when the next is due."""
-        gen = self.io.generation
-        links = self.io.links()
-        built: dict[str, bytes] = {}
-        next_due = math.inf
-        for peer in links:
-            st = self._link(peer)
-            frames: list[bytes] = []
-            for name, entry in st.schedule.items():
-                interval, due = entry
-                if interval <= 0.0:
-                    continue
-                if t >= due - DUE_TOLERANCE_S:
-                    entry[1] = max(due + interval, t) if t - due < interval else t + interval
-                    if not (name == "HOME_POSITION" and self.nav.home_m is None):
-                        data = built.get(name)
-                        if data is None:
-                            data = built[name] = self.io.pack(self._build(name, self._telem))
-                        frames.append(data)
-                next_due = min(next_due, entry[1])
-            if frames:
-                # in one write: a station wakes once for the period's telemetry
-                self.io.send_frames(frames, peer)
-        for gone in [p for p in self._links if p not in links]:
-            del self._links[gone]
-        self._streams_due, self._streams_gen = next_due, gen
-
-    def _build(self, name: str, tm: Telemetry) -> Any:
-        boot_ms = int(tm.t_s * 1000) & 0xFFFFFFFF
-        if name == "ATTITUDE":
-            q = quat_enu_flu_to_ned_frd(tm.quat)
-            roll, pitch, yaw = quat_to_euler(q)   # ZYX angles of body FRD in NED
-            p, q_, r = flu_to_frd(tm.rates_rad_s)
-            return M.MAVLink_attitude_message(boot_ms, roll, pitch, yaw, p, q_, r)
-        if name == "LOCAL_POSITION_NED":
-            x, y, z = enu_to_ned(tm.pos_m)
-            vx, vy, vz = enu_to_ned(tm.vel_m_s)
-            return M.MAVLink_local_position_ned_message(boot_ms, x, y, z, vx, vy, vz)
-        if name == "GLOBAL_POSITION_INT":
-            lat, lon, alt = local_enu_to_global(tm.pos_m, self.origin)
-            vn = enu_to_ned(tm.vel_m_s)
-            hdg = math.degrees(yaw_enu_to_ned(quat_to_euler(tm.quat)[2])) % 360.0
-            return M.MAVLink_global_position_int_message(
-                boot_ms, round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
-                round(tm.pos_m[2] * 1000), _i16(vn[0] * 100), _i16(vn[1] * 100),
-                _i16(vn[2] * 100), round(hdg * 100) % 36000)
-        if name == "GPS_RAW_INT":
-            lat, lon, alt = local_enu_to_global(tm.pos_m, self.origin)
-            vn = enu_to_ned(tm.vel_m_s)
-            gs = math.hypot(vn[0], vn[1])
-            cog = math.degrees(math.atan2(vn[1], vn[0])) % 360.0 if gs > 0.1 else 0.0
-            return M.MAVLink_gps_raw_int_message(
-                int(tm.t_s * 1e6), M.GPS_FIX_TYPE_3D_FIX, round(lat * 1e7), round(lon * 1e7),
-                round(alt * 1000), 70, 100, round(gs * 100), round(cog * 100) % 36000, 16)
-        if name == "VFR_HUD":
-            vn = enu_to_ned(tm.vel_m_s)
-            gs = math.hypot(vn[0], vn[1])
-            hdg = math.degrees(yaw_enu_to_ned(quat_to_euler(tm.quat)[2])) % 360.0
-            return M.MAVLink_vfr_hud_message(gs, gs, round(hdg) % 360,
-                                              round(100 * tm.throttle),
-                                              self.origin[2] + tm.pos_m[2], -vn[2])
-        if name == "SYS_STATUS":
-            # the fence's health bit is set as ArduPilot sets it while no fence is breached
-            return M.MAVLink_sys_status_message(_SENSORS, _SENSORS,
-                                                _SENSORS | M.MAV_SYS_STATUS_GEOFENCE, 100, 48000,
-                                                round(100 * 100 * tm.throttle), 100, 0, 0, 0,
-                                                0, 0, 0)
-        if name == "BATTERY_STATUS":
-            # powered through the tether: a steady supply, never discharging
-            cells = [48000] + [65535] * 9
-            return M.MAVLink_battery_status_message(
-                0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_UNKNOWN, 32767, cells,
-                round(100 * 100 * tm.throttle), -1, -1, 100)
-        if name == "EXTENDED_SYS_STATE":
-            return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED,
-                                                        self._landed_state())
-        if name == "HOME_POSITION":
-            return self._home_position()
-        if name == "MISSION_CURRENT":
-            return self._mission_current()
-        if name == "SYSTEM_TIME":
-            return M.MAVLink_system_time_message(int(time.time() * 1e6), boot_ms)
-        raise KeyError(name)
-
-    def _landed_state(self) -> int:
-        nav = self.nav
-        if not nav.armed or nav.landed:
-            return M.MAV_LANDED_STATE_ON_GROUND
-        if nav.landing:
-            return M.MAV_LANDED_STATE_LANDING
-        if self._telem is not None and self._telem.pos_m[2] < nav.gear_height_m + 1.0 \
-                and self._telem.vel_m_s[2] > 0.1:
-            return M.MAV_LANDED_STATE_TAKEOFF
-        return M.MAV_LANDED_STATE_IN_AIR
-
-    def _home_position(self) -> Any:
-        home = self.nav.home_m or (0.0, 0.0, 0.0)
-        ground = (home[0], home[1], 0.0)
-        lat, lon, alt = local_enu_to_global(ground, self.origin)
-        x, y, z = enu_to_ned(ground)
-        return M.MAVLink_home_position_message(
-            round(lat * 1e7), round(lon * 1e7), round(alt * 1000), x, y, z, [1.0, 0.0, 0.0, 0.0],
-            0.0, 0.0, 0.0, int(self._telem.t_s * 1e6) if self._telem else 0)
-
-    def _mission_current(self) -> Any:
-        nav = self.nav
-        total = len(self.missions.items) if hasattr(self.missions, "items") else 0
-        if nav.mission_running:
-            state = M.MISSION_STATE_ACTIVE
-        elif total <= 1:
-            state = M.MISSION_STATE_NO_MISSION
-        else:
-            state = M.MISSION_STATE_NOT_STARTED
-        return M.MAVLink_mission_current_message(nav.current_seq, max(total - 1, 0), state,
-                                                 1 if nav.mode == FlightMode.AUTO else 0)
-
-    def _autopilot_version(self) -> Any:
-        return M.MAVLink_autopilot_version_message(
-            CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, list(b"tuavsitl"), [0] * 8, [0] * 8, 0,
-            0, 0x7475617600000001)
-
-
-def _i16(x: float) -> int:
-    return max(-32768, min(32767, round(x)))
-
