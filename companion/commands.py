@@ -86,8 +86,8 @@ class CommandHandler:
             "COMMAND_INT": self._on_command_int,
             "SET_MODE": self._on_set_mode,
             "MISSION_SET_CURRENT": self._on_mission_set_current,
-            "MISSION_ITEM_INT": self._on_mission_item_int,
-            "MISSION_ITEM": self._on_mission_item,
+            "MISSION_ITEM_INT": self._guided_item,
+            "MISSION_ITEM": self._guided_item,
             "SET_POSITION_TARGET_LOCAL_NED": self._on_set_position_target_local_ned,
             "SET_POSITION_TARGET_GLOBAL_INT": self._on_set_position_target_global_int,
         }
@@ -282,12 +282,6 @@ class CommandHandler:
         self.io.send(self.streams.mission_current(), peer)
 
     # ----- guided targets as mission items (current = 2: go there; 3: change altitude)
-
-    def _on_mission_item_int(self, peer: Peer, msg: Any) -> None:
-        self._guided_item(peer, msg)
-
-    def _on_mission_item(self, peer: Peer, msg: Any) -> None:
-        self._guided_item(peer, msg)
 
     def _guided_item(self, peer: Peer, msg: Any) -> None:
         """What MAVProxy's ``guided`` and older ground stations send, as ArduCopter takes
