@@ -95,6 +95,8 @@ def _category(file: str, func: str) -> str:
                                          "companion/component_server.py",
                                          "companion/mavlink_server.py",
                                          "companion/mavlink_io.py", "companion/autopilot.py",
+                                         "companion/telemetry.py", "companion/commands.py",
+                                         "companion/mission_items.py",
                                          "companion/mission_protocol.py",
                                          "companion/param_protocol.py",
                                          "groundstation/winch_link.py",

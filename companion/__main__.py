@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from companion.autopilot import Autopilot, Telemetry
+from companion.autopilot import Autopilot
 from companion.component_server import ComponentServer
 from companion.flight_controller import VehicleState
 from companion.gains import FlightControlParams
@@ -44,6 +44,7 @@ from companion.navigation import NavigationParams
 from companion.onboard import Companion, OnboardInputs
 from companion.param_protocol import params_to_defs
 from companion.simlink_client import SimLinkClient
+from companion.telemetry import Telemetry
 from tuavdefs import component_link as cl
 from tuavdefs import simlink as sl
 from tuavdefs.params import SystemParams

@@ -18,10 +18,11 @@ import pytest
 from gcs_util import Vehicle, command, download_mission, free_port, upload_mission, wait_msg
 from pymavlink import mavutil
 
-from companion.autopilot import Autopilot, Telemetry
+from companion.autopilot import Autopilot
 from companion.component_server import ComponentServer
 from companion.mavlink_io import MavlinkEndpoints
 from companion.navigation import NavigationParams, Navigator
+from companion.telemetry import Telemetry
 from tuavdefs import simlink
 from tuavdefs.frames import global_to_local_enu, local_enu_to_global
 from tuavdefs.simlink import HOME_DEFAULT

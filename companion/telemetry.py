@@ -1,0 +1,341 @@
+"""The vehicle's telemetry to ground stations: what it knows of itself at a control period
+(:class:`Telemetry`), the messages built from it, and each link's stream schedule as
+ArduCopter keeps one (:class:`TelemetryStreams`).
+
+Every ground-station link starts with :data:`DEFAULT_RATES_HZ` (in simulated time);
+SET_MESSAGE_INTERVAL changes one message on the link that asked, REQUEST_DATA_STREAM a group
+of them (:data:`STREAM_GROUPS`), REQUEST_MESSAGE sends one at once. The messages due at a
+period go out in one write per link. Positions: MAVLink's local NED has its origin at the
+winder, global positions come from ``origin`` (the winder's latitude deg, longitude deg,
+ground altitude m AMSL); inside, the inertial z-up frame and body FLU.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.mavlink_io import MavlinkEndpoints, Peer
+from companion.mission_items import finite
+from companion.mission_protocol import MissionProtocol
+from companion.navigation import FlightMode, Navigator
+from tuavdefs.frames import (
+    enu_to_ned,
+    flu_to_frd,
+    local_enu_to_global,
+    quat_enu_flu_to_ned_frd,
+    quat_to_euler,
+    yaw_enu_to_ned,
+)
+
+M = mavlink2
+Vec3 = tuple[float, float, float]
+
+__all__ = ["CAPABILITIES", "DEFAULT_RATES_HZ", "DUE_TOLERANCE_S", "FLIGHT_SW_VERSION",
+           "STREAM_GROUPS", "Telemetry", "TelemetryStreams"]
+
+#: ArduCopter 4.5.7 official, as AUTOPILOT_VERSION encodes it (major, minor, patch, type).
+FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (7 << 8) | M.FIRMWARE_VERSION_TYPE_OFFICIAL
+#: AUTOPILOT_VERSION's MAV_PROTOCOL_CAPABILITY flags.
+CAPABILITIES = (M.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+                | M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+                | M.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+                | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
+
+_SENSORS = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+            | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+            | M.MAV_SYS_STATUS_SENSOR_GPS | M.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+            | M.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+            | M.MAV_SYS_STATUS_SENSOR_YAW_POSITION
+            | M.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+            | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+            | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | M.MAV_SYS_STATUS_AHRS
+            | M.MAV_SYS_STATUS_SENSOR_BATTERY | M.MAV_SYS_STATUS_PREARM_CHECK)
+
+
+#: Default telemetry: message name -> rate [Hz of simulated time].
+DEFAULT_RATES_HZ: dict[str, float] = {
+    "SYS_STATUS": 1.0, "EXTENDED_SYS_STATE": 1.0, "BATTERY_STATUS": 1.0,
+    "GPS_RAW_INT": 2.0, "GLOBAL_POSITION_INT": 5.0, "LOCAL_POSITION_NED": 5.0,
+    "ATTITUDE": 10.0, "VFR_HUD": 2.0, "HOME_POSITION": 0.2, "MISSION_CURRENT": 1.0,
+    "SYSTEM_TIME": 0.5,
+}
+#: A message due within this [s] of a period's time is sent in that period: its due times
+#: are sums of intervals in floating point, and without it messages due at the same instant
+#: (a 5 Hz one on a 10 Hz one's grid) land a period apart as their rounding falls, and a
+#: ground station wakes for each.
+DUE_TOLERANCE_S = 1e-6
+#: REQUEST_DATA_STREAM groups, as ArduPilot assigns messages to them.
+STREAM_GROUPS: dict[int, tuple[str, ...]] = {
+    M.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "GPS_RAW_INT", "MISSION_CURRENT"),
+    M.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
+    M.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
+    M.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
+    M.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "BATTERY_STATUS", "EXTENDED_SYS_STATE"),
+}
+_MSG_IDS = {name: getattr(M, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_RATES_HZ}
+_MSG_NAMES = {v: k for k, v in _MSG_IDS.items()}
+
+
+class Telemetry(NamedTuple):
+    """What the vehicle knows of itself at a control period (inertial z-up, body FLU)."""
+
+    t_s: float
+    """Simulated time [s]."""
+    pos_m: Vec3
+    vel_m_s: Vec3
+    quat: tuple[float, float, float, float]
+    """Attitude, body FLU in the inertial frame (w, x, y, z)."""
+    rates_rad_s: Vec3
+    """Body rates (FLU) [rad/s]."""
+    throttle: float
+    """Mean rotor command in [0, 1]."""
+
+
+@dataclass
+class _LinkState:
+    """Per-link telemetry schedule: message name -> [interval s, next due s]."""
+
+    schedule: dict[str, list[float]] = field(default_factory=dict)
+
+
+class TelemetryStreams:
+    """The telemetry of every ground-station link of ``io``: the latest :attr:`telem`, the
+    schedule of each link, and the messages that describe the vehicle (home, mission state,
+    version). ``nav`` gives the flight state, ``missions`` the stored mission, ``origin``
+    the winder's (latitude deg, longitude deg, ground altitude m AMSL).
+
+    The caller sets :attr:`telem` at every control period and calls :meth:`send_due` only
+    when ``t >= due_s - DUE_TOLERANCE_S`` or the links changed (``io.generation !=
+    generation``): most periods nothing is due, and that test is all they cost.
+    """
+
+    def __init__(self, io: MavlinkEndpoints, nav: Navigator, origin: Vec3,
+                 missions: MissionProtocol) -> None:
+        self.io = io
+        self.nav = nav
+        self.origin = origin
+        self.missions = missions
+        self.telem: Telemetry | None = None
+        """The latest control period's telemetry (None before the first)."""
+        self.due_s = -math.inf
+        """Earliest time [s] a message is next due on any link."""
+        self.generation = -1
+        """The endpoints' ``generation`` (their set of links) :attr:`due_s` was found for."""
+        self._links: dict[Peer, _LinkState] = {}
+
+    def position(self) -> Vec3:
+        """The latest position [m] (the winder's exit before the first period)."""
+        return self.telem.pos_m if self.telem is not None else (0.0, 0.0, 0.0)
+
+    def forget(self, peer: Peer) -> None:
+        """Drop the schedule of a link that closed."""
+        self._links.pop(peer, None)
+
+    def handlers(self) -> dict[str, Any]:
+        """Handlers of the ground-station messages this takes: type -> ``f(peer, msg)``."""
+        return {"REQUEST_DATA_STREAM": self.on_request_data_stream}
+
+    # ----- the schedule
+
+    def _link(self, peer: Peer) -> _LinkState:
+        st = self._links.get(peer)
+        if st is None:
+            st = self._links[peer] = _LinkState()
+            t = self.telem.t_s if self.telem is not None else 0.0
+            for name, rate in DEFAULT_RATES_HZ.items():
+                st.schedule[name] = [1.0 / rate, t]
+        return st
+
+    def send_due(self, t: float) -> None:
+        """Send the telemetry due at ``t`` [s] on each link; note when the next is due."""
+        io = self.io
+        gen = io.generation
+        links = io.links()
+        built: dict[str, bytes] = {}
+        next_due = math.inf
+        for peer in links:
+            st = self._link(peer)
+            frames: list[bytes] = []
+            for name, entry in st.schedule.items():
+                interval, due = entry
+                if interval <= 0.0:
+                    continue
+                if t >= due - DUE_TOLERANCE_S:
+                    entry[1] = max(due + interval, t) if t - due < interval else t + interval
+                    if not (name == "HOME_POSITION" and self.nav.home_m is None):
+                        data = built.get(name)
+                        if data is None:
+                            data = built[name] = io.pack(self.build(name, self.telem))
+                        frames.append(data)
+                next_due = min(next_due, entry[1])
+            if frames:
+                # in one write: a station wakes once for the period's telemetry
+                io.send_frames(frames, peer)
+        for gone in [p for p in self._links if p not in links]:
+            del self._links[gone]
+        self.due_s, self.generation = next_due, gen
+
+    def set_interval(self, peer: Peer, msg_id: float, interval_us: float) -> int:
+        """MAV_CMD_SET_MESSAGE_INTERVAL on ``peer``'s link: ``interval_us`` [us] between
+        messages ``msg_id``, 0 for the default rate, negative to stop it. The
+        MAV_RESULT."""
+        if not (finite(msg_id) and finite(interval_us)):
+            return M.MAV_RESULT_DENIED
+        name = _MSG_NAMES.get(int(msg_id))
+        if name is None:
+            return M.MAV_RESULT_UNSUPPORTED if int(msg_id) != M.MAVLINK_MSG_ID_HEARTBEAT \
+                else M.MAV_RESULT_ACCEPTED
+        sched = self._link(peer).schedule
+        self.due_s = -math.inf
+        if interval_us < 0:
+            sched[name] = [0.0, math.inf]
+        else:
+            interval = (1.0 / DEFAULT_RATES_HZ[name] if interval_us == 0
+                        else max(interval_us * 1e-6, 0.002))
+            sched[name] = [interval, self.telem.t_s if self.telem else 0.0]
+        return M.MAV_RESULT_ACCEPTED
+
+    def on_request_data_stream(self, peer: Peer, msg: Any) -> None:
+        """REQUEST_DATA_STREAM: a group's messages at ``req_message_rate`` [Hz] on
+        ``peer``'s link, or stopped."""
+        groups = (list(STREAM_GROUPS) if msg.req_stream_id == M.MAV_DATA_STREAM_ALL
+                  else [msg.req_stream_id])
+        rate = msg.req_message_rate if msg.start_stop else 0
+        sched = self._link(peer).schedule
+        self.due_s = -math.inf
+        t = self.telem.t_s if self.telem else 0.0
+        for g in groups:
+            for name in STREAM_GROUPS.get(g, ()):
+                sched[name] = [1.0 / rate, t] if rate > 0 else [0.0, math.inf]
+
+    def request_message(self, peer: Peer, msg_id: float) -> int:
+        """MAV_CMD_REQUEST_MESSAGE of message ``msg_id`` (not HEARTBEAT, which the caller
+        sends): sent to ``peer`` now; the MAV_RESULT."""
+        if not finite(msg_id):
+            return M.MAV_RESULT_DENIED
+        mid = int(msg_id)
+        if mid == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            self.io.send(self.autopilot_version(), peer)
+        elif mid == M.MAVLINK_MSG_ID_HOME_POSITION:
+            if self.nav.home_m is None:
+                return M.MAV_RESULT_TEMPORARILY_REJECTED
+            self.io.send(self.home_position(), peer)
+        elif mid in _MSG_NAMES and self.telem is not None:
+            self.io.send(self.build(_MSG_NAMES[mid], self.telem), peer)
+        else:
+            return M.MAV_RESULT_UNSUPPORTED
+        return M.MAV_RESULT_ACCEPTED
+
+    # ----- the messages
+
+    def build(self, name: str, tm: Telemetry) -> Any:
+        """Message ``name`` (a key of :data:`DEFAULT_RATES_HZ`) of telemetry ``tm``."""
+        boot_ms = int(tm.t_s * 1000) & 0xFFFFFFFF
+        if name == "ATTITUDE":
+            q = quat_enu_flu_to_ned_frd(tm.quat)
+            roll, pitch, yaw = quat_to_euler(q)   # ZYX angles of body FRD in NED
+            p, q_, r = flu_to_frd(tm.rates_rad_s)
+            return M.MAVLink_attitude_message(boot_ms, roll, pitch, yaw, p, q_, r)
+        if name == "LOCAL_POSITION_NED":
+            x, y, z = enu_to_ned(tm.pos_m)
+            vx, vy, vz = enu_to_ned(tm.vel_m_s)
+            return M.MAVLink_local_position_ned_message(boot_ms, x, y, z, vx, vy, vz)
+        if name == "GLOBAL_POSITION_INT":
+            lat, lon, alt = local_enu_to_global(tm.pos_m, self.origin)
+            vn = enu_to_ned(tm.vel_m_s)
+            hdg = math.degrees(yaw_enu_to_ned(quat_to_euler(tm.quat)[2])) % 360.0
+            return M.MAVLink_global_position_int_message(
+                boot_ms, round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
+                round(tm.pos_m[2] * 1000), _i16(vn[0] * 100), _i16(vn[1] * 100),
+                _i16(vn[2] * 100), round(hdg * 100) % 36000)
+        if name == "GPS_RAW_INT":
+            lat, lon, alt = local_enu_to_global(tm.pos_m, self.origin)
+            vn = enu_to_ned(tm.vel_m_s)
+            gs = math.hypot(vn[0], vn[1])
+            cog = math.degrees(math.atan2(vn[1], vn[0])) % 360.0 if gs > 0.1 else 0.0
+            return M.MAVLink_gps_raw_int_message(
+                int(tm.t_s * 1e6), M.GPS_FIX_TYPE_3D_FIX, round(lat * 1e7), round(lon * 1e7),
+                round(alt * 1000), 70, 100, round(gs * 100), round(cog * 100) % 36000, 16)
+        if name == "VFR_HUD":
+            vn = enu_to_ned(tm.vel_m_s)
+            gs = math.hypot(vn[0], vn[1])
+            hdg = math.degrees(yaw_enu_to_ned(quat_to_euler(tm.quat)[2])) % 360.0
+            return M.MAVLink_vfr_hud_message(gs, gs, round(hdg) % 360,
+                                              round(100 * tm.throttle),
+                                              self.origin[2] + tm.pos_m[2], -vn[2])
+        if name == "SYS_STATUS":
+            # the fence's health bit is set as ArduPilot sets it while no fence is breached
+            return M.MAVLink_sys_status_message(_SENSORS, _SENSORS,
+                                                _SENSORS | M.MAV_SYS_STATUS_GEOFENCE, 100, 48000,
+                                                round(100 * 100 * tm.throttle), 100, 0, 0, 0,
+                                                0, 0, 0)
+        if name == "BATTERY_STATUS":
+            # powered through the tether: a steady supply, never discharging
+            cells = [48000] + [65535] * 9
+            return M.MAVLink_battery_status_message(
+                0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_UNKNOWN, 32767, cells,
+                round(100 * 100 * tm.throttle), -1, -1, 100)
+        if name == "EXTENDED_SYS_STATE":
+            return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED,
+                                                        self.landed_state())
+        if name == "HOME_POSITION":
+            return self.home_position()
+        if name == "MISSION_CURRENT":
+            return self.mission_current()
+        if name == "SYSTEM_TIME":
+            return M.MAVLink_system_time_message(int(time.time() * 1e6), boot_ms)
+        raise KeyError(name)
+
+    def landed_state(self) -> int:
+        """EXTENDED_SYS_STATE's MAV_LANDED_STATE now."""
+        nav = self.nav
+        if not nav.armed or nav.landed:
+            return M.MAV_LANDED_STATE_ON_GROUND
+        if nav.landing:
+            return M.MAV_LANDED_STATE_LANDING
+        if self.telem is not None and self.telem.pos_m[2] < nav.gear_height_m + 1.0 \
+                and self.telem.vel_m_s[2] > 0.1:
+            return M.MAV_LANDED_STATE_TAKEOFF
+        return M.MAV_LANDED_STATE_IN_AIR
+
+    def home_position(self) -> Any:
+        """HOME_POSITION: home on the ground below the navigator's ``home_m`` (the winder
+        before it is set)."""
+        home = self.nav.home_m or (0.0, 0.0, 0.0)
+        ground = (home[0], home[1], 0.0)
+        lat, lon, alt = local_enu_to_global(ground, self.origin)
+        x, y, z = enu_to_ned(ground)
+        return M.MAVLink_home_position_message(
+            round(lat * 1e7), round(lon * 1e7), round(alt * 1000), x, y, z, [1.0, 0.0, 0.0, 0.0],
+            0.0, 0.0, 0.0, int(self.telem.t_s * 1e6) if self.telem else 0)
+
+    def mission_current(self) -> Any:
+        """MISSION_CURRENT: the current item, the mission's size (without home), its
+        state."""
+        nav = self.nav
+        total = len(self.missions.items) if hasattr(self.missions, "items") else 0
+        if nav.mission_running:
+            state = M.MISSION_STATE_ACTIVE
+        elif total <= 1:
+            state = M.MISSION_STATE_NO_MISSION
+        else:
+            state = M.MISSION_STATE_NOT_STARTED
+        return M.MAVLink_mission_current_message(nav.current_seq, max(total - 1, 0), state,
+                                                 1 if nav.mode == FlightMode.AUTO else 0)
+
+    def autopilot_version(self) -> Any:
+        """AUTOPILOT_VERSION: ArduCopter's version and :data:`CAPABILITIES`."""
+        return M.MAVLink_autopilot_version_message(
+            CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, list(b"tuavsitl"), [0] * 8, [0] * 8, 0,
+            0, 0x7475617600000001)
+
+
+def _i16(x: float) -> int:
+    return max(-32768, min(32767, round(x)))
