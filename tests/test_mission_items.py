@@ -123,8 +123,8 @@ def test_a_whole_mission_skips_home(nav):
              MissionItem(M.MAV_CMD_NAV_LAND, REL),
              MissionItem(M.MAV_CMD_NAV_RETURN_TO_LAUNCH, M.MAV_FRAME_MISSION)]
     cmds = nav_commands(items, ORIGIN, nav)
-    assert [(c.seq, c.kind) for c in cmds] == [(1, NavKind.TAKEOFF), (2, NavKind.SPEED), (3, NavKind.LAND),
-                                               (4, NavKind.RTL)]
+    assert [(c.seq, c.kind) for c in cmds] == [(1, NavKind.TAKEOFF), (2, NavKind.SPEED),
+                                               (3, NavKind.LAND), (4, NavKind.RTL)]
     assert cmds[1].speed_m_s == 3.0
     assert nav_commands(items[:1], ORIGIN, nav) == []
 

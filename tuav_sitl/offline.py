@@ -25,6 +25,7 @@ import numpy as np
 
 from companion.flight_controller import VehicleState
 from companion.legs import GotoItem, WaypointFollower
+from companion.mission_items import ItemRefused, nav_commands
 from companion.navigation import FlightMode, NavEvent
 from companion.onboard import Companion, OnboardInputs
 from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
@@ -253,7 +254,6 @@ class OfflineRunner:
         vehicle already in the air starts the mission)."""
         nav = self.companion.nav
         self.home, items = self.sc.mission_items()
-        from companion.mission_items import ItemRefused, nav_commands
         try:
             commands = nav_commands(items, self.home, nav)
         except ItemRefused as exc:
