@@ -15,55 +15,18 @@ import math
 import signal
 import sys
 import threading
-import time
 from collections.abc import Sequence
-from typing import TextIO
 
-from sitl.plant import DRUM_RATE, POS, QUAT, VEL, Plant, initial_state
+from sitl.plant import Plant, initial_state
 from sitl.sensors import SensorNoise
 from sitl.simlink_server import SimLinkServer, WinderInputs
 from sitl.trim import hover_trim
+from sitl.truth_log import TruthLog
 from sitl.winder_node import WinderCanNode
 from tuavdefs import simlink as sl
 from tuavdefs.canbus import CanBusError, CanLink
-from tuavdefs.frames import quat_to_euler
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
-
-TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "roll_rad",
-                 "pitch_rad", "yaw_rad", "tether_length_m", "drum_rate_rad_s", "armed",
-                 "rotor1", "rotor2", "rotor3", "rotor4")
-#: A row of the truth log: the columns' values (floats) as their repr.
-_ROW = ",".join(["%r"] * len(TRUTH_COLUMNS)) + "\n"
-
-
-class TruthLog:
-    """The plant's truth as CSV, flushed at least once a wall-clock second."""
-
-    def __init__(self, stream: TextIO, every_periods: int) -> None:
-        self.stream = stream
-        self.every = max(1, every_periods)
-        self._count = 0
-        self._flushed = time.monotonic()
-        stream.write(",".join(TRUTH_COLUMNS) + "\n")
-
-    def record(self, server: SimLinkServer) -> None:
-        """Called after each control period."""
-        self._count += 1
-        if (self._count - 1) % self.every:
-            return
-        p = server.plant
-        x = p.x.tolist()
-        c0, c1, c2, c3 = server.rotor_commands
-        # every value a float, each written as its repr
-        self.stream.write(_ROW % (float(p.t_s), *x[POS], *x[VEL], *quat_to_euler(x[QUAT]),
-                                  float(p.tether_length_m), x[DRUM_RATE],
-                                  1.0 if server.armed else 0.0, float(c0), float(c1),
-                                  float(c2), float(c3)))
-        now = time.monotonic()
-        if now - self._flushed >= 1.0:
-            self.stream.flush()
-            self._flushed = now
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -58,8 +58,8 @@ import numpy as np
 
 from companion.navigation import NavigationParams
 from groundstation.lbar import LBarEstimator, LBarParams
-from sitl.__main__ import TRUTH_COLUMNS
 from sitl.tether import Tether
+from sitl.truth_log import TRUTH_COLUMNS
 from tuav_sitl.candump_format import parse_log_line
 from tuav_sitl.offline import GROUND_REGIMES, SERIES, _to_toml
 from tuav_sitl.scenario import (
