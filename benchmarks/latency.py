@@ -92,9 +92,9 @@ def measure(work: Path, duration_s: float, control_rate_hz: float = 250.0) -> di
     applied: list[tuple[float, float]] = []   # (wall time the period's steps begin, torque)
 
     class TracedServer(SimLinkServer):
-        def _advance(self) -> None:
+        def advance(self) -> None:
             applied.append((time.monotonic(), float(self.winder_inputs.torque_n_m)))
-            super()._advance()
+            super().advance()
 
     def on_step(server: SimLinkServer) -> None:
         t = server.plant.t_s

@@ -347,7 +347,7 @@ def _batch_outcome(server: SimLinkServer, t_us: int) -> tuple:
     sink = _Sink()
     server._sock = sink  # type: ignore[assignment]
     try:
-        server._send_batch(t_us)
+        server.send_batch(t_us)
         out: object = sink.sent
     except Exception as e:  # noqa: BLE001 - the same error either way is the point
         out = (type(e), str(e))
