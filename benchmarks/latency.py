@@ -1,8 +1,9 @@
 """Latency of the winder's torque command: a ``Set_Input_Torque`` frame on the CAN bus to
 the first plant step that applies it. ``python -m benchmarks.latency WORK``.
 
-The plant loop runs in this process as the plant process runs it (``sitl/__main__.py``:
-:class:`sitl.simlink_server.SimLinkServer` in real time, the simulated ODrive axis
+The plant loop runs in this process as the plant process runs it
+(:class:`sitl.plant_loop.PlantLoop` over :class:`sitl.simlink_server.SimLinkServer` in real
+time, through :meth:`~sitl.simlink_server.SimLinkServer.serve`; the simulated ODrive axis
 :class:`sitl.winder_node.WinderCanNode` on a udp_multicast bus, serviced once per control
 period), with the real companion process answering; a CAN host process (:func:`host`)
 puts the axis in closed-loop torque control and then sends torque commands of distinct
@@ -92,9 +93,9 @@ def measure(work: Path, duration_s: float, control_rate_hz: float = 250.0) -> di
     applied: list[tuple[float, float]] = []   # (wall time the period's steps begin, torque)
 
     class TracedServer(SimLinkServer):
-        def _advance(self) -> None:
+        def advance(self) -> None:
             applied.append((time.monotonic(), float(self.winder_inputs.torque_n_m)))
-            super()._advance()
+            super().advance()
 
     def on_step(server: SimLinkServer) -> None:
         t = server.plant.t_s

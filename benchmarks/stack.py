@@ -106,7 +106,8 @@ def _category(file: str, func: str) -> str:
             "tuavdefs/canbus.py", "tuavdefs/can_protocol.py", "sitl/odrive_axis.py",
             "sitl/winder_node.py")):
         return "CAN"
-    if "/sitl/" in f and not f.endswith("sitl/__main__.py"):
+    if "/sitl/" in f and not f.endswith(("sitl/__main__.py", "sitl/plant_loop.py",
+                                         "sitl/truth_log.py")):
         return "physics"
     if f.endswith(("companion/flight_controller.py", "companion/position.py",
                    "companion/attitude.py", "companion/actuators.py",

@@ -14,56 +14,19 @@ import gc
 import math
 import signal
 import sys
-import threading
-import time
 from collections.abc import Sequence
-from typing import TextIO
 
-from sitl.plant import DRUM_RATE, POS, QUAT, VEL, Plant, initial_state
+from sitl.plant import Plant, initial_state
+from sitl.plant_loop import PlantLoop
 from sitl.sensors import SensorNoise
-from sitl.simlink_server import SimLinkServer, WinderInputs
+from sitl.simlink_server import SimLinkServer
 from sitl.trim import hover_trim
+from sitl.truth_log import TruthLog
 from sitl.winder_node import WinderCanNode
 from tuavdefs import simlink as sl
 from tuavdefs.canbus import CanBusError, CanLink
-from tuavdefs.frames import quat_to_euler
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
-
-TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "roll_rad",
-                 "pitch_rad", "yaw_rad", "tether_length_m", "drum_rate_rad_s", "armed",
-                 "rotor1", "rotor2", "rotor3", "rotor4")
-#: A row of the truth log: the columns' values (floats) as their repr.
-_ROW = ",".join(["%r"] * len(TRUTH_COLUMNS)) + "\n"
-
-
-class TruthLog:
-    """The plant's truth as CSV, flushed at least once a wall-clock second."""
-
-    def __init__(self, stream: TextIO, every_periods: int) -> None:
-        self.stream = stream
-        self.every = max(1, every_periods)
-        self._count = 0
-        self._flushed = time.monotonic()
-        stream.write(",".join(TRUTH_COLUMNS) + "\n")
-
-    def record(self, server: SimLinkServer) -> None:
-        """Called after each control period."""
-        self._count += 1
-        if (self._count - 1) % self.every:
-            return
-        p = server.plant
-        x = p.x.tolist()
-        c0, c1, c2, c3 = server.rotor_commands
-        # every value a float, each written as its repr
-        self.stream.write(_ROW % (float(p.t_s), *x[POS], *x[VEL], *quat_to_euler(x[QUAT]),
-                                  float(p.tether_length_m), x[DRUM_RATE],
-                                  1.0 if server.armed else 0.0, float(c0), float(c1),
-                                  float(c2), float(c3)))
-        now = time.monotonic()
-        if now - self._flushed >= 1.0:
-            self.stream.flush()
-            self._flushed = now
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -126,56 +89,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         except CanBusError as exc:
             print(f"plant: {exc}", file=sys.stderr)
             return 1
-    log_file = open(args.truth_log, "w") if args.truth_log else None  # noqa: SIM115
-    log = TruthLog(log_file, args.log_every) if log_file else None
-
-    def on_step(server: SimLinkServer) -> None:
-        if node is not None:
-            t = server.plant.t_s
-            node.service(t)
-            node.tick(t)
-        if log is not None:
-            log.record(server)
-
-    def before_physics(server: SimLinkServer) -> None:
-        # (in lockstep: the last moment to wait for the ground station's torque)
-        inputs = node.inputs(server.plant.t_s)      # type: ignore[union-attr]
-        if server.winder_inputs != inputs:   # (a new tuple only if new)
-            server.winder_inputs = WinderInputs(*inputs)
-
+    log = (TruthLog(open(args.truth_log, "w"), args.log_every)  # noqa: SIM115
+           if args.truth_log else None)
     try:
         server = SimLinkServer(plant, control_rate_hz=args.control_rate,
                                home=tuple(args.home), port=args.port,
                                real_time=real_time, speedup=args.speedup,
                                sensor_noise=SensorNoise.off() if args.no_noise else None,
-                               on_step=on_step,
-                               before_physics=before_physics if node is not None else None,
                                unix_path=args.socket)
     except OSError as exc:
         where = sl.format_sim_address(args.socket if args.socket is not None
                                       else (sl.SIM_HOST_DEFAULT, args.port))
         print(f"plant: cannot listen on {where}: {exc.strerror}", file=sys.stderr)
         return 1
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    loop = PlantLoop(server, node=node, truth_log=log)
+    signal.signal(signal.SIGTERM, lambda *_: loop.stop())
+    signal.signal(signal.SIGINT, lambda *_: loop.stop())
     can_text = f", winder on CAN {node.link.description}" if node else ", winder braked"
     print(f"plant: listening on {server.address} "
-          f"({server.pacing.replace('-', ' ')}{can_text})", flush=True)
+          f"({loop.pacing.replace('-', ' ')}{can_text})", flush=True)
     # the start-up's objects (numpy, numba, pymavlink and their modules: most of the heap)
     # move to the collector's permanent generation, so its full collections during the
     # run no longer walk them: about a tenth of the loop's CPU (docs/performance.md)
     gc.collect()
     gc.freeze()
     try:
-        summary = server.serve(max_sim_time_s=args.duration, stop_event=stop,
-                               accept_timeout_s=args.accept_timeout)
+        summary = loop.run(max_sim_time_s=args.duration, accept_timeout_s=args.accept_timeout)
     finally:
-        server.close()    # (a Unix-domain socket's file goes with it)
-        if log_file:
-            log_file.close()
-        if node is not None:
-            node.link.close()
+        loop.close()    # (the server's Unix-domain socket file, the log, the CAN bus)
     can_text = (f", CAN: {node.frames_received} frames in, {node.frames_sent} out, "
                 f"{node.late_answers} late answers" if node else "")
     pacing_text = ""

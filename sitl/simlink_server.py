@@ -1,35 +1,27 @@
 """The plant's end of the simulator link: PX4's simulator MAVLink API, lockstep.
 
 :class:`SimLinkServer` listens on 127.0.0.1 (port 4560 by default) or on a Unix-domain
-socket, accepts one companion and runs the loop (conventions in :mod:`tuavdefs.simlink`)::
+socket and accepts one companion (conventions in :mod:`tuavdefs.simlink`). It is the link
+the plant's loop (:class:`sitl.plant_loop.PlantLoop`, which owns the clock and the order of
+each control period) works through, one control period at a time::
 
-    k = 0, t = t0
-    repeat:
-        send HIL_GPS (when due, 10 Hz), HIL_STATE_QUATERNION, HIL_SENSOR, stamped t
-        wait for the HIL_ACTUATOR_CONTROLS with time_usec == t
-        hold its rotor commands and armed flag (and the caller's winder inputs) for
-        N = T / dt physics steps of the plant; t += T
+    send_batch(t)     HIL_GPS (when due, 10 Hz), HIL_STATE_QUATERNION, HIL_SENSOR, stamped t
+    wait_answer(t)    until the HIL_ACTUATOR_CONTROLS with time_usec == t (or, in real
+                      time, the period's deadline): hold its rotor commands and armed flag
+    advance()         N = T / dt physics steps of the plant with them and the winder inputs
 
-In **lockstep** (the default) the plant waits as long as it takes: the simulation runs as
-fast as the two processes allow and is deterministic. In **real-time** mode the batch for
-period k goes out at wall time ``w0 + k T`` and the answer must arrive before
-``w0 + (k + 1) T``; if it does not, the plant steps with the commands it holds and counts a
-missed deadline (a late answer still replaces the held commands when it arrives). If the
-plant itself falls more than a period behind the wall clock it re-anchors its schedule and
-counts an overrun.
-
-The winder's inputs are not carried by this link (the winder is driven over CAN by another
-process): the caller sets :attr:`SimLinkServer.winder_inputs` between steps, from
-``on_step``, which is called once for every state a control period reaches, before the
-next period's physics steps: in lockstep just after the batch describing that state has
-gone out (so that the caller's work, such as the winder's CAN traffic, overlaps the
-companion's), in real time once the answer is in (so that what the caller received while
-waiting, such as a torque command, applies as early as possible); and from
-``before_physics``, called in both modes just before each period's physics steps, once
-the answer is in (in lockstep, the last moment to wait for another process's input).
+It is configured with the link's pacing: **lockstep** (the default: the plant waits for
+each answer as long as it takes, and only the answer to the period's own batch counts),
+lockstep paced at N x real time (``speedup``), or **real time** (``real_time``: an answer
+to an earlier period, arriving late, still replaces the held commands). The winder's
+inputs are not carried by this link (the winder is driven over CAN by another process):
+the loop sets :attr:`SimLinkServer.winder_inputs` between periods.
 
 Malformed, truncated and corrupted frames are counted and dropped; a disconnect of the
-companion, ``stop_event`` or ``max_sim_time_s`` ends :meth:`SimLinkServer.serve` with a
+companion raises :class:`DisconnectedError` out of the period's calls, and the stop event
+:class:`StoppedError` out of :meth:`SimLinkServer.wait_answer`. :meth:`SimLinkServer.serve`
+runs a :class:`sitl.plant_loop.PlantLoop` over the server alone (no CAN node, no truth log)
+with the server's ``on_step`` and ``before_physics``, and returns its
 :class:`ServeSummary`.
 """
 
@@ -44,8 +36,7 @@ import socket
 import stat
 import threading
 import time
-from array import array
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -54,18 +45,8 @@ from sitl.plant import POS, QUAT, RATES, VEL, Plant, PlantInputs
 from sitl.sensors import ISA_RHO0_KG_M3, SensorNoise, SensorSuite, airspeed_from, isa_air
 from tuavdefs import simlink as sl
 
-#: How often a waiting loop looks at ``stop_event`` [s].
-_POLL_S = 0.05
-#: Longest a real-time wait spins before a batch's due time [s].
-_SPIN_MAX_S = 0.001
-
-
-def _quantile(sorted_values: Sequence[float], q: float) -> float:
-    """The ``q`` quantile (nearest rank) of ascending values; NaN for none."""
-    if not sorted_values:
-        return math.nan
-    k = min(len(sorted_values) - 1, max(0, math.ceil(q * len(sorted_values)) - 1))
-    return float(sorted_values[k])
+#: How often a waiting loop looks at its stop event [s].
+STOP_POLL_S = 0.05
 
 
 class WinderInputs(NamedTuple):
@@ -136,12 +117,12 @@ class ServeSummary:
         return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else math.inf
 
 
-class _DisconnectedError(Exception):
-    pass
+class DisconnectedError(Exception):
+    """The companion closed the link (or it failed)."""
 
 
-class _StoppedError(Exception):
-    pass
+class StoppedError(Exception):
+    """The stop event was set while waiting for an answer."""
 
 
 def _check_loopback(host: str) -> None:
@@ -188,7 +169,12 @@ class SimLinkServer:
     period than TCP on the loopback interface. :attr:`address` says which; the socket is
     bound and listening when the constructor returns. ``sensor_noise`` configures the
     sensor errors (None: :class:`sitl.sensors.SensorNoise` defaults; ``SensorNoise.off()``
-    for exact readings). ``gps_rate_hz`` [Hz] is the rate of HIL_GPS.
+    for exact readings). ``gps_rate_hz`` [Hz] is the rate of HIL_GPS. The link's pacing:
+    lockstep, or with ``real_time`` real time, or lockstep paced at ``speedup`` x real time
+    (None or inf: as fast as possible); the loop that runs it is
+    :class:`sitl.plant_loop.PlantLoop`. ``winder_inputs`` are the winder's inputs until the
+    loop sets others; ``on_step`` and ``before_physics`` are the hooks :meth:`serve` runs
+    its loop with.
     """
 
     def __init__(self, plant: Plant, control_rate_hz: float = sl.CONTROL_RATE_HZ_DEFAULT,
@@ -211,15 +197,13 @@ class SimLinkServer:
         self.gps_period_us = sl.control_period_us(gps_rate_hz)
         self.home = tuple(float(v) for v in home)
         self.real_time = bool(real_time)
-        #: In real time, the wait for a batch's due time ends awake, spinning for this long
-        #: [s]: an eighth of the period, at most 1 ms.
-        self.spin_s = min(_SPIN_MAX_S, self.period_us * 1e-6 / 8.0)
         #: Lockstep paced at this many times real time (None: as fast as possible).
         self.speedup = None if real_time or speedup is None or math.isinf(speedup) \
             else float(speedup)
         if self.speedup is not None and not self.speedup > 0:
             raise ValueError(f"speedup must be > 0, got {speedup!r}")
         self.winder_inputs = winder_inputs
+        #: The caller's hooks of :meth:`serve` (see :class:`sitl.plant_loop.PlantLoop`).
         self.on_step = on_step
         self.before_physics = before_physics
         suite_kw = {} if earth_field_ned_gauss is None else {
@@ -233,7 +217,7 @@ class SimLinkServer:
         self.companion_lockstep = False
         # what the last period's physics steps held: PlantInputs' fields (last_inputs)
         self._held: tuple = tuple(PlantInputs())
-        #: Control periods advanced by the running (or last) serve().
+        #: Control periods advanced in the running (or last) session (the loop counts).
         self.steps = 0
         self._encoder = sl.Encoder(sl.PLANT_SYSID, sl.PLANT_COMPID)
         #: The batches in one compiled call (None without numba: :meth:`_batch_bytes`).
@@ -278,7 +262,7 @@ class SimLinkServer:
 
     def close(self) -> None:
         """Close the listening socket (and a connection, if any); remove its socket file."""
-        self._close_client()
+        self.close_client()
         self._listener.close()
         made, self._unix_file = self._unix_file, None
         if made is not None and self.unix_path is not None:
@@ -295,7 +279,8 @@ class SimLinkServer:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _close_client(self) -> None:
+    def close_client(self) -> None:
+        """Close the companion's connection, if any (the listening socket stays)."""
         if self._sock is not None:
             try:
                 self._sock.close()
@@ -303,131 +288,42 @@ class SimLinkServer:
                 self._sock = None
                 self._poller = None
 
+    @property
+    def bad_frames(self) -> int:
+        """Malformed frames dropped in this session."""
+        return self._parser.bad_frames
+
+    @property
+    def bad_bytes(self) -> int:
+        """Bytes dropped as malformed in this session."""
+        return self._parser.bad_bytes
+
     # ----- the loop
     def serve(self, max_sim_time_s: float | None = None,
               stop_event: threading.Event | None = None,
               accept_timeout_s: float | None = None) -> ServeSummary:
-        """Accept one companion and run the loop until it disconnects, ``stop_event`` is
-        set, or ``max_sim_time_s`` [s] of simulated time have passed in this call. Without a
-        connection within ``accept_timeout_s`` [s] (None: wait) returns at once."""
-        stop = stop_event or threading.Event()
+        """Accept one companion and run the loop (:class:`sitl.plant_loop.PlantLoop` over
+        this server alone, with :attr:`on_step` and :attr:`before_physics`) until it
+        disconnects, ``stop_event`` is set, or ``max_sim_time_s`` [s] of simulated time have
+        passed in this call. Without a connection within ``accept_timeout_s`` [s] (None:
+        wait) returns at once."""
+        from sitl.plant_loop import PlantLoop  # (which imports this module)
+
+        loop = PlantLoop(self, on_step=self.on_step, before_physics=self.before_physics,
+                         stop_event=stop_event)
+        return loop.run(max_sim_time_s=max_sim_time_s, accept_timeout_s=accept_timeout_s)
+
+    # ----- the link's part of a session and of each control period (the loop's calls)
+    def accept(self, stop: threading.Event, timeout_s: float | None) -> bool:
+        """Start a session: forget the last one's periods, parser and GPS schedule, and
+        wait for a companion to connect (True), at most ``timeout_s`` [s] (None: until
+        ``stop`` is set; then, or on the timeout, False)."""
         self.steps = 0
         self._parser = sl.FrameParser()
         self._last_gps_us = None
-        ignored = late = missed = overruns = 0
-        if not self._accept(stop, accept_timeout_s):
-            return self._summary(0.0, 0, 0, 0, 0, "stopped" if stop.is_set() else "no_client")
-        wall0 = time.monotonic()
-        t0_us = sl.time_usec(self.plant.t_s)
-        max_steps = (None if max_sim_time_s is None
-                     else math.ceil(max_sim_time_s * 1e6 / self.period_us - 1e-9))
-        reason = "disconnected"
-        sched0 = wall0       # wall time of period 0's batch (real time)
-        pending = False      # on_step is due for the state the last period reached
-        # real time: the wall time between batches, and each batch's time after its due time
-        intervals: array[float] = array("d")
-        lateness: array[float] = array("d")
-        last_sent: float | None = None
-        in_service = False
-        service_steps = service_missed = 0
-        try:
-            while True:
-                if stop.is_set():
-                    reason = "stopped"
-                    break
-                if max_steps is not None and self.steps >= max_steps:
-                    reason = "max_sim_time"
-                    break
-                t_us = t0_us + self.steps * self.period_us
-                if self.real_time:
-                    due = sched0 + self.steps * self.period_us * 1e-6
-                    now = time.monotonic()
-                    if now > due + self.period_us * 1e-6:
-                        overruns += 1
-                        sched0 = now - self.steps * self.period_us * 1e-6
-                        due = now
-                    elif now < due:
-                        self._sleep_until(due, stop)
-                    deadline: float | None = due + self.period_us * 1e-6
-                else:
-                    deadline = None
-                    if self.speedup is not None:
-                        due = sched0 + self.steps * self.period_us * 1e-6 / self.speedup
-                        now = time.monotonic()
-                        if now < due:
-                            self._sleep_until(due, stop)
-                        elif now > due + 0.1:
-                            # fell behind (a slow step): resume the pace, don't sprint
-                            sched0 = now - self.steps * self.period_us * 1e-6 / self.speedup
-                self._send_batch(t_us)
-                if self.real_time and in_service:
-                    sent = time.monotonic()
-                    if last_sent is not None:
-                        intervals.append(sent - last_sent)
-                    lateness.append(sent - due)
-                    last_sent = sent
-                if pending and not self.real_time:
-                    # lockstep: the caller's work for the state just reached (the winder's
-                    # CAN traffic, the truth log) runs while the companion computes its
-                    # answer, off the critical path
-                    pending = False
-                    self.on_step(self)  # type: ignore[misc]
-                answered, n_late, n_ignored = self._wait_answer(t_us, deadline, stop)
-                if pending:
-                    # real time: just before the physics steps, so that whatever the
-                    # caller received meanwhile (a torque command) applies from them on
-                    pending = False
-                    self.on_step(self)  # type: ignore[misc]
-                late += n_late
-                ignored += n_ignored
-                if not answered:
-                    missed += 1
-                if in_service:
-                    service_steps += 1
-                    service_missed += not answered
-                # the pacing's statistics start once the companion has answered (before
-                # that it is still starting up)
-                in_service = in_service or answered or n_late > 0
-                if self.before_physics is not None:
-                    self.before_physics(self)
-                self._advance()
-                self.steps += 1
-                pending = self.on_step is not None
-        except _DisconnectedError:
-            reason = "disconnected"
-        except _StoppedError:
-            reason = "stopped"
-        finally:
-            try:
-                if pending:
-                    self.on_step(self)  # type: ignore[misc]
-            finally:
-                self._close_client()
-        return self._summary(time.monotonic() - wall0, missed, overruns, late, ignored, reason,
-                             intervals, lateness, service_steps, service_missed)
-
-    def _summary(self, wall: float, missed: int, overruns: int, late: int, ignored: int,
-                 reason: str, intervals: Sequence[float] = (),
-                 lateness: Sequence[float] = (), service_steps: int = 0,
-                 service_missed: int = 0) -> ServeSummary:
-        period = self.period_us * 1e-6
-        jitter = sorted(abs(d - period) for d in intervals)
-        behind = sorted(lateness)
-        return ServeSummary(
-            steps=self.steps, sim_time_s=self.steps * period, wall_time_s=wall,
-            missed_deadlines=missed, overruns=overruns, bad_frames=self._parser.bad_frames,
-            bad_bytes=self._parser.bad_bytes, late_answers=late, ignored_messages=ignored,
-            pacing=self.pacing, end_reason=reason,
-            jitter_p50_s=_quantile(jitter, 0.5), jitter_p99_s=_quantile(jitter, 0.99),
-            jitter_max_s=jitter[-1] if jitter else math.nan,
-            lateness_p99_s=_quantile(behind, 0.99),
-            lateness_max_s=behind[-1] if behind else math.nan,
-            periods_in_service=service_steps, missed_in_service=service_missed)
-
-    def _accept(self, stop: threading.Event, timeout_s: float | None) -> bool:
         end = None if timeout_s is None else time.monotonic() + timeout_s
         while not stop.is_set():
-            wait = _POLL_S if end is None else min(_POLL_S, end - time.monotonic())
+            wait = STOP_POLL_S if end is None else min(STOP_POLL_S, end - time.monotonic())
             if wait <= 0:
                 return False
             ready, _, _ = select.select([self._listener], [], [], wait)
@@ -436,35 +332,17 @@ class SimLinkServer:
                 if sock.family != socket.AF_UNIX:
                     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                 sock.setblocking(True)
-                # lockstep: recv itself waits for the answer, _POLL_S at a time
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, sl.timeval(_POLL_S))
+                # lockstep: recv itself waits for the answer, STOP_POLL_S at a time
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, sl.timeval(STOP_POLL_S))
                 self._sock = sock
                 self._poller = select.poll()
                 self._poller.register(sock, select.POLLIN)
                 return True
         return False
 
-    def _sleep_until(self, t: float, stop: threading.Event) -> None:
-        """Wait until wall time ``t`` [s]: sleep to :attr:`spin_s` before it, then spin.
-
-        A sleeping process is woken by the scheduler, which on a busy machine first lets the
-        task on the CPU finish its slice (up to a few milliseconds): the last stretch is
-        spent awake, so the batch goes out on time whenever the process holds a CPU then.
-        """
-        spin = self.spin_s
-        while True:
-            now = time.monotonic()
-            left = t - now
-            if left <= 0 or stop.is_set():
-                return
-            if left <= spin:
-                while time.monotonic() < t:
-                    pass
-                return
-            time.sleep(min(left - spin, _POLL_S))
-
-    def _send_batch(self, t_us: int) -> None:
-        """HIL_GPS (when due), HIL_STATE_QUATERNION and HIL_SENSOR for the current state."""
+    def send_batch(self, t_us: int) -> None:
+        """Send HIL_GPS (when due), HIL_STATE_QUATERNION and HIL_SENSOR for the current
+        state, stamped ``t_us`` [us]."""
         gps_dt: float | None = None
         last = self._last_gps_us
         if last is None or t_us - last >= self.gps_period_us:
@@ -476,7 +354,7 @@ class SimLinkServer:
         try:
             self._sock.sendall(data)  # type: ignore[union-attr]
         except OSError as e:
-            raise _DisconnectedError from e
+            raise DisconnectedError from e
 
     def _batch_bytes(self, t_us: int, gps_dt: float | None) -> bytes:
         """The batch for the current state at ``t_us`` [us] (with HIL_GPS, its channels read
@@ -505,10 +383,11 @@ class SimLinkServer:
             *s.baro_of_air(pressure_hpa, temperature_k, dt))))
         return b"".join(chunks)
 
-    def _wait_answer(self, t_us: int, deadline: float | None, stop: threading.Event
-                     ) -> tuple[bool, int, int]:
+    def wait_answer(self, t_us: int, deadline: float | None, stop: threading.Event
+                    ) -> tuple[bool, int, int]:
         """Read until the answer to ``t_us`` arrives (True) or, in real time, the wall
-        ``deadline`` passes (False). Returns (answered, late answers, ignored messages)."""
+        ``deadline`` [s, time.monotonic] passes (False; None: no deadline, lockstep).
+        Returns (answered, late answers, ignored messages)."""
         sock = self._sock
         poller = self._poller
         assert sock is not None and poller is not None
@@ -516,21 +395,21 @@ class SimLinkServer:
         late = ignored = 0
         while True:
             if stop.is_set():
-                raise _StoppedError
+                raise StoppedError
             if deadline is not None:
                 wait = deadline - time.monotonic()
                 if wait <= 0:
                     return False, late, ignored
-                if not poller.poll(min(wait, _POLL_S) * 1e3):
+                if not poller.poll(min(wait, STOP_POLL_S) * 1e3):
                     continue
             try:
-                data = sock.recv(65536)   # (lockstep: waits up to _POLL_S)
+                data = sock.recv(65536)   # (lockstep: waits up to STOP_POLL_S)
             except BlockingIOError:   # the socket's receive timeout
                 continue
             except OSError as e:
-                raise _DisconnectedError from e
+                raise DisconnectedError from e
             if not data:
-                raise _DisconnectedError
+                raise DisconnectedError
             answered = False
             # the usual case, one well-formed answer, skips the message objects
             items = parser.feed_link(data)
@@ -563,8 +442,9 @@ class SimLinkServer:
         """The inputs the last control period's physics steps held."""
         return PlantInputs(*self._held)
 
-    def _advance(self) -> None:
-        """N physics steps with the held commands and the caller's winder inputs."""
+    def advance(self) -> None:
+        """One control period of the plant: its N physics steps with the held commands and
+        :attr:`winder_inputs`."""
         torque, enabled = self.winder_inputs
         held = self._held = (self.rotor_commands, self.armed, float(torque), bool(enabled))
         self.plant.advance_held(*held, self.physics_steps)

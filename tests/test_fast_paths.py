@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
-from sitl.__main__ import TRUTH_COLUMNS, TruthLog
 from sitl.batch import BatchPacker
 from sitl.catenary import catenary_end_forces
 from sitl.plant import Plant, PlantInputs
@@ -29,6 +28,7 @@ from sitl.sensors import (
 from sitl.simlink_server import SimLinkServer
 from sitl.tether import Tether, TetherForces
 from sitl.trim import hover_trim
+from sitl.truth_log import TRUTH_COLUMNS, TruthLog
 from tuavdefs import frames as fr
 from tuavdefs import simlink as sl
 from tuavdefs.jit import JIT, entry_point, njit
@@ -347,7 +347,7 @@ def _batch_outcome(server: SimLinkServer, t_us: int) -> tuple:
     sink = _Sink()
     server._sock = sink  # type: ignore[assignment]
     try:
-        server._send_batch(t_us)
+        server.send_batch(t_us)
         out: object = sink.sent
     except Exception as e:  # noqa: BLE001 - the same error either way is the point
         out = (type(e), str(e))
@@ -432,7 +432,7 @@ def test_the_compiled_batch_is_the_interpreted_one(noise: SensorNoise,
 
 def test_the_truth_logs_row_is_each_values_repr():
     """A row of the plant's truth log is the repr of each column's value as a float (the
-    columns of :data:`sitl.__main__.TRUTH_COLUMNS`), for any state: gimbal lock, negative
+    columns of :data:`sitl.truth_log.TRUTH_COLUMNS`), for any state: gimbal lock, negative
     zeros, integer commands."""
     plant = Plant(SystemParams())
     server = SimpleNamespace(plant=plant, armed=False, rotor_commands=(0.0, 0.0, 0.0, 0.0))

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from companion.navigation import NavigationParams
-from sitl.__main__ import TRUTH_COLUMNS
+from sitl.truth_log import TRUTH_COLUMNS
 from tuav_sitl.offline import _to_toml
 from tuav_sitl.scenario import (
     InitialParams,
@@ -100,7 +100,7 @@ def needs_import(run_dir: Path) -> bool:
 
 
 def read_truth(path: Path) -> dict[str, np.ndarray]:
-    """The plant's truth log as columns (the names of ``sitl.__main__.TRUTH_COLUMNS``; SI
+    """The plant's truth log as columns (the names of ``sitl.truth_log.TRUTH_COLUMNS``; SI
     units, z-up frame, angles [rad]). A last line cut short (the plant stopped while
     writing) and unreadable lines are left out."""
     path = Path(path)

@@ -1,0 +1,64 @@
+"""The plant's truth log: ``truth.csv``, one row every N control periods.
+
+:data:`TRUTH_COLUMNS` names the columns; each row holds their values as floats, each
+written as its ``repr`` (so a reader gets the plant's doubles back to the bit). Units are SI
+in the inertial frame (z up, origin at the winder's tether exit): time ``t_s`` [s],
+position ``x_m, y_m, z_m`` [m], velocity ``vx_m_s, vy_m_s, vz_m_s`` [m/s], the attitude's
+Euler angles ``roll_rad, pitch_rad, yaw_rad`` [rad] (body x forward, y left, z up), the
+paid-out ``tether_length_m`` [m], the drum's rate ``drum_rate_rad_s`` [rad/s], ``armed``
+(1.0 or 0.0) and the held rotor commands ``rotor1`` .. ``rotor4`` (normalised, [0, 1]).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, TextIO
+
+from sitl.plant import DRUM_RATE, POS, QUAT, VEL
+from tuavdefs.frames import quat_to_euler
+
+if TYPE_CHECKING:
+    from sitl.simlink_server import SimLinkServer
+
+#: The truth log's columns, in order (units in the module docstring).
+TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "roll_rad",
+                 "pitch_rad", "yaw_rad", "tether_length_m", "drum_rate_rad_s", "armed",
+                 "rotor1", "rotor2", "rotor3", "rotor4")
+#: A row of the truth log: the columns' values (floats) as their repr.
+_ROW = ",".join(["%r"] * len(TRUTH_COLUMNS)) + "\n"
+
+
+class TruthLog:
+    """The plant's truth as CSV on ``stream`` (the header written at once), a row every
+    ``every_periods`` control periods (at least 1), flushed at least once a wall-clock
+    second."""
+
+    def __init__(self, stream: TextIO, every_periods: int) -> None:
+        self.stream = stream
+        self.every = max(1, every_periods)
+        self._count = 0
+        self._flushed = time.monotonic()
+        stream.write(",".join(TRUTH_COLUMNS) + "\n")
+
+    def record(self, server: SimLinkServer) -> None:
+        """Called after each control period: the row of the state ``server.plant`` has
+        reached and the commands the server holds, if this period is one to log."""
+        self._count += 1
+        if (self._count - 1) % self.every:
+            return
+        p = server.plant
+        x = p.x.tolist()
+        c0, c1, c2, c3 = server.rotor_commands
+        # every value a float, each written as its repr
+        self.stream.write(_ROW % (float(p.t_s), *x[POS], *x[VEL], *quat_to_euler(x[QUAT]),
+                                  float(p.tether_length_m), x[DRUM_RATE],
+                                  1.0 if server.armed else 0.0, float(c0), float(c1),
+                                  float(c2), float(c3)))
+        now = time.monotonic()
+        if now - self._flushed >= 1.0:
+            self.stream.flush()
+            self._flushed = now
+
+    def close(self) -> None:
+        """Close the stream (what is buffered is written first)."""
+        self.stream.close()
