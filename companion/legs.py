@@ -1,16 +1,17 @@
-"""Mission legs: the items a mission is made of (:class:`GotoItem`, :class:`CircleItem`),
-the events it reports (:class:`MissionEvent`), and :class:`WaypointFollower`, the mission
-logic shared by the companion's AUTO/GUIDED modes and the offline runner, which flies each
-item as :mod:`companion.reference` trajectories. Inertial frame (z up, x east, y north,
-origin at the winder), positions in m, speeds in m/s, times in s, angles in rad.
+"""Mission legs: the items a leg flies to (:class:`GotoItem`, :class:`CircleItem`) and
+:class:`LegFollower`, which flies one item as :mod:`companion.reference` trajectories and
+says when it is reached. The navigator (:mod:`companion.navigation`) is the one sequencer:
+it plans one leg per mission item, guided target or landing step. Inertial frame (z up,
+x east, y north, origin at the winder), positions in m, speeds in m/s, times in s, angles
+in rad.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import NamedTuple
+from enum import Enum
 
 from companion.reference import (
     DEFAULT_MAX_YAW_ACC_RAD_S2,
@@ -58,19 +59,6 @@ class CircleItem:
 
 MissionItem = GotoItem | CircleItem
 
-EVENT_CURRENT = "current"
-"""An item became the one being flown (MISSION_CURRENT)."""
-EVENT_REACHED = "reached"
-"""An item was reached (MISSION_ITEM_REACHED)."""
-
-
-class MissionEvent(NamedTuple):
-    """Something the companion reports: ``kind`` is EVENT_CURRENT or EVENT_REACHED."""
-
-    kind: str
-    index: int
-    t_s: float
-
 
 def as_mission_item(item: MissionItem | Iterable[float]) -> MissionItem:
     """A GotoItem or CircleItem from an item or an (x, y, z) / (x, y, z, yaw) tuple."""
@@ -84,29 +72,32 @@ def as_mission_item(item: MissionItem | Iterable[float]) -> MissionItem:
     raise ValueError(f"a waypoint is (x, y, z) or (x, y, z, yaw), got {item!r}")
 
 
-_TRANSIT, _CIRCLE, _HOLD, _DONE = "transit", "circle", "hold", "done"
+class LegPhase(Enum):
+    """Where a leg is."""
+
+    TRANSIT = "transit"      # flying to the item (or to a circle's start)
+    CIRCLE = "circle"        # flying a circle item's circle
+    HOLD = "hold"            # reached, holding for hold_s
+    DONE = "done"            # reached and held: the next leg may begin
 
 
-class WaypointFollower:
-    """Mission logic shared by the companion's AUTO/GUIDED modes and the offline runner.
+class LegFollower:
+    """One leg: flies to one item and says when it is reached.
 
     Flies a :class:`Transition` (within ``max_speed_m_s`` [m/s], ``max_acc_m_s2``
-    [m/s^2]) to each item in turn. A goto item is reached when its transition has finished
-    and the vehicle is within ``acceptance_radius_m`` [m] of it; a circle item is flown as
-    a transition to the circle's start point (entered when reached the same way), then the
+    [m/s^2]) to the item. A goto item is reached when its transition has finished and the
+    vehicle is within ``acceptance_radius_m`` [m] of it; a circle item is flown as a
+    transition to the circle's start point (entered when reached the same way), then the
     :class:`Circle`, and is reached when the circle has stopped and the vehicle is within
-    the radius of its end point. After ``hold_s`` [s] at a reached item the next one starts.
-    Until then the reference holds (at rest) at the item, whatever the vehicle does.
-
-    Events (EVENT_CURRENT, EVENT_REACHED) go to ``on_event`` if given and are queued for
-    :meth:`pop_events`; ``reached`` lists (index, time) pairs.
+    the radius of its end point. After ``hold_s`` [s] at the reached item the leg is done.
+    Until then, and after, the reference holds (at rest) at the item, whatever the vehicle
+    does. :attr:`reached_t_s` is when it was reached (None before).
     """
 
     def __init__(self, max_speed_m_s: float, max_acc_m_s2: float, acceptance_radius_m: float,
                  hold_s: float = 0.0, *, max_yaw_rate: float = DEFAULT_MAX_YAW_RATE_RAD_S,
                  max_yaw_acc_rad_s2: float = DEFAULT_MAX_YAW_ACC_RAD_S2,
-                 min_duration_s: float = DEFAULT_MIN_DURATION_S,
-                 on_event: Callable[[MissionEvent], None] | None = None) -> None:
+                 min_duration_s: float = DEFAULT_MIN_DURATION_S) -> None:
         self.max_speed_m_s = positive(max_speed_m_s, "max_speed_m_s")
         self.max_acc_m_s2 = positive(max_acc_m_s2, "max_acc_m_s2")
         self.acceptance_radius_m = positive(acceptance_radius_m, "acceptance_radius_m")
@@ -116,13 +107,10 @@ class WaypointFollower:
         self._transition_kw = dict(max_yaw_rate=max_yaw_rate,
                                    max_yaw_acc_rad_s2=max_yaw_acc_rad_s2,
                                    min_duration_s=min_duration_s)
-        self.on_event = on_event
-        self.reached: list[tuple[int, float]] = []
-        """(item index, time [s]) of each item reached, in order."""
-        self._events: list[MissionEvent] = []
-        self._items: list[MissionItem] = []
-        self._index = 0
-        self._phase = _DONE
+        self.item: MissionItem | None = None
+        self.reached_t_s: float | None = None
+        """When the item was reached [s] (None before)."""
+        self._phase = LegPhase.DONE
         self._traj: Trajectory | None = None
         self._target: Vec3 | None = None
         self._hold_until = 0.0
@@ -131,135 +119,91 @@ class WaypointFollower:
     # -- state --
 
     @property
-    def items(self) -> tuple[MissionItem, ...]:
-        """The mission items (retargets replace or insert items)."""
-        return tuple(self._items)
-
-    @property
-    def current_index(self) -> int:
-        """Index of the item being flown or held at; len(items) when done."""
-        return self._index
-
-    @property
     def done(self) -> bool:
-        """True when every item has been reached and its hold is over."""
-        return self._phase == _DONE
+        """True once the item has been reached and its hold is over."""
+        return self._phase is LegPhase.DONE
 
     @property
-    def phase(self) -> str:
-        """"transit", "circle", "hold" or "done"."""
+    def phase(self) -> LegPhase:
+        """Where the leg is."""
         return self._phase
 
     @property
     def trajectory(self) -> Trajectory:
         """The trajectory being flown."""
         if self._traj is None:
-            raise RuntimeError("WaypointFollower.start() has not been called")
+            raise RuntimeError("LegFollower.start() has not been called")
         return self._traj
 
     @property
     def target_m(self) -> Vec3 | None:
-        """Point [m] the acceptance test currently uses (None while on an endless circle)."""
+        """Point [m] the acceptance test uses (None while on an endless circle)."""
         return self._target
-
-    @property
-    def has_events(self) -> bool:
-        """Whether :meth:`pop_events` has events to hand out."""
-        return bool(self._events)
-
-    def pop_events(self) -> list[MissionEvent]:
-        """Events since the last call, oldest first."""
-        out, self._events = self._events, []
-        return out
 
     # -- control --
 
-    def start(self, t: float, current_pos: Iterable[float],
-              current_vel: Iterable[float] = ZERO3,
-              waypoints: Iterable[MissionItem | Iterable[float]] = (), *,
-              current_yaw: float = 0.0, current_acc: Iterable[float] = ZERO3) -> None:
-        """Start the mission at time ``t`` [s] from the vehicle state (position [m],
-        velocity [m/s], yaw [rad], acceleration [m/s^2]). With no items the reference just
-        comes to rest at ``current_pos``. Raises ValueError on an impossible circle item."""
-        items = [as_mission_item(w) for w in waypoints]
-        for it in items:
-            if isinstance(it, CircleItem):
-                self._check_circle(it)
-        pos = vec3(current_pos, "current_pos")
-        state = RefSample(pos, vec3(current_vel, "current_vel"),
-                          vec3(current_acc, "current_acc"), ZERO3, wrap_pi(current_yaw), 0.0)
-        self._items = items
-        self.reached = []
-        self._events = []
-        self._index = 0
-        if items:
-            self._begin_item(float(t), state, 0.0)
-        else:
-            self._traj = Transition(pos, pos, t, self.max_speed_m_s, self.max_acc_m_s2,
-                                    state.vel_m_s, state.acc_m_s2, state.yaw_rad,
-                                    **self._transition_kw)
-            self._phase, self._target = _DONE, pos
+    def start(self, t: float, current_pos: Iterable[float], current_vel: Iterable[float],
+              item: MissionItem | Iterable[float], *, current_yaw: float = 0.0,
+              current_acc: Iterable[float] = ZERO3, current_yaw_rate: float = 0.0,
+              current_yaw_acc: float = 0.0) -> None:
+        """Start the leg at time ``t`` [s] from the reference state (position [m],
+        velocity [m/s], acceleration [m/s^2], yaw [rad] and its rate and acceleration), so
+        the reference stays C2. Raises ValueError on an impossible circle item."""
+        it = as_mission_item(item)
+        if isinstance(it, CircleItem):
+            self._check_circle(it)
+        state = RefSample(vec3(current_pos, "current_pos"), vec3(current_vel, "current_vel"),
+                          vec3(current_acc, "current_acc"), ZERO3, wrap_pi(current_yaw),
+                          float(current_yaw_rate))
+        self.item = it
+        self.reached_t_s = None
+        self._begin(float(t), state, float(current_yaw_acc))
 
     def update(self, t: float, current_pos: Iterable[float]) -> RefSample:
-        """Advance the mission with the vehicle at ``current_pos`` [m] at time ``t`` [s]
+        """Advance the leg with the vehicle at ``current_pos`` [m] at time ``t`` [s]
         (non-decreasing) and return the reference at ``t``."""
         traj = self.trajectory
         phase = self._phase
-        if (t < traj.end_s and phase in (_TRANSIT, _CIRCLE)
-                or phase == _HOLD and t < self._hold_until or phase == _DONE):
+        if (t < traj.end_s and (phase is LegPhase.TRANSIT or phase is LegPhase.CIRCLE)
+                or phase is LegPhase.HOLD and t < self._hold_until
+                or phase is LegPhase.DONE):
             return traj.sample(t)   # nothing to decide (most calls)
         pos = tuple(current_pos)
-        for _ in range(2 * len(self._items) + 4):  # each pass changes phase or stops
-            traj = self.trajectory
-            if self._phase in (_TRANSIT, _CIRCLE):
-                if not (t >= traj.end_s and self._target is not None
+        for _ in range(4):  # each pass changes phase or stops
+            if self._phase in (LegPhase.TRANSIT, LegPhase.CIRCLE):
+                if not (t >= self.trajectory.end_s and self._target is not None
                         and math.dist(pos, self._target) <= self.acceptance_radius_m):
                     break
-                if self._phase == _TRANSIT and self._circle_kw is not None:
+                if self._phase is LegPhase.TRANSIT and self._circle_kw is not None:
                     circle = Circle(t0=t, **self._circle_kw)
                     self._circle_kw = None
-                    self._traj, self._phase, self._target = circle, _CIRCLE, circle.final_pos_m
+                    self._traj, self._phase = circle, LegPhase.CIRCLE
+                    self._target = circle.final_pos_m
                     continue
-                self.reached.append((self._index, t))
-                self._emit(EVENT_REACHED, self._index, t)
-                self._phase, self._hold_until = _HOLD, t + self.hold_s
-            elif self._phase == _HOLD:
-                if t < self._hold_until:
-                    break
-                self._index += 1
-                if self._index >= len(self._items):
-                    self._phase = _DONE
-                    break
-                self._begin_item(t, traj.sample(t), traj.yaw_acc_rad_s2(t))
+                self.reached_t_s = t
+                self._phase, self._hold_until = LegPhase.HOLD, t + self.hold_s
+            elif self._phase is LegPhase.HOLD:
+                if t >= self._hold_until:
+                    self._phase = LegPhase.DONE
+                break
             else:
                 break
         return self.trajectory.sample(t)
 
     def retarget(self, t: float, new_goal: MissionItem | Iterable[float]) -> RefSample:
-        """Fly to ``new_goal`` from the current reference state at ``t`` [s] (position,
-        velocity, acceleration, yaw and its rates), so the reference stays C2. It replaces
-        the item being flown; if that was already reached (holding, or done), it is inserted
-        after it. Later items are kept. Returns the reference at ``t``."""
+        """Fly to ``new_goal`` instead, from the current reference state at ``t`` [s]
+        (position, velocity, acceleration, yaw and its rates), so the reference stays C2.
+        Returns the reference at ``t``."""
         traj = self.trajectory
         item = as_mission_item(new_goal)
         if isinstance(item, CircleItem):
             self._check_circle(item)
-        if self._phase in (_HOLD, _DONE):
-            self._index = min(self._index + 1, len(self._items)) if self._phase == _HOLD \
-                else len(self._items)
-            self._items.insert(self._index, item)
-        else:
-            self._items[self._index] = item
-        self._begin_item(float(t), traj.sample(t), traj.yaw_acc_rad_s2(t))
+        self.item = item
+        self.reached_t_s = None
+        self._begin(float(t), traj.sample(t), traj.yaw_acc_rad_s2(t))
         return self.trajectory.sample(t)
 
     # -- internals --
-
-    def _emit(self, kind: str, index: int, t: float) -> None:
-        ev = MissionEvent(kind, index, t)
-        self._events.append(ev)
-        if self.on_event is not None:
-            self.on_event(ev)
 
     def _circle_args(self, item: CircleItem, pos: Iterable[float], yaw: float) -> dict:
         theta0 = (nearest_angle(item.centre_xy_m, pos) if item.start_angle_rad is None
@@ -280,8 +224,8 @@ class WaypointFollower:
         Circle(t0=0.0, **self._circle_args(item, (item.centre_xy_m[0] + 1.0,
                                                   item.centre_xy_m[1]), 0.0))
 
-    def _begin_item(self, t: float, state: RefSample, yaw_acc: float) -> None:
-        item = self._items[self._index]
+    def _begin(self, t: float, state: RefSample, yaw_acc: float) -> None:
+        item = self.item
         if isinstance(item, CircleItem):
             self._circle_kw = self._circle_args(item, state.pos_m, state.yaw_rad)
             kw = self._circle_kw
@@ -298,11 +242,8 @@ class WaypointFollower:
                                 state.vel_m_s, state.acc_m_s2, state.yaw_rad, yaw_goal,
                                 start_yaw_rate_rad_s=state.yaw_rate_rad_s,
                                 start_yaw_acc_rad_s2=yaw_acc, **self._transition_kw)
-        self._phase, self._target = _TRANSIT, goal
-        self._emit(EVENT_CURRENT, self._index, t)
+        self._phase, self._target = LegPhase.TRANSIT, goal
 
 
-__all__ = [
-    "EVENT_CURRENT", "EVENT_REACHED", "CircleItem", "GotoItem", "MissionEvent", "MissionItem",
-    "WaypointFollower", "as_mission_item",
-]
+__all__ = ["CircleItem", "GotoItem", "LegFollower", "LegPhase", "MissionItem",
+           "as_mission_item"]

@@ -34,7 +34,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 
-from companion.legs import EVENT_REACHED, CircleItem, GotoItem, WaypointFollower
+from companion.legs import CircleItem, GotoItem, LegFollower
 from companion.reference import Circle, RefSample
 from tuavdefs.frames import quat_to_yaw
 from tuavdefs.paramspec import Params, quantity
@@ -223,9 +223,9 @@ class Refusal:
 # ----- legs: one planned movement each
 
 class _Leg:
-    """A planned movement: a WaypointFollower over one item, optionally open-ended."""
+    """A planned movement: a LegFollower over one item, optionally open-ended."""
 
-    def __init__(self, follower: WaypointFollower, item: GotoItem | CircleItem,
+    def __init__(self, follower: LegFollower, item: GotoItem | CircleItem,
                  landing: bool = False, seq: int | None = None,
                  tag: LegTag = LegTag.HOLD) -> None:
         self.follower = follower
@@ -234,6 +234,7 @@ class _Leg:
         self.seq = seq
         self.tag = tag
         self.finished = False
+        self.reported = False      # its reaching has been reported
 
 
 class _VelocityRef:
@@ -661,10 +662,10 @@ class Navigator:
         assert leg is not None
         follower = leg.follower
         ref = follower.update(t, self._pos)
-        if follower.has_events:
-            for ev in follower.pop_events():
-                if ev.kind == EVENT_REACHED and leg.seq is not None and leg.tag is LegTag.MISSION:
-                    self._emit(NavEvent.REACHED, leg.seq)
+        if follower.reached_t_s is not None and not leg.reported:
+            leg.reported = True
+            if leg.seq is not None and leg.tag is LegTag.MISSION:
+                self._emit(NavEvent.REACHED, leg.seq)
         if follower.done and not leg.landing and not leg.finished:
             leg.finished = True
             self._leg_done(t, leg)
@@ -710,16 +711,14 @@ class Navigator:
         return self._ref
 
     def _follower(self, speed: float, accept: float | None = None, hold_s: float = 0.0
-                  ) -> WaypointFollower:
-        return WaypointFollower(speed, self.p.acc_m_s2,
-                                accept if accept is not None else self.p.acceptance_radius_m,
-                                hold_s)
+                  ) -> LegFollower:
+        return LegFollower(speed, self.p.acc_m_s2,
+                           accept if accept is not None else self.p.acceptance_radius_m, hold_s)
 
     def _start_leg(self, leg: _Leg) -> None:
         ref = self._current_ref()
-        leg.follower.start(self._t, ref.pos_m, ref.vel_m_s, [leg.item],
+        leg.follower.start(self._t, ref.pos_m, ref.vel_m_s, leg.item,
                            current_yaw=ref.yaw_rad, current_acc=ref.acc_m_s2)
-        leg.follower.pop_events()
         self._leg = leg
 
     def _queue(self, legs: list[_Leg]) -> None:

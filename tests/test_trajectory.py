@@ -16,11 +16,10 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from companion.legs import (
-    EVENT_CURRENT,
-    EVENT_REACHED,
     CircleItem,
     GotoItem,
-    WaypointFollower,
+    LegFollower,
+    LegPhase,
 )
 from companion.planner import (
     _BISECT_RTOL,
@@ -596,14 +595,54 @@ def test_sequence_rejects_gaps():
         Sequence([Hold((0, 0, 0)), a])
 
 
-# --- WaypointFollower -----------------------------------------------------------------------
+# --- LegFollower ----------------------------------------------------------------------------
 
 DT = 0.02
 
 
-def fly(f: WaypointFollower, t0: float, t1: float, pos, tracker=None, phases=None):
-    """Run the follower from t0 to t1; the perfect tracker is one step behind the reference.
-    Returns (times, references); appends the follower's phase at each step to ``phases``."""
+class Chain:
+    """Legs flown one after the other, each started from the previous one's reference when
+    it is done, as a sequencer (the navigator) does; ``reached`` lists (index, time)."""
+
+    def __init__(self, v_max: float, a_max: float, accept: float, items, hold_s: float = 0.0,
+                 t0: float = 0.0, pos=(0.0, 0.0, 10.0), vel=(0.0, 0.0, 0.0)) -> None:
+        self.items = list(items)
+        self.make = lambda: LegFollower(v_max, a_max, accept, hold_s)
+        self.index = 0
+        self.reached: list[tuple[int, float]] = []
+        self.leg = self.make()
+        self.leg.start(t0, pos, vel, self.items[0])
+
+    @property
+    def done(self) -> bool:
+        return self.index >= len(self.items)
+
+    @property
+    def phase(self) -> LegPhase:
+        return self.leg.phase
+
+    def update(self, t: float, pos) -> RefSample:
+        ref = self.leg.update(t, pos)
+        if self.leg.reached_t_s is not None and not self.done and (
+                not self.reached or self.reached[-1][0] != self.index):
+            self.reached.append((self.index, self.leg.reached_t_s))
+        if self.leg.done and not self.done:
+            self.index += 1
+            if not self.done:
+                traj = self.leg.trajectory
+                state = traj.sample(t)
+                self.leg = self.make()
+                self.leg.start(t, state.pos_m, state.vel_m_s, self.items[self.index],
+                               current_yaw=state.yaw_rad, current_acc=state.acc_m_s2,
+                               current_yaw_rate=state.yaw_rate_rad_s,
+                               current_yaw_acc=traj.yaw_acc_rad_s2(t))
+                ref = self.leg.update(t, pos)
+        return ref
+
+
+def fly(f, t0: float, t1: float, pos, tracker=None, phases=None):
+    """Run the leg (or chain) from t0 to t1; the perfect tracker is one step behind the
+    reference. Returns (times, references); appends the phase at each step to ``phases``."""
     ts, refs = [], []
     for k in range(int(round((t1 - t0) / DT)) + 1):
         t = t0 + k * DT
@@ -646,13 +685,11 @@ def leg_duration(a, b, yaw_a, yaw_b, v=5.0, acc=2.0) -> float:
                                 DEFAULT_MIN_DURATION_S))
 
 
-def test_follower_perfect_tracker_reaches_all_in_order():
-    seen = []
-    f = WaypointFollower(5.0, 2.0, 0.05, on_event=seen.append)
-    f.start(1.0, (0, 0, 10), (0, 0, 0), WAYPOINTS)
-    assert f.current_index == 0 and not f.done
+def test_legs_perfect_tracker_reaches_all_in_order():
+    f = Chain(5.0, 2.0, 0.05, WAYPOINTS, t0=1.0)
+    assert not f.leg.done and f.leg.reached_t_s is None
     ts, refs = fly(f, 1.0, 200.0, (0.0, 0.0, 10.0))
-    assert f.done and f.current_index == 4
+    assert f.done
     assert [i for i, _ in f.reached] == [0, 1, 2, 3]
     # each leg starts when the previous item is reached and lasts the quintic duration
     pts = [(0.0, 0.0, 10.0), (20.0, 0.0, 10.0), (20.0, 30.0, 15.0), (-10.0, 5.0, 5.0),
@@ -663,34 +700,26 @@ def test_follower_perfect_tracker_reaches_all_in_order():
         expect = t_prev + leg_duration(pts[k], pts[k + 1], yaw[k], yaw[k + 1])
         assert expect <= t_k <= expect + 2 * DT + 1e-9
         t_prev = t_k
-    events = f.pop_events()
-    assert events == seen and f.pop_events() == []
-    assert [(e.kind, e.index) for e in events] == [
-        (k, i) for i in range(4) for k in (EVENT_CURRENT, EVENT_REACHED)]
-    assert [e.t_s for e in events if e.kind == EVENT_REACHED] == [t for _, t in f.reached]
     assert_run_smooth(ts, refs, 5.0, 2.0)
     final = refs[-1]
     assert final.pos_m == (0.0, 0.0, 10.0) and abs(wrap_pi(final.yaw_rad + 2.0)) < 1e-12
 
 
-def test_follower_waits_for_a_lagging_vehicle():
-    f = WaypointFollower(5.0, 2.0, 0.5)
-    f.start(0.0, (0, 0, 10), (0, 0, 0), WAYPOINTS[:2])
+def test_leg_waits_for_a_lagging_vehicle():
+    f = LegFollower(5.0, 2.0, 0.5)
+    f.start(0.0, (0, 0, 10), (0, 0, 0), WAYPOINTS[0])
     stuck = (0.0, 0.0, 10.0)
     ts, refs = fly(f, 0.0, 100.0, stuck, tracker=lambda t, ref: stuck)
-    assert f.reached == [] and f.current_index == 0 and not f.done
+    assert f.reached_t_s is None and f.phase is LegPhase.TRANSIT and not f.done
     assert refs[-1].pos_m == (20.0, 0.0, 10.0) and refs[-1].vel_m_s == (0.0, 0.0, 0.0)
     near = (20.3, 0.2, 10.1)  # within 0.5 m
     f.update(100.0 + DT, near)
-    assert f.reached == [(0, 100.0 + DT)] and f.current_index == 1
-    fly(f, 100.0 + 2 * DT, 150.0, near)
-    assert [i for i, _ in f.reached] == [0, 1] and f.done
+    assert f.reached_t_s == 100.0 + DT and f.done
 
 
-def test_follower_hold():
+def test_legs_hold():
     hold = 3.0
-    f = WaypointFollower(5.0, 2.0, 0.05, hold_s=hold)
-    f.start(0.0, (0, 0, 10), (0, 0, 0), WAYPOINTS[:3])
+    f = Chain(5.0, 2.0, 0.05, WAYPOINTS[:3], hold_s=hold)
     ts, refs = fly(f, 0.0, 150.0, (0.0, 0.0, 10.0))
     assert [i for i, _ in f.reached] == [0, 1, 2] and f.done
     pts = [(0.0, 0.0, 10.0), (20.0, 0.0, 10.0), (20.0, 30.0, 15.0), (-10.0, 5.0, 5.0)]
@@ -706,14 +735,13 @@ def test_follower_hold():
     assert_run_smooth(ts, refs, 5.0, 2.0)
 
 
-def test_follower_circle_item():
+def test_legs_circle_item():
     circle = CircleItem((0.0, 0.0), 10.0, 10.0, 3.0, turns=1.0)
-    f = WaypointFollower(5.0, 2.0, 0.05)
-    f.start(0.0, (0, 0, 10), (0, 0, 0), [(30.0, 0.0, 10.0), circle, (0.0, 0.0, 20.0)])
+    f = Chain(5.0, 2.0, 0.05, [(30.0, 0.0, 10.0), circle, (0.0, 0.0, 20.0)])
     phases = []
     ts, refs = fly(f, 0.0, 150.0, (0.0, 0.0, 10.0), phases=phases)
     assert [i for i, _ in f.reached] == [0, 1, 2] and f.done
-    circ_t = [t for t, p in zip(ts, phases, strict=True) if p == "circle"]
+    circ_t = [t for t, p in zip(ts, phases, strict=True) if p is LegPhase.CIRCLE]
     on = [r for t, r in zip(ts, refs, strict=True) if circ_t[0] <= t <= circ_t[-1]]
     # after the transit from (30, 0) to the nearest point (10, 0), one turn round the centre
     assert on[0].pos_m == (10.0, 0.0, 10.0) and on[0].vel_m_s == (0.0, 0.0, 0.0)
@@ -729,16 +757,16 @@ def test_follower_circle_item():
     assert_run_smooth(ts, refs, 5.0, 2.0)
 
 
-def test_follower_rejects_impossible_circle():
-    f = WaypointFollower(5.0, 1.0, 0.1)
+def test_leg_rejects_impossible_circle():
+    f = LegFollower(5.0, 1.0, 0.1)
     with pytest.raises(ValueError, match="radius"):
-        f.start(0.0, (0, 0, 10), (0, 0, 0), [CircleItem((0.0, 0.0), 5.0, 10.0, 4.0)])
+        f.start(0.0, (0, 0, 10), (0, 0, 0), CircleItem((0.0, 0.0), 5.0, 10.0, 4.0))
 
 
 @pytest.mark.parametrize("t_r", [3.0, 6.5, 10.0])
-def test_follower_retarget_keeps_continuity(t_r):
-    f = WaypointFollower(5.0, 2.0, 0.05)
-    f.start(0.0, (0, 0, 10), (0, 0, 0), [(60.0, 0.0, 10.0), (60.0, 40.0, 10.0)])
+def test_leg_retarget_keeps_continuity(t_r):
+    f = LegFollower(5.0, 2.0, 0.05)
+    f.start(0.0, (0, 0, 10), (0, 0, 0), (60.0, 0.0, 10.0))
     ts, refs = fly(f, 0.0, t_r - DT, (0.0, 0.0, 10.0))
     before = f.trajectory.sample(t_r)
     assert np.linalg.norm(before.vel_m_s) > 0.5  # really mid-flight
@@ -746,36 +774,35 @@ def test_follower_retarget_keeps_continuity(t_r):
     assert close(before.pos_m, after.pos_m, 1e-12) and close(before.vel_m_s, after.vel_m_s,
                                                              1e-12)
     assert close(before.acc_m_s2, after.acc_m_s2, 1e-12)
-    assert f.current_index == 0 and f.trajectory.within_limits
+    assert f.trajectory.within_limits and f.reached_t_s is None
     ts2, refs2 = fly(f, t_r, 200.0, refs[-1].pos_m)
-    assert [i for i, _ in f.reached] == [0, 1] and f.done
-    assert f.items[0] == GotoItem((-20.0, 30.0, 25.0), 1.5)
+    assert f.done and f.item == GotoItem((-20.0, 30.0, 25.0), 1.5)
     assert_run_smooth(ts + ts2, refs + refs2, 5.0, 2.0)
-    assert refs2[-1].pos_m == (60.0, 40.0, 10.0)
+    assert refs2[-1].pos_m == (-20.0, 30.0, 25.0)
 
 
-def test_follower_retarget_from_circle_and_after_done():
-    f = WaypointFollower(4.0, 2.0, 0.05)
+def test_leg_retarget_from_circle_and_after_done():
+    f = LegFollower(4.0, 2.0, 0.05)
     f.start(0.0, (0, 0, 10), (0, 0, 0),
-            [CircleItem((0.0, 10.0), 10.0, 10.0, 4.0, turns=math.inf,
-                        start_angle_rad=-math.pi / 2)])
+            CircleItem((0.0, 10.0), 10.0, 10.0, 4.0, turns=math.inf,
+                       start_angle_rad=-math.pi / 2))
     ts, refs = fly(f, 0.0, 40.0, (0.0, 0.0, 10.0))
-    assert f.phase == "circle" and not f.done
+    assert f.phase is LegPhase.CIRCLE and not f.done
     after = f.retarget(40.0 + DT, (30.0, 30.0, 20.0))
     assert f.trajectory.within_limits
     ts2, refs2 = fly(f, 40.0 + DT, 100.0, refs[-1].pos_m)
-    assert f.done and [i for i, _ in f.reached] == [0]
+    assert f.done and f.reached_t_s is not None
     assert after == refs2[0]
-    f.retarget(100.0 + DT, (0.0, 0.0, 10.0))  # a new goal after the mission ended
-    assert f.current_index == 1 and not f.done
+    f.retarget(100.0 + DT, (0.0, 0.0, 10.0))  # a new goal after the leg ended
+    assert not f.done and f.reached_t_s is None
     ts3, refs3 = fly(f, 100.0 + DT, 150.0, refs2[-1].pos_m)
-    assert [i for i, _ in f.reached] == [0, 1] and f.done
+    assert f.done
     assert_run_smooth(ts + ts2 + ts3, refs + refs2 + refs3, 4.0, 2.0)
 
 
-def test_follower_starts_from_a_moving_vehicle():
-    f = WaypointFollower(5.0, 2.0, 0.05)
-    f.start(0.0, (0, 0, 10), (3.0, -1.0, 0.5), [(0.0, 20.0, 10.0)])
+def test_leg_starts_from_a_moving_vehicle():
+    f = LegFollower(5.0, 2.0, 0.05)
+    f.start(0.0, (0, 0, 10), (3.0, -1.0, 0.5), (0.0, 20.0, 10.0))
     s = f.update(0.0, (0, 0, 10))
     assert s.pos_m == (0.0, 0.0, 10.0) and s.vel_m_s == (3.0, -1.0, 0.5)
     ts, refs = fly(f, 0.0, 60.0, (0.0, 0.0, 10.0))
@@ -787,22 +814,23 @@ def test_follower_starts_from_a_moving_vehicle():
 @given(wps=st.lists(st.tuples(*[st.floats(-60.0, 60.0)] * 2, st.floats(2.0, 60.0)),
                     min_size=1, max_size=3),
        retarget_at=st.floats(0.5, 20.0), new_goal=st.tuples(*[st.floats(-60.0, 60.0)] * 3))
-def test_follower_random_missions(wps, retarget_at, new_goal):
-    f = WaypointFollower(6.0, 3.0, 0.05)
-    f.start(0.0, (0, 0, 10), (0, 0, 0), wps)
+def test_legs_random_missions(wps, retarget_at, new_goal):
+    f = Chain(6.0, 3.0, 0.05, wps)
     ts, refs = fly(f, 0.0, retarget_at, (0.0, 0.0, 10.0))
-    f.retarget(retarget_at + DT, new_goal)
+    if not f.done:
+        f.leg.retarget(retarget_at + DT, new_goal)
     ts2, refs2 = fly(f, retarget_at + DT, retarget_at + 200.0, refs[-1].pos_m)
     assert f.done
-    assert [i for i, _ in f.reached] == list(range(len(f.items)))
+    assert [i for i, _ in f.reached] == list(range(len(wps)))
     times = [t for _, t in f.reached]
     assert times == sorted(times)
     assert_run_smooth(ts + ts2, refs + refs2, 6.0, 3.0)
 
 
-def test_follower_needs_start():
-    f = WaypointFollower(5.0, 2.0, 0.05)
+def test_leg_needs_start():
+    f = LegFollower(5.0, 2.0, 0.05)
     with pytest.raises(RuntimeError):
         f.update(0.0, (0, 0, 0))
-    f.start(0.0, (1, 2, 3), (0, 0, 0), [])
+    f.start(0.0, (1, 2, 3), (0, 0, 0), (1.0, 2.0, 3.0))
+    fly(f, 0.0, 2.0, (1.0, 2.0, 3.0))
     assert f.done and f.update(5.0, (1, 2, 3)).pos_m == (1.0, 2.0, 3.0)

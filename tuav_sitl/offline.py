@@ -24,9 +24,8 @@ from typing import Any, TextIO
 import numpy as np
 
 from companion.flight_controller import VehicleState
-from companion.legs import GotoItem, WaypointFollower
 from companion.mission_items import ItemRefused, nav_commands
-from companion.navigation import FlightMode, NavEvent
+from companion.navigation import FlightMode, NavCommand, NavEvent, NavKind
 from companion.onboard import Companion, OnboardInputs
 from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
 from groundstation.winder_host import WinderHost
@@ -107,12 +106,14 @@ class RunResult:
     scenario: ScenarioParams
     series: dict[str, np.ndarray]
     metrics: dict[str, Any]
-    events: list[tuple[str, int, float]] = field(default_factory=list)
+    events: list[tuple[NavEvent, object, float]] = field(default_factory=list)
+    """The navigator's events: (kind, value, time [s])."""
 
 
 class Reference:
     """The scenario's trajectory, as the ground station's script streams it to the vehicle
-    (the paper's experiments): a trajectory, or waypoints flown one after the other."""
+    (the paper's experiments). A ``waypoints`` scenario holds here until ``start_s``, then
+    flies its waypoints as a mission (:meth:`OfflineRunner`'s script uploads them)."""
 
     def __init__(self, sc: ScenarioParams) -> None:
         #: the trajectory segment last sampled, with the times [from, to) it covers
@@ -120,7 +121,6 @@ class Reference:
         tr = sc.trajectory
         start = tuple(sc.initial.position_m)
         yaw = sc.initial.yaw_rad
-        self.follower: WaypointFollower | None = None
         self.goal: tuple[float, ...] | None = None
         b = SequenceBuilder(start, 0.0, tr.max_speed_m_s, tr.max_acc_m_s2, yaw=yaw)
         if tr.start_s > 0:
@@ -141,33 +141,14 @@ class Reference:
         elif tr.kind == "circle":
             b.circle(tr.centre_m, tr.radius_m, tr.speed_m_s, tr.turns,
                      altitude_m=tr.altitude_m, lead_in_s=tr.lead_in_s)
-        elif tr.kind == "waypoints":
-            self.follower = WaypointFollower(tr.max_speed_m_s, tr.max_acc_m_s2,
-                                             tr.acceptance_radius_m, tr.hold_s)
-            self._items = [GotoItem(tuple(w.position_m)) for w in tr.waypoints]
-            self._start_s = tr.start_s
-            self._started = False
         self.traj = b.build()
 
     def sample(self, t: float, pos: tuple[float, float, float]) -> RefSample:
         """The reference at ``t`` [s] for the vehicle at ``pos`` [m]."""
-        if self.follower is None:
-            lo, hi, segment = self._segment
-            if not lo <= t < hi:
-                self._segment = lo, hi, segment = _active_segment(self.traj, t)
-            return segment.sample(t)
-        if not self._started:
-            if t < self._start_s:
-                return self.traj.sample(t)
-            self.follower.start(t, self.traj.sample(t).pos_m, (0.0, 0.0, 0.0), self._items)
-            self._started = True
-        return self.follower.update(t, pos)
-
-    def events(self) -> list[tuple[str, int, float]]:
-        """Mission events (kind, item index, time [s]) so far."""
-        if self.follower is None:
-            return []
-        return [(e.kind, e.index, e.t_s) for e in self.follower.pop_events()]
+        lo, hi, segment = self._segment
+        if not lo <= t < hi:
+            self._segment = lo, hi, segment = _active_segment(self.traj, t)
+        return segment.sample(t)
 
 
 def _active_segment(traj: Any, t: float) -> tuple[float, float, Any]:
@@ -231,14 +212,28 @@ class OfflineRunner:
             self.plant.x[:] = x0
         #: the navigator's events: (kind, value, time [s])
         self.nav_events: list[tuple[NavEvent, object, float]] = []
-        self.companion = Companion(params, sc.control, sc.navigation,
+        nav_params = sc.navigation
+        tr = sc.trajectory
+        if not sc.flies_mission and tr.kind == "waypoints":
+            # the paper's multi-position runs: its waypoints, at its speed limits
+            nav_params = nav_params.replace(speed_m_s=tr.max_speed_m_s,
+                                            acc_m_s2=tr.max_acc_m_s2,
+                                            acceptance_radius_m=tr.acceptance_radius_m)
+        self.companion = Companion(params, sc.control, nav_params,
                                    on_event=self._on_nav_event)
         self._t = 0.0
         self.companion.start(OnboardInputs(0.0, self._vehicle_state()))
         self.reference: Reference | None = None
         self.home: tuple[float, float, float] | None = None
+        #: a waypoints run's mission, and when the script starts it [s]
+        self._waypoints: list[NavCommand] = []
+        self._waypoints_at_s = math.inf
         if sc.flies_mission:
             self._upload_mission()
+        elif tr.kind == "waypoints":
+            self._waypoints = self._waypoint_commands()
+            self._waypoints_at_s = tr.start_s
+            self.companion.nav.set_mission(self._waypoints)
         else:
             self.reference = Reference(sc)
             why = self.companion.nav.follow(self.reference.sample)
@@ -263,6 +258,20 @@ class OfflineRunner:
                     else (nav.start_mission(),)):
             if why is not None:
                 raise MissionError(f"{self.sc.name}: mission refused: {why}")
+
+    def _waypoint_commands(self) -> list[NavCommand]:
+        """A waypoints run's waypoints as mission items (seq from 1), checked as an upload
+        checks them."""
+        tr, nav = self.sc.trajectory, self.companion.nav
+        commands = []
+        for seq, w in enumerate(tr.waypoints, start=1):
+            why = nav.check_target(w.position_m)
+            if why is not None:
+                raise MissionError(f"{self.sc.name}: waypoint {seq}: {why}")
+            x, y, z = w.position_m
+            commands.append(NavCommand(seq, NavKind.WAYPOINT, (x, y), z, hold_s=tr.hold_s,
+                                       accept_m=tr.acceptance_radius_m))
+        return commands
 
     def _vehicle_state(self) -> VehicleState:
         """What the companion receives: the truth state (docs/architecture.md)."""
@@ -308,6 +317,11 @@ class OfflineRunner:
             if k % n_ctrl == 0:
                 x = plant.x.tolist()
                 self._t = t
+                if t >= self._waypoints_at_s:   # the script starts the waypoints: AUTO
+                    self._waypoints_at_s = math.inf
+                    why = nav.start_mission()
+                    if why is not None:
+                        raise MissionError(f"{sc.name}: waypoints refused: {why}")
                 out = step(OnboardInputs(t, VehicleState(tuple(x[POS]), tuple(x[VEL]),
                                                          tuple(x[QUAT]), tuple(x[RATES]))),
                            diagnostics=True)
@@ -354,19 +368,15 @@ class OfflineRunner:
         bar.close()
         series = log.arrays()
         metrics = compute_metrics(sc, series, self.reference, wall)
-        events: list[tuple[str, int, float]] = []
-        if self.reference is not None and self.reference.follower is not None:
-            events = self.reference.events()
-            metrics["waypoints_reached"] = [
-                {"index": i, "t_s": round(ts, 3)} for kind, i, ts in events
-                if kind == "reached"]
+        reached = [(int(v), ts) for kind, v, ts in self.nav_events if kind is NavEvent.REACHED]
+        if self._waypoints:
+            metrics["waypoints_reached"] = [{"index": seq - 1, "t_s": round(ts, 3)}
+                                            for seq, ts in reached]
         if mission:
-            metrics["items_reached"] = [int(v) for kind, v, _ in self.nav_events
-                                        if kind is NavEvent.REACHED]
-            metrics["items_reached_t_s"] = [round(ts, 3) for kind, _, ts in self.nav_events
-                                            if kind is NavEvent.REACHED]
+            metrics["items_reached"] = [seq for seq, _ in reached]
+            metrics["items_reached_t_s"] = [round(ts, 3) for _, ts in reached]
             metrics["landed_disarmed"] = bool(nav.landed and not nav.armed)
-        return RunResult(sc, series, metrics, events)
+        return RunResult(sc, series, metrics, self.nav_events)
 
 
 class _Log:
