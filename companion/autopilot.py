@@ -90,6 +90,8 @@ class Autopilot:
         self._last_hb_wall = -math.inf
         self._statustext_id = 0
         self._winch_pending: list[tuple[float, Peer, int, int, int]] = []
+        #: the mission's DO_WINCH items sent to the winch and not yet answered (seq)
+        self._mission_winch: list[int] = []
         self._winch_sink: Callable[[Any], None] | None = None
         self._watch: list[Any] = []
         self._watch_gen = -1
@@ -239,9 +241,15 @@ class Autopilot:
         for msg in msgs:
             if msg.get_srcComponent() != cl.WINCH_COMPONENT_ID:
                 continue
-            if (msg.get_type() == "COMMAND_ACK" and msg.command == M.MAV_CMD_DO_WINCH
-                    and self._winch_acked(msg)):
-                continue   # answered from the autopilot, to whom it was sent
+            if msg.get_type() == "COMMAND_ACK" and msg.command == M.MAV_CMD_DO_WINCH:
+                if self._mission_winch and msg.target_component == cl.AUTOPILOT_COMPONENT_ID:
+                    seq = self._mission_winch.pop(0)
+                    if msg.result != M.MAV_RESULT_ACCEPTED:
+                        self.statustext(M.MAV_SEVERITY_WARNING,
+                                        f"Mission: winch refused item {seq} ({msg.result})")
+                    continue   # the autopilot's own command
+                if self._winch_acked(msg):
+                    continue   # answered from the autopilot, to whom it was sent
             self.io.send_bytes(msg.get_msgbuf())
             if msg.get_type() == "WINCH_STATUS" and self._winch_sink is not None:
                 self._winch_sink(msg)
@@ -301,7 +309,7 @@ class Autopilot:
 
     # ----- navigator events
 
-    def _nav_event(self, kind: str, value: object) -> None:
+    def _nav_event(self, kind: NavEvent, value: object) -> None:
         if kind == NavEvent.CURRENT:
             self.io.send(self.streams.mission_current())
         elif kind == NavEvent.REACHED:
@@ -318,6 +326,19 @@ class Autopilot:
         elif kind == NavEvent.DISARMED:
             self.statustext(M.MAV_SEVERITY_INFO, "Disarmed")
             self.send_heartbeat()
+        elif kind == NavEvent.WINCH:
+            self._mission_winch_command(*value)
+
+    def _mission_winch_command(self, seq: int, params: tuple[float, float, float, float]
+                               ) -> None:
+        """A mission's DO_WINCH item: the command to the winch, from the autopilot."""
+        if self.component is None or not self.component.connected:
+            self.statustext(M.MAV_SEVERITY_WARNING, f"Mission: item {seq}: no winch")
+            return
+        self.component.send(M.MAVLink_command_long_message(
+            cl.SYSTEM_ID, cl.WINCH_COMPONENT_ID, M.MAV_CMD_DO_WINCH, 0, *params, 0.0, 0.0,
+            0.0))
+        self._mission_winch.append(seq)
 
     def armed_changed(self) -> None:
         """Call after arming on the ground: home is set there, and announced."""

@@ -104,6 +104,12 @@ class ComponentServer:
                             *_LPN_ID) + payload[:n]
         return _MAGIC + body + _CRC.pack(mavlink_crc(body + _LPN_CRC_EXTRA))
 
+    def send(self, msg: mavlink2.MAVLink_message) -> None:
+        """``msg`` from this link's system and component (the autopilot's own commands to
+        the winch)."""
+        if self.conn is not None:
+            self.send_bytes(msg.pack(self.mav))
+
     @property
     def connected(self) -> bool:
         """Whether a component is connected."""

@@ -65,12 +65,24 @@ def nav_command(seq: int, item: MissionItem, origin: Origin, nav: Navigator) -> 
     Waypoints: param1 hold [s], param2 acceptance radius [m] (0: the navigator's).
     Loiter turns: param1 turns, param3 radius [m] (positive clockwise, at least 0.5 m).
     Take-off: the altitude must be above the ground. DO_CHANGE_SPEED: param2 [m/s] > 0.
+    DO_WINCH: param1 instance, param2 action (WINCH_ACTIONS), param3 length [m], param4
+    rate [m/s], handed to the winch as the item begins.
     """
     cmd, frame = item.command, item.frame
     if cmd == M.MAV_CMD_DO_CHANGE_SPEED:
         if not (finite(item.param2) and item.param2 > 0):
             raise ItemRefused(M.MAV_MISSION_INVALID_PARAM2, "speed must be > 0")
         return NavCommand(seq, NavKind.SPEED, speed_m_s=float(item.param2))
+    if cmd == M.MAV_CMD_DO_WINCH:
+        instance, action, length, rate = item.param1, item.param2, item.param3, item.param4
+        if not (finite(action) and action == int(action)
+                and int(action) in mavlink2.enums["WINCH_ACTIONS"]):
+            raise ItemRefused(M.MAV_MISSION_INVALID_PARAM2, f"winch: bad action {action}")
+        if not finite(instance):
+            raise ItemRefused(M.MAV_MISSION_INVALID_PARAM1, "winch: instance is not a number")
+        # the winch checks length and rate when it receives them
+        return NavCommand(seq, NavKind.WINCH, winch=(float(instance), float(action),
+                                                     float(length), float(rate)))
     if cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
         return NavCommand(seq, NavKind.RTL)
     kind = _KINDS.get(cmd)

@@ -130,6 +130,7 @@ class NavKind(Enum):
     LAND = "land"                    # NAV_LAND
     RTL = "rtl"                      # NAV_RETURN_TO_LAUNCH
     SPEED = "speed"                  # DO_CHANGE_SPEED
+    WINCH = "winch"                  # DO_WINCH: handed to the winch as the item begins
 
 
 #: Steps that move the vehicle (a mission of none has nothing to fly).
@@ -154,6 +155,8 @@ class NavCommand:
     circle_radius_m: float = 0.0
     clockwise: bool = True
     speed_m_s: float | None = None
+    winch: tuple[float, float, float, float] | None = None
+    """DO_WINCH's (instance, action, length [m], rate [m/s]), as MAV_CMD_DO_WINCH's param1-4."""
 
 
 class NavEvent(Enum):
@@ -166,6 +169,8 @@ class NavEvent(Enum):
     LANDED = "landed"            # (the landing item's seq, or None)
     DISARMED = "disarmed"
     ERROR = "error"              # a plan could not be flown; holding instead (text)
+    WINCH = "winch"              # a DO_WINCH item began: (seq, (instance, action, length,
+                                 # rate)) for the winch
 
 
 class MotorState(Enum):
@@ -788,7 +793,7 @@ class Navigator:
 
     def _first_nav(self) -> NavCommand:
         for c in self.mission[self.mission_index:] or self.mission:
-            if c.kind is not NavKind.SPEED:
+            if c.kind in NAV_MOVES:
                 return c
         return self.mission[0]
 
@@ -808,6 +813,11 @@ class Navigator:
             if c.kind is NavKind.SPEED:
                 if c.speed_m_s is not None and c.speed_m_s > 0:
                     self._speed_override = c.speed_m_s
+                self.mission_index += 1
+                continue
+            if c.kind is NavKind.WINCH:
+                # as ArduPilot's DO_ commands: run as the item begins, then the next item
+                self._emit(NavEvent.WINCH, (c.seq, c.winch))
                 self.mission_index += 1
                 continue
             self._fly_item(c)

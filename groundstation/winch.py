@@ -67,6 +67,7 @@ from typing import NamedTuple
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from groundstation.winder_control import WinderCommand
 from groundstation.winder_host import WinderHost
 from tuavdefs import can_protocol as cp
 from tuavdefs import component_link as cl
@@ -282,6 +283,8 @@ class Winch:
         self._hold_m = math.nan
         self._limit_noticed = False
         self._lock_noticed = False
+        #: the torque law's last output (torque, Lyapunov function, ...), for diagnostics
+        self.last_command: WinderCommand | None = None
         # axis
         self._arm_pending = False
         # reporting
@@ -488,15 +491,17 @@ class Winch:
                 pos, vel = uav
                 step = self.host.update(length, omega, tension, pos, vel)
                 self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
-                torque = step.torque_n_m
+                command = step.command
             else:
                 self.ref_m, self.ref_rate_m_s = self._hold_m, 0.0
-                torque = self.host.controller.update(self.dt_s, length, omega, tension,
-                                                     self._hold_m, 0.0).torque_n_m
+                command = self.host.controller.update(self.dt_s, length, omega, tension,
+                                                      self._hold_m, 0.0)
         else:
             self._advance_reference(out)
-            torque = self.host.controller.update(self.dt_s, length, omega, tension,
-                                                 self.ref_m, self.ref_rate_m_s).torque_n_m
+            command = self.host.controller.update(self.dt_s, length, omega, tension,
+                                                  self.ref_m, self.ref_rate_m_s)
+        self.last_command = command
+        torque = command.torque_n_m
         return torque if math.isfinite(torque) else 0.0
 
     def _advance_reference(self, out: WinchOutput) -> None:

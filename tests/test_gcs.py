@@ -48,8 +48,9 @@ def flight(tmp_path_factory):
     """One flight shared by the tests below, in order; records what each step saw."""
     tmp = tmp_path_factory.mktemp("gcs")
     udp_port = free_port(socket.SOCK_DGRAM)
-    veh = Vehicle(tmp, udp_port=udp_port)
-    rec: dict = {"veh": veh, "udp_port": udp_port}
+    component_port = free_port()
+    veh = Vehicle(tmp, udp_port=udp_port, extra=("--component-port", str(component_port)))
+    rec: dict = {"veh": veh, "udp_port": udp_port, "component_port": component_port}
     try:
         m = veh.connect()
         rec["m"] = m
@@ -313,14 +314,20 @@ def test_udp_endpoint_pushes_and_answers(flight):
 
 
 def test_mission_in_auto_reaches_every_item_then_lands_and_disarms(flight):
+    """A mission with a DO_WINCH item: the autopilot hands it to the winch (a pymavlink
+    component 169 on the component link here), which answers; the nav items are reached in
+    order and the vehicle lands and disarms."""
     m = flight["m"]
     items = [
         (M.MAV_CMD_NAV_TAKEOFF, REL, 0, 0, 0, 0, 0, 0, 10),
         (M.MAV_CMD_NAV_WAYPOINT, REL, 0, 0, 0, 0, *ll(5.0, 0.0), 10),
+        (M.MAV_CMD_DO_WINCH, M.MAV_FRAME_MISSION, 1, 1, 0.5, 0.25, 0, 0, 0),
         (M.MAV_CMD_NAV_WAYPOINT, REL, 1, 0, 0, 0, *ll(5.0, 6.0), 12),
         (M.MAV_CMD_NAV_WAYPOINT, REL, 0, 0, 0, 0, *ll(-3.0, 6.0), 12),
         (M.MAV_CMD_NAV_LAND, REL, 0, 0, 0, 0, 0, 0, 0),
     ]
+    winch = mavutil.mavlink_connection(f"tcp:127.0.0.1:{flight['component_port']}",
+                                       source_system=1, source_component=169)
     ack = upload_mission(m, items)
     assert ack.type == M.MAV_MISSION_ACCEPTED
     got = download_mission(m)
@@ -328,27 +335,46 @@ def test_mission_in_auto_reaches_every_item_then_lands_and_disarms(flight):
     m.set_mode("AUTO")
     seen: list = []
     reached: list[int] = []
+    to_winch: list = []
     disarmed = None
     end = time.monotonic() + 180
-    while time.monotonic() < end:
-        msg = wait_msg(m, ["MISSION_ITEM_REACHED", "HEARTBEAT"], timeout=5, seen=seen)
-        if msg is None:
-            continue
-        if msg.get_type() == "MISSION_ITEM_REACHED":
-            reached.append(msg.seq)
-            if msg.seq == 3:
-                pos = local(m.messages["GLOBAL_POSITION_INT"])
-                assert math.dist(pos, (5.0, 6.0, 12.0)) < 0.6
-        elif msg.get_srcComponent() == 1 and not msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED:
-            disarmed = msg
-            break
-    assert reached == [1, 2, 3, 4, 5]
+    try:
+        while time.monotonic() < end:
+            cmd = winch.recv_match(type="COMMAND_LONG", blocking=False)
+            if cmd is not None:
+                to_winch.append(cmd)
+                winch.mav.command_ack_send(cmd.command, M.MAV_RESULT_ACCEPTED, 0, 0,
+                                           cmd.get_srcSystem(), cmd.get_srcComponent())
+            msg = wait_msg(m, ["MISSION_ITEM_REACHED", "HEARTBEAT"], timeout=5, seen=seen)
+            if msg is None:
+                continue
+            if msg.get_type() == "MISSION_ITEM_REACHED":
+                reached.append(msg.seq)
+                if msg.seq == 4:
+                    pos = local(m.messages["GLOBAL_POSITION_INT"])
+                    assert math.dist(pos, (5.0, 6.0, 12.0)) < 0.6
+            elif (msg.get_srcComponent() == 1
+                  and not msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED):
+                disarmed = msg
+                break
+    finally:
+        winch.close()
+    assert reached == [1, 2, 4, 5, 6]          # a DO_ item is run, not reached
     assert disarmed is not None
+    assert len(to_winch) == 1
+    w = to_winch[0]
+    assert (w.command, w.target_system, w.target_component) == (M.MAV_CMD_DO_WINCH, 1, 169)
+    assert (w.get_srcSystem(), w.get_srcComponent()) == (1, 1)
+    assert (w.param1, w.param2, w.param3, w.param4) == (1, 1, 0.5, 0.25)
+    # the winch's answer to the autopilot's own command is not routed to ground stations
+    assert not any(x.get_type() == "COMMAND_ACK" and x.command == M.MAV_CMD_DO_WINCH
+                   for x in seen)
     g = wait_msg(m, "GLOBAL_POSITION_INT")
     assert local(g)[2] < 0.3
     assert math.hypot(local(g)[0] + 3.0, local(g)[1] - 6.0) < 0.3
     texts = [s.text for s in seen if s.get_type() == "STATUSTEXT"]
     assert any("Reached command #2" in t for t in texts)
+    assert not any("winch" in t for t in texts)
     assert wait_msg(m, "EXTENDED_SYS_STATE").landed_state == M.MAV_LANDED_STATE_ON_GROUND
 
 

@@ -134,3 +134,14 @@ def test_mission_home_is_on_the_ground(nav):
     x, y = at(3.0, 4.0)
     assert (item.command, item.frame, item.x, item.y, item.z) == (
         M.MAV_CMD_NAV_WAYPOINT, M.MAV_FRAME_GLOBAL, x, y, ORIGIN[2])
+
+
+def test_do_winch_items_become_winch_commands_and_bad_actions_are_refused():
+    nav = Navigator(NavigationParams(), 0.2, 50.0)
+    cmd = nav_command(3, MissionItem(M.MAV_CMD_DO_WINCH, M.MAV_FRAME_MISSION, param1=1.0,
+                                     param2=1.0, param3=2.0, param4=0.5), ORIGIN, nav)
+    assert (cmd.seq, cmd.kind, cmd.winch) == (3, NavKind.WINCH, (1.0, 1.0, 2.0, 0.5))
+    with pytest.raises(ItemRefused) as e:
+        nav_command(3, MissionItem(M.MAV_CMD_DO_WINCH, M.MAV_FRAME_MISSION, param1=1.0,
+                                   param2=99.0), ORIGIN, nav)
+    assert e.value.result == M.MAV_MISSION_INVALID_PARAM2

@@ -7,6 +7,7 @@ from multiprocessing import get_context
 import numpy as np
 import pytest
 
+from companion.navigation import NavEvent
 from tuav_sitl.offline import RunResult, run_scenario, write_outputs
 from tuav_sitl.scenario import ScenarioParams, load_scenario, shipped_scenarios
 from tuavdefs.paramspec import ParameterError, load_toml
@@ -206,3 +207,37 @@ def test_bad_missions_fail_at_load_or_upload_with_the_reason(tmp_path):
         OfflineRunner(far)
     with pytest.raises(ParameterError, match="mission\\[0\\].command"):
         ScenarioParams.from_dict({"mission": [{"command": "NAV_FLIP"}]})
+
+
+def test_a_mission_s_do_winch_reaches_the_winch_offline():
+    """DO_WINCH items offline go to the ground station's own winch logic (the
+    groundstation.winch.Winch the process runs): relative length pays 2 m more out, relaxed
+    follows L-bar again; the DO items are run, not reached, and the tether stays slack."""
+    from tuav_sitl.offline import OfflineRunner
+
+    item = {"command": "NAV_WAYPOINT", "param1": 8.0}
+    sc = ScenarioParams.from_dict({
+        "name": "winch", "duration_s": 120.0, "initial": {"position_m": [2.0, 0.0, 0.0]},
+        "mission": [
+            {"command": "NAV_TAKEOFF", "altitude_m": 10.0},
+            {"command": "DO_WINCH", "param1": 1.0, "param2": 1.0, "param3": 2.0,
+             "param4": 0.5},
+            {**item, "position_m": [4.0, 0.0, 10.0]},
+            {"command": "DO_WINCH", "param1": 1.0, "param2": 0.0},
+            {**item, "position_m": [2.0, 0.0, 10.0]},
+            {"command": "NAV_LAND"}]})
+    runner = OfflineRunner(sc)
+    res = runner.run()
+    m, s = res.metrics, res.series
+    assert m["items_reached"] == [1, 3, 5, 6] and m["landed_disarmed"]
+    assert m["min_tether_slack_m"] > 0.0
+    t_wp, t_back = m["items_reached_t_s"][1], m["items_reached_t_s"][2]
+    slack = s["length"] - np.linalg.norm(s["pos"], axis=1)
+    at = lambda when: int(np.searchsorted(s["t"], when))   # noqa: E731
+    t_cmd = m["items_reached_t_s"][0]   # DO_WINCH runs as the take-off is reached
+    i = at(t_wp + 6.0)   # held at the waypoint: 2 m more than when the command came
+    assert s["length"][i] - s["length"][at(t_cmd)] == pytest.approx(2.0, abs=0.02)
+    j = at(t_back + 4.0)   # relaxed again: the slack of L-bar
+    assert slack[j] < 0.3 < slack[i]
+    assert [k for k, _, _ in res.events].count(NavEvent.WINCH) == 2
+    assert runner.ground.notices == []

@@ -22,12 +22,14 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.flight_controller import VehicleState
 from companion.mission_items import ItemRefused, nav_commands
 from companion.navigation import FlightMode, NavCommand, NavEvent, NavKind
 from companion.onboard import Companion, OnboardInputs
 from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
+from groundstation.winch import CommandRequest, Winch, WinchStatusReport
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
 from sitl.plant import (
@@ -43,6 +45,8 @@ from sitl.plant import (
 )
 from sitl.trim import hover_trim
 from tuav_sitl.scenario import ScenarioParams
+from tuavdefs import can_protocol as cp
+from tuavdefs import component_link as cl
 from tuavdefs.frames import quat_to_euler, wrap_pi
 from tuavdefs.paramspec import to_dict
 
@@ -175,6 +179,61 @@ _NAN3 = (math.nan,) * 3
 _ORIGIN = (0.0, 0.0, 0.0)
 
 
+class GroundStation:
+    """The ground station offline: the winch component the ground-station process runs
+    (:class:`groundstation.winch.Winch`: ``DO_WINCH`` modes, brake, L-bar and the torque
+    law), fed the CAN frames the plant's winder node would send (the load cell's tension,
+    then the axis's encoder estimates) and the UAV's position the component link brings;
+    its torque and axis-state frames are read as the plant's axis reads them."""
+
+    def __init__(self, winch: Winch) -> None:
+        self.winch = winch
+        self._r_w = winch.r_w
+        self._encoder_id = cp.frame_id(winch.node, cp.Cmd.GET_ENCODER_ESTIMATES)
+        self._tension_id = cp.frame_id(winch.sensor_node, cp.SensorCmd.WINCH_TENSION)
+        self._torque_id = cp.frame_id(winch.node, cp.Cmd.SET_INPUT_TORQUE)
+        self._state_id = cp.frame_id(winch.node, cp.Cmd.SET_AXIS_STATE)
+        self.torque_n_m = 0.0
+        """The last torque asked of the axis [N m]."""
+        self.axis_enabled = True
+        """Whether the axis is in closed-loop control (False: IDLE, the drum braked)."""
+        self.notices: list[tuple[float, str]] = []
+        """What the winch said (time [s], text)."""
+
+    def period(self, t_s: float, length_m: float, drum_rate_rad_s: float,
+               drum_tension_n: float, uav_pos_m: tuple[float, float, float],
+               uav_vel_m_s: tuple[float, float, float]) -> WinchStatusReport | None:
+        """One winder period at ``t_s`` [s]; returns the WINCH_STATUS it sends, if any."""
+        w = self.winch
+        w.set_uav((uav_pos_m, uav_vel_m_s))
+        w.handle_frame(t_s, self._tension_id,
+                       cp.encode_winch_tension(drum_tension_n, not self.axis_enabled))
+        rev = 1.0 / (2.0 * math.pi)
+        out = w.handle_frame(t_s, self._encoder_id, cp.encode_encoder_estimates(
+            length_m / self._r_w * rev, drum_rate_rad_s * rev))
+        if out is None:
+            return None
+        for frame in out.frames:
+            if frame.arbitration_id == self._torque_id:
+                self.torque_n_m = cp.decode_set_input_torque(frame.data)
+            elif frame.arbitration_id == self._state_id:
+                self.axis_enabled = (cp.decode_set_axis_state(frame.data)
+                                     == cp.AxisState.CLOSED_LOOP_CONTROL)
+                if not self.axis_enabled:
+                    self.torque_n_m = 0.0
+        self.notices.extend((t_s, n.text) for n in out.notices)
+        return out.status
+
+    def command(self, t_s: float, params: tuple[float, float, float, float]) -> int:
+        """MAV_CMD_DO_WINCH (instance, action, length [m], rate [m/s]) from the vehicle, as
+        the component link brings it; returns the COMMAND_ACK's result."""
+        reply = self.winch.command(CommandRequest(
+            mavlink2.MAV_CMD_DO_WINCH, cl.SYSTEM_ID, cl.WINCH_COMPONENT_ID, cl.SYSTEM_ID,
+            cl.AUTOPILOT_COMPONENT_ID, *params), t_s)
+        self.notices.extend((t_s, n.text) for n in reply.notices)
+        return reply.result
+
+
 class MissionError(ValueError):
     """A scenario's mission the vehicle refuses (as it would refuse the upload)."""
 
@@ -197,6 +256,8 @@ class OfflineRunner:
         self.n_wind = round(sc.physics_rate_hz / sc.winder_control.rate_hz)
         self.winder_host = WinderHost(sc.winder_control, sc.lbar, params.winder,
                                       params.tether, g)
+        self.ground = GroundStation(Winch(self.winder_host, params.winder, params.tether, g,
+                                          sc.winch))
         start = tuple(sc.initial.position_m)
         gear = params.vehicle.gear_height_m
         self.plant = Plant(params, dt_s=self.dt)
@@ -243,6 +304,12 @@ class OfflineRunner:
 
     def _on_nav_event(self, kind: NavEvent, value: object) -> None:
         self.nav_events.append((kind, value, self._t))
+        if kind is NavEvent.WINCH:   # the autopilot sends it to the winch
+            seq, params = value
+            result = self.ground.command(self._t, params)
+            if result != mavlink2.MAV_RESULT_ACCEPTED:
+                self.ground.notices.append((self._t, f"Mission: winch refused item {seq} "
+                                                     f"({result})"))
 
     def _upload_mission(self) -> None:
         """What a ground station does: upload the mission, AUTO, arm (from the ground; a
@@ -283,7 +350,8 @@ class OfflineRunner:
         """Run the scenario; returns the time series and metrics. A mission ends when the
         vehicle has landed and disarmed (or at ``duration_s``)."""
         sc, plant = self.sc, self.plant
-        companion, winder_host = self.companion, self.winder_host
+        companion, ground = self.companion, self.ground
+        winch = ground.winch
         nav = companion.nav
         r_w = self.params.winder.drum_radius_m
         dt, n_wind, n_ctrl = self.dt, self.n_wind, self.n_ctrl
@@ -293,8 +361,8 @@ class OfflineRunner:
         bar = ProgressBar(sc.duration_s, progress)
         inputs = PlantInputs()
         winder_torque, winder_lyap, lbar_m, lbar_rate = 0.0, 0.0, 0.0, 0.0
-        companion.winch_report(0.0, plant.tether_length_m, 0.0,
-                               plant.tether_forces().drum_tension_n)
+        winder_enabled = True
+        g = self.params.environment.gravity_m_s2
         mission = sc.flies_mission
         advance, tether_forces = plant.advance, plant.tether_forces
         step, add_row = companion.step, log.add
@@ -308,12 +376,15 @@ class OfflineRunner:
                 drum_tension = tether_forces().drum_tension_n
                 x = plant.x.tolist()
                 length, drum_rate = r_w * x[DRUM_ANGLE], x[DRUM_RATE]
-                ws = winder_host.update(length, drum_rate, drum_tension, tuple(x[POS]),
-                                        tuple(x[VEL]))
-                winder_torque, winder_lyap = ws.torque_n_m, ws.command.lyapunov
-                lbar_m, lbar_rate = ws.lbar_m, ws.lbar_rate_m_s
-                # ... and the winch's report reaches the companion
-                companion.winch_report(t, length, drum_rate * r_w, drum_tension)
+                status = ground.period(t, length, drum_rate, drum_tension, tuple(x[POS]),
+                                       tuple(x[VEL]))
+                winder_torque, winder_enabled = ground.torque_n_m, ground.axis_enabled
+                cmd = winch.last_command
+                winder_lyap = cmd.lyapunov if cmd is not None else math.nan
+                lbar_m, lbar_rate = winch.reference()
+                if status is not None:   # WINCH_STATUS reaches the companion
+                    companion.winch_report(t, status.line_length_m, status.speed_m_s,
+                                           status.tension_kg * g)
             if k % n_ctrl == 0:
                 x = plant.x.tolist()
                 self._t = t
@@ -326,7 +397,8 @@ class OfflineRunner:
                                                          tuple(x[QUAT]), tuple(x[RATES]))),
                            diagnostics=True)
                 state, fs, ref = out.state, out.flight, out.reference
-                inputs = PlantInputs(out.rotor_commands, out.armed, winder_torque, True)
+                inputs = PlantInputs(out.rotor_commands, out.armed, winder_torque,
+                                     winder_enabled)
                 truth = tether_forces()
                 info = truth.info
                 if fs is not None:
@@ -356,7 +428,7 @@ class OfflineRunner:
                     break   # landed and disarmed: the mission is over
             elif fresh:   # the winder's new torque, the rotors' commands held
                 inputs = PlantInputs(inputs.rotor_commands, inputs.armed, winder_torque,
-                                     inputs.winder_enabled)
+                                     winder_enabled)
             if k >= n_steps:
                 break
             # the plant runs with the inputs held up to the next control or winder step, in

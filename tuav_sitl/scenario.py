@@ -26,6 +26,7 @@ from companion.gains import FlightControlParams
 from companion.mission_protocol import MissionItem, degrees_to_e7, home_item
 from companion.navigation import NavigationParams
 from groundstation.lbar import LBarParams
+from groundstation.winch import WinchParams
 from groundstation.winder_control import WinderControlParams
 from tuavdefs.frames import local_enu_to_global
 from tuavdefs.params import (
@@ -90,7 +91,7 @@ class TrajectoryParams(Params):
 MISSION_COMMANDS: dict[str, int] = {
     name: getattr(mavlink2, f"MAV_CMD_{name}")
     for name in ("NAV_TAKEOFF", "NAV_WAYPOINT", "NAV_LOITER_TURNS", "NAV_LOITER_TIME",
-                 "NAV_LAND", "NAV_RETURN_TO_LAUNCH", "DO_CHANGE_SPEED")}
+                 "NAV_LAND", "NAV_RETURN_TO_LAUNCH", "DO_CHANGE_SPEED", "DO_WINCH")}
 #: The global frames a mission item may be given in (without ``MAV_FRAME_``).
 MISSION_FRAMES: dict[str, int] = {
     name: getattr(mavlink2, f"MAV_FRAME_{name}")
@@ -173,6 +174,8 @@ class ScenarioParams(Params):
     winder_control: WinderControlParams = quantity(
         WinderControlParams(), "", "winder control")
     lbar: LBarParams = quantity(LBarParams(), "", "the L-bar estimator")
+    winch: WinchParams = quantity(WinchParams(), "", "the winch component (its WINCH_STATUS "
+                                  "rate: what the companion's tether model hears)")
 
     def check(self) -> None:
         if self.mission and self.mission_file:
