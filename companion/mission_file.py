@@ -21,13 +21,19 @@ from companion.mission_protocol import (
     from_message,
     to_message,
 )
+from tuavdefs.paramspec import ParameterError
 
 HEADER = "QGC WPL 110"
 _FIELDS = 12
 
 
-class MissionFileError(ValueError):
-    """A mission file that cannot be read, said with its line number."""
+class MissionFileError(ParameterError):
+    """A mission file that cannot be read, said with its line number (``field``: the
+    file and line)."""
+
+    def __init__(self, message: str) -> None:
+        where, _, text = message.partition(": ")
+        super().__init__(where, text)
 
 
 class _Row:

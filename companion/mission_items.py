@@ -41,11 +41,13 @@ _KINDS = {M.MAV_CMD_NAV_WAYPOINT: NavKind.WAYPOINT,
 
 class ItemRefused(ValueError):  # noqa: N818 - the name the mission runners use
     """A mission item the vehicle cannot fly: ``result`` is the MAV_MISSION_RESULT to
-    answer its upload with, the message (``str(exc)``) says why."""
+    answer its upload with, the message (``str(exc)``) says why; ``seq`` is the item's
+    sequence number when :func:`nav_commands` refused it (else None)."""
 
-    def __init__(self, result: int, text: str) -> None:
+    def __init__(self, result: int, text: str, seq: int | None = None) -> None:
         super().__init__(text)
         self.result = result
+        self.seq = seq
 
 
 def finite(x: Any) -> bool:
@@ -133,8 +135,17 @@ def nav_command(seq: int, item: MissionItem, origin: Origin, nav: Navigator) -> 
 def nav_commands(items: Sequence[MissionItem], origin: Origin,
                  nav: Navigator) -> list[NavCommand]:
     """The navigator's commands of a whole mission, ``items[0]`` being home (skipped, as
-    ArduPilot stores it); raises :class:`ItemRefused` for the first item refused."""
-    return [nav_command(seq, item, origin, nav) for seq, item in enumerate(items) if seq > 0]
+    ArduPilot stores it); raises :class:`ItemRefused` for the first item refused, saying
+    which ("item 3: ...")."""
+    out = []
+    for seq, item in enumerate(items):
+        if seq == 0:
+            continue
+        try:
+            out.append(nav_command(seq, item, origin, nav))
+        except ItemRefused as exc:
+            raise ItemRefused(exc.result, f"item {seq}: {exc}", seq) from None
+    return out
 
 
 def mission_home(home_m: Sequence[float], origin: Origin) -> MissionItem:

@@ -48,7 +48,7 @@ from tuav_sitl.scenario import ScenarioParams
 from tuavdefs import can_protocol as cp
 from tuavdefs import component_link as cl
 from tuavdefs.frames import quat_to_euler, wrap_pi
-from tuavdefs.paramspec import to_dict
+from tuavdefs.paramspec import ParameterError, to_dict
 
 #: Tether regimes in which part of the tether lies on the ground.
 GROUND_REGIMES = (int(CatenaryRegime.TOUCHDOWN), int(CatenaryRegime.SLACK),
@@ -234,8 +234,9 @@ class GroundStation:
         return reply.result
 
 
-class MissionError(ValueError):
-    """A scenario's mission the vehicle refuses (as it would refuse the upload)."""
+class MissionError(ParameterError):
+    """A scenario's mission (or trajectory) the vehicle refuses, as it would refuse the
+    upload: ``field`` names the scenario's mission."""
 
 
 class OfflineRunner:
@@ -299,8 +300,9 @@ class OfflineRunner:
             self.reference = Reference(sc)
             why = self.companion.nav.follow(self.reference.sample)
             if why is not None:
-                raise MissionError(f"{sc.name}: the trajectory cannot be flown: {why} "
-                                   "(does [initial] start on the ground?)")
+                raise MissionError(f"{sc.name}.trajectory",
+                                   f"the trajectory cannot be flown: {why} (does [initial] "
+                                   "start on the ground?)")
 
     def _on_nav_event(self, kind: NavEvent, value: object) -> None:
         self.nav_events.append((kind, value, self._t))
@@ -319,12 +321,12 @@ class OfflineRunner:
         try:
             commands = nav_commands(items, self.home, nav)
         except ItemRefused as exc:
-            raise MissionError(f"{self.sc.name}: mission: {exc}") from None
+            raise MissionError(f"{self.sc.name}.mission", str(exc)) from None
         nav.set_mission(commands)
         for why in ((nav.set_mode(FlightMode.AUTO), nav.arm()) if nav.landed
                     else (nav.start_mission(),)):
             if why is not None:
-                raise MissionError(f"{self.sc.name}: mission refused: {why}")
+                raise MissionError(f"{self.sc.name}.mission", f"refused: {why}")
 
     def _waypoint_commands(self) -> list[NavCommand]:
         """A waypoints run's waypoints as mission items (seq from 1), checked as an upload
@@ -334,7 +336,7 @@ class OfflineRunner:
         for seq, w in enumerate(tr.waypoints, start=1):
             why = nav.check_target(w.position_m)
             if why is not None:
-                raise MissionError(f"{self.sc.name}: waypoint {seq}: {why}")
+                raise MissionError(f"{self.sc.name}.trajectory.waypoints[{seq - 1}]", str(why))
             x, y, z = w.position_m
             commands.append(NavCommand(seq, NavKind.WAYPOINT, (x, y), z, hold_s=tr.hold_s,
                                        accept_m=tr.acceptance_radius_m))
@@ -392,7 +394,7 @@ class OfflineRunner:
                     self._waypoints_at_s = math.inf
                     why = nav.start_mission()
                     if why is not None:
-                        raise MissionError(f"{sc.name}: waypoints refused: {why}")
+                        raise MissionError(f"{sc.name}.trajectory", f"waypoints refused: {why}")
                 out = step(OnboardInputs(t, VehicleState(tuple(x[POS]), tuple(x[VEL]),
                                                          tuple(x[QUAT]), tuple(x[RATES]))),
                            diagnostics=True)
