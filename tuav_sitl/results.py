@@ -33,6 +33,7 @@ FIGURES_FOR_DOCS = {
     "tether-length": ["tether_length.png"],
     "single-position": ["snapshots.png"],
     "multi-position": ["snapshots.png"],
+    "mission": ["path_3d.png"],
 }
 
 
@@ -98,8 +99,9 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
     lines += [
         "",
         "In every scenario: the tether is never taut (`min_tether_slack_m` > 0), never lies "
-        "on the ground (`tether_ground_contact_fraction` = 0), and the rotors saturate less "
-        "than 1 % of the time:",
+        "on the ground (`tether_ground_contact_fraction` = 0; a mission starts and ends on "
+        "the ground, where it lies), and the rotors saturate less than 1 % of the time in "
+        "flight:",
         "",
         "| scenario | position RMSE [m] | max error [m] | attitude RMSE [rad] | "
         "tether-length RMSE [m] | min slack [m] | on ground | max tension [N] | "
@@ -134,6 +136,16 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
         for n, items in wp.items():
             lines.append(f"- {n}: " + ", ".join(f"#{w['index']} at {w['t_s']:.1f} s"
                                                 for w in items))
+    missions = {n: metrics[n] for n in names if "items_reached" in metrics[n]}
+    if missions:
+        lines += ["", "## Missions", "",
+                  "Flown through the navigator from the ground, armed in AUTO "
+                  "(docs/usage.md):", ""]
+        for n, m in missions.items():
+            reached = ", ".join(f"#{seq} at {t:.1f} s" for seq, t in
+                                zip(m["items_reached"], m["items_reached_t_s"], strict=True))
+            end = "landed and disarmed" if m["landed_disarmed"] else "NOT landed and disarmed"
+            lines.append(f"- {n}: items reached {reached}; {end}")
     if figures:
         lines += ["", "## Figures", ""]
         from tuav_sitl.figures import FIGURE_CAPTIONS
