@@ -32,6 +32,8 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numpy as np
+
 from tuavdefs.jit import njit
 from tuavdefs.paramspec import Params, quantity
 
@@ -47,6 +49,17 @@ class LBarParams(Params):
         "the winder", ge=0, lt=math.pi / 2)
     min_slack_m: float = quantity(
         0.05, "m", "least length above the straight-line distance, always", gt=0)
+    tension_trim_rate_m_s: float = quantity(
+        2.0, "m/s", "tension trim: how fast extra tether is paid out (or taken back) per "
+        "unit of ln(measured / expected drum tension) beyond the dead band, so the tether "
+        "keeps its slack when the UAV's reported position is off (0: off)", ge=0)
+    tension_trim_max_rate_m_s: float = quantity(
+        1.0, "m/s", "tension trim: fastest change of the offset", gt=0)
+    tension_trim_max_m: float = quantity(
+        5.0, "m", "tension trim: largest offset either way", ge=0)
+    tension_trim_band: float = quantity(
+        0.1, "1", "tension trim: dead band of ln(measured / expected tension) within which "
+        "the offset holds", ge=0)
 
 
 #: Width of the smooth maxima [m]: over this range the larger argument takes over.
@@ -213,6 +226,51 @@ def lbar_kernel(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     return length, speed * (fwd - back) / (2.0 * step), a, guess
 
 
+@njit
+def expected_drum_tension_n(a_m: float, h_m: float, v_m: float, w_n_m: float) -> float:
+    """The tension [N] at the winder's exit of the inelastic catenary of parameter ``a_m``
+    [m] spanning ``h_m`` across and ``v_m`` up [m], weighing ``w_n_m`` [N/m]:
+    H sqrt(1 + s^2), H = w a, s the exit slope; NaN where the catenary is degenerate
+    (vertical, or a infinite)."""
+    if not (math.isfinite(a_m) and h_m > 1e-6):
+        return math.nan
+    slope = exit_slope(a_m, h_m, v_m)
+    return w_n_m * a_m * math.sqrt(1.0 + slope * slope)
+
+
+@njit
+def tension_trim(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, a_m: float, px: float,
+                 py: float, pz: float, w_n_m: float, tension_n: float) -> None:
+    """One period of the tension trim (docs/control.md §3): the extra length ``trim_s[0]``
+    [m] paid out beyond L-bar, and its rate ``trim_s[1]`` [m/s].
+
+    With e = ln(T / T_expected), T the drum tension measured and T_expected the model
+    catenary's (parameter ``a_m`` [m]) for the reported position (``px``, ``py``, ``pz``
+    [m]): beyond the dead band ``band`` the extra length
+    grows at ``rate (e - band)`` (the tether is tighter than the model says: the UAV is
+    farther than reported), and below ``-band`` shrinks at ``rate (e + band)``, never
+    below 0 (never less tether than L-bar), at most ``offset_max``, at most ``rate_max``
+    fast; held where the catenary is degenerate or the tension unknown. ``trim_p`` = (rate
+    [m/s], rate_max [m/s], offset_max [m], band)."""
+    gain, rate_max, offset_max, band = trim_p[0], trim_p[1], trim_p[2], trim_p[3]
+    expected = expected_drum_tension_n(a_m, math.hypot(px, py), max(pz, 0.0), w_n_m)
+    rate = 0.0
+    if gain > 0.0 and expected > 0.0 and tension_n > 0.0:
+        e = math.log(tension_n / expected)
+        if e > band:
+            rate = gain * (e - band)
+        elif e < -band:
+            rate = gain * (e + band)
+        rate = min(max(rate, -rate_max), rate_max)
+    offset = trim_s[0] + rate * dt_s
+    if offset < 0.0:
+        offset, rate = 0.0, 0.0
+    elif offset > offset_max:
+        offset, rate = offset_max, 0.0
+    trim_s[0] = offset
+    trim_s[1] = rate
+
+
 class LBarEstimator:
     """Desired tether length and its rate for a UAV position and velocity."""
 
@@ -222,6 +280,11 @@ class LBarEstimator:
         self.a_target = params.target_horizontal_tension_n / w_n_m
         self._tan_min = math.tan(params.min_exit_angle_rad)
         self._root = math.nan  # the last exit-angle root: where Newton starts next time
+        #: the tension trim's parameters and state (:func:`tension_trim`)
+        self.trim_params = np.array([params.tension_trim_rate_m_s,
+                                     params.tension_trim_max_rate_m_s,
+                                     params.tension_trim_max_m, params.tension_trim_band])
+        self.trim_state = np.zeros(2)
 
     def length(self, pos_m: tuple[float, float, float]) -> tuple[float, float]:
         """(L-bar [m], a [m]) for the UAV at ``pos_m``."""

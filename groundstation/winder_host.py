@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from groundstation.lbar import LBarEstimator, LBarParams, lbar_kernel
+from groundstation.lbar import LBarEstimator, LBarParams, lbar_kernel, tension_trim
 from groundstation.winder_control import (
     WinderCommand,
     WinderController,
@@ -50,7 +50,8 @@ class WinderHost:
         lb, ctl = self.lbar, self.controller
         self._step = entry_point(winder_step, 1.0, 0.0, 10.0, 0.0, 0.0, 0.0, lb.a_target,
                                  lb._tan_min, lb.p.min_slack_m, math.nan, ctl.params(),
-                                 ctl.state, self.dt_s, 10.0, 0.0, 1.0)
+                                 ctl.state, self.dt_s, 10.0, 0.0, 1.0, lb.w, lb.trim_params,
+                                 np.zeros(2))
 
     def update(self, length_m: float, omega_rad_s: float, drum_tension_n: float,
                uav_pos_m: tuple[float, float, float],
@@ -62,7 +63,8 @@ class WinderHost:
         vx, vy, vz = uav_vel_m_s
         lbar_m, rate, lb._root, cmd = self._step(
             px, py, pz, vx, vy, vz, lb.a_target, lb._tan_min, lb.p.min_slack_m, lb._root,
-            ctl.params(), ctl.state, self.dt_s, length_m, omega_rad_s, drum_tension_n)
+            ctl.params(), ctl.state, self.dt_s, length_m, omega_rad_s, drum_tension_n, lb.w,
+            lb.trim_params, lb.trim_state)
         return WinderStep(cmd[0], lbar_m, rate, _command(cmd))
 
 
@@ -70,13 +72,19 @@ class WinderHost:
 def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float,
                 a_target: float, tan_min: float, min_slack: float, root_guess: float,
                 law_p: np.ndarray, law_s: np.ndarray, dt_s: float, length_m: float,
-                omega_rad_s: float, drum_tension_n: float
+                omega_rad_s: float, drum_tension_n: float, w_n_m: float,
+                trim_p: np.ndarray, trim_s: np.ndarray
                 ) -> tuple[float, float, float, tuple[float, float, float, float, float, bool]]:
-    """:meth:`WinderHost.update` in scalars: L-bar and its rate (:func:`lbar_kernel`), then
-    the torque law (:func:`winder_law`, its filter ``law_s`` advanced in place). Returns
-    (L-bar, its rate, the exit-angle root for next time, the WinderCommand's fields)."""
-    lbar_m, rate, _, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
+    """:meth:`WinderHost.update` in scalars: L-bar and its rate (:func:`lbar_kernel`), the
+    tension trim's offset (:func:`tension_trim`, advanced in place), then the torque law
+    (:func:`winder_law`, its filter ``law_s`` advanced in place) on L-bar + offset. Returns
+    (the length reference, its rate, the exit-angle root for next time, the WinderCommand's
+    fields)."""
+    lbar_m, rate, a, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
                                         min_slack, root_guess)
+    tension_trim(trim_p, trim_s, dt_s, a, px, py, pz, w_n_m, drum_tension_n)
+    lbar_m += trim_s[0]
+    rate += trim_s[1]
     cmd = winder_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, lbar_m,
                      rate)
     return lbar_m, rate, root, cmd

@@ -13,7 +13,7 @@ from companion.flight_controller import FlightController, VehicleState
 from companion.gains import FlightControlParams
 from companion.position import PositionController
 from companion.reference import RefSample
-from groundstation.lbar import LBarParams, _a_for_exit_slope, _exit_slope_root
+from groundstation.lbar import LBarParams, _a_for_exit_slope, _exit_slope_root, tension_trim
 from groundstation.winder_control import WinderControlParams
 from groundstation.winder_host import WinderHost
 from tuavdefs.frames import euler_to_quat, quat_to_euler, quat_to_matrix
@@ -128,8 +128,11 @@ def test_the_winder_step_is_its_components_step():
         a = hosts[0].update(length, omega, tension, pos, vel)
         b = hosts[1]
         lb = b.lbar.estimate(pos, vel)
-        cmd = b.controller.update(b.dt_s, length, omega, tension, lb.length_m, lb.rate_m_s)
-        assert a == (cmd.torque_n_m, lb.length_m, lb.rate_m_s, cmd)
+        est = b.lbar
+        tension_trim(est.trim_params, est.trim_state, b.dt_s, lb.a_m, *pos, est.w, tension)
+        ref, rate = lb.length_m + est.trim_state[0], lb.rate_m_s + est.trim_state[1]
+        cmd = b.controller.update(b.dt_s, length, omega, tension, ref, rate)
+        assert a == (cmd.torque_n_m, ref, rate, cmd)
 
 
 def test_a_replaced_parameter_takes_effect():

@@ -37,8 +37,11 @@ ACK = mavlink2.MAV_RESULT_ACCEPTED
 ENC_ID = cp.frame_id(0, cp.Cmd.GET_ENCODER_ESTIMATES)
 
 
-def make_winch() -> Winch:
-    host = WinderHost(WinderControlParams(), LBarParams(), PARAMS.winder, PARAMS.tether, G)
+def make_winch(lbar: LBarParams | None = None) -> Winch:
+    """The winch; without the tension trim unless ``lbar`` says otherwise: these tests
+    feed it made-up tensions (a constant, or none), not a catenary's."""
+    lbar = lbar if lbar is not None else LBarParams(tension_trim_rate_m_s=0.0)
+    host = WinderHost(WinderControlParams(), lbar, PARAMS.winder, PARAMS.tether, G)
     return Winch(host, PARAMS.winder, PARAMS.tether, G)
 
 
@@ -707,3 +710,39 @@ def test_the_client_reads_the_same_with_and_without_the_fast_path(order, data):
                          c.bad_frames, c.positions_received))
         clients.append(seen)
     assert clients[0] == clients[1]
+
+
+def test_tension_trim_pays_out_when_the_tether_is_tighter_than_its_model_says():
+    """L-bar's tension trim: a drum tension matching the model catenary's for the reported
+    position leaves L-bar alone; three times that (the UAV is farther than reported) pays
+    extra tether out at the trim's rate, bounded; back at the model's tension the extra
+    is kept; well below it the extra is taken back, never below L-bar."""
+    from groundstation.lbar import expected_drum_tension_n
+
+    lp = LBarParams()
+    host = WinderHost(WinderControlParams(), lp, PARAMS.winder, PARAMS.tether, G)
+    lb = host.lbar
+    pos, vel = UAV
+    lbar, a = lb.length(pos)
+    expected = expected_drum_tension_n(a, math.hypot(pos[0], pos[1]), pos[2], lb.w)
+    assert 0.5 < expected < 20.0
+    for _ in range(100):
+        step = host.update(lbar, 0.0, expected, pos, vel)
+    assert step.lbar_m == pytest.approx(lbar, abs=1e-9) and lb.trim_state[0] == 0.0
+    for _ in range(50):   # 0.5 s at 1.5x the expected tension
+        step = host.update(lbar, 0.0, 1.5 * expected, pos, vel)
+    rate = lp.tension_trim_rate_m_s * (math.log(1.5) - lp.tension_trim_band)
+    assert step.lbar_rate_m_s == pytest.approx(rate) and rate < lp.tension_trim_max_rate_m_s
+    assert step.lbar_m - lbar == pytest.approx(0.5 * rate, rel=0.03)
+    extra = step.lbar_m - lbar
+    for _ in range(100):
+        step = host.update(lbar, 0.0, 1.05 * expected, pos, vel)   # within the band
+    assert step.lbar_m - lbar == pytest.approx(extra)
+    for _ in range(300):
+        step = host.update(lbar, 0.0, 0.1 * expected, pos, vel)    # far slacker: back
+    assert step.lbar_m == pytest.approx(lbar) and step.lbar_rate_m_s == 0.0
+    step = host.update(lbar, 0.0, 100.0 * expected, pos, vel)   # taut: at the rate limit
+    assert step.lbar_rate_m_s == lp.tension_trim_max_rate_m_s
+    for _ in range(3000):   # taut for 30 s: bounded
+        step = host.update(lbar, 0.0, 100.0 * expected, pos, vel)
+    assert step.lbar_m - lbar == pytest.approx(lp.tension_trim_max_m)
