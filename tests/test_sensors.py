@@ -153,7 +153,8 @@ def test_gps_without_noise_is_the_truth():
     fix = suite.gps((12.5, -3.25, 20.0), (0.5, 0.25, -0.125), 0.1)
     assert fix.position_enu_m == (12.5, -3.25, 20.0)
     assert fix.velocity_enu_m_s == (0.5, 0.25, -0.125)
-    assert (fix.eph_m, fix.epv_m) == (0.3, 0.5)
+    # the accuracies the (RTK) receiver reports: its channels' 1 sigma, noise off or on
+    assert (fix.eph_m, fix.epv_m) == (math.hypot(0.004, 0.01), math.hypot(0.006, 0.02))
 
 
 # ----------------------------------------------------------------- noise
