@@ -373,12 +373,12 @@ class SimLinkServer:
         x = p.x.tolist()
         pos, vel, quat, rates = (tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]),
                                  tuple(x[RATES]))
+        s, enc, home = self.sensors, self._encoder, self._home_map
+        s.record_truth_us(t_us, pos, vel)    # (first: whatever fails below, it is kept)
         f_flu = p.specific_force_flu()
         pressure_hpa, temperature_k, density = isa_air(self.home[2] + pos[2])
         tas = airspeed_from(vel, p.wind_m_s)
         ias = tas * math.sqrt(density / ISA_RHO0_KG_M3)
-        s, enc, home = self.sensors, self._encoder, self._home_map
-        s.record_truth_us(t_us, pos, vel)
         chunks = []
         if gps_dt is not None:
             fix = s.gps_fix_us(t_us, gps_dt)
