@@ -453,3 +453,16 @@ def test_the_links_fixes_are_the_truth_latency_earlier():
             assert pos == pytest.approx(want, abs=0.012)   # (1e-7 deg, 1 mm on the wire)
             assert vel[0] == pytest.approx(4.0, abs=0.01)
         assert fixes[1][1][0][0] < positions[50][0] - 0.39   # 0.4 m behind the truth now
+
+
+def test_the_plant_cli_chooses_the_receiver():
+    from sitl.__main__ import build_parser
+
+    args = build_parser().parse_args(["--gnss", "gnss", "--sensor-seed", "4"])
+    assert (args.gnss, args.sensor_seed) == ("gnss", 4)
+    assert SensorNoise.preset(args.gnss, args.sensor_seed) == SensorNoise.preset(
+        GnssPreset.GNSS, seed=4)
+    defaults = build_parser().parse_args([])
+    assert (defaults.gnss, defaults.sensor_seed, defaults.no_noise) == ("rtk", 0, False)
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["--gnss", "dgps"])
