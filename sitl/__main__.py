@@ -121,8 +121,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, lambda *_: loop.stop())
     signal.signal(signal.SIGINT, lambda *_: loop.stop())
     can_text = f", winder on CAN {node.link.description}" if node else ", winder braked"
+    gnss_text = ("exact sensors" if args.no_noise else
+                 f"GNSS {args.gnss} at {noise.gps_rate_hz:g} Hz, "
+                 f"{noise.gps_latency_s * 1e3:g} ms late, sensor seed {args.sensor_seed}")
     print(f"plant: listening on {server.address} "
-          f"({loop.pacing.replace('-', ' ')}{can_text})", flush=True)
+          f"({loop.pacing.replace('-', ' ')}{can_text}; {gnss_text})", flush=True)
     # the start-up's objects (numpy, numba, pymavlink and their modules: most of the heap)
     # move to the collector's permanent generation, so its full collections during the
     # run no longer walk them: about a tenth of the loop's CPU (docs/performance.md)
