@@ -18,7 +18,7 @@ from collections.abc import Sequence
 
 from sitl.plant import Plant, initial_state
 from sitl.plant_loop import PlantLoop
-from sitl.sensors import SensorNoise
+from sitl.sensors import GnssPreset, SensorNoise
 from sitl.simlink_server import SimLinkServer
 from sitl.trim import hover_trim
 from sitl.truth_log import TruthLog
@@ -54,7 +54,16 @@ def build_parser() -> argparse.ArgumentParser:
                     help="paid-out length at the start [m] (default 1.15 x the distance)")
     ap.add_argument("--home", type=float, nargs=3, default=sl.HOME_DEFAULT,
                     metavar=("LAT", "LON", "ALT"), help="the winder's global position")
-    ap.add_argument("--no-noise", action="store_true", help="exact sensor readings")
+    ap.add_argument("--no-noise", action="store_true",
+                    help="exact sensor readings (no noise, no bias, no GNSS latency)")
+    ap.add_argument("--gnss", choices=[p.value for p in GnssPreset],
+                    default=GnssPreset.RTK.value,
+                    help="the GNSS receiver: rtk (u-blox ZED-F9P class, 1 cm, 10 Hz, 50 ms "
+                         "late; the default) or gnss (standalone M9N/M10 class, 0.8 m "
+                         "wandering over 8 s, 5 Hz, 100 ms late); HIL_GPS's rate and "
+                         "latency follow it")
+    ap.add_argument("--sensor-seed", type=int, default=0, metavar="N",
+                    help="seed of the sensors' noise and biases (>= 0)")
     ap.add_argument("--truth-log", default=None, help="CSV of the plant's truth")
     ap.add_argument("--log-every", type=int, default=5, help="log every N control periods")
     ap.add_argument("--can", default=None, metavar="SPEC",
@@ -69,6 +78,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the plant process; returns the exit code."""
     args = build_parser().parse_args(argv)
     real_time = args.real_time or args.speedup == 1.0
+    try:
+        noise = (SensorNoise.off(args.gnss) if args.no_noise
+                 else SensorNoise.preset(args.gnss, seed=args.sensor_seed))
+    except ValueError as exc:
+        print(f"plant: --sensor-seed: {exc}", file=sys.stderr)
+        return 2
     params = load_option(SystemParams, args.params, "plant")
     pos = tuple(args.position)
     gear = params.vehicle.gear_height_m
@@ -95,7 +110,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         server = SimLinkServer(plant, control_rate_hz=args.control_rate,
                                home=tuple(args.home), port=args.port,
                                real_time=real_time, speedup=args.speedup,
-                               sensor_noise=SensorNoise.off() if args.no_noise else None,
+                               sensor_noise=noise,
                                unix_path=args.socket)
     except OSError as exc:
         where = sl.format_sim_address(args.socket if args.socket is not None
@@ -106,8 +121,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, lambda *_: loop.stop())
     signal.signal(signal.SIGINT, lambda *_: loop.stop())
     can_text = f", winder on CAN {node.link.description}" if node else ", winder braked"
+    gnss_text = ("exact sensors" if args.no_noise else
+                 f"GNSS {args.gnss} at {noise.gps_rate_hz:g} Hz, "
+                 f"{noise.gps_latency_s * 1e3:g} ms late, sensor seed {args.sensor_seed}")
     print(f"plant: listening on {server.address} "
-          f"({loop.pacing.replace('-', ' ')}{can_text})", flush=True)
+          f"({loop.pacing.replace('-', ' ')}{can_text}; {gnss_text})", flush=True)
     # the start-up's objects (numpy, numba, pymavlink and their modules: most of the heap)
     # move to the collector's permanent generation, so its full collections during the
     # run no longer walk them: about a tenth of the loop's CPU (docs/performance.md)

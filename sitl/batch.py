@@ -24,12 +24,18 @@ import re
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
+from sitl import sensors as _sensors
 from sitl._jit import JIT, njit
 from sitl.plant import Plant, quat_rotate_kernel, specific_force_kernel
 from sitl.pymath import hypot2
 from sitl.sensors import (
     _BLOCK,
     _ISA_EXP,
+    _P_ENABLED,
+    _P_GM_SIGMA,
+    _P_GM_TAU,
+    _P_SIGMA,
+    _P_WALK,
     ISA_LAPSE_K_M,
     ISA_P0_HPA,
     ISA_R_J_KG_K,
@@ -51,6 +57,9 @@ _SATELLITES = sl.GPS_SATELLITES_VISIBLE
 round_clamp = njit(sl.round_clamp)
 wrap_lon = njit(sl.wrap_lon)
 _quat_multiply = njit(quat_multiply)
+_gm_coefficients = njit(_sensors.gauss_markov_coefficients)
+_truth_push = njit(_sensors.truth_push)
+_truth_at = njit(_sensors.truth_at)
 
 #: The messages' rows in the kernel's arrays, in the batch's order.
 _GPS, _STATE, _SENSOR = 0, 1, 2
@@ -66,7 +75,7 @@ _MAX_FIELDS = 20
 _ACCEL, _GYRO, _MAG, _BARO, _GPS_H, _GPS_V, _GPS_VEL = range(7)
 #: The constants the kernel is handed (indices into its ``consts``).
 (_K_LAT0, _K_LON0, _K_ALT0, _K_RN, _K_RECOS, _K_FIELD_E, _K_FIELD_N, _K_FIELD_U, _K_G,
- _K_TWO, _K_EPH, _K_EPV, _N_CONSTS) = range(13)
+ _K_TWO, _K_EPH, _K_EPV, _K_LATENCY_US, _N_CONSTS) = range(14)
 #: Magnitude below which a float rounds to an int64 safely.
 _ROUND_MAX = 2.0 ** 62
 #: A batch's bytes at most (three frames of at most 10 + 255 + 2).
@@ -84,24 +93,33 @@ def _layout(cls: type) -> list[int]:
 
 @njit
 def _read(c: int, dim: int, t0: float, t1: float, t2: float, dt: float, draws: np.ndarray,
-          bias: np.ndarray, cursor: np.ndarray, params: np.ndarray, new_bias: np.ndarray,
-          out: np.ndarray) -> None:
+          bias: np.ndarray, gm: np.ndarray, cursor: np.ndarray, params: np.ndarray,
+          new_bias: np.ndarray, new_gm: np.ndarray, out: np.ndarray) -> None:
     """:meth:`sitl.sensors.NoisyChannel.read` of channel ``c`` (``dim`` axes of the truth
-    ``t0, t1, t2``) into ``out``, its bias after the read into ``new_bias[c]``; the state
-    itself is left to :func:`_commit`."""
-    if params[c, 0] == 0.0:   # disabled: the truth
+    ``t0, t1, t2``) into ``out``, its bias and Gauss-Markov error after the read into
+    ``new_bias[c]``, ``new_gm[c]``; the state itself is committed by the caller."""
+    if params[c, _P_ENABLED] == 0.0:   # disabled: the truth
         out[0], out[1], out[2] = t0, t1, t2
         return
     i = cursor[c]
-    sigma, walk = params[c, 1], params[c, 2]
+    sigma, walk, gm_sigma = params[c, _P_SIGMA], params[c, _P_WALK], params[c, _P_GM_SIGMA]
     k = walk * math.sqrt(dt) if walk > 0.0 else 0.0
+    phi, q = 0.0, 0.0
+    if gm_sigma > 0.0:
+        phi, q = _gm_coefficients(gm_sigma, params[c, _P_GM_TAU], dt)
     for a in range(dim):
         b = bias[c, a]
         if walk > 0.0:
             b = b + k * draws[c, i, 0, a]
         new_bias[c, a] = b
         t = t0 if a == 0 else (t1 if a == 1 else t2)
-        out[a] = t + b + sigma * draws[c, i, 1, a]
+        if gm_sigma > 0.0:
+            g = phi * gm[c, a] + q * draws[c, i, 2, a]
+            new_gm[c, a] = g
+            out[a] = t + b + g + sigma * draws[c, i, 1, a]
+        else:
+            new_gm[c, a] = gm[c, a]
+            out[a] = t + b + sigma * draws[c, i, 1, a]
 
 
 @njit
@@ -189,21 +207,26 @@ def _frame(out: np.ndarray, pos: int, seq: int, sysid: int, compid: int, msg: np
 def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: float,
                  seq: int, sysid: int, compid: int, x: np.ndarray, p: np.ndarray,
                  wind_e: float, wind_n: float, wind_u: float, warm: np.ndarray,
-                 consts: np.ndarray, draws: np.ndarray, bias: np.ndarray,
-                 cursor: np.ndarray, params: np.ndarray, layouts: np.ndarray,
+                 consts: np.ndarray, draws: np.ndarray, bias: np.ndarray, gm: np.ndarray,
+                 cursor: np.ndarray, params: np.ndarray, truth_t: np.ndarray,
+                 truth_pv: np.ndarray, truth_ring: np.ndarray, layouts: np.ndarray,
                  msgs: np.ndarray, fv: np.ndarray, iv: np.ndarray, new_bias: np.ndarray,
-                 f32: np.ndarray, u32: np.ndarray) -> tuple[int, int]:
+                 new_gm: np.ndarray, truth: np.ndarray, f32: np.ndarray, u32: np.ndarray
+                 ) -> tuple[int, int]:
     """The batch for the plant's state ``x`` at ``t_us`` [us] into ``out``, as
     :meth:`sitl.simlink_server.SimLinkServer` builds it interpreted: HIL_GPS if
     ``gps_due`` (its channels read ``gps_dt`` [s] after the last fix), then
     HIL_STATE_QUATERNION and HIL_SENSOR (its channels read ``dt`` [s] after the last),
-    sequence numbers from ``seq``; the noise channels' state (``draws``, ``bias``,
-    ``cursor``, ``params``: :class:`sitl.sensors.NoiseState`) advanced. Returns (bytes
+    sequence numbers from ``seq``; the noise channels' state (``draws``, ``bias``, ``gm``,
+    ``cursor``, ``params``: :class:`sitl.sensors.NoiseState`) advanced, the state's
+    position and velocity recorded in the truth buffer (``truth_t``, ``truth_pv``,
+    ``truth_ring``: :class:`sitl.sensors.TruthBuffer`), from which HIL_GPS reads the truth
+    of ``consts[_K_LATENCY_US]`` earlier. Returns (bytes
     written, a bit for each channel whose block it used up, to be refilled now:
     :meth:`sitl.sensors.NoisyChannel.refill`), or (0, 0) when this is not the usual case,
     nothing changed. ``layouts``, ``msgs``:
     :class:`BatchPacker`'s description of the messages; ``fv``, ``iv``, ``new_bias``,
-    ``f32``/``u32`` (one float32 and its bits): scratch."""
+    ``new_gm``, ``truth`` (6), ``f32``/``u32`` (one float32 and its bits): scratch."""
     reads = 0b0001111 | (0b1110000 if gps_due else 0)
     for j in range(19):
         if not math.isfinite(x[j]):
@@ -212,12 +235,21 @@ def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: f
     qw, qx, qy, qz, wx, wy, wz = x[6], x[7], x[8], x[9], x[10], x[11], x[12]
     ok = True
     r = np.empty(3)
-    if gps_due:   # HIL_GPS
-        _read(_GPS_H, 2, px, py, 0.0, gps_dt, draws, bias, cursor, params, new_bias, r)
+    # the truth buffer (its slot written now, the ring committed with the rest; the
+    # interpreter writes the same slot if this is left to it)
+    newest, count = _truth_push(float(t_us), px, py, pz, vx, vy, vz, truth_t, truth_pv,
+                                truth_ring)
+    if gps_due:   # HIL_GPS, of the truth latency_us earlier
+        _truth_at(float(t_us), consts[_K_LATENCY_US], truth_t, truth_pv, newest, count,
+                  truth)
+        _read(_GPS_H, 2, truth[0], truth[1], 0.0, gps_dt, draws, bias, gm, cursor, params,
+              new_bias, new_gm, r)
         ge, gn = r[0], r[1]
-        _read(_GPS_V, 1, pz, 0.0, 0.0, gps_dt, draws, bias, cursor, params, new_bias, r)
+        _read(_GPS_V, 1, truth[2], 0.0, 0.0, gps_dt, draws, bias, gm, cursor, params,
+              new_bias, new_gm, r)
         gu = r[0]
-        _read(_GPS_VEL, 3, vx, vy, vz, gps_dt, draws, bias, cursor, params, new_bias, r)
+        _read(_GPS_VEL, 3, truth[3], truth[4], truth[5], gps_dt, draws, bias, gm, cursor,
+              params, new_bias, new_gm, r)
         vn, ve, vd = r[1], r[0], -r[2]
         g_f, g_i = fv[_GPS], iv[_GPS]
         g_i[0] = t_us
@@ -274,16 +306,20 @@ def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: f
     # HIL_SENSOR
     h_f, h_i = fv[_SENSOR], iv[_SENSOR]
     h_i[0] = t_us
-    _read(_ACCEL, 3, fx, fy, fz, dt, draws, bias, cursor, params, new_bias, r)
+    _read(_ACCEL, 3, fx, fy, fz, dt, draws, bias, gm, cursor, params, new_bias,
+          new_gm, r)
     h_f[1], h_f[2], h_f[3] = r[0], -r[1], -r[2]
-    _read(_GYRO, 3, wx, wy, wz, dt, draws, bias, cursor, params, new_bias, r)
+    _read(_GYRO, 3, wx, wy, wz, dt, draws, bias, gm, cursor, params, new_bias,
+          new_gm, r)
     h_f[4], h_f[5], h_f[6] = r[0], -r[1], -r[2]
     me, mn, mu = quat_rotate_kernel((qw, -qx, -qy, -qz), (consts[_K_FIELD_E],
                                                              consts[_K_FIELD_N],
                                                              consts[_K_FIELD_U]))
-    _read(_MAG, 3, me, mn, mu, dt, draws, bias, cursor, params, new_bias, r)
+    _read(_MAG, 3, me, mn, mu, dt, draws, bias, gm, cursor, params, new_bias,
+          new_gm, r)
     h_f[7], h_f[8], h_f[9] = r[0], -r[1], -r[2]
-    _read(_BARO, 1, pressure_hpa, 0.0, 0.0, dt, draws, bias, cursor, params, new_bias, r)
+    _read(_BARO, 1, pressure_hpa, 0.0, 0.0, dt, draws, bias, gm, cursor, params, new_bias,
+          new_gm, r)
     baro = r[0]
     if baro < 0.0:   # (the interpreter's power of a negative number is complex)
         return 0, 0
@@ -295,10 +331,12 @@ def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: f
         return 0, 0
     # the usual case: commit the channels' reads, write the frames
     used_up = 0
+    truth_ring[0], truth_ring[1] = newest, count
     for c in range(7):
-        if (reads >> c) & 1 != 0 and params[c, 0] != 0.0:
+        if (reads >> c) & 1 != 0 and params[c, _P_ENABLED] != 0.0:
             for a in range(3):
                 bias[c, a] = new_bias[c, a]
+                gm[c, a] = new_gm[c, a]
             cursor[c] += 1
             if cursor[c] == _BLOCK:
                 used_up |= 1 << c
@@ -332,8 +370,9 @@ class BatchPacker:
         consts[[_K_FIELD_E, _K_FIELD_N, _K_FIELD_U]] = field
         consts[_K_G] = plant.model.g
         consts[_K_TWO] = 2.0
-        consts[_K_EPH] = max(noise.gps_horizontal.sigma, 0.01)
-        consts[_K_EPV] = max(noise.gps_vertical.sigma, 0.01)
+        consts[_K_EPH] = noise.gps_eph_m
+        consts[_K_EPV] = noise.gps_epv_m
+        consts[_K_LATENCY_US] = float(sensors.gps_latency_us)
         self._consts = consts
         self._layouts = np.zeros((3, 1 + _MAX_FIELDS), dtype=np.int64)
         self._msgs = np.zeros((3, 2), dtype=np.int64)
@@ -344,14 +383,17 @@ class BatchPacker:
         self._fv = np.zeros((3, _MAX_FIELDS))
         self._iv = np.zeros((3, _MAX_FIELDS), dtype=np.int64)
         self._new_bias = np.zeros((7, 3))
+        self._new_gm = np.zeros((7, 3))
         self._f32 = np.zeros(1, dtype=np.float32)
         self._u32 = self._f32.view(np.uint32)
         self._out = np.zeros(_OUT_BYTES, dtype=np.uint8)
         self._view = memoryview(self._out)   # type: ignore[arg-type]
         st = sensors.noise_state
-        self._state = (st.draws, st.bias, st.cursor, st.params)
+        tb = sensors.truth_buffer
+        self._state = (st.draws, st.bias, st.gm, st.cursor, st.params, tb.time_us,
+                       tb.pos_vel, tb.ring)
         self._scratch = (self._layouts, self._msgs, self._fv, self._iv, self._new_bias,
-                         self._f32, self._u32)
+                         self._new_gm, np.zeros(6), self._f32, self._u32)
         m = plant.model
         self._kernel = entry_point(batch_kernel, self._out, 0, False, 0.0, 0.0, 0, 0, 0,
                                    plant.x, m.p, 0.0, 0.0, 0.0, m.warm, consts, *self._state,

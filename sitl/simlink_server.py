@@ -5,7 +5,8 @@ socket and accepts one companion (conventions in :mod:`tuavdefs.simlink`). It is
 the plant's loop (:class:`sitl.plant_loop.PlantLoop`, which owns the clock and the order of
 each control period) works through, one control period at a time::
 
-    send_batch(t)     HIL_GPS (when due, 10 Hz), HIL_STATE_QUATERNION, HIL_SENSOR, stamped t
+    send_batch(t)     HIL_GPS (when due, at the GNSS preset's rate, describing the truth
+                      of its latency earlier), HIL_STATE_QUATERNION, HIL_SENSOR, stamped t
     wait_answer(t)    until the HIL_ACTUATOR_CONTROLS with time_usec == t (or, in real
                       time, the period's deadline): hold its rotor commands and armed flag
     advance()         N = T / dt physics steps of the plant with them and the winder inputs
@@ -168,8 +169,10 @@ class SimLinkServer:
     (``@NAME``: a name in Linux's abstract namespace), which costs the two ends less per
     period than TCP on the loopback interface. :attr:`address` says which; the socket is
     bound and listening when the constructor returns. ``sensor_noise`` configures the
-    sensor errors (None: :class:`sitl.sensors.SensorNoise` defaults; ``SensorNoise.off()``
-    for exact readings). ``gps_rate_hz`` [Hz] is the rate of HIL_GPS. The link's pacing:
+    sensor errors (None: :class:`sitl.sensors.SensorNoise` defaults, the RTK receiver;
+    ``SensorNoise.preset(...)`` for another; ``SensorNoise.off()`` for exact readings).
+    ``gps_rate_hz`` [Hz] is the rate of HIL_GPS (None: the noise's ``gps_rate_hz``, the
+    preset's); its latency is the noise's ``gps_latency_s``. The link's pacing:
     lockstep, or with ``real_time`` real time, or lockstep paced at ``speedup`` x real time
     (None or inf: as fast as possible); the loop that runs it is
     :class:`sitl.plant_loop.PlantLoop`. ``winder_inputs`` are the winder's inputs until the
@@ -181,7 +184,7 @@ class SimLinkServer:
                  home: tuple[float, float, float] = sl.HOME_DEFAULT,
                  host: str = sl.SIM_HOST_DEFAULT, port: int = sl.SIM_PORT_DEFAULT,
                  real_time: bool = False, sensor_noise: SensorNoise | None = None,
-                 gps_rate_hz: float = sl.GPS_RATE_HZ_DEFAULT,
+                 gps_rate_hz: float | None = None,
                  winder_inputs: WinderInputs = _WINDER_BRAKED,
                  earth_field_ned_gauss: tuple[float, float, float] | None = None,
                  on_step: Callable[[SimLinkServer], None] | None = None,
@@ -194,7 +197,6 @@ class SimLinkServer:
         self.control_rate_hz = float(control_rate_hz)
         self.period_us = sl.control_period_us(control_rate_hz)
         self.physics_steps = sl.physics_steps_per_period(control_rate_hz, plant.dt_s)
-        self.gps_period_us = sl.control_period_us(gps_rate_hz)
         self.home = tuple(float(v) for v in home)
         self.real_time = bool(real_time)
         #: Lockstep paced at this many times real time (None: as fast as possible).
@@ -210,6 +212,10 @@ class SimLinkServer:
             "earth_field_ned_gauss": tuple(earth_field_ned_gauss)}
         self.sensors = SensorSuite(noise=sensor_noise or SensorNoise(), home=self.home,
                                    **suite_kw)
+        #: HIL_GPS's rate [Hz] and period [us].
+        self.gps_rate_hz = float(self.sensors.gps_rate_hz if gps_rate_hz is None
+                                 else gps_rate_hz)
+        self.gps_period_us = sl.control_period_us(self.gps_rate_hz)
         #: The commands held from the last answer: rotor commands in [0, 1] and armed.
         self.rotor_commands: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
         self.armed = False
@@ -315,12 +321,14 @@ class SimLinkServer:
 
     # ----- the link's part of a session and of each control period (the loop's calls)
     def accept(self, stop: threading.Event, timeout_s: float | None) -> bool:
-        """Start a session: forget the last one's periods, parser and GPS schedule, and
+        """Start a session: forget the last one's periods, parser, GPS schedule and the
+        sensors' recorded truth (:meth:`sitl.sensors.SensorSuite.reset_truth`), and
         wait for a companion to connect (True), at most ``timeout_s`` [s] (None: until
         ``stop`` is set; then, or on the timeout, False)."""
         self.steps = 0
         self._parser = sl.FrameParser()
         self._last_gps_us = None
+        self.sensors.reset_truth()
         end = None if timeout_s is None else time.monotonic() + timeout_s
         while not stop.is_set():
             wait = STOP_POLL_S if end is None else min(STOP_POLL_S, end - time.monotonic())
@@ -365,14 +373,15 @@ class SimLinkServer:
         x = p.x.tolist()
         pos, vel, quat, rates = (tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]),
                                  tuple(x[RATES]))
+        s, enc, home = self.sensors, self._encoder, self._home_map
+        s.record_truth_us(t_us, pos, vel)    # (first: whatever fails below, it is kept)
         f_flu = p.specific_force_flu()
         pressure_hpa, temperature_k, density = isa_air(self.home[2] + pos[2])
         tas = airspeed_from(vel, p.wind_m_s)
         ias = tas * math.sqrt(density / ISA_RHO0_KG_M3)
-        s, enc, home = self.sensors, self._encoder, self._home_map
         chunks = []
         if gps_dt is not None:
-            fix = s.gps(pos, vel, gps_dt)
+            fix = s.gps_fix_us(t_us, gps_dt)
             chunks.append(enc.pack_values(sl.MSG_HIL_GPS, sl.hil_gps_values(
                 t_us, fix.position_enu_m, fix.velocity_enu_m_s, home, fix.eph_m, fix.epv_m)))
         chunks.append(enc.pack_values(sl.MSG_HIL_STATE_QUATERNION,

@@ -22,6 +22,7 @@ from sitl.sensors import (
     NoiseSpec,
     NoisyChannel,
     SensorNoise,
+    gauss_markov_coefficients,
     plant_acceleration_enu,
     specific_force_flu,
 )
@@ -331,6 +332,33 @@ def test_the_sensor_channels_are_the_per_axis_formula():
             assert ch.read(truth, dt) == want
 
 
+def test_the_gauss_markov_channels_are_the_per_axis_formula():
+    """With a Gauss-Markov error: three draws per axis and sample (bias walk, white noise,
+    Gauss-Markov), its start drawn after the turn-on bias, the exact discrete step."""
+    spec = NoiseSpec(sigma=0.05, bias_sigma=0.1, bias_walk=0.02, gm_sigma=0.7, gm_tau_s=6.0)
+    for dim in (1, 2, 3):
+        ch = NoisyChannel(spec, dim, np.random.default_rng(dim))
+        ref = np.random.default_rng(dim)
+        bias = [float(b) for b in ref.normal(0.0, spec.bias_sigma, dim)]
+        gm = [float(g) for g in ref.normal(0.0, spec.gm_sigma, dim)]
+        z = []
+        for i in range(600):
+            if i % 256 == 0:
+                z = ref.standard_normal((256, 3, dim)).tolist()
+            z_walk, z_noise, z_gm = z[i % 256]
+            dt = 0.004 if i % 7 else 0.2
+            k = spec.bias_walk * math.sqrt(dt)
+            bias = [b + k * w for b, w in zip(bias, z_walk, strict=True)]
+            phi = math.exp(-dt / spec.gm_tau_s)
+            q = spec.gm_sigma * math.sqrt(-math.expm1(-2.0 * dt / spec.gm_tau_s))
+            assert gauss_markov_coefficients(spec.gm_sigma, spec.gm_tau_s, dt) == (phi, q)
+            gm = [phi * g + q * w for g, w in zip(gm, z_gm, strict=True)]
+            truth = [float(t) for t in np.random.default_rng(i).uniform(-9, 9, dim)]
+            want = tuple(t + b + g + spec.sigma * n
+                         for t, b, g, n in zip(truth, bias, gm, z_noise, strict=True))
+            assert ch.read(truth, dt) == want
+
+
 # ----------------------------------------------------------------- the plant's batch
 class _Sink:
     """A connected socket's stand-in: keeps what is sent."""
@@ -384,17 +412,21 @@ def _random_state(rng: np.random.Generator, k: int, x0: np.ndarray) -> np.ndarra
 
 
 @pytest.mark.parametrize("noise, home", [
-    (SensorNoise(seed=7), sl.HOME_DEFAULT),
+    (SensorNoise(seed=7), sl.HOME_DEFAULT),          # the datasheet parts, RTK: 50 ms late
+    (SensorNoise.preset("gnss", seed=9), sl.HOME_DEFAULT),   # wandering 0.8 m, 100 ms late
     (SensorNoise.off(), (-33.9, 179.99995, 12.0)),
+    (SensorNoise(enabled=False, gps_latency_s=0.037), sl.HOME_DEFAULT),   # latency alone
     (SensorNoise(seed=8, baro=NoiseSpec(0.0, 0.0, 0.5), gps_vertical=NoiseSpec(0.0),
-                 gyro=NoiseSpec(0.01, 0.0, 0.0)), (89.0, -179.99998, 4000.0)),
+                 gyro=NoiseSpec(0.01, 0.0, 0.0),
+                 gps_velocity=NoiseSpec(0.1, 0.0, 0.0, 0.2, 0.5)), (89.0, -179.99998, 4000.0)),
 ])
 def test_the_compiled_batch_is_the_interpreted_one(noise: SensorNoise,
                                                    home: tuple[float, float, float]):
     """:class:`sitl.batch.BatchPacker` sends the bytes the interpreted path sends and
     leaves the sensors and the encoder as it leaves them, over thousands of periods (the
-    channels' blocks of draws refilled, GPS periods, clamped and unknown fields); what it
-    leaves alone (values no field carries) still goes the interpreted way."""
+    channels' blocks of draws refilled, Gauss-Markov errors, GPS periods and the truth
+    buffer of their latency, clamped and unknown fields); what it leaves alone (values no
+    field carries) still goes the interpreted way."""
     params = _windy()
     x0, u = hover_trim(params, (12.0, 5.0, 20.0), 24.5)
     servers = [SimLinkServer(Plant(params, state=x0), port=0, sensor_noise=noise, home=home)
@@ -422,6 +454,8 @@ def test_the_compiled_batch_is_the_interpreted_one(noise: SensorNoise,
             got, want = _batch_outcome(fast, t_us), _batch_outcome(ref, t_us)
             assert got == want, k
             for a, b in zip(fast.sensors.noise_state, ref.sensors.noise_state, strict=True):
+                assert np.array_equal(a, b, equal_nan=True), k
+            for a, b in zip(fast.sensors.truth_buffer, ref.sensors.truth_buffer, strict=True):
                 assert np.array_equal(a, b, equal_nan=True), k
             assert np.array_equal(fast.plant.model.warm, ref.plant.model.warm)
     finally:

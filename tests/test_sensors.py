@@ -12,7 +12,15 @@ from hypothesis import strategies as st
 
 from sitl.plant import Plant, initial_state
 from sitl.sensors import (
+    GNSS_MODELS,
+    ICM42688P_ACCEL,
+    ICM42688P_GYRO,
+    IMU_RATE_HZ,
+    MS5611_BARO,
+    RM3100_MAG,
+    GnssPreset,
     NoiseSpec,
+    NoisyChannel,
     SensorNoise,
     SensorSuite,
     isa_altitude_m,
@@ -153,7 +161,8 @@ def test_gps_without_noise_is_the_truth():
     fix = suite.gps((12.5, -3.25, 20.0), (0.5, 0.25, -0.125), 0.1)
     assert fix.position_enu_m == (12.5, -3.25, 20.0)
     assert fix.velocity_enu_m_s == (0.5, 0.25, -0.125)
-    assert (fix.eph_m, fix.epv_m) == (0.3, 0.5)
+    # the accuracies the (RTK) receiver reports: its channels' 1 sigma, noise off or on
+    assert (fix.eph_m, fix.epv_m) == (math.hypot(0.004, 0.01), math.hypot(0.006, 0.02))
 
 
 # ----------------------------------------------------------------- noise
@@ -240,8 +249,220 @@ def test_seeded_streams():
 
 
 def test_noise_spec_validation():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="sigma"):
         NoiseSpec(sigma=-1.0)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="bias_walk"):
         NoiseSpec(bias_walk=float("nan"))
+    with pytest.raises(ValueError, match="gm_tau_s"):
+        NoiseSpec(gm_sigma=0.1)              # a Gauss-Markov error needs its time
+    with pytest.raises(ValueError, match="gm_sigma"):
+        NoiseSpec(gm_sigma=-0.1, gm_tau_s=1.0)
     assert NoiseSpec() == NoiseSpec(0.0, 0.0, 0.0)
+    for kw, field in (({"gps_rate_hz": 0.0}, "gps_rate_hz"), ({"gps_rate_hz": 3.0},
+                                                               "gps_rate_hz"),
+                      ({"gps_latency_s": -0.01}, "gps_latency_s"),
+                      ({"gps_latency_s": 2.0}, "gps_latency_s"), ({"seed": -1}, "seed"),
+                      ({"accel": 0.1}, "accel")):
+        with pytest.raises(ValueError, match=field):
+            SensorNoise(**kw)
+    with pytest.raises(ValueError, match="gnss"):
+        SensorNoise.preset("dgps")
+
+
+# ----------------------------------------------------------------- the datasheet parts
+def _static_errors(spec: NoiseSpec, n: int, seed: int, dt_s: float = 1.0 / IMU_RATE_HZ):
+    """n readings of a zero truth by a 3-axis channel of ``spec``: their errors."""
+    ch = NoisyChannel(spec, 3, np.random.default_rng(seed))
+    return np.array([ch.read((0.0, 0.0, 0.0), dt_s) for _ in range(n)])
+
+
+@pytest.mark.parametrize("spec, density, unit", [
+    (ICM42688P_GYRO, 0.0028, math.pi / 180.0),       # deg/s/sqrt(Hz) -> rad/s
+    (ICM42688P_ACCEL, 70e-6, 9.80665),               # g/sqrt(Hz) -> m/s^2
+])
+def test_a_static_imus_white_noise_is_the_datasheet_density(spec, density, unit):
+    """The sample-to-sample scatter of a static IMU at 250 Hz is the datasheet's noise
+    density x sqrt(rate): the differences of consecutive samples remove the slow biases
+    (the Allan deviation at one sample, sqrt(2) sigma per difference)."""
+    err = _static_errors(spec, 20000, seed=4)
+    sigma = density * unit * math.sqrt(IMU_RATE_HZ)
+    assert spec.sigma == pytest.approx(sigma, rel=1e-12)
+    d = np.diff(err, axis=0) / math.sqrt(2.0)
+    assert np.all(np.abs(d.std(axis=0, ddof=1) / sigma - 1.0) < 0.03)
+    # Allan deviation at tau0 = 1/250 s: the same sigma (white noise dominates there)
+    adev = np.sqrt(0.5 * np.mean(np.diff(err, axis=0) ** 2, axis=0))
+    assert np.all(np.abs(adev / sigma - 1.0) < 0.03)
+
+
+def test_the_datasheet_presets():
+    deg = math.pi / 180.0
+    assert ICM42688P_GYRO.sigma == pytest.approx(7.727e-4, rel=1e-3)        # rad/s
+    assert ICM42688P_GYRO.bias_sigma == pytest.approx(0.5 * deg)
+    assert ICM42688P_ACCEL.sigma == pytest.approx(0.010854, rel=1e-3)       # m/s^2
+    assert ICM42688P_ACCEL.bias_sigma == pytest.approx(0.02 * 9.80665)
+    assert MS5611_BARO.sigma == 0.012 and MS5611_BARO.bias_sigma == 1.5     # hPa
+    assert RM3100_MAG.sigma == pytest.approx(1.5e-4)                        # 15 nT in G
+    n = SensorNoise()
+    assert (n.accel, n.gyro, n.mag, n.baro) == (ICM42688P_ACCEL, ICM42688P_GYRO, RM3100_MAG,
+                                                MS5611_BARO)
+
+
+# ----------------------------------------------------------------- Gauss-Markov
+@pytest.mark.parametrize("gm_sigma, tau_s, dt_s", [(0.8, 8.0, 0.2), (0.01, 10.0, 0.1)])
+def test_the_gauss_markov_channel_has_its_variance_and_correlation_time(gm_sigma, tau_s,
+                                                                        dt_s):
+    """Seeded: the stationary sigma, and the autocorrelation exp(-lag/tau) at lags of tau/2,
+    tau and 2 tau, and the lag where it falls to 1/e, over 100 channels of 50 tau each
+    (5000 correlation times: the estimates' standard errors are about 0.02)."""
+    spec = NoiseSpec(gm_sigma=gm_sigma, gm_tau_s=tau_s)
+    n_steps, n_chan = int(50 * tau_s / dt_s), 100
+    x = np.empty((n_chan, n_steps))
+    for c in range(n_chan):
+        ch = NoisyChannel(spec, 1, np.random.default_rng(1000 + c))
+        x[c] = [ch.read((0.0,), dt_s)[0] for _ in range(n_steps)]
+    assert x.std() / gm_sigma == pytest.approx(1.0, abs=0.04)
+    # the mean's standard error: sigma sqrt(2 tau / T), T the 5000 tau in all
+    assert abs(x.mean()) < 5 * gm_sigma * math.sqrt(2.0 / 5000)
+
+    def acf(k: int) -> float:
+        return float(np.mean(x[:, :n_steps - k] * x[:, k:]) / gm_sigma ** 2)
+
+    for lag_tau in (0.5, 1.0, 2.0):
+        k = round(lag_tau * tau_s / dt_s)
+        assert acf(k) == pytest.approx(math.exp(-lag_tau), abs=0.06), lag_tau
+    # the correlation time: the first lag where the autocorrelation falls below 1/e
+    k = next(k for k in range(1, n_steps) if acf(k) < math.exp(-1.0) * acf(0))
+    assert k * dt_s == pytest.approx(tau_s, rel=0.1)
+
+
+def test_a_gauss_markov_step_is_exact_for_any_interval():
+    """One step of dt and two of dt/2 have the same statistics: the one-step variance
+    (1 - exp(-2 dt/tau)) sigma^2 conditional on the start."""
+    spec = NoiseSpec(gm_sigma=1.0, gm_tau_s=5.0)
+    dt = 0.5
+    starts, ends = [], []
+    for s in range(4000):
+        ch = NoisyChannel(spec, 1, np.random.default_rng(s))
+        starts.append(float(ch.gauss_markov_error[0]))
+        ends.append(ch.read((0.0,), dt)[0])
+    resid = np.array(ends) - math.exp(-dt / 5.0) * np.array(starts)
+    assert resid.std(ddof=1) == pytest.approx(math.sqrt(1 - math.exp(-2 * dt / 5.0)),
+                                              rel=0.04)
+
+
+# ----------------------------------------------------------------- GNSS presets, latency
+def test_the_gnss_presets():
+    rtk, gnss = SensorNoise.preset(GnssPreset.RTK, seed=3), SensorNoise.preset("gnss")
+    assert SensorNoise() == SensorNoise.preset() == SensorNoise.preset("rtk")   # default
+    assert rtk.seed == 3
+    assert (rtk.gps_rate_hz, rtk.gps_latency_s) == (10.0, 0.05)
+    assert (gnss.gps_rate_hz, gnss.gps_latency_s) == (5.0, 0.1)
+    # the accuracies: RTK about 1 cm horizontally, 2 cm vertically, 2 mm/s; standalone
+    # about 0.8 m and 1 m, wandering over seconds; 0.05 m/s
+    assert 0.01 <= rtk.gps_eph_m <= 0.02 and 0.02 <= rtk.gps_epv_m <= 0.03
+    assert rtk.gps_velocity.sigma == 0.002 and rtk.gps_velocity_accuracy_m_s < 0.003
+    assert 0.5 <= gnss.gps_eph_m <= 1.0 and 0.9 <= gnss.gps_epv_m <= 1.2
+    assert 5.0 <= gnss.gps_horizontal.gm_tau_s <= 10.0
+    assert gnss.gps_velocity.sigma == 0.05
+    suite = SensorSuite(gnss)
+    assert (suite.gps_rate_hz, suite.gps_latency_s, suite.gps_latency_us) == (5.0, 0.1,
+                                                                               100000)
+    off = SensorNoise.off("gnss")
+    assert not off.enabled and off.gps_latency_s == 0.0 and off.gps_rate_hz == 5.0
+    assert set(GNSS_MODELS) == set(GnssPreset)
+
+
+def test_a_fix_is_the_truth_latency_earlier():
+    """Noise off, latency on: the fix sent at t is the truth recorded at t - latency
+    (exactly, on a recorded sample; interpolated linearly between two); before the buffer
+    reaches back that far, the oldest sample; a new session forgets the buffer."""
+    noise = SensorNoise(enabled=False, gps_latency_s=0.05)
+    suite = SensorSuite(noise)
+
+    def truth(t_s):
+        return (3.0 * t_s, -2.0 * t_s + 1.0, 10.0 + t_s ** 2), (3.0, -2.0, 2 * t_s)
+
+    recorded = []
+    for k in range(60):                        # recorded every 10 ms
+        t = k * 0.01
+        recorded.append(truth(t))
+        suite.record_truth(t, *recorded[-1])
+        fix = suite.gps_fix(t, 0.1)
+        # 5 samples earlier, exactly (the first 5: the oldest, the first sample)
+        assert (fix.position_enu_m, fix.velocity_enu_m_s) == recorded[max(k - 5, 0)], k
+    # between samples: linear interpolation (exact for the linear east and north)
+    t = 0.6
+    suite.record_truth(t, *truth(t))
+    suite.record_truth(0.612, *truth(0.612))
+    fix = suite.gps_fix(0.612, 0.1)   # the truth at 0.562: between 0.56 and 0.57
+    assert fix.position_enu_m[:2] == pytest.approx(truth(0.562)[0][:2], abs=1e-12)
+    assert fix.position_enu_m[2] == pytest.approx(truth(0.562)[0][2], abs=1e-4)
+    suite.reset_truth()
+    suite.record_truth(5.0, *truth(5.0))
+    assert suite.gps_fix(5.0, 0.1).position_enu_m == truth(5.0)[0]
+    with pytest.raises(RuntimeError):
+        SensorSuite(noise).gps_fix(0.0, 0.1)   # nothing recorded
+
+
+class _Sink:
+    """A connected socket's stand-in: keeps what is sent."""
+
+    def __init__(self, sent: list[bytes]) -> None:
+        self.sent = sent
+
+    def sendall(self, data: bytes) -> None:
+        self.sent.append(bytes(data))
+
+
+def test_the_links_fixes_are_the_truth_latency_earlier():
+    """Over the simulator link (noise off, the standalone receiver's 100 ms and 5 Hz): the
+    HIL_GPS sent at t carries the truth of the state sent 100 ms (25 periods) earlier, as
+    the interpreted and the compiled batch both build it."""
+    from sitl.simlink_server import SimLinkServer
+
+    noise = SensorNoise(enabled=False, gps_latency_s=0.1, gps_rate_hz=5.0)
+    x0, _ = hover_trim(SystemParams(), (2.0, 0.0, 10.0), 12.0)
+    for compiled in (True, False):
+        server = SimLinkServer(Plant(SystemParams(), state=x0), port=0, sensor_noise=noise)
+        if not compiled:
+            server._packer = None
+        assert server.gps_period_us == 200000
+        sent: list[bytes] = []
+        server._sock = _Sink(sent)  # type: ignore[assignment]
+        hm = sl.home_map(server.home)
+        positions = {}
+        try:
+            for k in range(120):
+                x = x0.copy()
+                x[0] += 4.0 * k * 0.004      # moving east at 4 m/s
+                x[3] = 4.0
+                server.plant.x = x
+                positions[k] = (float(x[0]), float(x[1]), float(x[2]))
+                server.send_batch(k * 4000)
+        finally:
+            server._sock = None
+            server.close()
+        fixes = []
+        for k, data in enumerate(sent):
+            for mid, values in sl.FrameParser().feed_link(data):
+                if mid == sl.MSG_HIL_GPS:
+                    fixes.append((k, sl.gps_from_wire(values, hm)))
+        assert [k for k, _ in fixes] == [0, 50, 100]
+        for k, (pos, vel, _, _) in fixes:
+            want = positions[max(k - 25, 0)]
+            assert pos == pytest.approx(want, abs=0.012)   # (1e-7 deg, 1 mm on the wire)
+            assert vel[0] == pytest.approx(4.0, abs=0.01)
+        assert fixes[1][1][0][0] < positions[50][0] - 0.39   # 0.4 m behind the truth now
+
+
+def test_the_plant_cli_chooses_the_receiver():
+    from sitl.__main__ import build_parser
+
+    args = build_parser().parse_args(["--gnss", "gnss", "--sensor-seed", "4"])
+    assert (args.gnss, args.sensor_seed) == ("gnss", 4)
+    assert SensorNoise.preset(args.gnss, args.sensor_seed) == SensorNoise.preset(
+        GnssPreset.GNSS, seed=4)
+    defaults = build_parser().parse_args([])
+    assert (defaults.gnss, defaults.sensor_seed, defaults.no_noise) == ("rtk", 0, False)
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["--gnss", "dgps"])
