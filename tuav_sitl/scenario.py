@@ -28,6 +28,7 @@ from companion.navigation import NavigationParams
 from groundstation.lbar import LBarParams
 from groundstation.winch import WinchParams
 from groundstation.winder_control import WinderControlParams
+from sitl.sensors import GnssPreset, SensorNoise
 from tuavdefs.frames import local_enu_to_global
 from tuavdefs.params import (
     EnvironmentParams,
@@ -50,6 +51,23 @@ class InitialParams(Params):
     position_m: tuple[float, ...] = quantity(
         (2.0, 0.0, 10.0), "m", "initial position (x east, y north, z up)", length=3)
     yaw_rad: float = quantity(0.0, "rad", "initial heading (from east, counter-clockwise)")
+
+
+@dataclass(frozen=True)
+class SensorParams(Params):
+    """The plant's sensors (``sitl.sensors``): the GNSS receiver's preset and the seed of
+    every sensor's random streams."""
+
+    gnss: str = quantity("rtk", "", "GNSS receiver: rtk (ZED-F9P class, ~2 cm) or gnss "
+                         "(M9N/M10 class, 0.5-1 m, wandering)",
+                         choices=tuple(p.value for p in GnssPreset))
+    seed: int = quantity(0, "", "seed of the sensors' random streams", ge=0)
+    noise: bool = quantity(True, "", "false: every reading is the exact truth")
+
+    def noise_model(self) -> SensorNoise:
+        """The sensors' error models."""
+        return (SensorNoise.preset(self.gnss, self.seed) if self.noise
+                else SensorNoise.off(self.gnss))
 
 
 @dataclass(frozen=True)
@@ -174,6 +192,7 @@ class ScenarioParams(Params):
     winder_control: WinderControlParams = quantity(
         WinderControlParams(), "", "winder control")
     lbar: LBarParams = quantity(LBarParams(), "", "the L-bar estimator")
+    sensors: SensorParams = quantity(SensorParams(), "", "the plant's sensors")
     winch: WinchParams = quantity(WinchParams(), "", "the winch component (its WINCH_STATUS "
                                   "rate: what the companion's tether model hears)")
 
