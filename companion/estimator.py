@@ -130,6 +130,10 @@ class EstimatorParams(Params):
         0.05, "rad", "magnetic heading noise", gt=0)
     mag_gate_sigma: float = quantity(
         3.0, "1", "magnetic heading innovation gate [standard deviations]", gt=0)
+    mag_yaw_only: bool = quantity(
+        False, "", "the heading's Jacobian on yaw alone (EKF2's heading fusion: the "
+        "magnetometer never corrects roll and pitch); False: its exact Jacobian, which "
+        "includes the tilt error's effect on the heading through the field's inclination")
     mag_min_interval_s: float = quantity(
         0.02, "s", "magnetometer samples closer than this to the last fused one are "
         "skipped", ge=0)
@@ -538,11 +542,14 @@ def fuse_baro_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.nda
 @njit
 def fuse_mag_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
                     dx: np.ndarray, diag: np.ndarray, var_min: float, mx: float, my: float,
-                    mz: float, heading_earth_rad: float, r: float, gate: float) -> int:
+                    mz: float, heading_earth_rad: float, r: float, gate: float,
+                    tilt: bool, couple_x: float, couple_y: float) -> int:
     """A magnetometer sample ``m*`` [gauss] (body FLU) as a heading: the field rotated
     into the inertial frame with the estimated attitude, the innovation the Earth field's
     heading ``heading_earth_rad`` [rad] minus its heading (the yaw error, the tilt
-    taken from the estimate); Jacobian that of the yaw, noise variance ``r`` [rad^2].
+    taken from the estimate); noise variance ``r`` [rad^2]. Its Jacobian: that of the
+    yaw, and with ``tilt`` also the heading's dependence on the tilt error through the
+    field's inclination (``couple_*`` = E_z E_x / |E_h|^2, E_z E_y / |E_h|^2).
     Returns 1 if fused, 0 if rejected by the gate, 8 if refused (numerically, or no
     horizontal field)."""
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rot(x[6], x[7], x[8], x[9])
@@ -557,6 +564,10 @@ def fuse_mag_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndar
     if d < 1e-9:
         return _NUMERIC
     h0, h1 = -r20 * r00 / d, -r20 * r10 / d
+    if tilt:
+        # the heading of the field rotated with the estimate depends on its tilt error
+        # too, through the field's inclination
+        h0, h1 = -couple_x, -couple_y
     s = (h0 * h0 * P[6, 6] + h1 * h1 * P[7, 7] + P[8, 8] + 2.0 * h0 * h1 * P[6, 7]
          + 2.0 * h0 * P[6, 8] + 2.0 * h1 * P[7, 8] + r)
     diag[_D_MAG_INNOV] = y
@@ -603,6 +614,8 @@ class NavFilter:
         if math.hypot(ex, ey) <= 0.0:
             raise ValueError("earth_field_enu_gauss: no horizontal component, no heading")
         self._heading_earth_rad = math.atan2(ey, ex)
+        ez = self.earth_field_enu_gauss[2]
+        self._couple = (ez * ex / (ex * ex + ey * ey), ez * ey / (ex * ex + ey * ey))
         p = params
         self._x = np.zeros(NX)
         self._x[_X_Q] = 1.0
@@ -667,7 +680,7 @@ class NavFilter:
         self._baro_k = entry_point(fuse_baro_kernel, x, P, buf, meta, dx, diag, dl, 0.0,
                                    0.0, 0.0, 0.0, 0.0)
         self._mag_k = entry_point(fuse_mag_kernel, x, P, buf, meta, dx, diag, 0.0, 0.0,
-                                  0.0, 0.0, 0.0, 0.0, 0.0)
+                                  0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         self._pos_k = entry_point(fuse_position_kernel, x, P, buf, meta, dx, 0.0, 0.0, 0.0,
                                   0.0)
 
@@ -821,7 +834,8 @@ class NavFilter:
             return False
         res = self._mag_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
                           self._var_min, mx, my, mz, self._heading_earth_rad,
-                          p.mag_yaw_noise_rad ** 2, p.mag_gate_sigma)
+                          p.mag_yaw_noise_rad ** 2, p.mag_gate_sigma, not p.mag_yaw_only,
+                          *self._couple)
         if res == 1:
             self._t_mag = t_s
         return self._outcome("mag", t_s, res)

@@ -36,10 +36,15 @@ def static(pos=(2.0, 1.0, 20.0), roll=0.0, pitch=0.0, yaw=0.7) -> Callable[[floa
     return lambda t: Truth(pos, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), q, (0.0, 0.0, 0.0))
 
 
-def yaw_spin(rate_rad_s=0.5, pos=(0.0, 0.0, 20.0)) -> Callable[[float], Truth]:
-    """At rest in position, level, yawing at a constant rate [rad/s]."""
-    return lambda t: Truth(pos, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
-                           euler_to_quat(0.0, 0.0, rate_rad_s * t), (0.0, 0.0, rate_rad_s))
+def yaw_spin(rate_rad_s=0.5, start_s=0.0, pos=(0.0, 0.0, 20.0)) -> Callable[[float], Truth]:
+    """At rest in position, level; from ``start_s`` [s] on yawing at a constant rate
+    [rad/s]."""
+    def at(t: float) -> Truth:
+        spinning = t >= start_s
+        return Truth(pos, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                     euler_to_quat(0.0, 0.0, rate_rad_s * max(t - start_s, 0.0)),
+                     (0.0, 0.0, rate_rad_s if spinning else 0.0))
+    return at
 
 
 def _attitude(acc, yaw: float) -> np.ndarray:
@@ -124,6 +129,9 @@ def params_for(noise: SensorNoise, **changes) -> EstimatorParams:
               baro_offset_walk_m_sqrt_s=max(noise.baro.bias_walk * hpa_m, 1e-3),
               baro_noise_m=noise.baro.sigma * hpa_m,
               gnss_vel_noise_m_s=noise.gps_velocity.sigma,
+              # the field's noise over its horizontal part (0.2 G), a margin for the
+              # calibration's residual
+              mag_yaw_noise_rad=max(1.5 * noise.mag.sigma / 0.2, 0.005),
               gyro_bias_sigma_rad_s=max(noise.gyro.bias_sigma, 1e-4) * 2.0,
               accel_bias_sigma_m_s2=max(noise.accel.bias_sigma, 1e-3) * 2.0)
     kw.update(changes)
