@@ -196,6 +196,46 @@ OFFLINE_SHARES = {
 }
 
 
+def bench_estimator(quick: bool) -> list[Row]:
+    """The onboard navigation filter (companion/estimator.py), aligned on a still vehicle:
+    medians per step of an IMU predict alone, and of a predict with a GNSS fusion (a fix
+    every step: the worst period) [us]."""
+    from companion.estimator import EstimatorParams, NavFilter
+
+    g = 9.80665
+    f = NavFilter(EstimatorParams(), g, (0.0, 0.2, -0.45))
+    t = 0.0
+    for k in range(400):            # align: 1 s of samples, the field, a fix
+        t = k / 250.0
+        f.predict(t, (0.0, 0.0, 0.0), (0.0, 0.0, g))
+        f.fuse_mag(t, (0.2, 0.0, -0.45))
+        if k % 25 == 0:
+            f.fuse_gnss(t, (0.0, 0.0, 10.0), (0.0, 0.0, 0.0), 0.5, 0.8)
+    steps = 500 if quick else 20000
+    predict, fused = [], []
+    clock = time.perf_counter
+    for _ in range(steps):
+        t += 0.004
+        t0 = clock()
+        f.predict(t, (1e-3, 0.0, 0.0), (0.0, 0.0, g))
+        t1 = clock()
+        t += 0.004
+        t2 = clock()
+        f.predict(t, (1e-3, 0.0, 0.0), (0.0, 0.0, g))
+        f.fuse_gnss(t, (0.0, 0.0, 10.0), (0.0, 0.0, 0.0), 0.5, 0.8)
+        t3 = clock()
+        predict.append((t1 - t0) * 1e6)
+        fused.append((t3 - t2) * 1e6)
+    p, pf = statistics.median(predict), statistics.median(fused)
+    return [Row("onboard EKF predict (16 error states)", p, "us",
+                note=f"median of {steps} IMU steps, the Python wrapper included",
+                goal=f"<= 20 us: {'met' if p <= 20.0 else 'NOT met'}"),
+            Row("onboard EKF predict + GNSS fusion", pf, "us",
+                note="median per step; position and velocity against the delayed state, "
+                     "gated, six scalar updates",
+                goal=f"<= 20 us: {'met' if pf <= 20.0 else 'NOT met'}")]
+
+
 def bench_offline(quick: bool) -> list[Row]:
     """``tuav-sitl run circle``: simulated seconds per wall second, and where time goes."""
     import cProfile
@@ -370,7 +410,7 @@ def main(argv: list[str] | None = None) -> int:
                          "time, the torque and command latencies)")
     args = ap.parse_args(argv)
     rows: list[Row] = []
-    benches = [bench_tether, bench_plant_step, bench_offline]
+    benches = [bench_tether, bench_plant_step, bench_estimator, bench_offline]
     if not args.no_processes:
         benches += [bench_processes, bench_command_latency]
     loads: list[tuple[str, Load]] = []

@@ -1,0 +1,1024 @@
+"""The onboard navigation filter: an error-state (multiplicative) extended Kalman filter.
+
+What the companion knows of its own position, velocity and attitude from its sensors alone
+(the IMU, GNSS, barometer and magnetometer the simulator link delivers), in the manner of
+PX4's EKF2 and ArduPilot's EKF3 (docs/estimation.md has the equations):
+
+- nominal state: position ``p`` [m] and velocity ``v`` [m/s] in the inertial frame (z up,
+  x east, y north, origin at the winder), attitude ``q`` (body FLU -> inertial, (w, x, y,
+  z)), gyro bias ``b_g`` [rad/s], accelerometer bias ``b_a`` [m/s^2], barometer offset
+  ``b_h`` [m];
+- error state (16): ``dp, dv, dtheta, db_g, db_a, db_h``; the attitude error is a small
+  rotation in the inertial frame, ``R_true = Exp(dtheta) R``;
+- predict with each IMU sample (:meth:`NavFilter.predict`); fuse GNSS position and velocity
+  against the state at the measurement's time (a ring buffer of past states, the
+  correction applied to the current state), barometric height and magnetic heading (yaw
+  only), each gated on its normalised innovation;
+- health (:class:`FilterHealth`, :class:`HealthReason`), MAVLink's
+  ``ESTIMATOR_STATUS_FLAGS`` (:class:`EstimatorFlags`) and ArduPilot's
+  ``EKF_STATUS_REPORT`` test ratios in :class:`FilterStatus`.
+
+The arithmetic is compiled (numba kernels on the filter's arrays, through
+:func:`tuavdefs.jit.entry_point`); the class is the thin Python wrapper around them.
+Everything the filter assumes about its sensors is in :class:`EstimatorParams`: its own
+numbers, never the plant's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import IntEnum, IntFlag
+
+import numpy as np
+
+from companion.flight_controller import VehicleState
+from tuavdefs.frames import Quat, Vec3, euler_to_quat
+from tuavdefs.jit import entry_point, njit
+from tuavdefs.paramspec import Params, quantity
+
+# ----- layouts of the packed arrays
+#: Nominal state x: p 0-2, v 3-5, q 6-9 (w, x, y, z), b_g 10-12, b_a 13-15, b_h 16.
+NX = 17
+#: Error state (the covariance's rows): dp 0-2, dv 3-5, dtheta 6-8, db_g 9-11, db_a 12-14,
+#: db_h 15.
+N_ERR = 16
+IDX_P, IDX_V, IDX_TH, IDX_BG, IDX_BA, IDX_BH = 0, 3, 6, 9, 12, 15
+_X_Q, _X_BG, _X_BA, _X_BH = 6, 10, 13, 16
+#: The ring buffer's columns: t [s], p [m] (3), v [m/s] (3).
+_BUF_COLS = 7
+
+# the packed parameter array (prm) of the kernels
+_P_GRAV, _P_GYRO_N, _P_ACC_N, _P_BG_W, _P_BA_W, _P_BH_W, _P_DT_MAX, _P_VAR_MIN = range(8)
+_N_PRM = 8
+
+# diagnostics written by the fusion kernels (diag)
+(_D_POS_INNOV, _D_VEL_INNOV, _D_POS_TR, _D_VEL_TR, _D_BARO_INNOV, _D_BARO_TR,
+ _D_MAG_INNOV, _D_MAG_TR) = (0, 3, 6, 9, 12, 13, 14, 15)
+_N_DIAG = 16
+
+#: Time constant of the magnetometer's low-pass for the alignment [s].
+_MAG_ALIGN_TAU_S = 0.1
+
+# the GNSS kernel's result bits
+_ACC_POS_H, _ACC_POS_V, _ACC_VEL, _NUMERIC = 1, 2, 4, 8
+
+
+# ----- parameters
+@dataclass(frozen=True)
+class EstimatorParams(Params):
+    """The navigation filter's own model of its sensors, its gates and its health checks
+    (docs/estimation.md). Noise densities are of continuous white noise; random walks are
+    the rate at which a bias wanders."""
+
+    imu_rate_hz: float = quantity(
+        250.0, "Hz", "nominal IMU rate: sizes the delay buffer; a gap longer than 5 "
+        "periods is integrated as 5 periods", gt=0, le=2000)
+    gyro_noise_rad_s_sqrt_hz: float = quantity(
+        3.0e-4, "rad/s/sqrt(Hz)", "gyro white-noise density (angle random walk)", gt=0)
+    accel_noise_m_s2_sqrt_hz: float = quantity(
+        4.0e-3, "m/s^2/sqrt(Hz)", "accelerometer white-noise density (velocity random "
+        "walk)", gt=0)
+    gyro_bias_walk_rad_s_sqrt_s: float = quantity(
+        1.5e-4, "rad/s/sqrt(s)", "gyro bias random walk", ge=0)
+    accel_bias_walk_m_s2_sqrt_s: float = quantity(
+        3.0e-3, "m/s^2/sqrt(s)", "accelerometer bias random walk", ge=0)
+    baro_offset_walk_m_sqrt_s: float = quantity(
+        0.03, "m/sqrt(s)", "random walk of the barometer's height offset", ge=0)
+    gyro_bias_sigma_rad_s: float = quantity(
+        0.01, "rad/s", "prior standard deviation of each gyro bias", gt=0)
+    accel_bias_sigma_m_s2: float = quantity(
+        0.15, "m/s^2", "prior standard deviation of each accelerometer bias", gt=0)
+    baro_offset_sigma_m: float = quantity(
+        0.5, "m", "prior standard deviation of the barometer's height offset (beyond the "
+        "GNSS height's own accuracy)", gt=0)
+    tilt_sigma_rad: float = quantity(
+        0.02, "rad", "prior standard deviation of roll and pitch after alignment", gt=0)
+    yaw_sigma_rad: float = quantity(
+        0.15, "rad", "prior standard deviation of yaw after alignment", gt=0)
+    align_time_s: float = quantity(
+        1.0, "s", "how long accelerometer and magnetometer are averaged for the static "
+        "alignment", gt=0, le=60)
+    align_max_accel_std_m_s2: float = quantity(
+        1.0, "m/s^2", "alignment restarts while the specific force varies more than this "
+        "(standard deviation of its magnitude): the vehicle is not still enough", gt=0)
+    gnss_delay_s: float = quantity(
+        0.1, "s", "age of a GNSS fix when it arrives: it is compared with the state that "
+        "long ago", ge=0, le=0.5)
+    gnss_vel_noise_m_s: float = quantity(
+        0.1, "m/s", "GNSS velocity noise (per axis; HIL_GPS carries no speed accuracy)",
+        gt=0)
+    gnss_pos_noise_min_m: float = quantity(
+        0.01, "m", "floor on the GNSS position noise taken from the fix's eph/epv", gt=0)
+    gnss_max_eph_m: float = quantity(
+        5.0, "m", "fixes claiming a horizontal accuracy worse than this are not used", gt=0)
+    gnss_fuse_height: bool = quantity(
+        True, "", "fuse the GNSS height as well as the barometer's (the baro offset then "
+        "follows it)")
+    gnss_pos_gate_sigma: float = quantity(
+        5.0, "1", "GNSS position innovation gate [standard deviations]", gt=0)
+    gnss_vel_gate_sigma: float = quantity(
+        5.0, "1", "GNSS velocity innovation gate [standard deviations]", gt=0)
+    baro_noise_m: float = quantity(
+        0.15, "m", "barometric height noise", gt=0)
+    baro_delay_s: float = quantity(
+        0.0, "s", "age of a barometer sample when it arrives", ge=0, le=0.5)
+    baro_gate_sigma: float = quantity(
+        5.0, "1", "barometric height innovation gate [standard deviations]", gt=0)
+    mag_yaw_noise_rad: float = quantity(
+        0.05, "rad", "magnetic heading noise", gt=0)
+    mag_gate_sigma: float = quantity(
+        3.0, "1", "magnetic heading innovation gate [standard deviations]", gt=0)
+    mag_yaw_only: bool = quantity(
+        False, "", "the heading's Jacobian on yaw alone (EKF2's heading fusion: the "
+        "magnetometer never corrects roll and pitch); False: its exact Jacobian, which "
+        "includes the tilt error's effect on the heading through the field's inclination")
+    mag_min_interval_s: float = quantity(
+        0.02, "s", "magnetometer samples closer than this to the last fused one are "
+        "skipped", ge=0)
+    gnss_timeout_s: float = quantity(
+        1.0, "s", "no GNSS fused for this long: position and velocity flags drop, the "
+        "filter reports no GNSS", gt=0)
+    innovation_fail_s: float = quantity(
+        2.0, "s", "an innovation test failing for this long makes the filter unhealthy",
+        gt=0)
+    gnss_reset_s: float = quantity(
+        5.0, "s", "GNSS position rejected for this long (fixes still arriving): position "
+        "and velocity are reset to the GNSS", gt=0)
+    const_pos_after_s: float = quantity(
+        10.0, "s", "no GNSS position for this long: constant-position mode (the held "
+        "position fused with a large noise, to keep the attitude)", gt=0)
+    const_pos_noise_m: float = quantity(
+        10.0, "m", "noise of the held position in constant-position mode", gt=0)
+    pos_variance_limit_m2: float = quantity(
+        1.0e4, "m^2", "a position variance above this counts as a covariance blow-up",
+        gt=0)
+    converged_tilt_sigma_rad: float = quantity(
+        0.02, "rad", "healthy needs roll and pitch standard deviations below this", gt=0)
+    converged_yaw_sigma_rad: float = quantity(
+        0.1, "rad", "healthy needs a yaw standard deviation below this", gt=0)
+
+
+# ----- health and status
+class FilterHealth(IntEnum):
+    """What the filter's estimate is good for."""
+
+    INITIALISING = 0
+    """Not aligned yet: averaging for the static alignment, or waiting for a GNSS fix."""
+    ALIGNED = 1
+    """Initialised, no failure, but not converged yet (attitude uncertainty above the
+    thresholds, or no GNSS fused yet)."""
+    HEALTHY = 2
+    """Converged and fusing GNSS."""
+    UNHEALTHY = 3
+    """Something failed: see :class:`HealthReason`."""
+
+
+class HealthReason(IntFlag):
+    """Why the filter is unhealthy (several can hold)."""
+
+    NONE = 0
+    NO_GNSS = 1
+    """No GNSS position or velocity fused for ``gnss_timeout_s``."""
+    GNSS_REJECTED = 2
+    """The GNSS innovation test has failed for ``innovation_fail_s``."""
+    BARO_REJECTED = 4
+    """The barometer's innovation test has failed for ``innovation_fail_s``."""
+    MAG_REJECTED = 8
+    """The magnetic heading's innovation test has failed for ``innovation_fail_s``."""
+    COVARIANCE = 16
+    """A variance is negative or above ``pos_variance_limit_m2``."""
+    NAN = 32
+    """The state or the covariance is not finite (the filter must be reset)."""
+
+
+class EstimatorFlags(IntFlag):
+    """MAVLink's ``ESTIMATOR_STATUS_FLAGS`` (the same bit values)."""
+
+    ATTITUDE = 1
+    VELOCITY_HORIZ = 2
+    VELOCITY_VERT = 4
+    POS_HORIZ_REL = 8
+    POS_HORIZ_ABS = 16
+    POS_VERT_ABS = 32
+    POS_VERT_AGL = 64
+    CONST_POS_MODE = 128
+    PRED_POS_HORIZ_REL = 256
+    PRED_POS_HORIZ_ABS = 512
+    GPS_GLITCH = 1024
+    ACCEL_ERROR = 2048
+
+
+@dataclass(frozen=True)
+class FilterStatus:
+    """The filter's health, flags and checks at one time.
+
+    The ``*_variance`` fields are what ArduPilot puts in ``EKF_STATUS_REPORT``: the square
+    root of the latest test ratio of each measurement, |innovation| / (gate x its standard
+    deviation), so 1.0 is at the gate and above 1 the measurement was rejected.
+    """
+
+    health: FilterHealth
+    reasons: HealthReason
+    flags: EstimatorFlags
+    velocity_variance: float
+    pos_horiz_variance: float
+    pos_vert_variance: float
+    compass_variance: float
+    terrain_alt_variance: float
+    pos_innovation_m: Vec3
+    """Latest GNSS position innovation (measurement - delayed state) [m]."""
+    vel_innovation_m_s: Vec3
+    """Latest GNSS velocity innovation [m/s]."""
+    baro_innovation_m: float
+    mag_innovation_rad: float
+    pos_sigma_m: Vec3
+    """Standard deviations of the position estimate [m] (east, north, up)."""
+    vel_sigma_m_s: Vec3
+    attitude_sigma_rad: Vec3
+    """Standard deviations of the attitude error about the inertial axes [rad]."""
+    time_since_gnss_s: float
+    """Since the last GNSS position fused [s] (inf: never)."""
+
+    @property
+    def healthy(self) -> bool:
+        """Whether the estimate is fit to fly on."""
+        return self.health == FilterHealth.HEALTHY
+
+
+# ----- kernels
+@njit
+def _rot(qw: float, qx: float, qy: float, qz: float) -> tuple[float, ...]:
+    """The rotation matrix of a unit quaternion, row-major (9 floats)."""
+    return (1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz),
+            2.0 * (qx * qz + qw * qy),
+            2.0 * (qx * qy + qw * qz), 1.0 - 2.0 * (qx * qx + qz * qz),
+            2.0 * (qy * qz - qw * qx),
+            2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx),
+            1.0 - 2.0 * (qx * qx + qy * qy))
+
+
+@njit
+def _qmul_exp(qw: float, qx: float, qy: float, qz: float, rx: float, ry: float,
+              rz: float) -> tuple[float, float, float, float]:
+    """``q * Exp(r)`` for a rotation vector ``r`` [rad] (right: in the body frame),
+    normalised."""
+    a = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if a < 1e-9:
+        c, s = 1.0, 0.5
+    else:
+        c, s = math.cos(0.5 * a), math.sin(0.5 * a) / a
+    ew, ex, ey, ez = c, s * rx, s * ry, s * rz
+    w = qw * ew - qx * ex - qy * ey - qz * ez
+    x = qw * ex + qx * ew + qy * ez - qz * ey
+    y = qw * ey - qx * ez + qy * ew + qz * ex
+    z = qw * ez + qx * ey - qy * ex + qz * ew
+    n = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+    return w * n, x * n, y * n, z * n
+
+
+@njit
+def _expq_mul(rx: float, ry: float, rz: float, qw: float, qx: float, qy: float,
+              qz: float) -> tuple[float, float, float, float]:
+    """``Exp(r) * q`` for a rotation vector ``r`` [rad] (left: in the inertial frame),
+    normalised."""
+    a = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if a < 1e-9:
+        c, s = 1.0, 0.5
+    else:
+        c, s = math.cos(0.5 * a), math.sin(0.5 * a) / a
+    ew, ex, ey, ez = c, s * rx, s * ry, s * rz
+    w = ew * qw - ex * qx - ey * qy - ez * qz
+    x = ew * qx + ex * qw + ey * qz - ez * qy
+    y = ew * qy - ex * qz + ey * qw + ez * qx
+    z = ew * qz + ex * qy - ey * qx + ez * qw
+    n = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+    if w < 0.0:
+        n = -n
+    return w * n, x * n, y * n, z * n
+
+
+@njit
+def predict_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
+                   prm: np.ndarray, rates: np.ndarray, t_s: float, dt_s: float,
+                   gx: float, gy: float, gz: float, ax: float, ay: float, az: float
+                   ) -> None:
+    """One IMU step of ``dt_s`` [s] ending at ``t_s`` [s]: the nominal state ``x``
+    integrated with the rates ``g*`` [rad/s] and specific force ``a*`` [m/s^2] (body FLU),
+    the covariance ``P`` propagated (``F P F' + Q``), the state stored in the ring buffer
+    ``buf`` (``meta`` = next slot, entries), ``rates`` = the bias-corrected rates."""
+    g = prm[_P_GRAV]
+    # bias-corrected measurements
+    wx, wy, wz = gx - x[10], gy - x[11], gz - x[12]
+    fx, fy, fz = ax - x[13], ay - x[14], az - x[15]
+    rates[0], rates[1], rates[2] = wx, wy, wz
+    qw, qx, qy, qz = x[6], x[7], x[8], x[9]
+    # the specific force rotated with the attitude at mid-step
+    mw, mx, my, mz = _qmul_exp(qw, qx, qy, qz, 0.5 * wx * dt_s, 0.5 * wy * dt_s,
+                               0.5 * wz * dt_s)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rot(mw, mx, my, mz)
+    aix = r00 * fx + r01 * fy + r02 * fz
+    aiy = r10 * fx + r11 * fy + r12 * fz
+    aiz = r20 * fx + r21 * fy + r22 * fz - g
+    for i, a in enumerate((aix, aiy, aiz)):
+        x[i] += (x[3 + i] + 0.5 * a * dt_s) * dt_s
+        x[3 + i] += a * dt_s
+    nw, nx, ny, nz = _qmul_exp(qw, qx, qy, qz, wx * dt_s, wy * dt_s, wz * dt_s)
+    x[6], x[7], x[8], x[9] = nw, nx, ny, nz
+    # F = I + A dt: dp <- dv dt; dv <- -[a_i]x dtheta dt - R db_a dt;
+    # dtheta <- -R db_g dt (the attitude error in the inertial frame)
+    sx, sy, sz = aix * dt_s, aiy * dt_s, (aiz + g) * dt_s     # a_i without gravity
+    # A = -[s]x (3x3), B = C = -R dt
+    A = ((0.0, sz, -sy), (-sz, 0.0, sx), (sy, -sx, 0.0))
+    R = ((r00, r01, r02), (r10, r11, r12), (r20, r21, r22))
+    n = P.shape[0]
+    # FP = F P (rows)
+    for j in range(n):
+        for i in range(3):
+            P[i, j] += dt_s * P[3 + i, j]
+        for i in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += A[i][k] * P[6 + k, j] - R[i][k] * dt_s * P[12 + k, j]
+            P[3 + i, j] += acc
+        for i in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc -= R[i][k] * dt_s * P[9 + k, j]
+            P[6 + i, j] += acc
+    # (F P) F' (columns)
+    for j in range(n):
+        for i in range(3):
+            P[j, i] += dt_s * P[j, 3 + i]
+        for i in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += A[i][k] * P[j, 6 + k] - R[i][k] * dt_s * P[j, 12 + k]
+            P[j, 3 + i] += acc
+        for i in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc -= R[i][k] * dt_s * P[j, 9 + k]
+            P[j, 6 + i] += acc
+    # Q: white noise of the accelerometer (on dv) and gyro (on dtheta), bias random walks
+    qv = prm[_P_ACC_N] ** 2 * dt_s
+    qt = prm[_P_GYRO_N] ** 2 * dt_s
+    qbg = prm[_P_BG_W] ** 2 * dt_s
+    qba = prm[_P_BA_W] ** 2 * dt_s
+    for i in range(3):
+        P[i, i] += qv * dt_s * dt_s / 3.0
+        P[i, 3 + i] += 0.5 * qv * dt_s
+        P[3 + i, i] += 0.5 * qv * dt_s
+        P[3 + i, 3 + i] += qv
+        P[6 + i, 6 + i] += qt
+        P[9 + i, 9 + i] += qbg
+        P[12 + i, 12 + i] += qba
+    P[15, 15] += prm[_P_BH_W] ** 2 * dt_s
+    _symmetrise(P)
+    # the ring buffer of (t, p, v)
+    k = meta[0]
+    buf[k, 0] = t_s
+    for i in range(6):
+        buf[k, 1 + i] = x[i]
+    meta[0] = (k + 1) % buf.shape[0]
+    if meta[1] < buf.shape[0]:
+        meta[1] += 1
+
+
+@njit
+def _symmetrise(P: np.ndarray) -> None:
+    """``P = (P + P') / 2`` in place."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            m = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = m
+            P[j, i] = m
+
+
+@njit
+def _delayed(buf: np.ndarray, meta: np.ndarray, x: np.ndarray, t_s: float,
+             out: np.ndarray) -> None:
+    """``out`` = (p, v) at time ``t_s`` [s]: interpolated in the ring buffer, the oldest
+    entry if older, the current state if newer than the newest (or the buffer empty)."""
+    n, count, size = meta[0], meta[1], buf.shape[0]
+    newest = (n - 1) % size
+    if count == 0 or t_s >= buf[newest, 0]:
+        for i in range(6):
+            out[i] = x[i]
+        return
+    later = newest
+    for m in range(1, count):
+        k = (newest - m) % size
+        if buf[k, 0] <= t_s:
+            t0, t1 = buf[k, 0], buf[later, 0]
+            w = (t_s - t0) / (t1 - t0) if t1 > t0 else 1.0
+            for i in range(6):
+                out[i] = buf[k, 1 + i] + w * (buf[later, 1 + i] - buf[k, 1 + i])
+            return
+        later = k
+    for i in range(6):       # older than the buffer: its oldest entry
+        out[i] = buf[later, 1 + i]
+
+
+@njit
+def scalar_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: float,
+                  i0: int, h0: float, i1: int, h1: float, i2: int, h2: float) -> bool:
+    """One scalar measurement with up to three non-zero Jacobian entries ``h`` at error
+    indices ``i`` (-1: unused), innovation ``y`` (against the state before this batch's
+    corrections ``dx``, which it accumulates into) and noise variance ``r``. Updates ``P``
+    (symmetric by construction; refused if a variance would fall below ``var_min``).
+    Returns whether it was applied."""
+    n = P.shape[0]
+    pht = np.zeros(n)
+    yy = y
+    for i, h in ((i0, h0), (i1, h1), (i2, h2)):
+        if i >= 0:
+            yy -= h * dx[i]
+            for k in range(n):
+                pht[k] += P[k, i] * h
+    s = r
+    for i, h in ((i0, h0), (i1, h1), (i2, h2)):
+        if i >= 0:
+            s += h * pht[i]
+    if not (s > 0.0) or not math.isfinite(s):
+        return False
+    inv = 1.0 / s
+    for k in range(n):
+        if P[k, k] - pht[k] * pht[k] * inv < var_min:
+            return False
+    for k in range(n):
+        dx[k] += pht[k] * inv * yy
+    for a in range(n):
+        ka = pht[a] * inv
+        for b in range(n):
+            P[a, b] -= ka * pht[b]
+    return True
+
+
+@njit
+def inject(x: np.ndarray, dx: np.ndarray, buf: np.ndarray, meta: np.ndarray) -> None:
+    """Add the error-state correction ``dx`` to the nominal state (the attitude as
+    ``q <- Exp(dtheta) q``), and its position and velocity to the buffered past states;
+    ``dx`` is zeroed. The covariance's reset Jacobian is taken as the identity."""
+    for i in range(6):
+        x[i] += dx[i]
+    x[6], x[7], x[8], x[9] = _expq_mul(dx[6], dx[7], dx[8], x[6], x[7], x[8], x[9])
+    for i in range(3):
+        x[10 + i] += dx[9 + i]
+        x[13 + i] += dx[12 + i]
+    x[16] += dx[15]
+    for m in range(meta[1]):
+        for i in range(6):
+            buf[m, 1 + i] += dx[i]
+    for i in range(dx.shape[0]):
+        dx[i] = 0.0
+
+
+@njit
+def fuse_gnss_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
+                     dx: np.ndarray, diag: np.ndarray, delayed: np.ndarray, var_min: float,
+                     t_meas_s: float, px: float, py: float, pz: float, vx: float,
+                     vy: float, vz: float, r_h: float, r_v: float, r_vel: float,
+                     gate_pos: float, gate_vel: float, fuse_height: bool) -> int:
+    """A GNSS fix of the time ``t_meas_s`` [s]: position ``p*`` [m] and velocity ``v*``
+    [m/s] (ENU), noise variances ``r_h``, ``r_v`` [m^2] and ``r_vel`` [m^2/s^2]. The
+    innovations are taken against the state at ``t_meas_s`` (``delayed``), gated (the
+    test ratios into ``diag``), the accepted axes fused one by one, the correction injected
+    into the current state. Returns the accepted groups as bits (1 horizontal position, 2
+    vertical position, 4 velocity, 8 numerical refusal)."""
+    _delayed(buf, meta, x, t_meas_s, delayed)
+    z = (px, py, pz, vx, vy, vz)
+    rr = (r_h, r_h, r_v, r_vel, r_vel, r_vel)
+    gates = (gate_pos, gate_pos, gate_pos, gate_vel, gate_vel, gate_vel)
+    tr = np.zeros(6)
+    for i in range(6):
+        y = z[i] - delayed[i]
+        diag[i] = y
+        tr[i] = y * y / ((P[i, i] + rr[i]) * gates[i] * gates[i])
+    diag[_D_POS_TR] = max(tr[0], tr[1])
+    diag[_D_POS_TR + 1] = tr[2]
+    diag[_D_VEL_TR] = max(tr[3], max(tr[4], tr[5]))
+    result = 0
+    ok = np.zeros(6, dtype=np.bool_)
+    if diag[_D_POS_TR] <= 1.0:
+        ok[0] = ok[1] = True
+        result |= _ACC_POS_H
+    if tr[2] <= 1.0 and fuse_height:
+        ok[2] = True
+        result |= _ACC_POS_V
+    if diag[_D_VEL_TR] <= 1.0:
+        ok[3] = ok[4] = ok[5] = True
+        result |= _ACC_VEL
+    for i in range(6):
+        if ok[i] and not scalar_update(P, dx, var_min, diag[i], rr[i], i, 1.0, -1, 0.0,
+                                       -1, 0.0):
+            result |= _NUMERIC
+    inject(x, dx, buf, meta)
+    return result
+
+
+@njit
+def fuse_baro_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
+                     dx: np.ndarray, diag: np.ndarray, delayed: np.ndarray, var_min: float,
+                     t_meas_s: float, height_m: float, r: float, gate: float) -> int:
+    """A barometric height ``height_m`` [m] (above the reference taken at alignment) of
+    the time ``t_meas_s`` [s]: ``h = p_z + b_h``, noise variance ``r`` [m^2]. Returns 1
+    if fused, 0 if rejected by the gate, 8 if refused numerically."""
+    _delayed(buf, meta, x, t_meas_s, delayed)
+    y = height_m - (delayed[2] + x[16])
+    s = P[2, 2] + 2.0 * P[2, 15] + P[15, 15] + r
+    diag[_D_BARO_INNOV] = y
+    diag[_D_BARO_TR] = y * y / (s * gate * gate)
+    if diag[_D_BARO_TR] > 1.0:
+        return 0
+    if not scalar_update(P, dx, var_min, y, r, 2, 1.0, 15, 1.0, -1, 0.0):
+        return _NUMERIC
+    inject(x, dx, buf, meta)
+    return 1
+
+
+@njit
+def fuse_mag_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
+                    dx: np.ndarray, diag: np.ndarray, var_min: float, mx: float, my: float,
+                    mz: float, heading_earth_rad: float, r: float, gate: float,
+                    tilt: bool, couple_x: float, couple_y: float) -> int:
+    """A magnetometer sample ``m*`` [gauss] (body FLU) as a heading: the field rotated
+    into the inertial frame with the estimated attitude, the innovation the Earth field's
+    heading ``heading_earth_rad`` [rad] minus its heading (the yaw error, the tilt
+    taken from the estimate); noise variance ``r`` [rad^2]. Its Jacobian: that of the
+    yaw, and with ``tilt`` also the heading's dependence on the tilt error through the
+    field's inclination (``couple_*`` = E_z E_x / |E_h|^2, E_z E_y / |E_h|^2).
+    Returns 1 if fused, 0 if rejected by the gate, 8 if refused (numerically, or no
+    horizontal field)."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rot(x[6], x[7], x[8], x[9])
+    ex = r00 * mx + r01 * my + r02 * mz
+    ey = r10 * mx + r11 * my + r12 * mz
+    if ex * ex + ey * ey < 1e-12:
+        return _NUMERIC
+    y = heading_earth_rad - math.atan2(ey, ex)
+    y = (y + math.pi) % (2.0 * math.pi) - math.pi
+    # yaw = atan2(R10, R00); d yaw / d dtheta for R <- (I + [dtheta]x) R
+    d = r00 * r00 + r10 * r10
+    if d < 1e-9:
+        return _NUMERIC
+    h0, h1 = -r20 * r00 / d, -r20 * r10 / d
+    if tilt:
+        # the heading of the field rotated with the estimate depends on its tilt error
+        # too, through the field's inclination
+        h0, h1 = -couple_x, -couple_y
+    s = (h0 * h0 * P[6, 6] + h1 * h1 * P[7, 7] + P[8, 8] + 2.0 * h0 * h1 * P[6, 7]
+         + 2.0 * h0 * P[6, 8] + 2.0 * h1 * P[7, 8] + r)
+    diag[_D_MAG_INNOV] = y
+    diag[_D_MAG_TR] = y * y / (s * gate * gate)
+    if diag[_D_MAG_TR] > 1.0:
+        return 0
+    if not scalar_update(P, dx, var_min, y, r, 6, h0, 7, h1, 8, 1.0):
+        return _NUMERIC
+    inject(x, dx, buf, meta)
+    return 1
+
+
+@njit
+def fuse_position_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
+                         dx: np.ndarray, var_min: float, px: float, py: float,
+                         r: float) -> bool:
+    """A horizontal position ``p*`` [m] of now with noise variance ``r`` [m^2], ungated
+    (constant-position mode's held position)."""
+    ok = scalar_update(P, dx, var_min, px - x[0], r, 0, 1.0, -1, 0.0, -1, 0.0)
+    ok = scalar_update(P, dx, var_min, py - x[1], r, 1, 1.0, -1, 0.0, -1, 0.0) and ok
+    inject(x, dx, buf, meta)
+    return ok
+
+
+# ----- the filter
+def _vec3(v: Sequence[float]) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+class NavFilter:
+    """The onboard navigation filter (module docstring, docs/estimation.md).
+
+    ``gravity_m_s2`` is the filter's gravity [m/s^2]; ``earth_field_enu_gauss`` the Earth's
+    magnetic field it assumes [gauss] in the inertial frame (east, north, up: the
+    declination and inclination are in it). Times are the companion's [s], monotonic.
+    """
+
+    def __init__(self, params: EstimatorParams, gravity_m_s2: float,
+                 earth_field_enu_gauss: tuple[float, float, float]) -> None:
+        self.params = params
+        self.gravity_m_s2 = float(gravity_m_s2)
+        self.earth_field_enu_gauss = _vec3(earth_field_enu_gauss)
+        ex, ey, _ = self.earth_field_enu_gauss
+        if math.hypot(ex, ey) <= 0.0:
+            raise ValueError("earth_field_enu_gauss: no horizontal component, no heading")
+        self._heading_earth_rad = math.atan2(ey, ex)
+        ez = self.earth_field_enu_gauss[2]
+        self._couple = (ez * ex / (ex * ex + ey * ey), ez * ey / (ex * ex + ey * ey))
+        p = params
+        self._x = np.zeros(NX)
+        self._x[_X_Q] = 1.0
+        self._P = np.zeros((N_ERR, N_ERR))
+        self._dx = np.zeros(N_ERR)
+        self._diag = np.zeros(_N_DIAG)
+        self._delayed_pv = np.zeros(6)
+        self._rates = np.zeros(3)
+        n_buf = int(math.ceil(max(p.gnss_delay_s, p.baro_delay_s) * p.imu_rate_hz)) + 8
+        self._buf = np.zeros((n_buf, _BUF_COLS))
+        self._meta = np.zeros(2, dtype=np.int64)
+        self._prm = np.zeros(_N_PRM)
+        self._prm[_P_GRAV] = self.gravity_m_s2
+        self._prm[_P_GYRO_N] = p.gyro_noise_rad_s_sqrt_hz
+        self._prm[_P_ACC_N] = p.accel_noise_m_s2_sqrt_hz
+        self._prm[_P_BG_W] = p.gyro_bias_walk_rad_s_sqrt_s
+        self._prm[_P_BA_W] = p.accel_bias_walk_m_s2_sqrt_s
+        self._prm[_P_BH_W] = p.baro_offset_walk_m_sqrt_s
+        self._prm[_P_DT_MAX] = 5.0 / p.imu_rate_hz
+        self._var_min = 1e-14
+        self._prm[_P_VAR_MIN] = self._var_min
+        self._compile()
+        # alignment
+        self._aligned = False
+        self._acc_sum = np.zeros(3)
+        self._acc_norm_sq = 0.0
+        self._acc_norm = 0.0
+        self._acc_n = 0
+        self._mag_lp = np.zeros(3)
+        self._mag_n = 0
+        self._t_mag_align = 0.0
+        self._baro_sum = 0.0
+        self._baro_n = 0
+        self._align_t0: float | None = None
+        self._fix: tuple[float, Vec3, Vec3, float, float] | None = None
+        self._baro_ref_m: float | None = None
+        # times
+        self._t_last: float | None = None
+        self._t_mag: float = -math.inf
+        self._t_gnss_pos: float = -math.inf   # last fused (or since alignment)
+        self._t_gnss_vel: float = -math.inf
+        self._t_gnss_hgt: float = -math.inf
+        self._t_baro: float = -math.inf
+        self._t_fix: float = -math.inf        # last usable fix received
+        self._fail_since = {"gnss": math.inf, "baro": math.inf, "mag": math.inf}
+        self._glitch = False
+        self._numeric_refusals = 0
+        self._const_pos: tuple[float, float] | None = None
+        self._t_const_fuse = -math.inf
+        #: Times the position and velocity were reset to the GNSS.
+        self.gnss_resets = 0
+
+    def _compile(self) -> None:
+        """The kernels' machine code for these arrays (loaded or compiled now)."""
+        x, P, buf, meta, dx, diag, dl = (self._x, self._P, self._buf, self._meta,
+                                         self._dx, self._diag, self._delayed_pv)
+        self._predict_k = entry_point(predict_kernel, x, P, buf, meta, self._prm,
+                                      self._rates, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self._gnss_k = entry_point(fuse_gnss_kernel, x, P, buf, meta, dx, diag, dl, 0.0,
+                                   0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                                   0.0, True)
+        self._baro_k = entry_point(fuse_baro_kernel, x, P, buf, meta, dx, diag, dl, 0.0,
+                                   0.0, 0.0, 0.0, 0.0)
+        self._mag_k = entry_point(fuse_mag_kernel, x, P, buf, meta, dx, diag, 0.0, 0.0,
+                                  0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self._pos_k = entry_point(fuse_position_kernel, x, P, buf, meta, dx, 0.0, 0.0, 0.0,
+                                  0.0)
+
+    # ----- properties
+    @property
+    def aligned(self) -> bool:
+        """Whether the filter is initialised (static alignment done, a GNSS fix taken)."""
+        return self._aligned
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """The error-state covariance (16 x 16, a copy): dp [m], dv [m/s], dtheta [rad]
+        (inertial axes), db_g [rad/s], db_a [m/s^2], db_h [m]."""
+        return self._P.copy()
+
+    @property
+    def gyro_bias_rad_s(self) -> Vec3:
+        """The gyro bias estimate [rad/s], body FLU."""
+        return _vec3(self._x[_X_BG:_X_BG + 3])
+
+    @property
+    def accel_bias_m_s2(self) -> Vec3:
+        """The accelerometer bias estimate [m/s^2], body FLU."""
+        return _vec3(self._x[_X_BA:_X_BA + 3])
+
+    @property
+    def baro_offset_m(self) -> float:
+        """The barometer's height offset estimate [m] (above the alignment's reference)."""
+        return float(self._x[_X_BH])
+
+    def state(self) -> VehicleState:
+        """(position [m], velocity [m/s], attitude quaternion body FLU -> inertial, body
+        rates [rad/s] = the last gyro sample minus the bias), as the flight controller
+        takes it."""
+        x = self._x
+        return VehicleState(_vec3(x[0:3]), _vec3(x[3:6]),
+                            (float(x[6]), float(x[7]), float(x[8]), float(x[9])),
+                            _vec3(self._rates))
+
+    # ----- inputs
+    def predict(self, t_s: float, gyro_flu_rad_s: Sequence[float],
+                accel_flu_m_s2: Sequence[float]) -> None:
+        """One IMU sample at ``t_s`` [s]: rates [rad/s] and specific force [m/s^2], body
+        FLU. Before alignment the sample is averaged for it."""
+        gx, gy, gz = gyro_flu_rad_s
+        ax, ay, az = accel_flu_m_s2
+        if not self._aligned:
+            self._rates[:] = (gx, gy, gz)
+            self._align_sample(t_s, ax, ay, az)
+            self._t_last = t_s
+            return
+        t_last = self._t_last if self._t_last is not None else t_s
+        dt = min(max(t_s - t_last, 0.0), self._prm[_P_DT_MAX])
+        self._t_last = t_s
+        self._predict_k(self._x, self._P, self._buf, self._meta, self._prm, self._rates,
+                        t_s, dt, gx, gy, gz, ax, ay, az)
+        if self._const_pos is not None and t_s - self._t_const_fuse >= 0.2:
+            self._t_const_fuse = t_s
+            self._pos_k(self._x, self._P, self._buf, self._meta, self._dx, self._var_min,
+                        self._const_pos[0], self._const_pos[1],
+                        self.params.const_pos_noise_m ** 2)
+        elif (self._const_pos is None
+              and t_s - self._t_gnss_pos > self.params.const_pos_after_s):
+            self._const_pos = (float(self._x[0]), float(self._x[1]))
+
+    def fuse_gnss(self, t_s: float, pos_enu_m: Sequence[float],
+                  vel_enu_m_s: Sequence[float], eph_m: float, epv_m: float) -> bool:
+        """A GNSS fix arriving at ``t_s`` [s] (taken ``gnss_delay_s`` earlier): position
+        [m] and velocity [m/s] in the inertial ENU frame, the receiver's claimed
+        horizontal and vertical accuracies [m] (its noise). Returns whether its position
+        was fused (velocity may be fused alone; see :meth:`status`)."""
+        p = self.params
+        pos, vel = _vec3(pos_enu_m), _vec3(vel_enu_m_s)
+        if not (math.isfinite(eph_m) and math.isfinite(epv_m) and eph_m <= p.gnss_max_eph_m
+                and all(map(math.isfinite, pos + vel))):
+            return False
+        self._t_fix = t_s
+        if not self._aligned:
+            self._fix = (t_s, pos, vel, float(eph_m), float(epv_m))
+            self._try_align(t_s)
+            return False
+        r_h = max(eph_m, p.gnss_pos_noise_min_m) ** 2
+        r_v = max(epv_m, p.gnss_pos_noise_min_m) ** 2
+        res = self._gnss_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
+                           self._delayed_pv, self._var_min, t_s - p.gnss_delay_s, *pos,
+                           *vel, r_h, r_v, p.gnss_vel_noise_m_s ** 2, p.gnss_pos_gate_sigma,
+                           p.gnss_vel_gate_sigma, p.gnss_fuse_height)
+        if res & _NUMERIC:
+            self._numeric_refusals += 1
+        if res & _ACC_VEL:
+            self._t_gnss_vel = t_s
+        if res & _ACC_POS_V:
+            self._t_gnss_hgt = t_s
+        accepted = bool(res & _ACC_POS_H)
+        self._glitch = not accepted
+        if accepted:
+            self._t_gnss_pos = t_s
+            self._const_pos = None
+            self._fail_since["gnss"] = math.inf
+        else:
+            self._fail_since["gnss"] = min(self._fail_since["gnss"], t_s)
+            if t_s - self._fail_since["gnss"] >= p.gnss_reset_s:
+                self._reset_to_gnss(pos, vel, r_h, r_v)
+                self._t_gnss_pos = self._t_gnss_vel = t_s
+                self._fail_since["gnss"] = math.inf
+                self._const_pos = None
+                self._glitch = False
+                accepted = True
+        return accepted
+
+    def fuse_baro(self, t_s: float, pressure_alt_m: float) -> bool:
+        """A barometer's pressure altitude [m AMSL] arriving at ``t_s`` [s]; its height is
+        taken above the reference set at alignment (the pressure altitude then minus the
+        GNSS height). Returns whether it was fused."""
+        if not math.isfinite(pressure_alt_m):
+            return False
+        if not self._aligned:
+            self._baro_sum += pressure_alt_m
+            self._baro_n += 1
+            return False
+        if self._baro_ref_m is None:        # no baro at alignment: referenced now
+            self._baro_ref_m = pressure_alt_m - float(self._x[2])
+        p = self.params
+        res = self._baro_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
+                           self._delayed_pv, self._var_min, t_s - p.baro_delay_s,
+                           pressure_alt_m - self._baro_ref_m, p.baro_noise_m ** 2,
+                           p.baro_gate_sigma)
+        return self._outcome("baro", t_s, res)
+
+    def fuse_mag(self, t_s: float, mag_flu_gauss: Sequence[float]) -> bool:
+        """A magnetometer sample [gauss], body FLU, at ``t_s`` [s], fused as a heading
+        (yaw only). Returns whether it was fused (samples within ``mag_min_interval_s``
+        of the last fused one are skipped: False)."""
+        mx, my, mz = _vec3(mag_flu_gauss)
+        if not (math.isfinite(mx) and math.isfinite(my) and math.isfinite(mz)):
+            return False
+        if not self._aligned:
+            # low-passed (time constant _MAG_ALIGN_TAU_S): the heading at the end of the
+            # window, should the vehicle turn during it
+            if self._mag_n == 0:
+                self._mag_lp[:] = (mx, my, mz)
+            else:
+                dt = max(t_s - self._t_mag_align, 0.0)
+                a = 1.0 - math.exp(-dt / _MAG_ALIGN_TAU_S)
+                self._mag_lp += a * (np.array((mx, my, mz)) - self._mag_lp)
+            self._t_mag_align = t_s
+            self._mag_n += 1
+            return False
+        p = self.params
+        if t_s - self._t_mag < p.mag_min_interval_s:
+            return False
+        res = self._mag_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
+                          self._var_min, mx, my, mz, self._heading_earth_rad,
+                          p.mag_yaw_noise_rad ** 2, p.mag_gate_sigma, not p.mag_yaw_only,
+                          *self._couple)
+        if res == 1:
+            self._t_mag = t_s
+        return self._outcome("mag", t_s, res)
+
+    def _outcome(self, name: str, t_s: float, res: int) -> bool:
+        if res & _NUMERIC:
+            self._numeric_refusals += 1
+        if res == 1:
+            self._fail_since[name] = math.inf
+            if name == "baro":
+                self._t_baro = t_s
+            return True
+        if res == 0:
+            self._fail_since[name] = min(self._fail_since[name], t_s)
+        return False
+
+    # ----- alignment
+    def _align_sample(self, t_s: float, ax: float, ay: float, az: float) -> None:
+        if self._align_t0 is None:
+            self._align_t0 = t_s
+        self._acc_sum += (ax, ay, az)
+        norm = math.sqrt(ax * ax + ay * ay + az * az)
+        self._acc_norm += norm
+        self._acc_norm_sq += norm * norm
+        self._acc_n += 1
+        self._try_align(t_s)
+
+    def _restart_alignment(self, t_s: float) -> None:
+        self._align_t0 = t_s
+        self._acc_sum[:] = 0.0
+        self._acc_norm = self._acc_norm_sq = 0.0
+        self._acc_n = 0
+        self._mag_n = 0
+        self._baro_sum = 0.0
+        self._baro_n = 0
+
+    def _try_align(self, t_s: float) -> None:
+        """Initialise once ``align_time_s`` of samples, a magnetometer sample and a fix
+        are in: tilt from the mean specific force, yaw from the low-passed field, position and
+        velocity from the fix (brought forward by its age)."""
+        p = self.params
+        if self._align_t0 is None or t_s - self._align_t0 < p.align_time_s:
+            return
+        n = self._acc_n
+        mean_norm = self._acc_norm / n
+        std = math.sqrt(max(self._acc_norm_sq / n - mean_norm * mean_norm, 0.0))
+        if std > p.align_max_accel_std_m_s2:
+            self._restart_alignment(t_s)
+            return
+        if self._mag_n == 0 or self._fix is None or t_s - self._fix[0] > 1.0:
+            return
+        fx, fy, fz = self._acc_sum / n
+        roll = math.atan2(fy, fz)
+        pitch = math.atan2(-fx, math.hypot(fy, fz))
+        q_tilt = euler_to_quat(roll, pitch, 0.0)
+        x = self._x
+        x[_X_Q:_X_Q + 4] = q_tilt
+        m = self._mag_lp
+        x_tilt = np.array(_rot_py(q_tilt)).reshape(3, 3) @ m
+        yaw = self._heading_earth_rad - math.atan2(x_tilt[1], x_tilt[0])
+        q = euler_to_quat(roll, pitch, yaw)
+        t_fix, pos, vel, eph, epv = self._fix
+        age = t_s - t_fix + p.gnss_delay_s
+        x[:] = 0.0
+        x[0:3] = [pos[i] + vel[i] * age for i in range(3)]
+        x[3:6] = vel
+        x[_X_Q:_X_Q + 4] = q
+        P = self._P
+        P[:] = 0.0
+        var_h = max(eph, p.gnss_pos_noise_min_m) ** 2
+        var_v = max(epv, p.gnss_pos_noise_min_m) ** 2
+        for i, v in enumerate((var_h, var_h, var_v)):
+            P[IDX_P + i, IDX_P + i] = v
+            P[IDX_V + i, IDX_V + i] = p.gnss_vel_noise_m_s ** 2
+            P[IDX_BG + i, IDX_BG + i] = p.gyro_bias_sigma_rad_s ** 2
+            P[IDX_BA + i, IDX_BA + i] = p.accel_bias_sigma_m_s2 ** 2
+        P[IDX_TH, IDX_TH] = P[IDX_TH + 1, IDX_TH + 1] = p.tilt_sigma_rad ** 2
+        P[IDX_TH + 2, IDX_TH + 2] = p.yaw_sigma_rad ** 2
+        # the baro offset is referenced to the GNSS height: their errors are opposed
+        P[IDX_BH, IDX_BH] = var_v + p.baro_offset_sigma_m ** 2
+        P[IDX_P + 2, IDX_BH] = P[IDX_BH, IDX_P + 2] = -var_v
+        # the baro's reference: its mean altitude then minus the GNSS height then
+        if self._baro_n:
+            self._baro_ref_m = self._baro_sum / self._baro_n - float(x[2])
+        self._meta[:] = 0
+        self._aligned = True
+        self._t_last = t_s
+        self._t_gnss_pos = self._t_gnss_vel = self._t_gnss_hgt = t_s
+        self._t_baro = t_s
+
+    def _reset_to_gnss(self, pos: Vec3, vel: Vec3, r_h: float, r_v: float) -> None:
+        """Position and velocity set to the fix (brought forward by its age), their
+        covariance to the fix's noise, uncorrelated with the rest."""
+        age = self.params.gnss_delay_s
+        new = np.array([pos[i] + vel[i] * age for i in range(3)] + list(vel))
+        delta = new - self._x[0:6]
+        self._x[0:6] = new
+        n = int(self._meta[1])
+        self._buf[:n, 1:7] += delta
+        P = self._P
+        P[0:6, :] = 0.0
+        P[:, 0:6] = 0.0
+        for i, v in enumerate((r_h, r_h, r_v)):
+            P[i, i] = v
+            P[3 + i, 3 + i] = self.params.gnss_vel_noise_m_s ** 2
+        self.gnss_resets += 1
+
+    # ----- status
+    def status(self, t_s: float | None = None) -> FilterStatus:
+        """Health, flags and checks at ``t_s`` [s] (default: the last IMU sample's time)."""
+        p = self.params
+        t = self._t_last if t_s is None else t_s
+        if t is None:
+            t = 0.0
+        d, P, x = self._diag, self._P, self._x
+        var = np.diag(P)
+        finite = bool(np.all(np.isfinite(x)) and np.all(np.isfinite(P)))
+        reasons = HealthReason.NONE
+        flags = EstimatorFlags(0)
+        health = FilterHealth.INITIALISING
+        since_pos = t - self._t_gnss_pos
+        if self._aligned:
+            if not finite:
+                reasons |= HealthReason.NAN
+            elif (np.any(var < 0.0)
+                  or float(np.max(var[0:3])) > p.pos_variance_limit_m2):
+                reasons |= HealthReason.COVARIANCE
+            gnss_pos = since_pos <= p.gnss_timeout_s
+            gnss_vel = t - self._t_gnss_vel <= p.gnss_timeout_s
+            if not (gnss_pos or gnss_vel):
+                reasons |= HealthReason.NO_GNSS
+            for name, reason in (("gnss", HealthReason.GNSS_REJECTED),
+                                 ("baro", HealthReason.BARO_REJECTED),
+                                 ("mag", HealthReason.MAG_REJECTED)):
+                if t - self._fail_since[name] >= p.innovation_fail_s:
+                    reasons |= reason
+            vert = (t - self._t_baro <= p.gnss_timeout_s
+                    or t - self._t_gnss_hgt <= p.gnss_timeout_s)
+            if finite:
+                flags |= EstimatorFlags.ATTITUDE
+                if gnss_vel:
+                    flags |= EstimatorFlags.VELOCITY_HORIZ | EstimatorFlags.VELOCITY_VERT
+                elif vert:
+                    flags |= EstimatorFlags.VELOCITY_VERT
+                if gnss_pos:
+                    flags |= EstimatorFlags.POS_HORIZ_REL | EstimatorFlags.POS_HORIZ_ABS
+                if vert:
+                    flags |= EstimatorFlags.POS_VERT_ABS
+            if self._const_pos is not None:
+                flags |= EstimatorFlags.CONST_POS_MODE
+            if t - self._t_fix <= p.gnss_timeout_s:
+                flags |= EstimatorFlags.PRED_POS_HORIZ_REL | EstimatorFlags.PRED_POS_HORIZ_ABS
+            if self._glitch:
+                flags |= EstimatorFlags.GPS_GLITCH
+            if reasons:
+                health = FilterHealth.UNHEALTHY
+            elif (gnss_pos and max(var[6], var[7]) < p.converged_tilt_sigma_rad ** 2
+                  and var[8] < p.converged_yaw_sigma_rad ** 2):
+                health = FilterHealth.HEALTHY
+            else:
+                health = FilterHealth.ALIGNED
+        sd = np.sqrt(np.maximum(var, 0.0))
+        return FilterStatus(
+            health, reasons, flags,
+            velocity_variance=math.sqrt(max(d[_D_VEL_TR], 0.0)),
+            pos_horiz_variance=math.sqrt(max(d[_D_POS_TR], 0.0)),
+            pos_vert_variance=math.sqrt(max(d[_D_BARO_TR], 0.0)),
+            compass_variance=math.sqrt(max(d[_D_MAG_TR], 0.0)),
+            terrain_alt_variance=0.0,
+            pos_innovation_m=_vec3(d[_D_POS_INNOV:_D_POS_INNOV + 3]),
+            vel_innovation_m_s=_vec3(d[_D_VEL_INNOV:_D_VEL_INNOV + 3]),
+            baro_innovation_m=float(d[_D_BARO_INNOV]),
+            mag_innovation_rad=float(d[_D_MAG_INNOV]),
+            pos_sigma_m=_vec3(sd[0:3]), vel_sigma_m_s=_vec3(sd[3:6]),
+            attitude_sigma_rad=_vec3(sd[6:9]),
+            time_since_gnss_s=since_pos if self._aligned else math.inf)
+
+
+def _rot_py(q: Quat) -> tuple[float, ...]:
+    """:func:`_rot` of a quaternion tuple, interpreted (the alignment's one use)."""
+    return _rot.py_func(*q) if hasattr(_rot, "py_func") else _rot(*q)
+
+
+__all__ = ["EstimatorParams", "NavFilter", "FilterStatus", "FilterHealth", "HealthReason",
+           "EstimatorFlags", "N_ERR"]
+
