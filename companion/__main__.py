@@ -31,6 +31,7 @@ from typing import Any
 
 from companion.autopilot import Autopilot
 from companion.component_server import ComponentServer
+from companion.estimator import ESTIMATOR_KINDS, EstimatorParams
 from companion.flight_controller import VehicleState
 from companion.gains import FlightControlParams
 from companion.mavlink_io import (
@@ -131,6 +132,11 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--params", default=None, help="system parameters TOML (the vehicle)")
     ap.add_argument("--gains", default=None, help="flight-control gains TOML")
     ap.add_argument("--nav", default=None, help="navigation parameters TOML (speeds, ...)")
+    ap.add_argument("--estimator", default=None,
+                    help="navigation filter parameters TOML (its sensor model, gates, ...)")
+    ap.add_argument("--state", choices=ESTIMATOR_KINDS, default=None,
+                    help="fly on the filter's estimate (ekf, the default) or on the "
+                         "simulator's state (truth: HIL_STATE_QUATERNION)")
     ap.add_argument("--goto", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                     help="when starting in the air: fly here [m] (z-up frame), then hold")
     ap.add_argument("--gcs-tcp", type=int, default=GCS_TCP_PORT_DEFAULT,
@@ -159,6 +165,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     params = load_option(SystemParams, args.params, "companion")
     gains = load_option(FlightControlParams, args.gains, "companion")
     nav_params = load_option(NavigationParams, args.nav, "companion")
+    estimator = load_option(EstimatorParams, args.estimator, "companion")
     udp = ([] if args.gcs_udp == ["none"] else
            [_address(a) for a in args.gcs_udp] if args.gcs_udp else
            [("127.0.0.1", UDP_GCS_PORT_DEFAULT), ("127.0.0.1", UDP_API_PORT_DEFAULT)])
@@ -172,7 +179,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     # the onboard software (and its compiled code) is ready before the plant's clock starts
     g = params.environment.gravity_m_s2
-    onboard = Companion(params, gains, nav_params)
+    if args.state is not None:
+        estimator = estimator.replace(kind=args.state)
+    onboard = Companion(params, gains, nav_params, estimator)
     nav = onboard.nav
     if isinstance(args.sim, str):
         client = SimLinkClient(home=tuple(args.home), unix_path=args.sim)
@@ -198,6 +207,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.param_file and Path(args.param_file).exists():
         for warning in autopilot.params.load() or []:
             print(f"companion: {warning}", flush=True)
+
+    def on_start() -> None:
+        """The first state: fly to --goto if in the air; announce home."""
+        if nav.flying and args.goto is not None:
+            why = nav.goto(tuple(args.goto))
+            if why is not None:
+                print(f"companion: --goto refused: {why}", flush=True)
+        autopilot.armed_changed()
+
+    onboard.on_start = on_start
     autopilot.on_winch_status(lambda m: onboard.winch_report(
         last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None))
     stop = {"signal": None}
@@ -241,21 +260,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                     break
                 continue
             last_state_wall = time.monotonic()
-            truth = sim.truth
-            if truth is None:
-                continue
             t = sim.sim_time_s
             last_t[0] = t
-            inputs = OnboardInputs(t, VehicleState(truth.position_enu_m, truth.velocity_enu_m_s,
-                                                   truth.quaternion, truth.body_rates_flu_rad_s))
-            first = not onboard.started
-            if first:
-                onboard.start(inputs)
-                if nav.flying and args.goto is not None:
-                    why = nav.goto(tuple(args.goto))
-                    if why is not None:
-                        print(f"companion: --goto refused: {why}", flush=True)
-                autopilot.armed_changed()
+            truth = sim.truth
+            inputs = OnboardInputs(
+                t, None if truth is None else VehicleState(
+                    truth.position_enu_m, truth.velocity_enu_m_s, truth.quaternion,
+                    truth.body_rates_flu_rad_s),
+                sim.imu, sim.gps if sim.gps_updated else None)
             out = onboard.step(inputs)
             cmds, armed, state = out.rotor_commands, out.armed, out.state
             client.send_actuators(sim.time_usec, cmds, armed=armed)
@@ -263,9 +275,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             # stations and the winch: what they ask applies from the next period
             if len(ready) > 1:
                 autopilot.receive(ready)
+            if state is None:       # no estimate yet: nothing to report but heartbeats
+                autopilot.service(None)
+                continue
             throttle = sum(cmds) / 4.0 if armed else 0.0
             autopilot.service(Telemetry(t, state.pos_m, state.vel_m_s, state.quat,
-                                        state.rates_rad_s, throttle))
+                                        state.rates_rad_s, throttle, onboard.imu,
+                                        onboard.gps, onboard.filter_status(t)))
             if nav.armed and not was_armed:
                 autopilot.armed_changed()
             was_armed = nav.armed

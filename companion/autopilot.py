@@ -328,6 +328,8 @@ class Autopilot:
             self.send_heartbeat()
         elif kind == NavEvent.WINCH:
             self._mission_winch_command(*value)
+        elif kind == NavEvent.FAILSAFE:
+            self.statustext(M.MAV_SEVERITY_CRITICAL, str(value))
 
     def _mission_winch_command(self, seq: int, params: tuple[float, float, float, float]
                                ) -> None:

@@ -66,12 +66,24 @@ _ACC_POS_H, _ACC_POS_V, _ACC_VEL, _NUMERIC = 1, 2, 4, 8
 
 
 # ----- parameters
+#: What the vehicle may fly on (EstimatorParams.kind).
+ESTIMATOR_KINDS = ("ekf", "truth")
+
+
 @dataclass(frozen=True)
 class EstimatorParams(Params):
     """The navigation filter's own model of its sensors, its gates and its health checks
     (docs/estimation.md). Noise densities are of continuous white noise; random walks are
     the rate at which a bias wanders."""
 
+    kind: str = quantity(
+        "ekf", "", "what the vehicle flies on: ekf (this filter, on the sensors) or truth "
+        "(the simulator's state as HIL_STATE_QUATERNION sends it: for comparison, and the "
+        "paper's experiments, which feed the state back; ArduPilot's AHRS_EKF_TYPE 10)",
+        choices=ESTIMATOR_KINDS)
+    earth_field_ned_gauss: tuple[float, ...] = quantity(
+        (0.2, 0.0, 0.45), "gauss", "the Earth's magnetic field at home (north, east, down), "
+        "as a world magnetic model gives it", length=3)
     imu_rate_hz: float = quantity(
         250.0, "Hz", "nominal IMU rate: sizes the delay buffer; a gap longer than 5 "
         "periods is integrated as 5 periods", gt=0, le=2000)
@@ -106,6 +118,9 @@ class EstimatorParams(Params):
     gnss_delay_s: float = quantity(
         0.1, "s", "age of a GNSS fix when it arrives: it is compared with the state that "
         "long ago", ge=0, le=0.5)
+    gnss_delay_uncertainty_s: float = quantity(
+        0.05, "s", "how well gnss_delay_s is known: the fix's position noise grows by the "
+        "speed times this", ge=0, le=0.5)
     gnss_vel_noise_m_s: float = quantity(
         0.1, "m/s", "GNSS velocity noise (per axis; HIL_GPS carries no speed accuracy)",
         gt=0)
@@ -706,6 +721,12 @@ class NavFilter:
         """The accelerometer bias estimate [m/s^2], body FLU."""
         return _vec3(self._x[_X_BA:_X_BA + 3])
 
+    def position_sigma_m(self) -> Vec3:
+        """Standard deviations of the position estimate [m] (east, north, up)."""
+        P = self._P
+        return (math.sqrt(max(P[0, 0], 0.0)), math.sqrt(max(P[1, 1], 0.0)),
+                math.sqrt(max(P[2, 2], 0.0)))
+
     @property
     def baro_offset_m(self) -> float:
         """The barometer's height offset estimate [m] (above the alignment's reference)."""
@@ -762,8 +783,12 @@ class NavFilter:
             self._fix = (t_s, pos, vel, float(eph_m), float(epv_m))
             self._try_align(t_s)
             return False
-        r_h = max(eph_m, p.gnss_pos_noise_min_m) ** 2
-        r_v = max(epv_m, p.gnss_pos_noise_min_m) ** 2
+        # the fix's age is known only to within gnss_delay_uncertainty_s: at speed v that is
+        # a position error of up to v u, added to the receiver's claimed accuracy
+        vx, vy, vz = vel
+        u = p.gnss_delay_uncertainty_s
+        r_h = max(eph_m, p.gnss_pos_noise_min_m) ** 2 + (vx * vx + vy * vy) * u * u
+        r_v = max(epv_m, p.gnss_pos_noise_min_m) ** 2 + vz * vz * u * u
         res = self._gnss_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
                            self._delayed_pv, self._var_min, t_s - p.gnss_delay_s, *pos,
                            *vel, r_h, r_v, p.gnss_vel_noise_m_s ** 2, p.gnss_pos_gate_sigma,

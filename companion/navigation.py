@@ -171,6 +171,7 @@ class NavEvent(Enum):
     ERROR = "error"              # a plan could not be flown; holding instead (text)
     WINCH = "winch"              # a DO_WINCH item began: (seq, (instance, action, length,
                                  # rate)) for the winch
+    FAILSAFE = "failsafe"        # a failsafe took over (text)
 
 
 class MotorState(Enum):
@@ -212,6 +213,7 @@ class Reason(Enum):
     NOT_ARMED = "not armed"
     BAD_VALUE = "bad value"
     NO_SUCH_ITEM = "no such mission item"
+    PREARM = "a pre-arm check failed"
 
 
 @dataclass(frozen=True)
@@ -316,6 +318,8 @@ class Navigator:
         self._vel_now: Vec3 = _ZERO3
         self._quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
         self._auto_takeoff_pending = False
+        #: the pre-arm checks of the rest of the vehicle (the estimator's), or None
+        self.prearm: Callable[[], Refusal | None] | None = None
 
     # ----- state
 
@@ -404,6 +408,10 @@ class Navigator:
         """Arm (ArduCopter's checks: an armable mode; with force, any)."""
         if self.armed:
             return None
+        if not force and self.prearm is not None:
+            why = self.prearm()
+            if why is not None:
+                return why
         if not force and self.mode not in ARMABLE_MODES:
             return Refusal(Reason.MODE_NOT_ARMABLE, f"Arm: Mode not armable ({self.mode.name})")
         if not force and self.mode == FlightMode.AUTO and not self._mission_has_items():
@@ -466,6 +474,13 @@ class Navigator:
             if self.flying:
                 self._hold()
         return None
+
+    def failsafe_land(self, text: str) -> None:
+        """A failsafe's action: LAND where it is (ArduCopter's FS_EKF_ACTION 1), said as a
+        NavEvent.FAILSAFE."""
+        self._emit(NavEvent.FAILSAFE, text)
+        if self.mode != FlightMode.LAND:
+            self.set_mode(FlightMode.LAND)
 
     def takeoff(self, alt_m: float) -> Refusal | None:
         """GUIDED take-off to ``alt_m`` [m above the ground]."""

@@ -1,10 +1,13 @@
 """The onboard software in one step: what the flight computer does every control period.
 
-:class:`Companion` holds the navigation (:class:`companion.navigation.Navigator`: modes,
-arming, take-off, landing, guided targets, missions) and the flight control
-(:class:`companion.flight_controller.FlightController`), and steps them together from what
-the links deliver: the vehicle's state from the simulator link, the winch's reports from the
-component link. The companion process (``companion/__main__.py``) wraps it with sockets; the
+:class:`Companion` holds the navigation filter (:class:`companion.estimator.NavFilter`, fed
+the IMU, barometer, magnetometer and GNSS), the navigation
+(:class:`companion.navigation.Navigator`: modes, arming, take-off, landing, guided targets,
+missions) and the flight control (:class:`companion.flight_controller.FlightController`),
+and steps them together from what the links deliver: the sensors (and, for comparison, the
+simulator's state) from the simulator link, the winch's reports from the component link.
+With ``EstimatorParams.kind`` "truth" it flies on the simulator's state instead of its
+filter's estimate. The companion process (``companion/__main__.py``) wraps it with sockets; the
 offline runner (``tuav_sitl/offline.py``) calls the same object with what the links would
 deliver, so both fly the same onboard software. Ground stations act on :attr:`nav` (through
 the MAVLink layer, or a scenario's script offline).
@@ -19,13 +22,30 @@ import math
 from collections.abc import Callable
 from typing import NamedTuple
 
+from companion.estimator import EstimatorParams, FilterStatus, NavFilter
 from companion.flight_controller import FlightController, FlightStep, VehicleState
 from companion.gains import FlightControlParams
-from companion.navigation import MotorState, NavEvent, NavigationParams, Navigator
+from companion.navigation import (
+    FlightMode,
+    MotorState,
+    NavEvent,
+    NavigationParams,
+    Navigator,
+    Reason,
+    Refusal,
+)
 from companion.reference import RefSample
+from companion.simlink_client import GpsFix, ImuSample
+from tuavdefs.airframe import rotor_speed_to_command
+from tuavdefs.frames import ned_to_enu
 from tuavdefs.params import SystemParams
 
 _STOPPED = (0.0, 0.0, 0.0, 0.0)
+#: An unhealthy navigation filter for this long in flight triggers the EKF failsafe [s]
+#: (ArduCopter checks its EKF's variances at 10 Hz and acts after about 1 s).
+EKF_FAILSAFE_S = 1.0
+#: How often the filter's health is checked [s] (ArduCopter: 10 Hz).
+HEALTH_CHECK_S = 0.1
 
 
 class OnboardInputs(NamedTuple):
@@ -33,8 +53,13 @@ class OnboardInputs(NamedTuple):
 
     t_s: float
     """Simulated time of the period [s]."""
-    state: VehicleState
-    """The vehicle's state as the link reports it (inertial z-up frame, body FLU, SI)."""
+    truth: VehicleState | None
+    """The simulator's state (HIL_STATE_QUATERNION; inertial z-up frame, body FLU, SI):
+    flown on only with ``EstimatorParams.kind`` "truth"."""
+    imu: ImuSample | None = None
+    """The period's IMU, magnetometer and barometer sample (HIL_SENSOR)."""
+    gps: GpsFix | None = None
+    """A GNSS fix, when one arrived this period (HIL_GPS)."""
 
 
 class OnboardOutputs(NamedTuple):
@@ -44,8 +69,9 @@ class OnboardOutputs(NamedTuple):
     """Normalised rotor commands, 0..1 (zeros unless flying)."""
     motors: MotorState
     armed: bool
-    state: VehicleState
-    """The state the vehicle flew on this period (what its telemetry reports)."""
+    state: VehicleState | None
+    """The state the vehicle flew on this period (what its telemetry reports); None while
+    its filter has not aligned."""
     reference: RefSample | None
     """The reference the flight controller tracked (None when not flying)."""
     flight: FlightStep | None
@@ -61,12 +87,30 @@ class Companion:
     """
 
     def __init__(self, params: SystemParams, gains: FlightControlParams,
-                 nav_params: NavigationParams, *,
+                 nav_params: NavigationParams, estimator: EstimatorParams | None = None, *,
                  on_event: Callable[[NavEvent, object], None] | None = None) -> None:
         self.params = params
         veh = params.vehicle
         g = params.environment.gravity_m_s2
         self.gravity_m_s2 = g
+        est = estimator if estimator is not None else EstimatorParams()
+        self.estimator_params = est
+        self.filter: NavFilter | None = (
+            NavFilter(est, g, ned_to_enu(tuple(est.earth_field_ned_gauss)))
+            if est.kind == "ekf" else None)
+        self.gps: GpsFix | None = None
+        """The last GNSS fix received (what GPS_RAW_INT reports)."""
+        self.imu: ImuSample | None = None
+        """The last IMU sample received."""
+        #: rotor commands that hover the vehicle by its own model (flown open loop while a
+        #: vehicle found in the air has no estimate yet)
+        hover = rotor_speed_to_command(
+            math.sqrt(veh.mass_kg * g / (4.0 * veh.rotor_thrust_coeff)), veh)
+        self._hover_commands = (hover,) * 4
+        self._airborne_at_boot: bool | None = None
+        self._unhealthy_since: float | None = None
+        self._healthy = self.filter is None
+        self._health_t_s = -math.inf
         self.flight = FlightController(gains, veh, params.tether, g)
         self.nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m,
                              on_event=on_event)
@@ -76,6 +120,10 @@ class Companion:
         #: starts there when the vehicle starts in the air)
         self.hover_speed_rad_s = math.sqrt(veh.mass_kg * g / (4.0 * veh.rotor_thrust_coeff))
         self.started = False
+        #: called once, right after the first state started the navigator and before its
+        #: first step (the process announces home there, a script uploads its mission)
+        self.on_start: Callable[[], None] | None = None
+        self.nav.prearm = self._prearm
         self._was_flying = False
         self.steps = 0
 
@@ -98,22 +146,96 @@ class Companion:
         drum tension [N] (None: not measured)."""
         self.flight.winch_report(t_s, length_m, speed_m_s, tension_n)
 
-    def start(self, inputs: OnboardInputs) -> None:
+    def filter_status(self, t_s: float | None = None) -> FilterStatus | None:
+        """The navigation filter's status (None when flying on the truth)."""
+        return self.filter.status(t_s) if self.filter is not None else None
+
+    @property
+    def navigation_healthy(self) -> bool:
+        """Whether what the vehicle flies on is usable (arming needs it): the filter's
+        health as last checked (:data:`HEALTH_CHECK_S`)."""
+        return self._healthy
+
+    def _check_health(self, t_s: float) -> None:
+        """The filter's health, again if :data:`HEALTH_CHECK_S` have passed (its status
+        is too costly for every period)."""
+        f = self.filter
+        if f is None or t_s - self._health_t_s < HEALTH_CHECK_S:
+            return
+        self._health_t_s = t_s
+        self._healthy = f.aligned and f.status(t_s).healthy
+
+    def _prearm(self) -> Refusal | None:
+        """ArduCopter's pre-arm check of the estimator."""
+        if self.navigation_healthy:
+            return None
+        return Refusal(Reason.PREARM, "PreArm: EKF not healthy")
+
+    def estimate(self, inputs: OnboardInputs) -> VehicleState | None:
+        """The period's sensors into the filter; the state to fly on (None while the
+        filter has not aligned). With kind "truth", the simulator's state."""
+        imu, gps = inputs.imu, inputs.gps
+        if imu is not None:
+            self.imu = imu
+        if gps is not None:
+            self.gps = gps
+        f = self.filter
+        if f is None:
+            return inputs.truth
+        t = inputs.t_s
+        if imu is not None:
+            f.predict(t, imu.gyro_flu_rad_s, imu.accel_flu_m_s2)
+            f.fuse_baro(t, imu.pressure_alt_m)
+            f.fuse_mag(t, imu.mag_flu_gauss)
+        self._check_health(t)
+        if gps is not None:
+            if self._airborne_at_boot is None:
+                self._airborne_at_boot = (gps.position_enu_m[2]
+                                          > self.params.vehicle.gear_height_m + 0.3)
+            f.fuse_gnss(t, gps.position_enu_m, gps.velocity_enu_m_s, gps.eph_m, gps.epv_m)
+        return f.state() if f.aligned else None
+
+    def _ekf_failsafe(self, t_s: float) -> None:
+        """ArduCopter's EKF failsafe: an unhealthy filter for ``EKF_FAILSAFE_S`` in flight
+        lands the vehicle."""
+        nav = self.nav
+        if self.navigation_healthy or not nav.flying:
+            self._unhealthy_since = None
+            return
+        if self._unhealthy_since is None:
+            self._unhealthy_since = t_s
+        elif (t_s - self._unhealthy_since >= EKF_FAILSAFE_S
+              and nav.mode != FlightMode.LAND):
+            nav.failsafe_land("EKF Failsafe: landing")
+
+    def start(self, t_s: float, state: VehicleState) -> None:
         """Initialise from the first state: on the ground (disarmed) or in the air (armed,
-        GUIDED, holding where it is). :meth:`step` calls it on its first call."""
-        state = inputs.state
+        GUIDED, holding where it is). :meth:`step` calls it with the first state."""
         self.started = True
-        self.nav.start(inputs.t_s, state.pos_m, state.vel_m_s, state.quat)
+        self.nav.start(t_s, state.pos_m, state.vel_m_s, state.quat)
         if self.nav.flying:
             self.flight.reset(state, (self.hover_speed_rad_s,) * 4)
             self._was_flying = True
 
     def step(self, inputs: OnboardInputs, diagnostics: bool = False) -> OnboardOutputs:
-        """One control period: the navigator's reference, then the flight controller's
-        rotor commands (with its diagnostics if ``diagnostics``)."""
+        """One control period: the estimate, the navigator's reference, then the flight
+        controller's rotor commands (with its diagnostics if ``diagnostics``). Until the
+        first state, a vehicle the GNSS finds in the air hovers open loop, one on the
+        ground stays disarmed."""
+        t = inputs.t_s
+        state = self.estimate(inputs)
+        if state is None:
+            self.steps += 1
+            if self._airborne_at_boot:
+                return OnboardOutputs(self._hover_commands, MotorState.FLY, True, None, None,
+                                      None)
+            return OnboardOutputs(_STOPPED, MotorState.OFF, False, None, None, None)
         if not self.started:
-            self.start(inputs)
-        t, state = inputs
+            self.start(t, state)
+            if self.on_start is not None:
+                self.on_start()
+        if self.filter is not None:
+            self._ekf_failsafe(t)
         ref, motors = self.nav.step(t, state.pos_m, state.vel_m_s, state.quat, self.dt_s)
         fs = None
         if motors is MotorState.FLY and ref is not None:

@@ -92,6 +92,63 @@ class SimState(NamedTuple):
     gps_updated: bool
 
 
+class BatchDecoder:
+    """The simulator link's batches decoded, without a socket: the plant's bytes in, one
+    :class:`SimState` per HIL_SENSOR out (the client decodes its socket's bytes with one;
+    the offline runner feeds one the plant's batches). ``home`` as for
+    :class:`SimLinkClient`."""
+
+    def __init__(self, home: tuple[float, float, float] = sl.HOME_DEFAULT) -> None:
+        self._home_map = sl.home_map(tuple(float(v) for v in home))
+        self._parser = sl.FrameParser()
+        self._truth: TruthState | None = None
+        self._gps: GpsFix | None = None
+        self._gps_new = False
+
+    @property
+    def bad_frames(self) -> int:
+        """Malformed frames dropped."""
+        return self._parser.bad_frames
+
+    def parse(self, data: bytes) -> list[tuple[int, tuple]]:
+        """The link messages in ``data``: (message id, values in wire order)."""
+        # the usual case, whole well-formed frames, skips the message objects
+        items = self._parser.feed_link(data)
+        if items is None:
+            items = [v for v in map(sl.link_values, self._parser.feed(data)) if v is not None]
+        return items
+
+    def absorb(self, item: tuple[int, tuple]) -> SimState | None:
+        """Take one message; the step's :class:`SimState` when it is the HIL_SENSOR."""
+        mid, v = item
+        # the records are built as the tuples they are (tuple.__new__), without their
+        # Python-level constructors
+        if mid == _SENSOR:
+            t = int(v[0])
+            state = _new(SimState, (t, t * 1e-6, self._truth,
+                                    _new(ImuSample, (t, *sl.imu_from_wire(v), int(v[14]))),
+                                    self._gps, self._gps_new))
+            self._gps_new = False
+            return state
+        if mid == _TRUTH:
+            self._truth = _new(TruthState, (int(v[0]), *sl.truth_from_wire(v, self._home_map)))
+        elif mid == sl.MSG_HIL_GPS:
+            pos, vel, eph, epv = sl.gps_from_wire(v, self._home_map)
+            self._gps = GpsFix(int(v[0]), pos, vel, v[1] * 1e-7, v[2] * 1e-7, v[3] * 1e-3,
+                               eph, epv, int(v[11]), int(v[12]))
+            self._gps_new = True
+        return None
+
+    def feed(self, data: bytes) -> list[SimState]:
+        """The steps whose HIL_SENSOR is in ``data`` (with the latest truth and fix)."""
+        out = []
+        for item in self.parse(data):
+            state = self.absorb(item)
+            if state is not None:
+                out.append(state)
+        return out
+
+
 class SimLinkClient:
     """Client of the plant's simulator link: TCP to ``host``:``port``, or with ``unix_path``
     the plant's Unix-domain socket (``@NAME``: Linux's abstract namespace).
@@ -111,17 +168,13 @@ class SimLinkClient:
         self.address = sl.format_sim_address(unix_path if unix_path is not None
                                               else (host, port))
         self.home = tuple(float(v) for v in home)
-        self._home_map = sl.home_map(self.home)
         self._sock: socket.socket | None = None
-        self._parser = sl.FrameParser()
+        self._decoder = BatchDecoder(self.home)
         self._encoder = sl.Encoder(sl.COMPANION_SYSID, sl.COMPANION_COMPID)
         #: The link's messages read and not yet absorbed: (message id, values in wire order)
         self._pending: deque[tuple[int, tuple]] = deque()
         #: The receive timeout set on the socket [ms] (it blocks in recv for at most that)
         self._recv_timeout_ms: int | None = None
-        self._truth: TruthState | None = None
-        self._gps: GpsFix | None = None
-        self._gps_new = False
 
     # ----- connection
     def connect(self, timeout_s: float = 10.0) -> None:
@@ -173,7 +226,7 @@ class SimLinkClient:
     @property
     def bad_frames(self) -> int:
         """Malformed frames dropped from the plant's stream."""
-        return self._parser.bad_frames
+        return self._decoder.bad_frames
 
     def close(self) -> None:
         """Close the connection (the plant's serve() then ends)."""
@@ -193,9 +246,10 @@ class SimLinkClient:
     def receive_state(self, timeout_s: float = 5.0) -> SimState:
         """The next step's batch, waiting up to ``timeout_s`` [s] for its HIL_SENSOR."""
         end = time.monotonic() + timeout_s
+        absorb = self._decoder.absorb
         while True:
             while self._pending:
-                state = self._absorb(self._pending.popleft())
+                state = absorb(self._pending.popleft())
                 if state is not None:
                     return state
             self._read(end)
@@ -220,31 +274,7 @@ class SimLinkClient:
             raise ConnectionError(f"simulator link failed: {e}") from e
         if not data:
             raise ConnectionError("the simulator closed the link")
-        # the usual case, whole well-formed frames, skips the message objects
-        items = self._parser.feed_link(data)
-        if items is None:
-            items = [v for v in map(sl.link_values, self._parser.feed(data)) if v is not None]
-        self._pending.extend(items)
-
-    def _absorb(self, item: tuple[int, tuple]) -> SimState | None:
-        mid, v = item
-        # the records are built as the tuples they are (tuple.__new__), without their
-        # Python-level constructors
-        if mid == _SENSOR:
-            t = int(v[0])
-            state = _new(SimState, (t, t * 1e-6, self._truth,
-                                    _new(ImuSample, (t, *sl.imu_from_wire(v), int(v[14]))),
-                                    self._gps, self._gps_new))
-            self._gps_new = False
-            return state
-        if mid == _TRUTH:
-            self._truth = _new(TruthState, (int(v[0]), *sl.truth_from_wire(v, self._home_map)))
-        elif mid == sl.MSG_HIL_GPS:
-            pos, vel, eph, epv = sl.gps_from_wire(v, self._home_map)
-            self._gps = GpsFix(int(v[0]), pos, vel, v[1] * 1e-7, v[2] * 1e-7, v[3] * 1e-3,
-                               eph, epv, int(v[11]), int(v[12]))
-            self._gps_new = True
-        return None
+        self._pending.extend(self._decoder.parse(data))
 
     # ----- sending
     def send_actuators(self, time_usec: int, rotor_commands: Sequence[float], armed: bool,

@@ -17,12 +17,15 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
+from pymavlink.dialects.v20 import ardupilotmega
 from pymavlink.dialects.v20 import common as mavlink2
 
+from companion.estimator import EstimatorFlags, FilterHealth, FilterStatus
 from companion.mavlink_io import MavlinkEndpoints, Peer
 from companion.mission_items import finite
 from companion.mission_protocol import MissionProtocol
 from companion.navigation import FlightMode, Navigator
+from companion.simlink_client import GpsFix, ImuSample
 from tuavdefs.frames import (
     enu_to_ned,
     flu_to_frd,
@@ -33,6 +36,7 @@ from tuavdefs.frames import (
 )
 
 M = mavlink2
+APM = ardupilotmega
 Vec3 = tuple[float, float, float]
 
 __all__ = ["CAPABILITIES", "DEFAULT_RATES_HZ", "DUE_TOLERANCE_S", "FLIGHT_SW_VERSION",
@@ -48,6 +52,8 @@ CAPABILITIES = (M.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | M.MAV_PROTOCOL_CAPABIL
                 | M.MAV_PROTOCOL_CAPABILITY_MAVLINK2
                 | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
 
+#: Standard gravity: the milli-g of RAW_IMU / SCALED_IMU [m/s^2].
+_G0_M_S2 = 9.80665
 _SENSORS = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
             | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
             | M.MAV_SYS_STATUS_SENSOR_GPS | M.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
@@ -64,7 +70,8 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "SYS_STATUS": 1.0, "EXTENDED_SYS_STATE": 1.0, "BATTERY_STATUS": 1.0,
     "GPS_RAW_INT": 2.0, "GLOBAL_POSITION_INT": 5.0, "LOCAL_POSITION_NED": 5.0,
     "ATTITUDE": 10.0, "VFR_HUD": 2.0, "HOME_POSITION": 0.2, "MISSION_CURRENT": 1.0,
-    "SYSTEM_TIME": 0.5,
+    "SYSTEM_TIME": 0.5, "EKF_STATUS_REPORT": 2.0, "RAW_IMU": 2.0, "SCALED_IMU": 2.0,
+    "SCALED_PRESSURE": 2.0,
 }
 #: A message due within this [s] of a period's time is sent in that period: its due times
 #: are sums of intervals in floating point, and without it messages due at the same instant
@@ -77,9 +84,14 @@ STREAM_GROUPS: dict[int, tuple[str, ...]] = {
     M.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
     M.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
     M.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
-    M.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "BATTERY_STATUS", "EXTENDED_SYS_STATE"),
+    M.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "BATTERY_STATUS", "EXTENDED_SYS_STATE",
+                               "EKF_STATUS_REPORT"),
+    M.MAV_DATA_STREAM_RAW_SENSORS: ("RAW_IMU", "SCALED_IMU", "SCALED_PRESSURE"),
 }
-_MSG_IDS = {name: getattr(M, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_RATES_HZ}
+_MSG_IDS = {name: getattr(APM, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_RATES_HZ}
+#: EKF_STATUS_REPORT's flags (ArduPilot's EKF_STATUS_FLAGS) of the estimator's flags
+#: (MAVLink's ESTIMATOR_STATUS_FLAGS): the same bits up to PRED_POS_HORIZ_ABS.
+_EKF_FLAG_BITS = 0x3FF
 _MSG_NAMES = {v: k for k, v in _MSG_IDS.items()}
 
 
@@ -96,6 +108,14 @@ class Telemetry(NamedTuple):
     """Body rates (FLU) [rad/s]."""
     throttle: float
     """Mean rotor command in [0, 1]."""
+    imu: ImuSample | None = None
+    """The last IMU, magnetometer and barometer sample (RAW_IMU, SCALED_IMU,
+    SCALED_PRESSURE)."""
+    gps: GpsFix | None = None
+    """The GNSS receiver's last fix (GPS_RAW_INT)."""
+    ekf: FilterStatus | None = None
+    """The navigation filter's status (EKF_STATUS_REPORT; None when flying on the
+    simulator's state)."""
 
 
 @dataclass
@@ -256,13 +276,17 @@ class TelemetryStreams:
                 round(tm.pos_m[2] * 1000), _i16(vn[0] * 100), _i16(vn[1] * 100),
                 _i16(vn[2] * 100), round(hdg * 100) % 36000)
         if name == "GPS_RAW_INT":
-            lat, lon, alt = local_enu_to_global(tm.pos_m, self.origin)
-            vn = enu_to_ned(tm.vel_m_s)
-            gs = math.hypot(vn[0], vn[1])
-            cog = math.degrees(math.atan2(vn[1], vn[0])) % 360.0 if gs > 0.1 else 0.0
-            return M.MAVLink_gps_raw_int_message(
-                int(tm.t_s * 1e6), M.GPS_FIX_TYPE_3D_FIX, round(lat * 1e7), round(lon * 1e7),
-                round(alt * 1000), 70, 100, round(gs * 100), round(cog * 100) % 36000, 16)
+            return self._gps_raw(tm)
+        if name == "EKF_STATUS_REPORT":
+            return self._ekf_status(tm)
+        if name in ("RAW_IMU", "SCALED_IMU"):
+            return self._imu(name, tm, boot_ms)
+        if name == "SCALED_PRESSURE":
+            imu = tm.imu
+            if imu is None:
+                return M.MAVLink_scaled_pressure_message(boot_ms, 0.0, 0.0, 0, 0)
+            return M.MAVLink_scaled_pressure_message(
+                boot_ms, imu.abs_pressure_hpa, 0.0, round(imu.temperature_c * 100), 0)
         if name == "VFR_HUD":
             vn = enu_to_ned(tm.vel_m_s)
             gs = math.hypot(vn[0], vn[1])
@@ -292,6 +316,58 @@ class TelemetryStreams:
         if name == "SYSTEM_TIME":
             return M.MAVLink_system_time_message(int(time.time() * 1e6), boot_ms)
         raise KeyError(name)
+
+    def _gps_raw(self, tm: Telemetry) -> Any:
+        """GPS_RAW_INT of the receiver's last fix (no fix before the first)."""
+        g = tm.gps
+        t_us = int(tm.t_s * 1e6)
+        if g is None:
+            return M.MAVLink_gps_raw_int_message(t_us, M.GPS_FIX_TYPE_NO_FIX, 0, 0, 0, 65535,
+                                                 65535, 65535, 65535, 0)
+        vn = enu_to_ned(g.velocity_enu_m_s)
+        gs = math.hypot(vn[0], vn[1])
+        cog = math.degrees(math.atan2(vn[1], vn[0])) % 360.0 if gs > 0.1 else 0.0
+        eph, epv = (min(round(v * 100), 65534) for v in (g.eph_m, g.epv_m))
+        return M.MAVLink_gps_raw_int_message(
+            t_us, g.fix_type, round(g.lat_deg * 1e7), round(g.lon_deg * 1e7),
+            round(g.alt_amsl_m * 1000), eph, epv, round(gs * 100), round(cog * 100) % 36000,
+            g.satellites_visible, 0, round(g.eph_m * 1000), round(g.epv_m * 1000))
+
+    def _ekf_status(self, tm: Telemetry) -> Any:
+        """EKF_STATUS_REPORT as ArduPilot fills it: flags, and each measurement's test
+        ratio as its variance (1.0 at the gate)."""
+        e = tm.ekf
+        if e is None:   # flying on the simulator's state: everything good
+            flags = (APM.EKF_ATTITUDE | APM.EKF_VELOCITY_HORIZ | APM.EKF_VELOCITY_VERT
+                     | APM.EKF_POS_HORIZ_REL | APM.EKF_POS_HORIZ_ABS | APM.EKF_POS_VERT_ABS
+                     | APM.EKF_PRED_POS_HORIZ_REL | APM.EKF_PRED_POS_HORIZ_ABS)
+            return APM.MAVLink_ekf_status_report_message(flags, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        flags = int(e.flags) & _EKF_FLAG_BITS
+        if e.flags & EstimatorFlags.GPS_GLITCH:
+            flags |= APM.EKF_GPS_GLITCHING
+        if e.health in (FilterHealth.INITIALISING,):
+            flags |= APM.EKF_UNINITIALIZED
+        return APM.MAVLink_ekf_status_report_message(
+            flags, e.velocity_variance, e.pos_horiz_variance, e.pos_vert_variance,
+            e.compass_variance, e.terrain_alt_variance, 0.0)
+
+    def _imu(self, name: str, tm: Telemetry, boot_ms: int) -> Any:
+        """RAW_IMU or SCALED_IMU of the last sample: mG, mrad/s, mgauss in body FRD (as
+        ArduPilot, RAW_IMU carries the same scaled values)."""
+        imu = tm.imu
+        if imu is None:
+            a = w = m = (0.0, 0.0, 0.0)
+            temp = 0
+        else:
+            a, w, m = (flu_to_frd(v) for v in (imu.accel_flu_m_s2, imu.gyro_flu_rad_s,
+                                                  imu.mag_flu_gauss))
+            temp = round(imu.temperature_c * 100)
+        acc = [_i16(v / _G0_M_S2 * 1000.0) for v in a]
+        gyr = [_i16(v * 1000.0) for v in w]
+        mag = [_i16(v * 1000.0) for v in m]
+        if name == "RAW_IMU":
+            return M.MAVLink_raw_imu_message(int(tm.t_s * 1e6), *acc, *gyr, *mag, 0, temp)
+        return M.MAVLink_scaled_imu_message(boot_ms, *acc, *gyr, *mag, temp)
 
     def landed_state(self) -> int:
         """EXTENDED_SYS_STATE's MAV_LANDED_STATE now."""

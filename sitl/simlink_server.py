@@ -41,9 +41,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from sitl.batch import batch_packer
-from sitl.plant import POS, QUAT, RATES, VEL, Plant, PlantInputs
-from sitl.sensors import ISA_RHO0_KG_M3, SensorNoise, SensorSuite, airspeed_from, isa_air
+from sitl.plant import Plant, PlantInputs
+from sitl.sensor_batch import SensorBatches
+from sitl.sensors import SensorNoise, SensorSuite
 from tuavdefs import simlink as sl
 
 #: How often a waiting loop looks at its stop event [s].
@@ -226,14 +226,12 @@ class SimLinkServer:
         #: Control periods advanced in the running (or last) session (the loop counts).
         self.steps = 0
         self._encoder = sl.Encoder(sl.PLANT_SYSID, sl.PLANT_COMPID)
-        #: The batches in one compiled call (None without numba: :meth:`_batch_bytes`).
-        self._packer = batch_packer(plant, self.sensors, self.home, self._encoder,
-                                    self.period_us)
+        #: Each period's batch (compiled where it can be).
+        self.batches = SensorBatches(plant, self.sensors, self.home, self.period_us,
+                                     self.gps_period_us, self._encoder)
         self._parser = sl.FrameParser()
         self._sock: socket.socket | None = None
         self._poller: select.poll | None = None
-        self._home_map = sl.home_map(self.home)
-        self._last_gps_us: int | None = None
         #: The Unix-domain path listened on (None: TCP).
         self.unix_path = unix_path
         address: tuple[str, int] | str
@@ -327,8 +325,7 @@ class SimLinkServer:
         ``stop`` is set; then, or on the timeout, False)."""
         self.steps = 0
         self._parser = sl.FrameParser()
-        self._last_gps_us = None
-        self.sensors.reset_truth()
+        self.batches.reset()
         end = None if timeout_s is None else time.monotonic() + timeout_s
         while not stop.is_set():
             wait = STOP_POLL_S if end is None else min(STOP_POLL_S, end - time.monotonic())
@@ -351,46 +348,11 @@ class SimLinkServer:
     def send_batch(self, t_us: int) -> None:
         """Send HIL_GPS (when due), HIL_STATE_QUATERNION and HIL_SENSOR for the current
         state, stamped ``t_us`` [us]."""
-        gps_dt: float | None = None
-        last = self._last_gps_us
-        if last is None or t_us - last >= self.gps_period_us:
-            gps_dt = (self.gps_period_us if last is None else t_us - last) * 1e-6
-            self._last_gps_us = t_us
-        data = None if self._packer is None else self._packer.pack(t_us, gps_dt)
-        if data is None:
-            data = self._batch_bytes(t_us, gps_dt)
+        data = self.batches.batch(t_us)
         try:
             self._sock.sendall(data)  # type: ignore[union-attr]
         except OSError as e:
             raise DisconnectedError from e
-
-    def _batch_bytes(self, t_us: int, gps_dt: float | None) -> bytes:
-        """The batch for the current state at ``t_us`` [us] (with HIL_GPS, its channels read
-        ``gps_dt`` [s] after the last fix, unless None), interpreted: the reference of
-        :class:`sitl.batch.BatchPacker`, and the path for what it leaves alone."""
-        p = self.plant
-        dt = self.period_us * 1e-6
-        x = p.x.tolist()
-        pos, vel, quat, rates = (tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]),
-                                 tuple(x[RATES]))
-        s, enc, home = self.sensors, self._encoder, self._home_map
-        s.record_truth_us(t_us, pos, vel)    # (first: whatever fails below, it is kept)
-        f_flu = p.specific_force_flu()
-        pressure_hpa, temperature_k, density = isa_air(self.home[2] + pos[2])
-        tas = airspeed_from(vel, p.wind_m_s)
-        ias = tas * math.sqrt(density / ISA_RHO0_KG_M3)
-        chunks = []
-        if gps_dt is not None:
-            fix = s.gps_fix_us(t_us, gps_dt)
-            chunks.append(enc.pack_values(sl.MSG_HIL_GPS, sl.hil_gps_values(
-                t_us, fix.position_enu_m, fix.velocity_enu_m_s, home, fix.eph_m, fix.epv_m)))
-        chunks.append(enc.pack_values(sl.MSG_HIL_STATE_QUATERNION,
-                                      sl.hil_state_quaternion_values(
-                                          t_us, pos, vel, quat, rates, f_flu, home, tas, ias)))
-        chunks.append(enc.pack_values(sl.MSG_HIL_SENSOR, sl.hil_sensor_values(
-            t_us, *s.imu(f_flu, rates, quat, dt),
-            *s.baro_of_air(pressure_hpa, temperature_k, dt))))
-        return b"".join(chunks)
 
     def wait_answer(self, t_us: int, deadline: float | None, stop: threading.Event
                     ) -> tuple[bool, int, int]:

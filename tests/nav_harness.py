@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+from companion.estimator import EstimatorParams
 from companion.flight_controller import VehicleState
 from companion.gains import FlightControlParams
 from companion.navigation import MotorState, NavigationParams
@@ -33,7 +34,8 @@ class Loop:
                                  params.tether, g)
         length0, _ = self.winder.lbar.length(pos0)
         self.plant.x[:] = initial_state(model, pos0, tether_length_m=length0)
-        self.companion = Companion(params, gains, nav or NavigationParams())
+        self.companion = Companion(params, gains, nav or NavigationParams(),
+                                   EstimatorParams(kind="truth"))
         self.nav = self.companion.nav
         self.n_ctrl = round(1.0 / (self.plant.dt_s * gains.rate_hz))
         self.n_wind = round(1.0 / (self.plant.dt_s * WinderControlParams().rate_hz))
@@ -44,7 +46,7 @@ class Loop:
         self.motors = MotorState.OFF
         self.events: list[tuple[float, object, object]] = []
         self.max_taut = -math.inf
-        self.companion.start(OnboardInputs(0.0, self._state()))
+        self.companion.start(0.0, self._state())
 
     def _state(self) -> VehicleState:
         x = self.plant.x.tolist()

@@ -432,11 +432,11 @@ def test_the_compiled_batch_is_the_interpreted_one(noise: SensorNoise,
     servers = [SimLinkServer(Plant(params, state=x0), port=0, sensor_noise=noise, home=home)
                for _ in range(2)]
     fast, ref = servers
-    ref._packer = None
-    assert (fast._packer is not None) == JIT
+    ref.batches.packer = None
+    assert (fast.batches.packer is not None) == JIT
     if not JIT:   # the kernel interpreted
-        fast._packer = BatchPacker(fast.plant, fast.sensors, fast.home, fast._encoder,
-                                   fast.period_us)
+        fast.batches.packer = BatchPacker(fast.plant, fast.sensors, fast.home,
+                                          fast._encoder, fast.period_us)
     periods = 3000 if JIT else 300
     rng = np.random.default_rng(5)
     t_us = 0

@@ -425,7 +425,7 @@ def test_the_links_fixes_are_the_truth_latency_earlier():
     for compiled in (True, False):
         server = SimLinkServer(Plant(SystemParams(), state=x0), port=0, sensor_noise=noise)
         if not compiled:
-            server._packer = None
+            server.batches.packer = None
         assert server.gps_period_us == 200000
         sent: list[bytes] = []
         server._sock = _Sink(sent)  # type: ignore[assignment]

@@ -147,3 +147,12 @@ def test_the_stack_waits_for_the_plants_own_end(tmp_path):
     finally:
         stack.procs["companion"].kill()
         stack.procs["companion"].wait()
+
+
+def test_up_names_the_gnss_presets_and_estimator_kinds_as_their_packages_do():
+    from companion.estimator import ESTIMATOR_KINDS
+    from sitl.sensors import GnssPreset
+    from tuav_sitl import up
+
+    assert up.GNSS_PRESETS == tuple(p.value for p in GnssPreset)
+    assert up.ESTIMATOR_KINDS == ESTIMATOR_KINDS

@@ -26,7 +26,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.flight_controller import VehicleState
 from companion.mission_items import ItemRefused, nav_commands
-from companion.navigation import FlightMode, NavCommand, NavEvent, NavKind
+from companion.navigation import FlightMode, NavCommand, NavEvent, NavKind, Refusal
 from companion.onboard import Companion, OnboardInputs
 from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
 from groundstation.winch import CommandRequest, Winch, WinchStatusReport
@@ -45,6 +45,7 @@ from sitl.plant import (
 )
 from sitl.trim import hover_trim
 from tuav_sitl.scenario import ScenarioParams
+from tuav_sitl.sensor_feed import SensorFeed
 from tuavdefs import can_protocol as cp
 from tuavdefs import component_link as cl
 from tuavdefs.frames import quat_to_euler, wrap_pi
@@ -64,7 +65,8 @@ SERIES: tuple[tuple[str, int], ...] = (
     ("v_att", 0), ("v_win", 0), ("v_pos_raw", 0), ("v_att_raw", 0), ("length", 0),
     ("lbar", 0), ("lbar_rate", 0), ("lbar_fresh", 0), ("drum_rate", 0),
     ("winder_torque", 0), ("drum_tension", 0), ("top_tension", 0), ("regime", 0),
-    ("lowest", 0), ("wind", 3), ("tether_force", 3), ("tether_force_est", 3))
+    ("lowest", 0), ("wind", 3), ("tether_force", 3), ("tether_force_est", 3),
+    ("est_pos", 3), ("est_vel", 3), ("est_euler", 3), ("est_pos_sigma", 3))
 
 
 class ProgressBar:
@@ -176,6 +178,8 @@ _GROUND_ATTITUDE = (math.nan,) * 6
 _GROUND_WRENCH = (math.nan,) * 4
 _GROUND_REST = (0.0, 0.0, math.nan, math.nan, math.nan, math.nan, math.nan)
 _NAN3 = (math.nan,) * 3
+#: The estimate's columns (est_pos, est_vel, est_euler, est_pos_sigma) without one.
+_NO_ESTIMATE = (math.nan,) * 12
 _ORIGIN = (0.0, 0.0, 0.0)
 
 
@@ -281,28 +285,68 @@ class OfflineRunner:
             nav_params = nav_params.replace(speed_m_s=tr.max_speed_m_s,
                                             acc_m_s2=tr.max_acc_m_s2,
                                             acceptance_radius_m=tr.acceptance_radius_m)
-        self.companion = Companion(params, sc.control, nav_params,
+        self.companion = Companion(params, sc.control, nav_params, sc.estimator,
                                    on_event=self._on_nav_event)
+        self.companion.on_start = self._on_start
         self._t = 0.0
-        self.companion.start(OnboardInputs(0.0, self._vehicle_state()))
         self.reference: Reference | None = None
-        self.home: tuple[float, float, float] | None = None
-        #: a waypoints run's mission, and when the script starts it [s]
-        self._waypoints: list[NavCommand] = []
-        self._waypoints_at_s = math.inf
+        self.home: tuple[float, float, float] = tuple(sc.home)  # type: ignore[assignment]
+        #: the mission the script uploads (checked now, as an upload is), and when a
+        #: waypoints run starts its mission [s]
+        self._mission: list[NavCommand] = []
+        self._waypoints = False
+        self._mission_at_s = math.inf
+        #: the script's arming request, retried every period until the vehicle accepts it
+        #: (as a ground station waits for "EKF OK"); the last refusal
+        self._arm_pending = False
+        self.arm_refusal: Refusal | None = None
         if sc.flies_mission:
-            self._upload_mission()
+            self.home, items = sc.mission_items()
+            try:
+                self._mission = nav_commands(items, self.home, self.companion.nav)
+            except ItemRefused as exc:
+                raise MissionError(f"{sc.name}.mission", str(exc)) from None
         elif tr.kind == "waypoints":
-            self._waypoints = self._waypoint_commands()
-            self._waypoints_at_s = tr.start_s
-            self.companion.nav.set_mission(self._waypoints)
+            self._mission = self._waypoint_commands()
+            self._waypoints = True
         else:
             self.reference = Reference(sc)
-            why = self.companion.nav.follow(self.reference.sample)
-            if why is not None:
-                raise MissionError(f"{sc.name}.trajectory",
-                                   f"the trajectory cannot be flown: {why} (does [initial] "
-                                   "start on the ground?)")
+        #: the plant's sensors, as the simulator link would deliver them (not needed when
+        #: the companion flies on the truth)
+        self.sensors = (SensorFeed(self.plant, sc.sensors.noise_model(), self.home,
+                                   1.0 / sc.control.rate_hz)
+                        if self.companion.filter is not None else None)
+
+    def _on_start(self) -> None:
+        """The ground station's script, once the vehicle has a state: upload the mission,
+        AUTO and arm (a vehicle in the air starts it), or start streaming the trajectory
+        (a waypoints run starts its mission at ``trajectory.start_s``)."""
+        sc, nav = self.sc, self.companion.nav
+        if self._mission:
+            nav.set_mission(self._mission)
+            if self._waypoints:
+                self._mission_at_s = sc.trajectory.start_s
+            elif nav.landed:
+                why = nav.set_mode(FlightMode.AUTO)
+                if why is not None:
+                    raise MissionError(f"{sc.name}.mission", f"refused: {why}")
+                self._arm_pending = True
+                self._try_arm()
+            else:
+                self._mission_at_s = 0.0
+            return
+        why = nav.follow(self.reference.sample)
+        if why is not None:
+            raise MissionError(f"{sc.name}.trajectory",
+                               f"the trajectory cannot be flown: {why} (does [initial] "
+                               "start on the ground?)")
+
+    def _try_arm(self) -> None:
+        """The script's arming request (MAV_CMD_COMPONENT_ARM_DISARM), again."""
+        why = self.companion.nav.arm()
+        self.arm_refusal = why
+        if why is None:
+            self._arm_pending = False
 
     def _on_nav_event(self, kind: NavEvent, value: object) -> None:
         self.nav_events.append((kind, value, self._t))
@@ -312,21 +356,6 @@ class OfflineRunner:
             if result != mavlink2.MAV_RESULT_ACCEPTED:
                 self.ground.notices.append((self._t, f"Mission: winch refused item {seq} "
                                                      f"({result})"))
-
-    def _upload_mission(self) -> None:
-        """What a ground station does: upload the mission, AUTO, arm (from the ground; a
-        vehicle already in the air starts the mission)."""
-        nav = self.companion.nav
-        self.home, items = self.sc.mission_items()
-        try:
-            commands = nav_commands(items, self.home, nav)
-        except ItemRefused as exc:
-            raise MissionError(f"{self.sc.name}.mission", str(exc)) from None
-        nav.set_mission(commands)
-        for why in ((nav.set_mode(FlightMode.AUTO), nav.arm()) if nav.landed
-                    else (nav.start_mission(),)):
-            if why is not None:
-                raise MissionError(f"{self.sc.name}.mission", f"refused: {why}")
 
     def _waypoint_commands(self) -> list[NavCommand]:
         """A waypoints run's waypoints as mission items (seq from 1), checked as an upload
@@ -366,6 +395,9 @@ class OfflineRunner:
         winder_enabled = True
         g = self.params.environment.gravity_m_s2
         mission = sc.flies_mission
+        sensors = self.sensors
+        filt = companion.filter
+        was_armed = False
         advance, tether_forces = plant.advance, plant.tether_forces
         step, add_row = companion.step, log.add
         wall0 = time.perf_counter()
@@ -390,43 +422,59 @@ class OfflineRunner:
             if k % n_ctrl == 0:
                 x = plant.x.tolist()
                 self._t = t
-                if t >= self._waypoints_at_s:   # the script starts the waypoints: AUTO
-                    self._waypoints_at_s = math.inf
+                if t >= self._mission_at_s:   # the script starts the mission in the air
+                    self._mission_at_s = math.inf
                     why = nav.start_mission()
                     if why is not None:
-                        raise MissionError(f"{sc.name}.trajectory", f"waypoints refused: {why}")
-                out = step(OnboardInputs(t, VehicleState(tuple(x[POS]), tuple(x[VEL]),
-                                                         tuple(x[QUAT]), tuple(x[RATES]))),
-                           diagnostics=True)
+                        raise MissionError(f"{sc.name}.mission", f"refused: {why}")
+                if self._arm_pending:
+                    self._try_arm()
+                pos, vel, quat, rates = (tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]),
+                                         tuple(x[RATES]))
+                truth = VehicleState(pos, vel, quat, rates)
+                if sensors is not None:
+                    sim = sensors.read(t)
+                    out = step(OnboardInputs(t, truth, sim.imu,
+                                             sim.gps if sim.gps_updated else None),
+                               diagnostics=True)
+                else:
+                    out = step(OnboardInputs(t, truth), diagnostics=True)
                 state, fs, ref = out.state, out.flight, out.reference
                 inputs = PlantInputs(out.rotor_commands, out.armed, winder_torque,
                                      winder_enabled)
-                truth = tether_forces()
-                info = truth.info
+                forces = tether_forces()
+                info = forces.info
                 if fs is not None:
                     po, ao = fs.position, fs.attitude
-                    control = (*ao.attitude_cmd_rad, *po.attitude_rad, *state.rates_rad_s,
+                    control = (*ao.attitude_cmd_rad, *po.attitude_rad, *rates,
                                po.thrust_n, *ao.torque_n_m, *fs.rotor_commands,
                                fs.mixer_saturated, po.saturated, *po.disturbance_m_s2,
                                po.lyapunov, ao.lyapunov)
                     lyap_raw = (po.lyapunov_raw, ao.lyapunov_raw)
                     est = fs.tether_force_est_n
                 else:
-                    control = (*_GROUND_ATTITUDE, *state.rates_rad_s, *_GROUND_WRENCH,
+                    control = (*_GROUND_ATTITUDE, *rates, *_GROUND_WRENCH,
                                *out.rotor_commands, *_GROUND_REST)
                     lyap_raw, est = (math.nan, math.nan), _NAN3
                 ref_pos, ref_vel = ((ref.pos_m, ref.vel_m_s) if ref is not None
                                     else (_NAN3, _NAN3))
-                add_row(t, *state.pos_m, *state.vel_m_s, *ref_pos, *ref_vel,
-                        *quat_to_euler(state.quat), *control, winder_lyap, *lyap_raw,
+                if filt is None or state is None:
+                    estimate = _NO_ESTIMATE
+                else:
+                    estimate = (*state.pos_m, *state.vel_m_s, *quat_to_euler(state.quat),
+                                *filt.position_sigma_m())
+                add_row(t, *pos, *vel, *ref_pos, *ref_vel,
+                        *quat_to_euler(quat), *control, winder_lyap, *lyap_raw,
                         r_w * x[DRUM_ANGLE], lbar_m, lbar_rate, fresh, x[DRUM_RATE],
-                        winder_torque, truth.drum_tension_n, truth.top_tension_n,
+                        winder_torque, forces.drum_tension_n, forces.top_tension_n,
                         int(info.regime), info.lowest_point_height_m, *plant.wind_m_s,
-                        *truth.on_uav_n, *est)
+                        *forces.on_uav_n, *est, *estimate)
                 bar.update(t)
                 if on_sample is not None:
                     on_sample(t)
-                if mission and nav.landed and not nav.armed and nav.mission:
+                if nav.armed:
+                    was_armed = True
+                elif mission and was_armed and nav.landed:
                     break   # landed and disarmed: the mission is over
             elif fresh:   # the winder's new torque, the rotors' commands held
                 inputs = PlantInputs(inputs.rotor_commands, inputs.armed, winder_torque,
@@ -449,7 +497,9 @@ class OfflineRunner:
         if mission:
             metrics["items_reached"] = [seq for seq, _ in reached]
             metrics["items_reached_t_s"] = [round(ts, 3) for _, ts in reached]
-            metrics["landed_disarmed"] = bool(nav.landed and not nav.armed)
+            metrics["landed_disarmed"] = bool(was_armed and nav.landed and not nav.armed)
+            metrics["arming_refused"] = (str(self.arm_refusal) if self._arm_pending
+                                         else None)
         return RunResult(sc, series, metrics, self.nav_events)
 
 

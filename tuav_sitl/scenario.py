@@ -22,6 +22,7 @@ from pathlib import Path
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion import mission_file
+from companion.estimator import EstimatorParams
 from companion.gains import FlightControlParams
 from companion.mission_protocol import MissionItem, degrees_to_e7, home_item
 from companion.navigation import NavigationParams
@@ -193,6 +194,9 @@ class ScenarioParams(Params):
         WinderControlParams(), "", "winder control")
     lbar: LBarParams = quantity(LBarParams(), "", "the L-bar estimator")
     sensors: SensorParams = quantity(SensorParams(), "", "the plant's sensors")
+    estimator: EstimatorParams = quantity(EstimatorParams(), "", "the companion's navigation "
+                                          "filter; kind = \"truth\" flies on the plant's "
+                                          "state")
     winch: WinchParams = quantity(WinchParams(), "", "the winch component (its WINCH_STATUS "
                                   "rate: what the companion's tether model hears)")
 

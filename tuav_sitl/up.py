@@ -35,6 +35,12 @@ from tuavdefs.gcs import (
 from tuavdefs.params import SystemParams, TetherParams, VehicleParams, WinderParams
 from tuavdefs.paramspec import ParameterError, load_toml, to_dict
 
+#: The plant's GNSS receivers (sitl.sensors.GnssPreset's values) and what the companion may
+#: fly on (companion.estimator.ESTIMATOR_KINDS), spelled out so that the command line
+#: parses without importing the packages (a test checks they agree).
+GNSS_PRESETS = ("rtk", "gnss")
+ESTIMATOR_KINDS = ("ekf", "truth")
+
 #: How long a process may take to say it is ready [s].
 READY_TIMEOUT_S = 60.0
 #: How long a process gets to exit after SIGTERM before it is killed [s].
@@ -249,6 +255,13 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     metavar=("X", "Y", "Z"),
                     help="where the UAV starts [m], z-up frame from the winder: on the "
                          "ground (default 2 m east) or, with Z above the gear, in hover")
+    ap.add_argument("--gnss", choices=GNSS_PRESETS, default="rtk",
+                    help="the plant's GNSS receiver: rtk (ZED-F9P class, ~2 cm, the default) "
+                         "or gnss (M9N/M10 class, 0.5-1 m, wandering); the companion is told "
+                         "its latency, as GPS_DELAY_MS would")
+    ap.add_argument("--state", choices=ESTIMATOR_KINDS, default="ekf",
+                    help="what the companion flies on: its navigation filter's estimate "
+                         "(ekf, the default) or the simulator's state (truth, to compare)")
     ap.add_argument("--goto", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                     help="when starting in the air, fly here [m] at once")
     ap.add_argument("--duration", type=float, default=None,
@@ -360,8 +373,14 @@ def run_up(args: argparse.Namespace) -> int:
     can = _can_spec(args.can, args.instance)
     home = [str(v) for v in args.home]
     common = ["--params", str(run_dir / "params.toml")]
+    from companion.estimator import EstimatorParams
+    from sitl.sensors import GNSS_MODELS, GnssPreset
+
+    latency_s = GNSS_MODELS[GnssPreset(args.gnss)].latency_s
+    estimator = EstimatorParams(kind=args.state, gnss_delay_s=latency_s)
+    (run_dir / "estimator.toml").write_text(_to_toml(to_dict(estimator)))
     plant_args = ["-m", "sitl", *plant_listen_args(sim), "--can", can, "--home", *home,
-                  "--position", *map(str, args.position),
+                  "--gnss", args.gnss, "--position", *map(str, args.position),
                   "--truth-log", str(run_dir / "truth.csv"), *common]
     if math.isfinite(speedup):
         plant_args += ["--speedup", repr(speedup)]
@@ -372,7 +391,8 @@ def run_up(args: argparse.Namespace) -> int:
                  "--gcs-udp", f"127.0.0.1:{ports.udp_gcs}",
                  "--gcs-udp", f"127.0.0.1:{ports.udp_api}",
                  "--tlog", str(run_dir / "flight.tlog"),
-                 "--param-file", str(run_dir / "companion.parm"), *common]
+                 "--param-file", str(run_dir / "companion.parm"),
+                 "--estimator", str(run_dir / "estimator.toml"), *common]
     if args.goto is not None:
         comp_args += ["--goto", *map(str, args.goto)]
     if speedup != 1.0:
