@@ -343,6 +343,8 @@ class TelemetryStreams:
                      | APM.EKF_PRED_POS_HORIZ_REL | APM.EKF_PRED_POS_HORIZ_ABS)
             return APM.MAVLink_ekf_status_report_message(flags, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         flags = int(e.flags) & _EKF_FLAG_BITS
+        if not e.healthy:   # the bits ArduPilot's pre-arm checks read: not ready to arm
+            flags &= ~(APM.EKF_PRED_POS_HORIZ_REL | APM.EKF_PRED_POS_HORIZ_ABS)
         if e.flags & EstimatorFlags.GPS_GLITCH:
             flags |= APM.EKF_GPS_GLITCHING
         if e.health in (FilterHealth.INITIALISING,):

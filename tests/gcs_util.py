@@ -111,6 +111,18 @@ def command(m: mavutil.mavfile, cmd: int, *params: float, target_component: int 
     return wait_msg(m, "COMMAND_ACK", lambda a: a.command == cmd, timeout, seen)
 
 
+def arm(m: mavutil.mavfile, timeout: float = 30.0) -> Any:
+    """Arm as a ground-station user does: again until the vehicle accepts (its navigation
+    filter must be healthy first: "PreArm: EKF not healthy"); the accepting COMMAND_ACK,
+    or the last refusal after ``timeout`` [s wall]."""
+    end = time.monotonic() + timeout
+    while True:
+        ack = command(m, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+        if ack is not None and ack.result == M.MAV_RESULT_ACCEPTED or time.monotonic() > end:
+            return ack
+        time.sleep(0.2)
+
+
 def upload_mission(m: mavutil.mavfile, items: list[tuple], timeout: float = 10.0,
                    seen: list | None = None) -> Any:
     """Upload ``items`` (each (command, frame, p1, p2, p3, p4, lat_deg, lon_deg, alt)) as

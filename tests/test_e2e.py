@@ -72,10 +72,11 @@ def test_the_paid_out_length_follows_lbar_and_the_tether_is_never_taut(e2e):
     flying = (armed == 1) & (pos[:, 2] > 0.5)
     assert flying.sum() > 1000
     err = length[flying] - _lbar(pos[flying])
-    # measured 1.5 mm RMSE, 5 mm at most: the ground station carries the UAV's reported
-    # position forward to the winch's sample time, as the offline runner has it at once
-    assert np.sqrt(np.mean(err**2)) < 0.005
-    assert np.max(np.abs(err)) < 0.02
+    # the ground station follows L-bar of the position the companion reports, its RTK-grade
+    # estimate (about 1-2 cm off the truth), carried forward to the winch's sample time;
+    # measured against L-bar of the truth: 1.6 cm RMSE (1.5 mm when it flew on the truth)
+    assert np.sqrt(np.mean(err**2)) < 0.03
+    assert np.max(np.abs(err)) < 0.1
     assert pos[:, 2].max() > 11.5                       # it really flew the mission
 
 

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gcs_util import Vehicle, command, upload_mission, wait_msg
+from gcs_util import Vehicle, arm, command, upload_mission, wait_msg
 from PIL import Image
 from pymavlink import mavutil
 
@@ -113,7 +113,7 @@ def up_run(tmp_path_factory) -> dict:
     try:
         m.set_mode("GUIDED")
         assert wait_msg(m, "COMMAND_ACK", lambda a: a.command == M.MAV_CMD_DO_SET_MODE)
-        assert command(m, M.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == M.MAV_RESULT_ACCEPTED
+        assert arm(m).result == M.MAV_RESULT_ACCEPTED
         ack = command(m, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, TAKEOFF_ALT)
         assert ack.result == M.MAV_RESULT_ACCEPTED
         assert near(m, (2.0, 0.0, TAKEOFF_ALT))

@@ -32,7 +32,8 @@ def _fly(tmp: Path, duration: float = 12.0, unix: bool = False
         ready = plant.stdout.readline()
         assert banner in ready, ready
         comp = subprocess.run(
-            [sys.executable, "-m", "companion", "--sim", sim,
+            # on the simulator's state: this test holds the flight to millimetres
+            [sys.executable, "-m", "companion", "--sim", sim, "--state", "truth",
              "--component-port", "0", "--gcs-tcp", "0", "--gcs-udp", "none",
              "--goto", *map(str, GOAL)],
             cwd=ROOT, capture_output=True, text=True, timeout=180)
@@ -115,8 +116,8 @@ def test_speedup_paces_lockstep(tmp_path):
         ready = plant.stdout.readline()
         assert "(lockstep at 20x" in ready, ready
         comp = subprocess.run(
-            [sys.executable, "-m", "companion", "--sim", f"127.0.0.1:{port}",
-             "--component-port", "0", "--gcs-tcp", "-1", "--gcs-udp", "none"],
+            [sys.executable, "-m", "companion", "--sim", f"127.0.0.1:{port}", "--state",
+             "truth", "--component-port", "0", "--gcs-tcp", "-1", "--gcs-udp", "none"],
             cwd=ROOT, capture_output=True, text=True, timeout=120)
         out, _ = plant.communicate(timeout=60)
     finally:

@@ -154,5 +154,5 @@ def test_up_names_the_gnss_presets_and_estimator_kinds_as_their_packages_do():
     from sitl.sensors import GnssPreset
     from tuav_sitl import up
 
-    assert up.GNSS_PRESETS == tuple(p.value for p in GnssPreset)
+    assert tuple(p.value for p in GnssPreset) == up.GNSS_PRESETS
     assert up.ESTIMATOR_KINDS == ESTIMATOR_KINDS

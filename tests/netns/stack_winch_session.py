@@ -71,8 +71,9 @@ def main() -> int:
     listener.settimeout(60.0)
     gs_sock, _ = listener.accept()
     time.sleep(0.5)
+    # on the simulator's state: the test holds the UAV's place to 0.2 m while the winch moves
     comp = subprocess.Popen([py, "-m", "companion", "--sim", f"127.0.0.1:{sim_port}",
-                             "--component-port", str(comp_port)],
+                             "--state", "truth", "--component-port", str(comp_port)],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True)
     comp_sock = connect(comp_port, 60.0)

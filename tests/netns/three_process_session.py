@@ -34,7 +34,9 @@ def main() -> int:
                            f"127.0.0.1:{comp_port}"],
                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     time.sleep(0.5)
+    # on the simulator's state: the test holds the goal to 2 cm and L-bar to millimetres
     comp = subprocess.Popen([py, "-m", "companion", "--sim", f"127.0.0.1:{sim_port}",
+                             "--state", "truth",
                              "--component-port", str(comp_port), "--gcs-tcp", "0",
                              "--gcs-udp", "none", "--goto", *map(str, goal)],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
