@@ -118,6 +118,10 @@ class EstimatorParams(Params):
     gnss_delay_s: float = quantity(
         0.1, "s", "age of a GNSS fix when it arrives: it is compared with the state that "
         "long ago", ge=0, le=0.5)
+    output_tau_s: float = quantity(
+        0.25, "s", "time constant over which the position and velocity the vehicle flies on "
+        "take up each fusion's correction (EKF2's output predictor, EKF2_TAU_POS/VEL): the "
+        "controllers see no step at each GNSS fix (0: at once)", ge=0)
     gnss_delay_uncertainty_s: float = quantity(
         0.05, "s", "how well gnss_delay_s is known: the fix's position noise grows by the "
         "speed times this", ge=0, le=0.5)
@@ -682,6 +686,9 @@ class NavFilter:
         self._t_const_fuse = -math.inf
         #: Times the position and velocity were reset to the GNSS.
         self.gnss_resets = 0
+        #: what the output (state()) still lags the filter by: the corrections of the
+        #: fusions, position [m] and velocity [m/s], decaying at output_tau_s
+        self._out_lag = np.zeros(6)
 
     def _compile(self) -> None:
         """The kernels' machine code for these arrays (loaded or compiled now)."""
@@ -737,7 +744,9 @@ class NavFilter:
         rates [rad/s] = the last gyro sample minus the bias), as the flight controller
         takes it."""
         x = self._x
-        return VehicleState(_vec3(x[0:3]), _vec3(x[3:6]),
+        r = self._out_lag
+        return VehicleState((float(x[0] - r[0]), float(x[1] - r[1]), float(x[2] - r[2])),
+                            (float(x[3] - r[3]), float(x[4] - r[4]), float(x[5] - r[5])),
                             (float(x[6]), float(x[7]), float(x[8]), float(x[9])),
                             _vec3(self._rates))
 
@@ -758,6 +767,9 @@ class NavFilter:
         self._t_last = t_s
         self._predict_k(self._x, self._P, self._buf, self._meta, self._prm, self._rates,
                         t_s, dt, gx, gy, gz, ax, ay, az)
+        tau = self.params.output_tau_s
+        if tau > 0.0:
+            self._out_lag *= math.exp(-dt / tau)
         if self._const_pos is not None and t_s - self._t_const_fuse >= 0.2:
             self._t_const_fuse = t_s
             self._pos_k(self._x, self._P, self._buf, self._meta, self._dx, self._var_min,
@@ -789,10 +801,12 @@ class NavFilter:
         u = p.gnss_delay_uncertainty_s
         r_h = max(eph_m, p.gnss_pos_noise_min_m) ** 2 + (vx * vx + vy * vy) * u * u
         r_v = max(epv_m, p.gnss_pos_noise_min_m) ** 2 + vz * vz * u * u
+        before = self._x[0:6].copy()
         res = self._gnss_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
                            self._delayed_pv, self._var_min, t_s - p.gnss_delay_s, *pos,
                            *vel, r_h, r_v, p.gnss_vel_noise_m_s ** 2, p.gnss_pos_gate_sigma,
                            p.gnss_vel_gate_sigma, p.gnss_fuse_height)
+        self._lag_correction(before)
         if res & _NUMERIC:
             self._numeric_refusals += 1
         if res & _ACC_VEL:
@@ -816,6 +830,12 @@ class NavFilter:
                 accepted = True
         return accepted
 
+    def _lag_correction(self, before: np.ndarray) -> None:
+        """The output takes up the fusion's correction of position and velocity (from
+        ``before``) over ``output_tau_s``."""
+        if self.params.output_tau_s > 0.0:
+            self._out_lag += self._x[0:6] - before
+
     def fuse_baro(self, t_s: float, pressure_alt_m: float) -> bool:
         """A barometer's pressure altitude [m AMSL] arriving at ``t_s`` [s]; its height is
         taken above the reference set at alignment (the pressure altitude then minus the
@@ -829,10 +849,12 @@ class NavFilter:
         if self._baro_ref_m is None:        # no baro at alignment: referenced now
             self._baro_ref_m = pressure_alt_m - float(self._x[2])
         p = self.params
+        before = self._x[0:6].copy()
         res = self._baro_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
                            self._delayed_pv, self._var_min, t_s - p.baro_delay_s,
                            pressure_alt_m - self._baro_ref_m, p.baro_noise_m ** 2,
                            p.baro_gate_sigma)
+        self._lag_correction(before)
         return self._outcome("baro", t_s, res)
 
     def fuse_mag(self, t_s: float, mag_flu_gauss: Sequence[float]) -> bool:
@@ -967,6 +989,7 @@ class NavFilter:
             P[i, i] = v
             P[3 + i, 3 + i] = self.params.gnss_vel_noise_m_s ** 2
         self.gnss_resets += 1
+        self._out_lag[:] = 0.0   # a reset is flown at once
 
     # ----- status
     def status(self, t_s: float | None = None) -> FilterStatus:

@@ -241,3 +241,31 @@ def test_a_mission_s_do_winch_reaches_the_winch_offline():
     assert slack[j] < 0.3 < slack[i]
     assert [k for k, _, _ in res.events].count(NavEvent.WINCH) == 2
     assert runner.ground.notices == []
+
+
+@pytest.mark.parametrize(("name", "tracking_m", "estimate_m", "inside_3_sigma"),
+                         [("circle-rtk", 0.05, 0.03, 0.9), ("circle-gnss", 1.0, 1.0, 0.7),
+                          ("circle-windy-gnss", 1.5, 1.0, 0.7)])
+def test_the_circle_flown_on_the_onboard_estimate(results, name, tracking_m, estimate_m,
+                                                  inside_3_sigma):
+    """The circle on the companion's EKF (RTK-grade and consumer-grade GNSS, calm and in
+    wind): the truth tracks the reference within the targets, the estimate is off the
+    truth by at most its target, and the tether stays slack (the ground station's tension
+    trim: its L-bar comes from the same estimate). Within 3 sigma of its own covariance the
+    estimate is 90 % of the time with RTK, but only about 75 % with the consumer receiver,
+    whose error wanders (Gauss-Markov, 8 s) where the filter takes each fix as independent:
+    the filter is overconfident there (measured 75.5 %), as said in docs/estimation.md."""
+    m = results[name].metrics
+    assert results[name].scenario.estimator.kind == "ekf"
+    assert m["position_rmse_m"] <= tracking_m
+    assert m["estimate_position_rmse_m"] <= estimate_m
+    assert m["estimate_velocity_rmse_m_s"] <= 0.1
+    assert m["min_tether_slack_m"] > 0.0
+    s = results[name].series
+    est = np.isfinite(s["est_pos"]).all(axis=1)
+    assert est[s["t"] > 2.0].all()             # aligned within the first seconds
+    # the estimate really is the estimate: off the truth, by about what it says
+    err = np.abs(s["est_pos"][est] - s["pos"][est])
+    assert err.max() > 1e-3
+    inside = (err <= 3.0 * s["est_pos_sigma"][est] + 0.05).mean()
+    assert inside > inside_3_sigma

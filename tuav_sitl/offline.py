@@ -582,6 +582,15 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray],
         "wall_time_s": round(wall_s, 3),
         "realtime_factor": round(float(t[-1]) / wall_s, 2) if wall_s > 0 else None,
     }
+    est = np.isfinite(s["est_pos"]).all(axis=1) & (t >= sc.metrics_after_s)
+    if est.any():
+        e_att_est = s["est_euler"][est] - s["euler"][est]
+        e_att_est[:, 2] = (e_att_est[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        m["estimate_position_rmse_m"] = _rms(np.linalg.norm(
+            s["est_pos"][est] - s["pos"][est], axis=1))
+        m["estimate_velocity_rmse_m_s"] = _rms(np.linalg.norm(
+            s["est_vel"][est] - s["vel"][est], axis=1))
+        m["estimate_attitude_rmse_rad"] = _rms(np.linalg.norm(e_att_est, axis=1))
     if (reference is not None and sc.trajectory.kind in ("setpoint", "step")
             and reference.goal is not None):
         goal = np.array(reference.goal)

@@ -25,6 +25,15 @@ TARGETS: list[tuple[str, str, str, float, str]] = [
     ("circle-windy", "position_rmse_m", "<=", 0.25, "windy circle: position RMSE"),
     ("setpoint", "settling_time_s", "<=", 10.0, "set-point: within 5 cm in"),
     ("setpoint", "overshoot_percent", "<=", 5.0, "set-point: overshoot"),
+    ("circle-rtk", "position_rmse_m", "<=", 0.05, "circle on the EKF, RTK: position RMSE"),
+    ("circle-rtk", "estimate_position_rmse_m", "<=", 0.03, "circle on the EKF, RTK: "
+     "estimate - truth"),
+    ("circle-gnss", "position_rmse_m", "<=", 1.0, "circle on the EKF, consumer GNSS: "
+     "position RMSE"),
+    ("circle-gnss", "estimate_position_rmse_m", "<=", 1.0, "circle on the EKF, consumer "
+     "GNSS: estimate - truth"),
+    ("circle-windy-gnss", "position_rmse_m", "<=", 1.5, "windy circle on the EKF, consumer "
+     "GNSS: position RMSE"),
 ]
 FIGURES_FOR_DOCS = {
     "setpoint": ["states.png", "errors.png", "lyapunov.png"],
