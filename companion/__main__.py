@@ -281,7 +281,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             throttle = sum(cmds) / 4.0 if armed else 0.0
             autopilot.service(Telemetry(t, state.pos_m, state.vel_m_s, state.quat,
                                         state.rates_rad_s, throttle, onboard.imu,
-                                        onboard.gps, onboard.filter_status(t)))
+                                        onboard.gps, onboard.last_status))
             if nav.armed and not was_armed:
                 autopilot.armed_changed()
             was_armed = nav.armed

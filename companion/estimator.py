@@ -153,6 +153,9 @@ class EstimatorParams(Params):
         False, "", "the heading's Jacobian on yaw alone (EKF2's heading fusion: the "
         "magnetometer never corrects roll and pitch); False: its exact Jacobian, which "
         "includes the tilt error's effect on the heading through the field's inclination")
+    baro_min_interval_s: float = quantity(
+        0.02, "s", "barometer samples closer than this to the last fused one are skipped "
+        "(the part's own output rate: an MS5611 gives about 50 Hz at full resolution)", ge=0)
     mag_min_interval_s: float = quantity(
         0.02, "s", "magnetometer samples closer than this to the last fused one are "
         "skipped", ge=0)
@@ -674,6 +677,7 @@ class NavFilter:
         # times
         self._t_last: float | None = None
         self._t_mag: float = -math.inf
+        self._t_baro_fused: float = -math.inf
         self._t_gnss_pos: float = -math.inf   # last fused (or since alignment)
         self._t_gnss_vel: float = -math.inf
         self._t_gnss_hgt: float = -math.inf
@@ -849,6 +853,9 @@ class NavFilter:
         if self._baro_ref_m is None:        # no baro at alignment: referenced now
             self._baro_ref_m = pressure_alt_m - float(self._x[2])
         p = self.params
+        if t_s - self._t_baro_fused < p.baro_min_interval_s:
+            return False
+        self._t_baro_fused = t_s
         before = self._x[0:6].copy()
         res = self._baro_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
                            self._delayed_pv, self._var_min, t_s - p.baro_delay_s,

@@ -44,8 +44,8 @@ _STOPPED = (0.0, 0.0, 0.0, 0.0)
 #: An unhealthy navigation filter for this long in flight triggers the EKF failsafe [s]
 #: (ArduCopter checks its EKF's variances at 10 Hz and acts after about 1 s).
 EKF_FAILSAFE_S = 1.0
-#: How often the filter's health is checked [s] (ArduCopter: 10 Hz).
-HEALTH_CHECK_S = 0.1
+#: How often the filter's health is checked [s] (5 Hz: within the failsafe's second).
+HEALTH_CHECK_S = 0.2
 
 
 class OnboardInputs(NamedTuple):
@@ -111,6 +111,7 @@ class Companion:
         self._unhealthy_since: float | None = None
         self._healthy = self.filter is None
         self._health_t_s = -math.inf
+        self._status: FilterStatus | None = None
         self.flight = FlightController(gains, veh, params.tether, g)
         self.nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m,
                              on_event=on_event)
@@ -147,8 +148,14 @@ class Companion:
         self.flight.winch_report(t_s, length_m, speed_m_s, tension_n)
 
     def filter_status(self, t_s: float | None = None) -> FilterStatus | None:
-        """The navigation filter's status (None when flying on the truth)."""
+        """The navigation filter's status now (None when flying on the truth)."""
         return self.filter.status(t_s) if self.filter is not None else None
+
+    @property
+    def last_status(self) -> FilterStatus | None:
+        """The navigation filter's status as last checked (:data:`HEALTH_CHECK_S`; None
+        when flying on the truth or before the first check): what telemetry reports."""
+        return self._status
 
     @property
     def navigation_healthy(self) -> bool:
@@ -163,7 +170,8 @@ class Companion:
         if f is None or t_s - self._health_t_s < HEALTH_CHECK_S:
             return
         self._health_t_s = t_s
-        self._healthy = f.aligned and f.status(t_s).healthy
+        self._status = st = f.status(t_s)
+        self._healthy = f.aligned and st.healthy
 
     def _prearm(self) -> Refusal | None:
         """ArduCopter's pre-arm check of the estimator."""
