@@ -409,6 +409,20 @@ def predict_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarr
 
 
 @njit
+def predict_output_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
+                          prm: np.ndarray, rates: np.ndarray, lag: np.ndarray,
+                          tau_s: float, t_s: float, dt_s: float, gx: float, gy: float,
+                          gz: float, ax: float, ay: float, az: float) -> None:
+    """:func:`predict_kernel`, then the output's lag behind the filter (``lag``: position
+    [m], velocity [m/s]) decayed over ``dt_s`` at the time constant ``tau_s`` [s]."""
+    predict_kernel(x, P, buf, meta, prm, rates, t_s, dt_s, gx, gy, gz, ax, ay, az)
+    if tau_s > 0.0:
+        decay = math.exp(-dt_s / tau_s)
+        for i in range(6):
+            lag[i] *= decay
+
+
+@njit
 def _symmetrise(P: np.ndarray) -> None:
     """``P = (P + P') / 2`` in place."""
     n = P.shape[0]
@@ -659,6 +673,11 @@ class NavFilter:
         self._prm[_P_DT_MAX] = 5.0 / p.imu_rate_hz
         self._var_min = 1e-14
         self._prm[_P_VAR_MIN] = self._var_min
+        self._dt_max_s = 5.0 / p.imu_rate_hz
+        self._output_tau_s = p.output_tau_s
+        #: what the output (state()) still lags the filter by: the corrections of the
+        #: fusions, position [m] and velocity [m/s], decaying at output_tau_s
+        self._out_lag = np.zeros(6)
         self._compile()
         # alignment
         self._aligned = False
@@ -690,16 +709,15 @@ class NavFilter:
         self._t_const_fuse = -math.inf
         #: Times the position and velocity were reset to the GNSS.
         self.gnss_resets = 0
-        #: what the output (state()) still lags the filter by: the corrections of the
-        #: fusions, position [m] and velocity [m/s], decaying at output_tau_s
-        self._out_lag = np.zeros(6)
+
 
     def _compile(self) -> None:
         """The kernels' machine code for these arrays (loaded or compiled now)."""
         x, P, buf, meta, dx, diag, dl = (self._x, self._P, self._buf, self._meta,
                                          self._dx, self._diag, self._delayed_pv)
-        self._predict_k = entry_point(predict_kernel, x, P, buf, meta, self._prm,
-                                      self._rates, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self._predict_k = entry_point(predict_output_kernel, x, P, buf, meta, self._prm,
+                                      self._rates, self._out_lag, 0.0, 0.0, 0.0, 0.0, 0.0,
+                                      0.0, 0.0, 0.0, 0.0)
         self._gnss_k = entry_point(fuse_gnss_kernel, x, P, buf, meta, dx, diag, dl, 0.0,
                                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
                                    0.0, True)
@@ -747,12 +765,10 @@ class NavFilter:
         """(position [m], velocity [m/s], attitude quaternion body FLU -> inertial, body
         rates [rad/s] = the last gyro sample minus the bias), as the flight controller
         takes it."""
-        x = self._x
-        r = self._out_lag
-        return VehicleState((float(x[0] - r[0]), float(x[1] - r[1]), float(x[2] - r[2])),
-                            (float(x[3] - r[3]), float(x[4] - r[4]), float(x[5] - r[5])),
-                            (float(x[6]), float(x[7]), float(x[8]), float(x[9])),
-                            _vec3(self._rates))
+        px, py, pz, vx, vy, vz, qw, qx, qy, qz = self._x[:10].tolist()
+        r0, r1, r2, r3, r4, r5 = self._out_lag.tolist()
+        return VehicleState((px - r0, py - r1, pz - r2), (vx - r3, vy - r4, vz - r5),
+                            (qw, qx, qy, qz), tuple(self._rates.tolist()))
 
     # ----- inputs
     def predict(self, t_s: float, gyro_flu_rad_s: Sequence[float],
@@ -767,13 +783,10 @@ class NavFilter:
             self._t_last = t_s
             return
         t_last = self._t_last if self._t_last is not None else t_s
-        dt = min(max(t_s - t_last, 0.0), self._prm[_P_DT_MAX])
+        dt = min(max(t_s - t_last, 0.0), self._dt_max_s)
         self._t_last = t_s
         self._predict_k(self._x, self._P, self._buf, self._meta, self._prm, self._rates,
-                        t_s, dt, gx, gy, gz, ax, ay, az)
-        tau = self.params.output_tau_s
-        if tau > 0.0:
-            self._out_lag *= math.exp(-dt / tau)
+                        self._out_lag, self._output_tau_s, t_s, dt, gx, gy, gz, ax, ay, az)
         if self._const_pos is not None and t_s - self._t_const_fuse >= 0.2:
             self._t_const_fuse = t_s
             self._pos_k(self._x, self._P, self._buf, self._meta, self._dx, self._var_min,
@@ -844,6 +857,8 @@ class NavFilter:
         """A barometer's pressure altitude [m AMSL] arriving at ``t_s`` [s]; its height is
         taken above the reference set at alignment (the pressure altitude then minus the
         GNSS height). Returns whether it was fused."""
+        if self._aligned and t_s - self._t_baro_fused < self.params.baro_min_interval_s:
+            return False
         if not math.isfinite(pressure_alt_m):
             return False
         if not self._aligned:
@@ -868,6 +883,8 @@ class NavFilter:
         """A magnetometer sample [gauss], body FLU, at ``t_s`` [s], fused as a heading
         (yaw only). Returns whether it was fused (samples within ``mag_min_interval_s``
         of the last fused one are skipped: False)."""
+        if self._aligned and t_s - self._t_mag < self.params.mag_min_interval_s:
+            return False
         mx, my, mz = _vec3(mag_flu_gauss)
         if not (math.isfinite(mx) and math.isfinite(my) and math.isfinite(mz)):
             return False
