@@ -104,6 +104,10 @@ FIGURE_CAPTIONS: dict[str, str] = {
         "(dotted lines: its limits, when approached) and the drum rate over time; shaded "
         "spans, if any, are "
         "times when part of the tether lies on the ground."),
+    "estimate": (
+        "The onboard navigation filter against the truth: its position error (estimate "
+        "minus truth) per axis with the filter's own 3-sigma band, and the horizontal "
+        "speed error; runs flown on the estimate only."),
 }
 #: The figures :func:`build_figures` draws, in order.
 FIGURE_NAMES: tuple[str, ...] = tuple(FIGURE_CAPTIONS)
@@ -115,6 +119,7 @@ FIGURE_NEEDS: dict[str, tuple[str, ...]] = {
     "position_tracking": ("ref_pos",),
     "attitude_tracking": ("att_cmd",),
     "lyapunov": ("v_pos", "v_att", "v_win"),
+    "estimate": ("est_pos", "est_pos_sigma"),
 }
 
 # Tether regimes with part of the line on the ground.
@@ -755,6 +760,28 @@ def fig_tension_and_winder(s: Mapping[str, np.ndarray], sc: ScenarioParams,
     return fig
 
 
+def fig_estimate(s: Mapping[str, np.ndarray], sc: ScenarioParams,
+                 metrics: Mapping[str, Any] | None = None) -> Figure:
+    """Estimate minus truth per axis with the filter's 3-sigma band; the speed error."""
+    fig = _new_figure()
+    _title(fig, sc, "onboard estimate against the truth")
+    t = s["t"]
+    err = s["est_pos"] - s["pos"]
+    sig = 3.0 * s["est_pos_sigma"]
+    axes = fig.subplots(4, 1, sharex=True)
+    for i, (ax, name) in enumerate(zip(axes[:3], ("x (east)", "y (north)", "z (up)"),
+                                       strict=True)):
+        ax.fill_between(t, -sig[:, i], sig[:, i], color=_AXIS_COLOURS[i], alpha=0.2,
+                        label="filter's 3 sigma")
+        ax.plot(t, err[:, i], color=_AXIS_COLOURS[i], lw=1.0, label=f"{name} error")
+        _finish(ax, "[m]")
+    dv = np.linalg.norm(s["est_vel"][:, :2], axis=1) - np.linalg.norm(s["vel"][:, :2],
+                                                                      axis=1)
+    axes[3].plot(t, dv, color="k", lw=0.8, label="horizontal speed error")
+    _finish(axes[3], "[m/s]", xlabel=True)
+    return fig
+
+
 _BUILDERS = {
     "states": fig_states,
     "errors": fig_errors,
@@ -765,6 +792,7 @@ _BUILDERS = {
     "snapshots": fig_snapshots,
     "lyapunov": fig_lyapunov,
     "tension_and_winder": fig_tension_and_winder,
+    "estimate": fig_estimate,
 }
 
 

@@ -582,8 +582,10 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray],
         "wall_time_s": round(wall_s, 3),
         "realtime_factor": round(float(t[-1]) / wall_s, 2) if wall_s > 0 else None,
     }
+    m["estimator"] = sc.estimator.kind
     est = np.isfinite(s["est_pos"]).all(axis=1) & (t >= sc.metrics_after_s)
     if est.any():
+        m["gnss"] = sc.sensors.gnss
         e_att_est = s["est_euler"][est] - s["euler"][est]
         e_att_est[:, 2] = (e_att_est[:, 2] + np.pi) % (2 * np.pi) - np.pi
         m["estimate_position_rmse_m"] = _rms(np.linalg.norm(

@@ -43,6 +43,7 @@ FIGURES_FOR_DOCS = {
     "single-position": ["snapshots.png"],
     "multi-position": ["snapshots.png"],
     "mission": ["path_3d.png"],
+    "circle-gnss": ["estimate.png"],
 }
 
 
@@ -145,6 +146,32 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
         for n, items in wp.items():
             lines.append(f"- {n}: " + ", ".join(f"#{w['index']} at {w['t_s']:.1f} s"
                                                 for w in items))
+    est = [n for n in names if "estimate_position_rmse_m" in metrics[n]]
+    if est:
+        lines += ["", "## Flown on the onboard estimate", "",
+                  "The companion's EKF on the plant's sensors (docs/estimation.md), beside "
+                  "the same flight on the truth: tracking is truth minus reference, the "
+                  "estimate's errors are estimate minus truth.", "",
+                  "| scenario | GNSS | position RMSE [m] | estimate position RMSE [m] | "
+                  "estimate velocity RMSE [m/s] | estimate attitude RMSE [rad] | "
+                  "rotor saturation | min slack [m] |", "|---|---|---|---|---|---|---|---|"]
+        shown: set[str] = set()
+        for n in est:
+            m = metrics[n]
+            base = n.removesuffix("-rtk").removesuffix("-gnss")
+            if (base in metrics and base not in shown
+                    and "estimate_position_rmse_m" not in metrics[base]):
+                shown.add(base)
+                b = metrics[base]
+                lines.append(f"| {base} | truth | {_fmt(b['position_rmse_m'])} | – | – | – | "
+                             f"{_fmt(b['motor_saturation_fraction'])} | "
+                             f"{_fmt(b['min_tether_slack_m'])} |")
+            lines.append(f"| {n} | {m.get('gnss', '?')} | {_fmt(m['position_rmse_m'])} | "
+                         f"{_fmt(m['estimate_position_rmse_m'])} | "
+                         f"{_fmt(m['estimate_velocity_rmse_m_s'])} | "
+                         f"{_fmt(m['estimate_attitude_rmse_rad'])} | "
+                         f"{_fmt(m['motor_saturation_fraction'])} | "
+                         f"{_fmt(m['min_tether_slack_m'])} |")
     missions = {n: metrics[n] for n in names if "items_reached" in metrics[n]}
     if missions:
         lines += ["", "## Missions", "",
