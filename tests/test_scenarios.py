@@ -269,3 +269,31 @@ def test_the_circle_flown_on_the_onboard_estimate(results, name, tracking_m, est
     assert err.max() > 1e-3
     inside = (err <= 3.0 * s["est_pos_sigma"][est] + 0.05).mean()
     assert inside > inside_3_sigma
+
+
+def test_an_unhealthy_filter_in_flight_lands_the_vehicle():
+    """ArduCopter's EKF failsafe: the GNSS stops arriving mid-circle, the filter turns
+    unhealthy (no GNSS for its timeout), and a second later the vehicle lands, said as a
+    failsafe; before that the same filter armed only once healthy (the mission's pre-arm
+    check is exercised by every mission run)."""
+    from companion.navigation import FlightMode
+    from tuav_sitl.offline import OfflineRunner
+
+    sc = load_scenario("circle-rtk").replace(duration_s=30.0)
+    runner = OfflineRunner(sc)
+    read = runner.sensors.read
+
+    def without_gnss_after_10_s(t_s: float):
+        sim = read(t_s)
+        return sim._replace(gps_updated=False) if t_s >= 10.0 else sim
+
+    runner.sensors.read = without_gnss_after_10_s
+    res = runner.run()
+    failsafes = [(t, v) for k, v, t in res.events if k is NavEvent.FAILSAFE]
+    assert failsafes, "no failsafe"
+    t_fs, text = failsafes[0]
+    assert "EKF" in text and 11.0 <= t_fs <= 13.0
+    assert runner.companion.nav.mode == FlightMode.LAND
+    s = res.series
+    assert s["pos"][-1, 2] < s["pos"][np.searchsorted(s["t"], t_fs), 2] - 2.0   # descending
+    assert res.metrics["min_tether_slack_m"] > 0.0

@@ -93,12 +93,20 @@ def main() -> int:
                   "sample": [ln for ln in lines if "Set_Input_Torque" in ln][:3]}
     tlog = mavutil.mavlink_connection(str(run / "flight.tlog"))
     kinds: dict = {}
+    ekf: list = []
+    local: list = []
     while True:
         msg = tlog.recv_match()
         if msg is None:
             break
         kinds[msg.get_type()] = kinds.get(msg.get_type(), 0) + 1
+        if msg.get_type() == "EKF_STATUS_REPORT":
+            ekf.append([msg.flags, msg.pos_horiz_variance])
+        elif msg.get_type() == "LOCAL_POSITION_NED":
+            local.append([msg.time_boot_ms * 1e-3, msg.x, msg.y, msg.z])
     out["tlog_kinds"] = kinds
+    out["ekf_status"] = ekf
+    out["local_ned"] = local
     print(json.dumps(out))
     return 0
 
