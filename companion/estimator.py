@@ -282,21 +282,34 @@ def _rot(qw: float, qx: float, qy: float, qz: float) -> tuple[float, ...]:
 
 
 @njit
-def _qmul_exp(qw: float, qx: float, qy: float, qz: float, rx: float, ry: float,
-              rz: float) -> tuple[float, float, float, float]:
-    """``q * Exp(r)`` for a rotation vector ``r`` [rad] (right: in the body frame),
-    normalised."""
+def _exp_rotvec(rx: float, ry: float, rz: float) -> tuple[float, float, float, float]:
+    """The unit quaternion ``Exp(r)`` of a rotation vector ``r`` [rad]."""
     a = math.sqrt(rx * rx + ry * ry + rz * rz)
     if a < 1e-9:
         c, s = 1.0, 0.5
     else:
         c, s = math.cos(0.5 * a), math.sin(0.5 * a) / a
-    ew, ex, ey, ez = c, s * rx, s * ry, s * rz
-    w = qw * ew - qx * ex - qy * ey - qz * ez
-    x = qw * ex + qx * ew + qy * ez - qz * ey
-    y = qw * ey - qx * ez + qy * ew + qz * ex
-    z = qw * ez + qx * ey - qy * ex + qz * ew
-    n = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+    return c, s * rx, s * ry, s * rz
+
+
+@njit
+def _qmul_unit(aw: float, ax: float, ay: float, az: float, bw: float, bx: float,
+               by: float, bz: float) -> tuple[float, float, float, float, float]:
+    """The product ``a * b`` and the inverse of its norm."""
+    w = aw * bw - ax * bx - ay * by - az * bz
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    return w, x, y, z, 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+
+
+@njit
+def _qmul_exp(qw: float, qx: float, qy: float, qz: float, rx: float, ry: float,
+              rz: float) -> tuple[float, float, float, float]:
+    """``q * Exp(r)`` for a rotation vector ``r`` [rad] (right: in the body frame),
+    normalised."""
+    ew, ex, ey, ez = _exp_rotvec(rx, ry, rz)
+    w, x, y, z, n = _qmul_unit(qw, qx, qy, qz, ew, ex, ey, ez)
     return w * n, x * n, y * n, z * n
 
 
@@ -304,18 +317,9 @@ def _qmul_exp(qw: float, qx: float, qy: float, qz: float, rx: float, ry: float,
 def _expq_mul(rx: float, ry: float, rz: float, qw: float, qx: float, qy: float,
               qz: float) -> tuple[float, float, float, float]:
     """``Exp(r) * q`` for a rotation vector ``r`` [rad] (left: in the inertial frame),
-    normalised."""
-    a = math.sqrt(rx * rx + ry * ry + rz * rz)
-    if a < 1e-9:
-        c, s = 1.0, 0.5
-    else:
-        c, s = math.cos(0.5 * a), math.sin(0.5 * a) / a
-    ew, ex, ey, ez = c, s * rx, s * ry, s * rz
-    w = ew * qw - ex * qx - ey * qy - ez * qz
-    x = ew * qx + ex * qw + ey * qz - ez * qy
-    y = ew * qy - ex * qz + ey * qw + ez * qx
-    z = ew * qz + ex * qy - ey * qx + ez * qw
-    n = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+    normalised, its scalar part kept non-negative."""
+    ew, ex, ey, ez = _exp_rotvec(rx, ry, rz)
+    w, x, y, z, n = _qmul_unit(ew, ex, ey, ez, qw, qx, qy, qz)
     if w < 0.0:
         n = -n
     return w * n, x * n, y * n, z * n
