@@ -112,6 +112,10 @@ class EstimatorParams(Params):
     align_time_s: float = quantity(
         1.0, "s", "how long accelerometer and magnetometer are averaged for the static "
         "alignment", gt=0, le=60)
+    air_align_time_s: float = quantity(
+        0.2, "s", "the alignment's averaging when the first GNSS fix finds the vehicle in "
+        "the air (a simulation started in hover): it hovers open loop meanwhile", gt=0,
+        le=60)
     align_max_accel_std_m_s2: float = quantity(
         1.0, "m/s^2", "alignment restarts while the specific force varies more than this "
         "(standard deviation of its magnitude): the vehicle is not still enough", gt=0)
@@ -684,6 +688,9 @@ class NavFilter:
         self._out_lag = np.zeros(6)
         self._compile()
         # alignment
+        #: how long the alignment averages [s] (align_time_s; shorter for a start in the
+        #: air, see :meth:`companion.onboard.Companion.estimate`)
+        self.align_time_s = p.align_time_s
         self._aligned = False
         self._acc_sum = np.zeros(3)
         self._acc_norm_sq = 0.0
@@ -952,7 +959,7 @@ class NavFilter:
         are in: tilt from the mean specific force, yaw from the low-passed field, position and
         velocity from the fix (brought forward by its age)."""
         p = self.params
-        if self._align_t0 is None or t_s - self._align_t0 < p.align_time_s:
+        if self._align_t0 is None or t_s - self._align_t0 < self.align_time_s:
             return
         n = self._acc_n
         mean_norm = self._acc_norm / n

@@ -200,6 +200,8 @@ class Companion:
             if self._airborne_at_boot is None:
                 self._airborne_at_boot = (gps.position_enu_m[2]
                                           > self.params.vehicle.gear_height_m + 0.3)
+                if self._airborne_at_boot:   # flying open loop: align sooner
+                    f.align_time_s = self.estimator_params.air_align_time_s
             f.fuse_gnss(t, gps.position_enu_m, gps.velocity_enu_m_s, gps.eph_m, gps.epv_m)
         return f.state() if f.aligned else None
 
