@@ -241,3 +241,37 @@ def test_log_format_round_trips_through_can_utils():
     assert len(back) == len(ours)
     for theirs, mine in zip(back, ours, strict=True):
         assert theirs.split()[2] == mine.split()[2]
+
+
+def test_the_recorder_skips_a_datagram_no_can_frame_can_be(tmp_path, capsys):
+    """A standard frame with id 0x800 (no 11-bit id) on the bus: the recorder says so on
+    stderr and goes on; the valid frames before and after it are logged (on python-can's
+    in-process virtual bus)."""
+    import argparse
+    import threading
+    import time
+
+    from tuav_sitl.candump import add_arguments, run_candump
+    from tuavdefs.canbus import CanLink
+
+    ap = argparse.ArgumentParser()
+    add_arguments(ap)
+    log = tmp_path / "can.log"
+    args = ap.parse_args(["--can", "virtual:bad-frame-test", "--count", "2", "--log",
+                          str(log), "--timeout", "5"])
+    sender = CanLink("virtual:bad-frame-test")
+
+    def send() -> None:
+        time.sleep(0.3)
+        sender.send(0x123, b"\x01\x02")
+        sender.send(0x800, b"\x03")             # no CAN frame has this id
+        sender.send(0x124, b"\x04")
+
+    t = threading.Thread(target=send, daemon=True)
+    t.start()
+    assert run_candump(args) == 0              # (the recorder in the main thread: signals)
+    t.join(timeout=10)
+    sender.close()
+    lines = log.read_text().splitlines()
+    assert [ln.split()[2] for ln in lines] == ["123#0102", "124#04"]
+    assert "bad frame" in capsys.readouterr().err

@@ -74,6 +74,7 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
     show = args.silent == 0
     n = 0
+    bad = 0
     last_rx = time.monotonic()
     last_flush = last_rx
     try:
@@ -89,13 +90,20 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             logged: list[str] = []
             for f in (rx, *link.recv_ready()):
                 ts = f.timestamp if f.timestamp > 0.0 else time.time()
-                log_line = (format_log(ts, iface, f.arbitration_id, f.data, f.is_remote,
-                                       f.is_extended)
-                            if log_file is not None or args.log_format else "")
-                if show:
-                    line = log_line if args.log_format else format_default(
+                try:
+                    log_line = (format_log(ts, iface, f.arbitration_id, f.data, f.is_remote,
+                                           f.is_extended)
+                                if log_file is not None or args.log_format else "")
+                    line = (log_line if args.log_format else format_default(
                         iface, f.arbitration_id, f.data, f.is_remote, f.is_extended,
-                        len(iface))
+                        len(iface))) if show else ""
+                except ValueError as exc:   # a datagram no CAN frame can be: said, skipped
+                    bad += 1
+                    if bad == 1 or bad % 1000 == 0:
+                        print(f"tuav-sitl candump: {bad} bad frame(s) skipped, the last: "
+                              f"{exc}", file=sys.stderr, flush=True)
+                    continue
+                if show:
                     if db is not None and not f.is_remote:
                         line += _decoded(db, f.arbitration_id, f.data)
                     lines.append(line)
