@@ -50,6 +50,15 @@ def test_a_dying_process_stops_the_others(session):
     assert d["left"] == []
 
 
+def test_a_dying_bus_recorder_stops_up_with_an_error(session):
+    """The recorder killed: up does not run on with a silent can.log and exit 0."""
+    d = session["recorder_dies"]
+    assert d["killed"] == 1
+    assert d["rc"] == 1
+    assert "bus recorder (candump) exited" in d["stderr"]
+    assert d["left"] == []
+
+
 def test_a_busy_port_names_the_port_and_the_way_out(session):
     b = session["busy"]
     assert b["rc"] == 1

@@ -163,8 +163,9 @@ class Stack:
                 print(f"[{name}] {line}", flush=True)
 
     def first_exit(self) -> tuple[str, int] | None:
-        """(name, exit code) of a process that has exited, if any."""
-        for name, proc in self.procs.items():
+        """(name, exit code) of a process that has exited, if any: the three, or a
+        recorder (which runs until it is stopped: its end is always an error)."""
+        for name, proc in (*self.procs.items(), *self.recorders.items()):
             code = proc.poll()
             if code is not None:
                 return name, code
@@ -433,12 +434,17 @@ def run_up(args: argparse.Namespace) -> int:
             ended = stack.first_exit()
             if ended is not None:
                 name, rc = ended
-                if name != "plant" and rc == 0:
+                if name != "plant" and name not in stack.recorders and rc == 0:
                     # the plant ending its run (--duration) closes the link, and the
                     # companion may exit first: the plant's own end decides
                     ended = stack.wait_exit("plant", STOP_GRACE_S) or ended
                     name, rc = ended
-                if name == "plant" and rc == 0:
+                if name in stack.recorders:
+                    print(f"tuav-sitl up: the bus recorder ({name}) exited with code "
+                          f"{rc}: the bus is no longer recorded; stopping",
+                          file=sys.stderr)
+                    code = 1
+                elif name == "plant" and rc == 0:
                     if not args.headless:
                         print(f"tuav-sitl up: plant finished: "
                               f"{_last_line(run_dir / 'plant.log')}", flush=True)

@@ -83,6 +83,18 @@ def main() -> int:
     so, se = p.communicate(timeout=30)
     out["dies"] = {"rc": p.returncode, "stderr": se, "killed": len(victims),
                    "left": processes_mentioning(str(d3))}
+    # 3b. the bus recorder dies: up says so and stops (can.log would stay silent)
+    d3b = base / "recorder-dies"
+    p = up(d3b)
+    wait_banner(p)
+    victims = [pid for pid in processes_mentioning(str(d3b))
+               if "candump" in Path(f"/proc/{pid}/cmdline").read_bytes().decode(
+                   errors="replace")]
+    for pid in victims:
+        os.kill(pid, signal.SIGKILL)
+    so, se = p.communicate(timeout=30)
+    out["recorder_dies"] = {"rc": p.returncode, "stderr": se, "killed": len(victims),
+                            "left": processes_mentioning(str(d3b))}
     # 4. a port in use, and the simulator link's socket name in use
     with socket.socket() as s:
         s.bind(("127.0.0.1", 5762 + 10 * 3))
