@@ -153,6 +153,7 @@ class Autopilot:
         if telem is not None:
             streams.telem = telem
         io = self.io
+        io.expire_udp_peers()
         if io.closed_pending:
             for peer in io.pop_closed():
                 self.missions.peer_closed(peer)

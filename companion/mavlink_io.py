@@ -41,6 +41,12 @@ COMPONENT_ID = gcs.AUTOPILOT_COMPONENT_ID
 
 _TLOG_STAMP = struct.Struct(">Q")
 _TLOG_FLUSH_S = 1.0
+#: UDP addresses a push socket answers besides its own target, at most: a new one beyond
+#: this takes the place of the one heard from longest ago.
+MAX_UDP_PEERS = 8
+#: A UDP address silent this long [s, wall] is no longer sent telemetry (ArduPilot, too,
+#: sends only to whoever wrote last).
+UDP_PEER_TIMEOUT_S = 10.0
 #: Unsent bytes a TCP client may fall behind by before frames to it are dropped.
 _TCP_BACKLOG_BYTES = 1 << 20
 
@@ -133,7 +139,9 @@ class MavlinkEndpoints:
             self.udp.append(s)
             self.udp_targets.append((target[0], int(target[1])))
         self._links: dict[Peer, _Link] = {}
-        self._udp_peers: list[set[Address]] = [set() for _ in self.udp]
+        #: per UDP socket: the addresses that wrote to it -> when they last did [s, wall]
+        self._udp_peers: list[dict[Address, float]] = [{} for _ in self.udp]
+        self._udp_expiry_s = time.monotonic() + 1.0
         # what select() watches and where telemetry goes, rebuilt only when they change
         self._socks: list[socket.socket] = []
         self._udp_index: dict[socket.socket, int] = {s: i for i, s in enumerate(self.udp)}
@@ -193,6 +201,7 @@ class MavlinkEndpoints:
         caller may have watched more in the same ``select``); returns the messages that
         arrived, as (peer, message)."""
         out: list[tuple[Peer, Any]] = []
+        self.expire_udp_peers()
         for sock in ready:
             if sock is self.listener:
                 self._accept()
@@ -253,10 +262,38 @@ class MavlinkEndpoints:
             except OSError:
                 return
             addr = (addr[0], addr[1])
-            if addr not in self._udp_peers[index]:
-                self._udp_peers[index].add(addr)
+            peers = self._udp_peers[index]
+            if addr not in peers:
+                if len(peers) >= MAX_UDP_PEERS:   # the table is full: the stalest goes
+                    stalest = min(peers, key=peers.__getitem__)
+                    self._forget_udp(index, stalest)
+                peers[addr] = time.monotonic()
                 self._changed()
+            else:
+                peers[addr] = time.monotonic()
             self._parse(("udp", index, addr), data, out)
+
+    def _forget_udp(self, index: int, addr: Address) -> None:
+        """No more telemetry to ``addr`` on UDP socket ``index`` (said as a closed peer)."""
+        del self._udp_peers[index][addr]
+        peer = ("udp", index, addr)
+        self._links.pop(peer, None)
+        self._closed.append(peer)
+
+    def expire_udp_peers(self, now_s: float | None = None) -> None:
+        """Forget the UDP addresses silent for :data:`UDP_PEER_TIMEOUT_S` (checked at most
+        once a second; ``now_s`` [s, time.monotonic])."""
+        now = time.monotonic() if now_s is None else now_s
+        if now < self._udp_expiry_s:
+            return
+        self._udp_expiry_s = now + 1.0
+        changed = False
+        for index, peers in enumerate(self._udp_peers):
+            for addr in [a for a, t in peers.items() if now - t > UDP_PEER_TIMEOUT_S]:
+                self._forget_udp(index, addr)
+                changed = True
+        if changed:
+            self._changed()
 
     def _parse(self, peer: Peer, data: bytes, out: list[tuple[Peer, Any]]) -> None:
         link = self._links.get(peer)
