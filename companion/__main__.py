@@ -291,6 +291,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         pass
     finally:
         client.close()
+        autopilot.params.close()   # the parameter file written out
         endpoints.close()
         if endpoints.tlog is not None:
             endpoints.tlog.close()

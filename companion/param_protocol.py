@@ -75,6 +75,7 @@ import os
 import re
 import struct
 import tempfile
+import threading
 import typing
 from collections.abc import Callable, Hashable, Iterable
 from dataclasses import dataclass
@@ -171,6 +172,74 @@ class ParamDef:
                              f"{self.param_type}")
 
 
+def write_atomically(path: Path, text: str) -> None:
+    """``text`` into ``path`` atomically: a temporary file beside it, fsync, rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="ascii") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+class _Writer:
+    """Writes the parameter file off the control path: :meth:`submit` hands over the text
+    and returns at once; a thread of its own writes the latest text submitted (older ones
+    are dropped: the file only ever needs the newest) with :func:`write_atomically`."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._cond = threading.Condition()
+        self._text: str | None = None       # the newest text not yet written
+        self._busy = False
+        self._closed = False
+        self.errors: list[OSError] = []
+        """Write failures not yet reported (taken by the protocol's :meth:`tick`)."""
+        self._thread = threading.Thread(target=self._run, name="param-writer", daemon=True)
+        self._thread.start()
+
+    def submit(self, text: str) -> None:
+        """Write ``text`` soon (instead of whatever is still waiting)."""
+        with self._cond:
+            self._text = text
+            self._cond.notify()
+
+    def flush(self, timeout_s: float | None = 10.0) -> bool:
+        """Wait until everything submitted is written; whether it was in time."""
+        with self._cond:
+            return self._cond.wait_for(lambda: self._text is None and not self._busy,
+                                       timeout_s)
+
+    def close(self, timeout_s: float = 10.0) -> None:
+        """Write what is waiting, then end the thread."""
+        self.flush(timeout_s)
+        with self._cond:
+            self._closed = True
+            self._cond.notify()
+        self._thread.join(timeout_s)
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._text is not None or self._closed)
+                if self._text is None:
+                    return
+                text, self._text, self._busy = self._text, None, True
+            try:
+                write_atomically(self.path, text)
+            except OSError as exc:
+                self.errors.append(exc)
+            finally:
+                with self._cond:
+                    self._busy = False
+                    self._cond.notify_all()
+
+
 @dataclass
 class _Stream:
     """A PARAM_REQUEST_LIST being answered: next index and the pacing budget."""
@@ -205,6 +274,7 @@ class ParamProtocol:
         self._send = send
         self._statustext = statustext
         self.persist_path = Path(persist_path) if persist_path is not None else None
+        self._writer = _Writer(self.persist_path) if self.persist_path is not None else None
         self.stream_rate_hz = float(stream_rate_hz)
         self.stream_burst = int(stream_burst)
         self._streams: dict[Hashable, _Stream] = {}
@@ -232,7 +302,13 @@ class ParamProtocol:
         return True
 
     def tick(self, now_s: float) -> None:
-        """Send the parameters the list streams' budgets allow; call often (>= 20 Hz)."""
+        """Send the parameters the list streams' budgets allow, and say a failed write of
+        the parameter file; call often (>= 20 Hz)."""
+        w = self._writer
+        if w is not None and w.errors:
+            exc = w.errors.pop(0)
+            log.error("cannot save parameters to %s: %s", self.persist_path, exc)
+            self._statustext(mavlink2.MAV_SEVERITY_ERROR, "Parameter save failed")
         if not self._streams:
             return
         for peer in list(self._streams):
@@ -289,24 +365,24 @@ class ParamProtocol:
         return warnings
 
     def save(self) -> None:
-        """Write every parameter to ``persist_path`` atomically (no-op without a path)."""
-        if self.persist_path is None:
+        """Write every parameter to ``persist_path`` atomically (no-op without a path), off
+        the control path: the text is made now, the file written by a thread of its own
+        (:meth:`flush` waits for it)."""
+        if self._writer is None:
             return
         lines = ["# tuav-sitl companion parameters (ArduPilot .parm format: NAME VALUE)"]
         for d in sorted(self.defs, key=lambda d: d.name):
             lines.append(f"{d.name:<16} {_format_value(d, d.get())}")
-        path = self.persist_path
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="ascii") as f:
-                f.write("\n".join(lines) + "\n")
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        self._writer.submit("\n".join(lines) + "\n")
+
+    def flush(self, timeout_s: float | None = 10.0) -> bool:
+        """Wait until the parameter file holds every accepted change; whether it does."""
+        return self._writer is None or self._writer.flush(timeout_s)
+
+    def close(self) -> None:
+        """Write what is waiting and end the writer's thread."""
+        if self._writer is not None:
+            self._writer.close()
 
     # --- handlers ----------------------------------------------------------------------
 
@@ -338,11 +414,7 @@ class ParamProtocol:
             self._send(peer, self._value_message(index))
             return
         self._send(None, self._value_message(index))
-        try:
-            self.save()
-        except OSError as exc:
-            log.error("cannot save parameters to %s: %s", self.persist_path, exc)
-            self._statustext(mavlink2.MAV_SEVERITY_ERROR, "Parameter save failed")
+        self.save()
 
     def _on_ftp(self, peer: Hashable, msg: Any, now_s: float) -> None:
         raw = bytes(int(b) & 0xFF for b in list(msg.payload)[:FTP_PAYLOAD_LEN])

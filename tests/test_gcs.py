@@ -107,7 +107,11 @@ def test_set_a_parameter_and_read_it_back(flight):
     m.mav.param_set_send(1, 1, b"PSC_K1_Z", -1.0, M.MAV_PARAM_TYPE_REAL32)
     v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "PSC_K1_Z")
     assert v.param_value == pytest.approx(2.5)
-    assert "PSC_K1_Z" in flight["veh"].param_file.read_text()
+    # the .parm file is written off the control loop, soon after
+    parm, end = flight["veh"].param_file, time.monotonic() + 10.0
+    while not (parm.exists() and "PSC_K1_Z" in parm.read_text()) and time.monotonic() < end:
+        time.sleep(0.05)
+    assert "PSC_K1_Z" in parm.read_text()
     # the whole list arrives
     m.mav.param_request_list_send(1, 1)
     names = set()

@@ -315,6 +315,7 @@ def test_accepted_set_is_broadcast_persisted_and_reloads(tmp_path):
     assert v.current.pos_k1_1_s[0] == 2.7
     assert v.texts == []
 
+    assert v.proto.flush()          # the file is written off the control path
     lines = [ln for ln in path.read_text().splitlines() if ln and not ln.startswith("#")]
     table = dict(ln.split() for ln in lines)
     assert len(table) == n_params()
@@ -474,8 +475,10 @@ def test_save_replaces_the_file_atomically(tmp_path):
     path = tmp_path / "sub" / "p.parm"
     v = Vehicle(persist_path=path)
     v.set("FC_CMDF_HZ", 8.0)
+    assert v.proto.flush()
     first_inode = path.stat().st_ino
     v.set("FC_CMDF_HZ", 9.0)
+    assert v.proto.flush()
     assert path.stat().st_ino != first_inode  # a new file renamed over the old one
     assert "FC_CMDF_HZ       9.0" in path.read_text()
     assert sorted(os.listdir(path.parent)) == ["p.parm"]
@@ -646,3 +649,44 @@ def test_never_raises_and_keeps_parameters_valid(script):
                            for f in dataclasses.fields(FlightControlParams)})
     for _, m in v.take():
         assert m.get_type() in ("PARAM_VALUE", "FILE_TRANSFER_PROTOCOL")
+
+
+def test_param_set_never_waits_for_the_disk(tmp_path, monkeypatch):
+    """PARAM_SET is answered while the disk is stuck (fsync blocked here until released):
+    the file is written by the writer's own thread, the newest values once the disk moves
+    (the control loop once fsynced for every accepted PARAM_SET)."""
+    import threading
+
+    import companion.param_protocol as pp
+
+    stuck = threading.Event()
+    real_fsync = os.fsync
+
+    def slow_fsync(fd):
+        stuck.wait(30.0)
+        real_fsync(fd)
+
+    monkeypatch.setattr(pp.os, "fsync", slow_fsync)
+    path = tmp_path / "p.parm"
+    v = Vehicle(persist_path=path)
+    for k in range(200):            # all answered with the disk stuck
+        assert v.set("FC_CMDF_HZ", 5.0 + 0.01 * k)
+    assert len(v.take()) == 200
+    assert not v.proto.flush(timeout_s=0.2)
+    stuck.set()
+    assert v.proto.flush()
+    assert "FC_CMDF_HZ       6.99" in path.read_text()
+    v.proto.close()
+
+
+def test_a_failed_write_is_said_from_the_control_loop(tmp_path):
+    """The parameter file cannot be written (its folder is a file): the next tick says
+    'Parameter save failed', the set itself stands."""
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("")
+    v = Vehicle(persist_path=blocker / "p.parm")
+    assert v.set("FC_CMDF_HZ", 8.0)
+    v.proto.flush()
+    v.proto.tick(0.0)
+    assert v.texts[-1] == (mavlink2.MAV_SEVERITY_ERROR, "Parameter save failed")
+    assert v.current.command_filter_hz == 8.0
