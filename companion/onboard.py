@@ -92,7 +92,6 @@ class Companion:
         self.params = params
         veh = params.vehicle
         g = params.environment.gravity_m_s2
-        self.gravity_m_s2 = g
         est = estimator if estimator is not None else EstimatorParams()
         self.estimator_params = est
         self.filter: NavFilter | None = (
@@ -102,11 +101,6 @@ class Companion:
         """The last GNSS fix received (what GPS_RAW_INT reports)."""
         self.imu: ImuSample | None = None
         """The last IMU sample received."""
-        #: rotor commands that hover the vehicle by its own model (flown open loop while a
-        #: vehicle found in the air has no estimate yet)
-        hover = rotor_speed_to_command(
-            math.sqrt(veh.mass_kg * g / (4.0 * veh.rotor_thrust_coeff)), veh)
-        self._hover_commands = (hover,) * 4
         self._airborne_at_boot: bool | None = None
         self._unhealthy_since: float | None = None
         self._healthy = self.filter is None
@@ -120,6 +114,9 @@ class Companion:
         #: the rotor speed [rad/s] the vehicle's own model says hovers it (the motor model
         #: starts there when the vehicle starts in the air)
         self.hover_speed_rad_s = math.sqrt(veh.mass_kg * g / (4.0 * veh.rotor_thrust_coeff))
+        #: its rotor commands (flown open loop while a vehicle found in the air has no
+        #: estimate yet)
+        self._hover_commands = (rotor_speed_to_command(self.hover_speed_rad_s, veh),) * 4
         self.started = False
         #: called once, right after the first state started the navigator and before its
         #: first step (the process announces home there, a script uploads its mission)
@@ -146,10 +143,6 @@ class Companion:
         """A report of the winch at ``t_s`` [s]: paid-out length [m], line speed [m/s],
         drum tension [N] (None: not measured)."""
         self.flight.winch_report(t_s, length_m, speed_m_s, tension_n)
-
-    def filter_status(self, t_s: float | None = None) -> FilterStatus | None:
-        """The navigation filter's status now (None when flying on the truth)."""
-        return self.filter.status(t_s) if self.filter is not None else None
 
     @property
     def last_status(self) -> FilterStatus | None:

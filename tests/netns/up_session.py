@@ -44,6 +44,20 @@ def wait_banner(proc: subprocess.Popen) -> str:
             return "".join(lines)
 
 
+def kill_one(logdir: Path, name: str) -> dict:
+    """Start up in ``logdir``, SIGKILL its processes whose command line names ``name``;
+    up's exit code, stderr, how many were killed and what was left running."""
+    p = up(logdir)
+    wait_banner(p)
+    victims = [pid for pid in processes_mentioning(str(logdir))
+               if name in Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")]
+    for pid in victims:
+        os.kill(pid, signal.SIGKILL)
+    _, se = p.communicate(timeout=30)
+    return {"rc": p.returncode, "stderr": se, "killed": len(victims),
+            "left": processes_mentioning(str(logdir))}
+
+
 def main() -> int:
     base = Path(sys.argv[1])
     out: dict = {}
@@ -72,29 +86,9 @@ def main() -> int:
     out["sigint"] = {"rc": p.returncode, "banner": banner, "stop_s": time.monotonic() - t0,
                      "stdout": so, "left": processes_mentioning(str(d2))}
     # 3. one process dies: the others are stopped and the exit code says so
-    d3 = base / "dies"
-    p = up(d3)
-    wait_banner(p)
-    victims = [pid for pid in processes_mentioning(str(d3))
-               if "groundstation" in Path(f"/proc/{pid}/cmdline").read_bytes().decode(
-                   errors="replace")]
-    for pid in victims:
-        os.kill(pid, signal.SIGKILL)
-    so, se = p.communicate(timeout=30)
-    out["dies"] = {"rc": p.returncode, "stderr": se, "killed": len(victims),
-                   "left": processes_mentioning(str(d3))}
+    out["dies"] = kill_one(base / "dies", "groundstation")
     # 3b. the bus recorder dies: up says so and stops (can.log would stay silent)
-    d3b = base / "recorder-dies"
-    p = up(d3b)
-    wait_banner(p)
-    victims = [pid for pid in processes_mentioning(str(d3b))
-               if "candump" in Path(f"/proc/{pid}/cmdline").read_bytes().decode(
-                   errors="replace")]
-    for pid in victims:
-        os.kill(pid, signal.SIGKILL)
-    so, se = p.communicate(timeout=30)
-    out["recorder_dies"] = {"rc": p.returncode, "stderr": se, "killed": len(victims),
-                            "left": processes_mentioning(str(d3b))}
+    out["recorder_dies"] = kill_one(base / "recorder-dies", "candump")
     # 4. a port in use, and the simulator link's socket name in use
     with socket.socket() as s:
         s.bind(("127.0.0.1", 5762 + 10 * 3))
