@@ -7,13 +7,14 @@ PX4's EKF2 and ArduPilot's EKF3 (docs/estimation.md has the equations):
 - nominal state: position ``p`` [m] and velocity ``v`` [m/s] in the inertial frame (z up,
   x east, y north, origin at the winder), attitude ``q`` (body FLU -> inertial, (w, x, y,
   z)), gyro bias ``b_g`` [rad/s], accelerometer bias ``b_a`` [m/s^2], barometer offset
-  ``b_h`` [m];
-- error state (16): ``dp, dv, dtheta, db_g, db_a, db_h``; the attitude error is a small
-  rotation in the inertial frame, ``R_true = Exp(dtheta) R``;
+  ``b_h`` [m], magnetometer bias ``b_m`` [gauss] (body FLU), the GNSS receiver's position
+  error ``b_p`` [m] (ENU; a Gauss-Markov wander, when its correlation time is set);
+- error state (22): ``dp, dv, dtheta, db_g, db_a, db_h, db_m, db_p``; the attitude error is a
+  small rotation in the inertial frame, ``R_true = Exp(dtheta) R``;
 - predict with each IMU sample (:meth:`NavFilter.predict`); fuse GNSS position and velocity
   against the state at the measurement's time (a ring buffer of past states, the
-  correction applied to the current state), barometric height and magnetic heading (yaw
-  only), each gated on its normalised innovation;
+  correction applied to the current state), barometric height and the magnetometer's
+  three axes (or its heading alone), each gated on its normalised innovation;
 - health (:class:`FilterHealth`, :class:`HealthReason`), MAVLink's
   ``ESTIMATOR_STATUS_FLAGS`` (:class:`EstimatorFlags`) and ArduPilot's
   ``EKF_STATUS_REPORT`` test ratios in :class:`FilterStatus`.
@@ -39,19 +40,21 @@ from tuavdefs.jit import entry_point, njit
 from tuavdefs.paramspec import Params, quantity
 
 # ----- layouts of the packed arrays
-#: Nominal state x: p 0-2, v 3-5, q 6-9 (w, x, y, z), b_g 10-12, b_a 13-15, b_h 16.
-NX = 17
+#: Nominal state x: p 0-2, v 3-5, q 6-9 (w, x, y, z), b_g 10-12, b_a 13-15, b_h 16,
+#: b_m 17-19, b_p 20-22.
+NX = 23
 #: Error state (the covariance's rows): dp 0-2, dv 3-5, dtheta 6-8, db_g 9-11, db_a 12-14,
-#: db_h 15.
-N_ERR = 16
-IDX_P, IDX_V, IDX_TH, IDX_BG, IDX_BA, IDX_BH = 0, 3, 6, 9, 12, 15
-_X_Q, _X_BG, _X_BA, _X_BH = 6, 10, 13, 16
+#: db_h 15, db_m 16-18, db_p 19-21.
+N_ERR = 22
+IDX_P, IDX_V, IDX_TH, IDX_BG, IDX_BA, IDX_BH, IDX_BM, IDX_BP = 0, 3, 6, 9, 12, 15, 16, 19
+_X_Q, _X_BG, _X_BA, _X_BH, _X_BM, _X_BP = 6, 10, 13, 16, 17, 20
 #: The ring buffer's columns: t [s], p [m] (3), v [m/s] (3).
 _BUF_COLS = 7
 
 # the packed parameter array (prm) of the kernels
-_P_GRAV, _P_GYRO_N, _P_ACC_N, _P_BG_W, _P_BA_W, _P_BH_W, _P_DT_MAX, _P_VAR_MIN = range(8)
-_N_PRM = 8
+(_P_GRAV, _P_GYRO_N, _P_ACC_N, _P_BG_W, _P_BA_W, _P_BH_W, _P_DT_MAX, _P_VAR_MIN, _P_BM_W,
+ _P_BP_TAU, _P_BP_VAR_H, _P_BP_VAR_V) = range(12)
+_N_PRM = 12
 
 # diagnostics written by the fusion kernels (diag)
 (_D_POS_INNOV, _D_VEL_INNOV, _D_POS_TR, _D_VEL_TR, _D_BARO_INNOV, _D_BARO_TR,
@@ -60,6 +63,9 @@ _N_DIAG = 16
 
 #: Time constant of the magnetometer's low-pass for the alignment [s].
 _MAG_ALIGN_TAU_S = 0.1
+#: Time constant of the low-passed acceleration and yaw rate that say whether the vehicle
+#: manoeuvres (the magnetometer's 3-axis fusion) [s].
+_MANOEUVRE_TAU_S = 1.0
 
 # the GNSS kernel's result bits
 _ACC_POS_H, _ACC_POS_V, _ACC_VEL, _NUMERIC = 1, 2, 4, 8
@@ -68,6 +74,10 @@ _ACC_POS_H, _ACC_POS_V, _ACC_VEL, _NUMERIC = 1, 2, 4, 8
 # ----- parameters
 #: What the vehicle may fly on (EstimatorParams.kind).
 ESTIMATOR_KINDS = ("ekf", "truth")
+#: How the magnetometer is fused (EstimatorParams.mag_fusion): its three axes against the
+#: Earth field with a bias state per axis (EKF2's 3-axis fusion, EKF3's MAG_CAL), or its
+#: heading alone.
+MAG_FUSIONS = ("3d", "heading")
 
 
 @dataclass(frozen=True)
@@ -129,6 +139,14 @@ class EstimatorParams(Params):
     gnss_delay_uncertainty_s: float = quantity(
         0.05, "s", "how well gnss_delay_s is known: the fix's position noise grows by the "
         "speed times this", ge=0, le=0.5)
+    gnss_pos_tau_s: float = quantity(
+        0.0, "s", "correlation time of the receiver's position error (0: white, each fix "
+        "independent, as EKF2 and EKF3 take it); above 0 the error is a Gauss-Markov state "
+        "per axis, the fix's claimed accuracy its standard deviation, so that a slowly "
+        "wandering receiver does not shrink the covariance below the error", ge=0, le=600)
+    gnss_pos_correlated_fraction: float = quantity(
+        0.9, "1", "with gnss_pos_tau_s > 0: the share of the claimed position variance that "
+        "is the wander (the rest is white)", gt=0, lt=1)
     gnss_vel_noise_m_s: float = quantity(
         0.1, "m/s", "GNSS velocity noise (per axis; HIL_GPS carries no speed accuracy)",
         gt=0)
@@ -153,9 +171,31 @@ class EstimatorParams(Params):
         0.05, "rad", "magnetic heading noise", gt=0)
     mag_gate_sigma: float = quantity(
         3.0, "1", "magnetic heading innovation gate [standard deviations]", gt=0)
+    mag_fusion: str = quantity(
+        "3d", "", "3d: the field's three axes, with the magnetometer's bias (the vehicle's "
+        "hard iron left after calibration) estimated; heading: the heading alone (the bias "
+        "is then not estimated: it passes into the yaw)", choices=MAG_FUSIONS)
+    mag_noise_gauss: float = quantity(
+        0.01, "gauss", "3-axis fusion: noise of each axis (the sensor's noise, the field "
+        "model's error and soft iron; EKF2's MAG_NOISE)", gt=0)
+    mag_bias_sigma_gauss: float = quantity(
+        0.01, "gauss", "3-axis fusion: prior standard deviation of each magnetometer bias",
+        gt=0)
+    mag_bias_walk_gauss_sqrt_s: float = quantity(
+        1.0e-5, "gauss/sqrt(s)", "3-axis fusion: random walk of the magnetometer biases",
+        ge=0)
+    mag_3d_accel_m_s2: float = quantity(
+        0.2, "m/s^2", "3-axis fusion only while the horizontal acceleration (low-passed "
+        "over 1 s) reaches this, or the yaw rate mag_3d_yaw_rate_rad_s (EKF2's "
+        "MAG_ACCLIM, MAG_YAWLIM): else the heading alone", gt=0)
+    mag_3d_yaw_rate_rad_s: float = quantity(
+        0.25, "rad/s", "3-axis fusion while the yaw rate (low-passed over 1 s) reaches this",
+        gt=0)
+    mag_3d_hold_s: float = quantity(
+        5.0, "s", "3-axis fusion goes on this long after the last manoeuvre", ge=0)
     mag_yaw_only: bool = quantity(
-        False, "", "the heading's Jacobian on yaw alone (EKF2's heading fusion: the "
-        "magnetometer never corrects roll and pitch); False: its exact Jacobian, which "
+        False, "", "heading fusion: the heading's Jacobian on yaw alone (EKF2's heading "
+        "fusion: the magnetometer never corrects roll and pitch); False: its exact Jacobian, which "
         "includes the tilt error's effect on the heading through the field's inclination")
     baro_min_interval_s: float = quantity(
         0.02, "s", "barometer samples closer than this to the last fused one are skipped "
@@ -337,7 +377,9 @@ def predict_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarr
     """One IMU step of ``dt_s`` [s] ending at ``t_s`` [s]: the nominal state ``x``
     integrated with the rates ``g*`` [rad/s] and specific force ``a*`` [m/s^2] (body FLU),
     the covariance ``P`` propagated (``F P F' + Q``), the state stored in the ring buffer
-    ``buf`` (``meta`` = next slot, entries), ``rates`` = the bias-corrected rates."""
+    ``buf`` (``meta`` = next slot, entries); ``rates`` [0:3] = the bias-corrected rates,
+    [3:6] = the inertial acceleration and [6] the yaw rate [rad/s], low-passed over
+    ``_MANOEUVRE_TAU_S`` (whether the vehicle manoeuvres)."""
     g = prm[_P_GRAV]
     # bias-corrected measurements
     wx, wy, wz = gx - x[10], gy - x[11], gz - x[12]
@@ -351,6 +393,11 @@ def predict_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarr
     aix = r00 * fx + r01 * fy + r02 * fz
     aiy = r10 * fx + r11 * fy + r12 * fz
     aiz = r20 * fx + r21 * fy + r22 * fz - g
+    lp = dt_s / (_MANOEUVRE_TAU_S + dt_s)
+    rates[3] += lp * (aix - rates[3])
+    rates[4] += lp * (aiy - rates[4])
+    rates[5] += lp * (aiz - rates[5])
+    rates[6] += lp * (r20 * wx + r21 * wy + r22 * wz - rates[6])
     for i, a in enumerate((aix, aiy, aiz)):
         x[i] += (x[3 + i] + 0.5 * a * dt_s) * dt_s
         x[3 + i] += a * dt_s
@@ -405,6 +452,21 @@ def predict_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarr
         P[9 + i, 9 + i] += qbg
         P[12 + i, 12 + i] += qba
     P[15, 15] += prm[_P_BH_W] ** 2 * dt_s
+    qbm = prm[_P_BM_W] ** 2 * dt_s
+    for i in range(3):
+        P[16 + i, 16 + i] += qbm
+    # the receiver's wander: b_p <- exp(-dt/tau) b_p, its stationary variance kept
+    tau = prm[_P_BP_TAU]
+    if tau > 0.0:
+        phi = math.exp(-dt_s / tau)
+        for i in range(3):
+            x[20 + i] *= phi
+            for j in range(n):
+                P[19 + i, j] *= phi
+            for j in range(n):
+                P[j, 19 + i] *= phi
+            var = prm[_P_BP_VAR_H] if i < 2 else prm[_P_BP_VAR_V]
+            P[19 + i, 19 + i] += var * (1.0 - phi * phi)
     _symmetrise(P)
     # the ring buffer of (t, p, v)
     k = meta[0]
@@ -468,29 +530,30 @@ def _delayed(buf: np.ndarray, meta: np.ndarray, x: np.ndarray, t_s: float,
 
 @njit
 def scalar_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: float,
-                  i0: int, h0: float, i1: int, h1: float, i2: int, h2: float) -> bool:
-    """One scalar measurement with up to three non-zero Jacobian entries ``h`` at error
+                  i0: int, h0: float, i1: int, h1: float, i2: int, h2: float,
+                  i3: int = -1, h3: float = 0.0) -> bool:
+    """One scalar measurement with up to four non-zero Jacobian entries ``h`` at error
     indices ``i`` (-1: unused), innovation ``y`` (against the state before this batch's
     corrections ``dx``, which it accumulates into) and noise variance ``r``. Updates ``P``
-    (symmetric by construction; refused if a variance would fall below ``var_min``).
-    Returns whether it was applied."""
+    (symmetric by construction; refused if a variance it changes would fall below
+    ``var_min``). Returns whether it was applied."""
     n = P.shape[0]
     pht = np.zeros(n)
     yy = y
-    for i, h in ((i0, h0), (i1, h1), (i2, h2)):
+    for i, h in ((i0, h0), (i1, h1), (i2, h2), (i3, h3)):
         if i >= 0:
             yy -= h * dx[i]
             for k in range(n):
                 pht[k] += P[k, i] * h
     s = r
-    for i, h in ((i0, h0), (i1, h1), (i2, h2)):
+    for i, h in ((i0, h0), (i1, h1), (i2, h2), (i3, h3)):
         if i >= 0:
             s += h * pht[i]
     if not (s > 0.0) or not math.isfinite(s):
         return False
     inv = 1.0 / s
     for k in range(n):
-        if P[k, k] - pht[k] * pht[k] * inv < var_min:
+        if pht[k] != 0.0 and P[k, k] - pht[k] * pht[k] * inv < var_min:
             return False
     for k in range(n):
         dx[k] += pht[k] * inv * yy
@@ -498,6 +561,36 @@ def scalar_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: fl
         ka = pht[a] * inv
         for b in range(n):
             P[a, b] -= ka * pht[b]
+    return True
+
+
+@njit
+def row_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: float,
+               h: np.ndarray, c0: int, c1: int) -> bool:
+    """:func:`scalar_update` with a dense Jacobian row ``h``; the error states ``c0`` to
+    ``c1 - 1`` are *considered*, not estimated (Schmidt's update: their gain is zero, their
+    uncertainty still enters the innovation's variance and their correlations are kept
+    right)."""
+    n = P.shape[0]
+    pht = P @ h
+    yy = y - float(h @ dx)
+    s = float(h @ pht) + r
+    if not (s > 0.0) or not math.isfinite(s):
+        return False
+    inv = 1.0 / s
+    for k in range(n):
+        if (pht[k] != 0.0 and not c0 <= k < c1
+                and P[k, k] - pht[k] * pht[k] * inv < var_min):
+            return False
+    for k in range(n):
+        if not c0 <= k < c1:
+            dx[k] += pht[k] * inv * yy
+    for a in range(n):
+        ka = pht[a] * inv
+        ca = c0 <= a < c1
+        for b in range(n):
+            if not (ca and c0 <= b < c1):
+                P[a, b] -= ka * pht[b]
     return True
 
 
@@ -513,6 +606,9 @@ def inject(x: np.ndarray, dx: np.ndarray, buf: np.ndarray, meta: np.ndarray) -> 
         x[10 + i] += dx[9 + i]
         x[13 + i] += dx[12 + i]
     x[16] += dx[15]
+    for i in range(3):
+        x[17 + i] += dx[16 + i]
+        x[20 + i] += dx[19 + i]
     for m in range(meta[1]):
         for i in range(6):
             buf[m, 1 + i] += dx[i]
@@ -525,9 +621,11 @@ def fuse_gnss_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.nda
                      dx: np.ndarray, diag: np.ndarray, delayed: np.ndarray, var_min: float,
                      t_meas_s: float, px: float, py: float, pz: float, vx: float,
                      vy: float, vz: float, r_h: float, r_v: float, r_vel: float,
-                     gate_pos: float, gate_vel: float, fuse_height: bool) -> int:
+                     gate_pos: float, gate_vel: float, fuse_height: bool,
+                     wander: bool) -> int:
     """A GNSS fix of the time ``t_meas_s`` [s]: position ``p*`` [m] and velocity ``v*``
-    [m/s] (ENU), noise variances ``r_h``, ``r_v`` [m^2] and ``r_vel`` [m^2/s^2]. The
+    [m/s] (ENU), noise variances ``r_h``, ``r_v`` [m^2] and ``r_vel`` [m^2/s^2]; with
+    ``wander`` the position is ``p + b_p`` (the receiver's Gauss-Markov error state). The
     innovations are taken against the state at ``t_meas_s`` (``delayed``), gated (the
     test ratios into ``diag``), the accepted axes fused one by one, the correction injected
     into the current state. Returns the accepted groups as bits (1 horizontal position, 2
@@ -539,8 +637,12 @@ def fuse_gnss_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.nda
     tr = np.zeros(6)
     for i in range(6):
         y = z[i] - delayed[i]
+        s = P[i, i] + rr[i]
+        if wander and i < 3:
+            y -= x[20 + i]
+            s += 2.0 * P[i, 19 + i] + P[19 + i, 19 + i]
         diag[i] = y
-        tr[i] = y * y / ((P[i, i] + rr[i]) * gates[i] * gates[i])
+        tr[i] = y * y / (s * gates[i] * gates[i])
     diag[_D_POS_TR] = max(tr[0], tr[1])
     diag[_D_POS_TR + 1] = tr[2]
     diag[_D_VEL_TR] = max(tr[3], max(tr[4], tr[5]))
@@ -556,7 +658,8 @@ def fuse_gnss_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.nda
         ok[3] = ok[4] = ok[5] = True
         result |= _ACC_VEL
     for i in range(6):
-        if ok[i] and not scalar_update(P, dx, var_min, diag[i], rr[i], i, 1.0, -1, 0.0,
+        ib = 19 + i if wander and i < 3 else -1
+        if ok[i] and not scalar_update(P, dx, var_min, diag[i], rr[i], i, 1.0, ib, 1.0,
                                        -1, 0.0):
             result |= _NUMERIC
     inject(x, dx, buf, meta)
@@ -587,7 +690,7 @@ def fuse_baro_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.nda
 def fuse_mag_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
                     dx: np.ndarray, diag: np.ndarray, var_min: float, mx: float, my: float,
                     mz: float, heading_earth_rad: float, r: float, gate: float,
-                    tilt: bool, couple_x: float, couple_y: float) -> int:
+                    tilt: bool, couple_x: float, couple_y: float, with_bias: bool) -> int:
     """A magnetometer sample ``m*`` [gauss] (body FLU) as a heading: the field rotated
     into the inertial frame with the estimated attitude, the innovation the Earth field's
     heading ``heading_earth_rad`` [rad] minus its heading (the yaw error, the tilt
@@ -595,8 +698,13 @@ def fuse_mag_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndar
     yaw, and with ``tilt`` also the heading's dependence on the tilt error through the
     field's inclination (``couple_*`` = E_z E_x / |E_h|^2, E_z E_y / |E_h|^2).
     Returns 1 if fused, 0 if rejected by the gate, 8 if refused (numerically, or no
-    horizontal field)."""
+    horizontal field). The bias estimate ``b_m`` is taken off the sample first; with
+    ``with_bias`` the Jacobian has the heading's dependence on the bias error too, the
+    bias considered, not estimated (the 3-axis mode's still phases, where a heading cannot
+    tell the bias from the yaw: the yaw's variance stays honest, the bias waits for a
+    manoeuvre)."""
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rot(x[6], x[7], x[8], x[9])
+    mx, my, mz = mx - x[17], my - x[18], mz - x[19]
     ex = r00 * mx + r01 * my + r02 * mz
     ey = r10 * mx + r11 * my + r12 * mz
     if ex * ex + ey * ey < 1e-12:
@@ -612,16 +720,70 @@ def fuse_mag_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndar
         # the heading of the field rotated with the estimate depends on its tilt error
         # too, through the field's inclination
         h0, h1 = -couple_x, -couple_y
-    s = (h0 * h0 * P[6, 6] + h1 * h1 * P[7, 7] + P[8, 8] + 2.0 * h0 * h1 * P[6, 7]
-         + 2.0 * h0 * P[6, 8] + 2.0 * h1 * P[7, 8] + r)
+    n = P.shape[0]
+    h = np.zeros(n)
+    h[6], h[7], h[8] = h0, h1, 1.0
+    if with_bias:
+        # the heading of R (m - b_m - db_m): d/d db_m = (e_y R_0j - e_x R_1j) / |e_h|^2
+        eh2 = ex * ex + ey * ey
+        for j, (a0, a1) in enumerate(((r00, r10), (r01, r11), (r02, r12))):
+            h[16 + j] = (ey * a0 - ex * a1) / eh2
+    ph = P @ h
+    s = float(h @ ph) + r
     diag[_D_MAG_INNOV] = y
     diag[_D_MAG_TR] = y * y / (s * gate * gate)
     if diag[_D_MAG_TR] > 1.0:
         return 0
-    if not scalar_update(P, dx, var_min, y, r, 6, h0, 7, h1, 8, 1.0):
+    c0, c1 = (16, 19) if with_bias else (0, 0)
+    if not row_update(P, dx, var_min, y, r, h, c0, c1):
         return _NUMERIC
     inject(x, dx, buf, meta)
     return 1
+
+
+@njit
+def fuse_mag3d_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
+                      dx: np.ndarray, diag: np.ndarray, var_min: float, mx: float,
+                      my: float, mz: float, ex: float, ey: float, ez: float,
+                      heading_earth_rad: float, r: float, gate: float) -> int:
+    """A magnetometer sample ``m*`` [gauss] (body FLU) fused on its three axes: the model
+    ``m = R' E + b_m`` with the Earth field ``E = e*`` [gauss] (inertial), Jacobians
+    ``R' [E]x`` on the attitude error and the identity on the bias, noise variance ``r``
+    [gauss^2] per axis. Gated as one: any axis's test ratio above 1 rejects the sample.
+    The diagnostics carry the heading innovation of the bias-corrected sample and the
+    largest test ratio. Returns 1 if fused, 0 if rejected, 8 if refused numerically."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rot(x[6], x[7], x[8], x[9])
+    cols = ((r00, r10, r20), (r01, r11, r21), (r02, r12, r22))   # rows of R'
+    m = (mx, my, mz)
+    y = np.zeros(3)
+    h = np.zeros((3, 3))
+    worst = 0.0
+    for k in range(3):
+        a0, a1, a2 = cols[k]
+        y[k] = m[k] - (a0 * ex + a1 * ey + a2 * ez + x[17 + k])
+        h0, h1, h2 = a1 * ez - a2 * ey, a2 * ex - a0 * ez, a0 * ey - a1 * ex
+        h[k, 0], h[k, 1], h[k, 2] = h0, h1, h2
+        b = 16 + k
+        s = (h0 * h0 * P[6, 6] + h1 * h1 * P[7, 7] + h2 * h2 * P[8, 8]
+             + 2.0 * (h0 * h1 * P[6, 7] + h0 * h2 * P[6, 8] + h1 * h2 * P[7, 8])
+             + 2.0 * (h0 * P[6, b] + h1 * P[7, b] + h2 * P[8, b]) + P[b, b] + r)
+        worst = max(worst, y[k] * y[k] / (s * gate * gate))
+    # the heading innovation, for the status
+    cx, cy, cz = mx - x[17], my - x[18], mz - x[19]
+    hx = r00 * cx + r01 * cy + r02 * cz
+    hy = r10 * cx + r11 * cy + r12 * cz
+    yh = heading_earth_rad - math.atan2(hy, hx)
+    diag[_D_MAG_INNOV] = (yh + math.pi) % (2.0 * math.pi) - math.pi
+    diag[_D_MAG_TR] = worst
+    if worst > 1.0:
+        return 0
+    res = 1
+    for k in range(3):
+        if not scalar_update(P, dx, var_min, y[k], r, 6, h[k, 0], 7, h[k, 1], 8, h[k, 2],
+                             16 + k, 1.0):
+            res = _NUMERIC
+    inject(x, dx, buf, meta)
+    return res
 
 
 @njit
@@ -667,7 +829,9 @@ class NavFilter:
         self._dx = np.zeros(N_ERR)
         self._diag = np.zeros(_N_DIAG)
         self._delayed_pv = np.zeros(6)
-        self._rates = np.zeros(3)
+        #: bias-corrected rates [rad/s], low-passed inertial acceleration [m/s^2] and yaw
+        #: rate [rad/s] (predict_kernel)
+        self._rates = np.zeros(7)
         n_buf = int(math.ceil(max(p.gnss_delay_s, p.baro_delay_s) * p.imu_rate_hz)) + 8
         self._buf = np.zeros((n_buf, _BUF_COLS))
         self._meta = np.zeros(2, dtype=np.int64)
@@ -678,6 +842,10 @@ class NavFilter:
         self._prm[_P_BG_W] = p.gyro_bias_walk_rad_s_sqrt_s
         self._prm[_P_BA_W] = p.accel_bias_walk_m_s2_sqrt_s
         self._prm[_P_BH_W] = p.baro_offset_walk_m_sqrt_s
+        self._prm[_P_BM_W] = p.mag_bias_walk_gauss_sqrt_s
+        self._prm[_P_BP_TAU] = p.gnss_pos_tau_s
+        self._wander = p.gnss_pos_tau_s > 0.0
+        self._mag3d = p.mag_fusion == "3d"
         self._prm[_P_DT_MAX] = 5.0 / p.imu_rate_hz
         self._var_min = 1e-14
         self._prm[_P_VAR_MIN] = self._var_min
@@ -707,6 +875,7 @@ class NavFilter:
         # times
         self._t_last: float | None = None
         self._t_mag: float = -math.inf
+        self._t_manoeuvre: float = -math.inf
         self._t_baro_fused: float = -math.inf
         self._t_gnss_pos: float = -math.inf   # last fused (or since alignment)
         self._t_gnss_vel: float = -math.inf
@@ -731,11 +900,13 @@ class NavFilter:
                                       0.0, 0.0, 0.0, 0.0)
         self._gnss_k = entry_point(fuse_gnss_kernel, x, P, buf, meta, dx, diag, dl, 0.0,
                                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                                   0.0, True)
+                                   0.0, True, True)
         self._baro_k = entry_point(fuse_baro_kernel, x, P, buf, meta, dx, diag, dl, 0.0,
                                    0.0, 0.0, 0.0, 0.0)
         self._mag_k = entry_point(fuse_mag_kernel, x, P, buf, meta, dx, diag, 0.0, 0.0,
-                                  0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+                                  0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, True)
+        self._mag3d_k = entry_point(fuse_mag3d_kernel, x, P, buf, meta, dx, diag, 0.0, 0.0,
+                                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         self._pos_k = entry_point(fuse_position_kernel, x, P, buf, meta, dx, 0.0, 0.0, 0.0,
                                   0.0)
 
@@ -747,8 +918,8 @@ class NavFilter:
 
     @property
     def covariance(self) -> np.ndarray:
-        """The error-state covariance (16 x 16, a copy): dp [m], dv [m/s], dtheta [rad]
-        (inertial axes), db_g [rad/s], db_a [m/s^2], db_h [m]."""
+        """The error-state covariance (22 x 22, a copy): dp [m], dv [m/s], dtheta [rad]
+        (inertial axes), db_g [rad/s], db_a [m/s^2], db_h [m], db_m [gauss], db_p [m]."""
         return self._P.copy()
 
     @property
@@ -760,6 +931,17 @@ class NavFilter:
     def accel_bias_m_s2(self) -> Vec3:
         """The accelerometer bias estimate [m/s^2], body FLU."""
         return _vec3(self._x[_X_BA:_X_BA + 3])
+
+    @property
+    def mag_bias_gauss(self) -> Vec3:
+        """The magnetometer bias estimate [gauss], body FLU (0 with heading fusion)."""
+        return _vec3(self._x[_X_BM:_X_BM + 3])
+
+    @property
+    def gnss_wander_m(self) -> Vec3:
+        """The estimate of the GNSS receiver's position error [m], ENU (0 unless
+        ``gnss_pos_tau_s`` > 0)."""
+        return _vec3(self._x[_X_BP:_X_BP + 3])
 
     def position_sigma_m(self) -> Vec3:
         """Standard deviations of the position estimate [m] (east, north, up)."""
@@ -779,7 +961,7 @@ class NavFilter:
         px, py, pz, vx, vy, vz, qw, qx, qy, qz = self._x[:10].tolist()
         r0, r1, r2, r3, r4, r5 = self._out_lag.tolist()
         return VehicleState((px - r0, py - r1, pz - r2), (vx - r3, vy - r4, vz - r5),
-                            (qw, qx, qy, qz), tuple(self._rates.tolist()))
+                            (qw, qx, qy, qz), tuple(self._rates[0:3].tolist()))
 
     # ----- inputs
     def predict(self, t_s: float, gyro_flu_rad_s: Sequence[float],
@@ -789,7 +971,7 @@ class NavFilter:
         gx, gy, gz = gyro_flu_rad_s
         ax, ay, az = accel_flu_m_s2
         if not self._aligned:
-            self._rates[:] = (gx, gy, gz)
+            self._rates[0:3] = (gx, gy, gz)
             self._align_sample(t_s, ax, ay, az)
             self._t_last = t_s
             return
@@ -827,13 +1009,14 @@ class NavFilter:
         # a position error of up to v u, added to the receiver's claimed accuracy
         vx, vy, vz = vel
         u = p.gnss_delay_uncertainty_s
-        r_h = max(eph_m, p.gnss_pos_noise_min_m) ** 2 + (vx * vx + vy * vy) * u * u
-        r_v = max(epv_m, p.gnss_pos_noise_min_m) ** 2 + vz * vz * u * u
+        var_h, var_v = self._gnss_white_var(eph_m, epv_m)
+        r_h = var_h + (vx * vx + vy * vy) * u * u
+        r_v = var_v + vz * vz * u * u
         before = self._x[0:6].copy()
         res = self._gnss_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
                            self._delayed_pv, self._var_min, t_s - p.gnss_delay_s, *pos,
                            *vel, r_h, r_v, p.gnss_vel_noise_m_s ** 2, p.gnss_pos_gate_sigma,
-                           p.gnss_vel_gate_sigma, p.gnss_fuse_height)
+                           p.gnss_vel_gate_sigma, p.gnss_fuse_height, self._wander)
         self._lag_correction(before)
         if res & _NUMERIC:
             self._numeric_refusals += 1
@@ -857,6 +1040,21 @@ class NavFilter:
                 self._glitch = False
                 accepted = True
         return accepted
+
+    def _gnss_white_var(self, eph_m: float, epv_m: float) -> tuple[float, float]:
+        """The white part of a fix's position variance [m^2] (horizontal, vertical) from
+        its claimed accuracies [m]; with the receiver's wander modelled, its share of the
+        claim goes to the wander state (its stationary variance, set here)."""
+        p = self.params
+        floor = p.gnss_pos_noise_min_m ** 2
+        var_h, var_v = max(eph_m, p.gnss_pos_noise_min_m) ** 2, max(
+            epv_m, p.gnss_pos_noise_min_m) ** 2
+        if not self._wander:
+            return var_h, var_v
+        c = p.gnss_pos_correlated_fraction
+        self._prm[_P_BP_VAR_H] = c * var_h
+        self._prm[_P_BP_VAR_V] = c * var_v
+        return max((1.0 - c) * var_h, floor), max((1.0 - c) * var_v, floor)
 
     def _lag_correction(self, before: np.ndarray) -> None:
         """The output takes up the fusion's correction of position and velocity (from
@@ -914,13 +1112,31 @@ class NavFilter:
         p = self.params
         if t_s - self._t_mag < p.mag_min_interval_s:
             return False
-        res = self._mag_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
-                          self._var_min, mx, my, mz, self._heading_earth_rad,
-                          p.mag_yaw_noise_rad ** 2, p.mag_gate_sigma, not p.mag_yaw_only,
-                          *self._couple)
+        if self._mag3d and self._manoeuvring(t_s):
+            res = self._mag3d_k(self._x, self._P, self._buf, self._meta, self._dx,
+                                self._diag, self._var_min, mx, my, mz,
+                                *self.earth_field_enu_gauss, self._heading_earth_rad,
+                                p.mag_noise_gauss ** 2, p.mag_gate_sigma)
+        else:
+            res = self._mag_k(self._x, self._P, self._buf, self._meta, self._dx,
+                              self._diag, self._var_min, mx, my, mz,
+                              self._heading_earth_rad, p.mag_yaw_noise_rad ** 2,
+                              p.mag_gate_sigma, not p.mag_yaw_only, *self._couple,
+                              self._mag3d)
         if res == 1:
             self._t_mag = t_s
         return self._outcome("mag", t_s, res)
+
+    def _manoeuvring(self, t_s: float) -> bool:
+        """Whether the magnetometer's bias is observable now (EKF2's rule for its 3-axis
+        fusion): the low-passed horizontal acceleration or yaw rate above its threshold,
+        or was within ``mag_3d_hold_s``. Still, the bias and the heading cannot be told
+        apart, and the heading alone is fused (with the bias learnt so far taken off)."""
+        p, r = self.params, self._rates
+        if (math.hypot(r[3], r[4]) >= p.mag_3d_accel_m_s2
+                or abs(r[6]) >= p.mag_3d_yaw_rate_rad_s):
+            self._t_manoeuvre = t_s
+        return t_s - self._t_manoeuvre <= p.mag_3d_hold_s
 
     def _outcome(self, name: str, t_s: float, res: int) -> bool:
         if res & _NUMERIC:
@@ -987,13 +1203,13 @@ class NavFilter:
         x[_X_Q:_X_Q + 4] = q
         P = self._P
         P[:] = 0.0
-        var_h = max(eph, p.gnss_pos_noise_min_m) ** 2
+        self._gnss_position_prior(eph, epv)
         var_v = max(epv, p.gnss_pos_noise_min_m) ** 2
-        for i, v in enumerate((var_h, var_h, var_v)):
-            P[IDX_P + i, IDX_P + i] = v
+        for i in range(3):
             P[IDX_V + i, IDX_V + i] = p.gnss_vel_noise_m_s ** 2
             P[IDX_BG + i, IDX_BG + i] = p.gyro_bias_sigma_rad_s ** 2
             P[IDX_BA + i, IDX_BA + i] = p.accel_bias_sigma_m_s2 ** 2
+            P[IDX_BM + i, IDX_BM + i] = p.mag_bias_sigma_gauss ** 2
         P[IDX_TH, IDX_TH] = P[IDX_TH + 1, IDX_TH + 1] = p.tilt_sigma_rad ** 2
         P[IDX_TH + 2, IDX_TH + 2] = p.yaw_sigma_rad ** 2
         # the baro offset is referenced to the GNSS height: their errors are opposed
@@ -1008,9 +1224,31 @@ class NavFilter:
         self._t_gnss_pos = self._t_gnss_vel = self._t_gnss_hgt = t_s
         self._t_baro = t_s
 
+    def _gnss_position_prior(self, eph_m: float, epv_m: float) -> None:
+        """The position's covariance (and the receiver wander's) when the position is set
+        from a fix with claimed accuracies [m]: the position's error is the fix's, minus
+        the wander's where it is modelled (the wander estimate then 0)."""
+        p, P = self.params, self._P
+        white = self._gnss_white_var(eph_m, epv_m)
+        claim = (max(eph_m, p.gnss_pos_noise_min_m) ** 2,
+                 max(epv_m, p.gnss_pos_noise_min_m) ** 2)
+        self._x[_X_BP:_X_BP + 3] = 0.0
+        P[IDX_BP:IDX_BP + 3, :] = 0.0
+        P[:, IDX_BP:IDX_BP + 3] = 0.0
+        for i in range(3):
+            k = 0 if i < 2 else 1
+            if self._wander:
+                wander = claim[k] - white[k] if claim[k] > white[k] else 0.0
+                P[IDX_P + i, IDX_P + i] = white[k] + wander
+                P[IDX_BP + i, IDX_BP + i] = wander
+                P[IDX_P + i, IDX_BP + i] = P[IDX_BP + i, IDX_P + i] = -wander
+            else:
+                P[IDX_P + i, IDX_P + i] = claim[k]
+
     def _reset_to_gnss(self, pos: Vec3, vel: Vec3, r_h: float, r_v: float) -> None:
         """Position and velocity set to the fix (brought forward by its age), their
-        covariance to the fix's noise, uncorrelated with the rest."""
+        covariance to the fix's noise (``r_h``, ``r_v`` [m^2], the white part where the
+        receiver's wander is modelled: that is reset too), uncorrelated with the rest."""
         age = self.params.gnss_delay_s
         new = np.array([pos[i] + vel[i] * age for i in range(3)] + list(vel))
         delta = new - self._x[0:6]
@@ -1023,6 +1261,15 @@ class NavFilter:
         for i, v in enumerate((r_h, r_h, r_v)):
             P[i, i] = v
             P[3 + i, 3 + i] = self.params.gnss_vel_noise_m_s ** 2
+        if self._wander:
+            h, v = self._prm[_P_BP_VAR_H], self._prm[_P_BP_VAR_V]
+            self._x[_X_BP:_X_BP + 3] = 0.0
+            P[IDX_BP:IDX_BP + 3, :] = 0.0
+            P[:, IDX_BP:IDX_BP + 3] = 0.0
+            for i, w in enumerate((h, h, v)):
+                P[i, i] += w
+                P[IDX_BP + i, IDX_BP + i] = w
+                P[i, IDX_BP + i] = P[IDX_BP + i, i] = -w
         self.gnss_resets += 1
         self._out_lag[:] = 0.0   # a reset is flown at once
 

@@ -117,6 +117,14 @@ def rtk_noise(seed: int = 1) -> SensorNoise:
         gps_velocity=NoiseSpec(sigma=0.02))
 
 
+def walk(spec: NoiseSpec) -> float:
+    """The random-walk intensity [u/sqrt(s)] a filter takes for a channel's bias: its walk
+    and its Gauss-Markov in-run error (whose short-term increments are a walk of
+    ``sigma sqrt(2 / tau)``) together."""
+    gm = spec.gm_sigma ** 2 * 2.0 / spec.gm_tau_s if spec.gauss_markov else 0.0
+    return math.sqrt(spec.bias_walk ** 2 + gm)
+
+
 def params_for(noise: SensorNoise, **changes) -> EstimatorParams:
     """The filter's parameters for a sensor set as its datasheets give it (the densities
     of the per-sample noise at the IMU rate)."""
@@ -124,14 +132,16 @@ def params_for(noise: SensorNoise, **changes) -> EstimatorParams:
     hpa_m = 8.4          # metres per hPa near sea level
     kw = dict(gyro_noise_rad_s_sqrt_hz=noise.gyro.sigma * math.sqrt(dt),
               accel_noise_m_s2_sqrt_hz=noise.accel.sigma * math.sqrt(dt),
-              gyro_bias_walk_rad_s_sqrt_s=max(noise.gyro.bias_walk, 1e-6),
-              accel_bias_walk_m_s2_sqrt_s=max(noise.accel.bias_walk, 1e-5),
-              baro_offset_walk_m_sqrt_s=max(noise.baro.bias_walk * hpa_m, 1e-3),
+              gyro_bias_walk_rad_s_sqrt_s=max(walk(noise.gyro), 1e-6),
+              accel_bias_walk_m_s2_sqrt_s=max(walk(noise.accel), 1e-5),
+              baro_offset_walk_m_sqrt_s=max(walk(noise.baro) * hpa_m, 1e-3),
               baro_noise_m=noise.baro.sigma * hpa_m,
-              gnss_vel_noise_m_s=noise.gps_velocity.sigma,
+              gnss_vel_noise_m_s=noise.gps_velocity.stationary_sigma,
               # the field's noise over its horizontal part (0.2 G), a margin for the
               # calibration's residual
               mag_yaw_noise_rad=max(1.5 * noise.mag.sigma / 0.2, 0.005),
+              mag_noise_gauss=max(2.0 * noise.mag.sigma, 0.005),
+              mag_bias_sigma_gauss=max(noise.mag.bias_sigma, 1e-4) * 2.0,
               gyro_bias_sigma_rad_s=max(noise.gyro.bias_sigma, 1e-4) * 2.0,
               accel_bias_sigma_m_s2=max(noise.accel.bias_sigma, 1e-3) * 2.0)
     kw.update(changes)
