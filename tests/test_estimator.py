@@ -157,6 +157,48 @@ def test_circle_with_wandering_gnss():
     assert att_max <= 0.5
 
 
+def _preset_circle(gnss: str, seed: int, **changes):
+    """The circle through the plant's datasheet sensors (sitl.sensors presets: a 0.005 G
+    hard-iron residual on the magnetometer, the receiver's Gauss-Markov wander), at the
+    receiver's rate and latency."""
+    from sitl.sensors import GNSS_MODELS, GnssPreset
+
+    model = GNSS_MODELS[GnssPreset(gnss)]
+    noise = SensorNoise.preset(gnss, seed)
+    params = params_for(noise, gnss_delay_s=model.latency_s, **changes)
+    return simulate(circle(), noise, 60.0, params=params, gnss_hz=model.rate_hz,
+                    gnss_delay_s=model.latency_s), model
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_the_magnetometers_hard_iron_is_learnt_in_a_manoeuvre(seed):
+    """Three-axis fusion learns the magnetometer's bias once the vehicle turns (its
+    estimate within 1 mG of the simulated one), and the attitude stays within 0.5 deg; the
+    heading alone passes the same bias into the yaw."""
+    run, _ = _preset_circle("gnss", seed, gnss_pos_tau_s=8.0)
+    att = _circle_metrics(run)[1]
+    np.testing.assert_allclose(run.filt.mag_bias_gauss, run.suite.mag.bias, atol=1e-3)
+    assert att <= 0.5, att
+    heading, _ = _preset_circle("gnss", seed, gnss_pos_tau_s=8.0, mag_fusion="heading")
+    att_heading = _circle_metrics(heading)[1]
+    assert att_heading > 2.0 * att, (att_heading, att)
+
+
+def test_a_wandering_receiver_is_consistent_when_its_wander_is_modelled():
+    """A consumer receiver (0.8 m Gauss-Markov over 8 s): with the wander as states the
+    NEES of position and velocity is inside the chi-square(6) 95 % bounds most of the time;
+    taking each fix as independent (gnss_pos_tau_s = 0) it is not."""
+    run, model = _preset_circle("gnss", 4, gnss_pos_tau_s=8.0)
+    pos_rms, _, _, inside = _circle_metrics(run)
+    white, _ = _preset_circle("gnss", 4)
+    inside_white = _circle_metrics(white)[3]
+    print(f"consumer GNSS circle: NEES inside the 95 % bounds {100 * inside:.1f} % with the "
+          f"wander modelled, {100 * inside_white:.1f} % without; position {pos_rms:.2f} m")
+    assert inside >= 0.85, inside
+    assert inside_white < 0.5, inside_white
+    assert pos_rms <= 1.0
+
+
 def test_a_gnss_glitch_is_rejected():
     """A 5 m jump east for 1 s (from 30 s): every fix of it rejected, the glitch flagged,
     the estimate within 10 cm of the truth throughout, the fixes after it accepted."""

@@ -377,8 +377,11 @@ def run_up(args: argparse.Namespace) -> int:
     from companion.estimator import EstimatorParams
     from sitl.sensors import GNSS_MODELS, GnssPreset
 
-    latency_s = GNSS_MODELS[GnssPreset(args.gnss)].latency_s
-    estimator = EstimatorParams(kind=args.state, gnss_delay_s=latency_s)
+    # what the receiver's datasheet tells the vehicle's designers: its latency (ArduPilot's
+    # GPS_DELAY_MS) and how slowly its position error wanders
+    receiver = GNSS_MODELS[GnssPreset(args.gnss)]
+    estimator = EstimatorParams(kind=args.state, gnss_delay_s=receiver.latency_s,
+                                gnss_pos_tau_s=receiver.horizontal.gm_tau_s)
     (run_dir / "estimator.toml").write_text(_to_toml(to_dict(estimator)))
     plant_args = ["-m", "sitl", *plant_listen_args(sim), "--can", can, "--home", *home,
                   "--gnss", args.gnss, "--position", *map(str, args.position),
