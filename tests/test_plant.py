@@ -141,7 +141,8 @@ def test_fall_with_quadratic_drag_matches_analytic():
     # m dv/dt = -m g + rho/2 CdA v^2: v = -v_t tanh(g t / v_t), z = z0 - v_t^2/g ln cosh(g t/v_t)
     cda, rho = 0.12, 1.1
     params = _params(tether=FEATHER, environment=EnvironmentParams(air_density_kg_m3=rho),
-                     vehicle=VehicleParams(drag_coeff_n_s_m=(0, 0, 0), drag_area_m2=(0.5, 0.7, cda)))
+                     vehicle=VehicleParams(drag_coeff_n_s_m=(0, 0, 0),
+                                           drag_area_m2=(0.5, 0.7, cda)))
     x = initial_state(PlantModel(params), position_m=(0.0, 0.0, 150.0), tether_length_m=300.0)
     plant = Plant(params, state=x)
     for _ in range(4000):
