@@ -243,8 +243,9 @@ def line_wind(ls: np.ndarray, wp: np.ndarray, wind: np.ndarray, out: np.ndarray)
 def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float) -> int:
     """Adds or removes the node at the exit so that the exit segment stays between
     ``MERGE`` and ``SPLIT`` nominal lengths, conserving mass and momentum (a new node on the
-    exit segment's chord, at the velocity the line had there; a removed node's momentum
-    given to its neighbour). Returns the change in the number of nodes."""
+    exit segment's chord, at the velocity the line had there, interpolated towards the
+    exit at rest; a removed node's momentum given to its neighbour). The free nodes'
+    momentum is the same before and after. Returns the change in the number of nodes."""
     ls_m = lp[L_LS]
     maxn = int(lp[L_MAXN])
     n0 = int(ls[0])
@@ -264,14 +265,15 @@ def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float) -> int:
                     ls[1 + i] = 0.0
             n += 1
         elif exit_len < MERGE * ls_m and n > 0:
-            # node n-1 goes; node n-2 (if any) takes its momentum
+            # node n-1 goes; node n-2 (if any), whose share becomes ls_m + exit_len/2 (the
+            # exit's share takes the other ls_m/2), takes the momentum of both
             if n > 1:
                 o = 1 + 6 * (n - 2)
                 m_keep = ls_m
                 m_gone = 0.5 * (ls_m + exit_len)
+                m_new = ls_m + 0.5 * exit_len
                 for i in range(3, 6):
-                    ls[o + i] = (m_keep * ls[o + i] + m_gone * ls[o + 6 + i]) / (
-                        m_keep + m_gone)
+                    ls[o + i] = (m_keep * ls[o + i] + m_gone * ls[o + 6 + i]) / m_new
             n -= 1
         else:
             break
