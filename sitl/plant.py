@@ -537,8 +537,11 @@ class Plant:
     def lay_line(self, settle_s: float = 2.0) -> None:
         """The lumped line laid at rest on the catenary from the exit to the attachment
         point, then relaxed towards its own static shape for ``settle_s`` [s] of simulated
-        time with the UAV held (velocities damped), and its pull left for the read-outs."""
+        time with the UAV held (velocities damped), and its pull left for the read-outs.
+        Call it after setting the state by hand; nothing for the catenary."""
         m = self.model
+        if not m.lumped:
+            return
         x = self.x
         bx, by, bz, _, _, _ = attachment_point(x, m.p)
         length = self.tether_length_m
