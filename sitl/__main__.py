@@ -93,6 +93,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         length = args.tether_length or math.dist(pos, (0.0, 0.0, 0.0)) + 0.1
         plant = Plant(params)
         plant.x[:] = initial_state(plant.model, pos, tether_length_m=length)
+        plant.lay_line()    # a lumped tether laid out to it
     else:
         length = args.tether_length or 1.15 * math.dist(pos, (0.0, 0.0, 0.0))
         x0, _ = hover_trim(params, pos, length)

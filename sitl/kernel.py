@@ -15,14 +15,22 @@ import numpy as np
 
 from sitl._jit import njit
 from sitl.catenary import _solve
+from sitl.lumped import line_params, line_rhs, node_count
 from tuavdefs.airframe import ROTOR_LAYOUT
-from tuavdefs.params import SystemParams
+from tuavdefs.params import SystemParams, TetherModel
 
 # indices of the packed parameter array
 (P_G, P_M, P_IXX, P_IYY, P_IZZ, P_KF, P_KM, P_D, P_TAU_M, P_DRAG_X, P_DRAG_Y, P_DRAG_Z,
  P_ROT_DAMP, P_GEAR, P_MU, P_W, P_EA, P_RW, P_THETA_MIN, P_THETA_MAX, P_M_BAR, P_RHO,
- P_LT, P_RADII_SQ, P_I_ROTOR, P_BETA, P_TAU_MAX, P_OMEGA_MAX, P_KV, P_BRAKE) = range(30)
-N_PARAMS = 30
+ P_LT, P_RADII_SQ, P_I_ROTOR, P_BETA, P_TAU_MAX, P_OMEGA_MAX, P_KV, P_BRAKE, P_HALF_RHO_AIR,
+ P_CDA_X, P_CDA_Y, P_CDA_Z, P_ATT_X, P_ATT_Y, P_ATT_Z, P_LUMPED) = range(38)
+N_PARAMS = 38
+
+# the tether's auxiliary array ("warm"): the catenary's warm start (H, V), and the lumped
+# line's pull on the UAV (x, y, z) [N], drum tension [N] and top tension [N] at the current
+# state, which the read-outs (the state derivative for the sensors) use
+W_H, W_V, W_FX, W_FY, W_FZ, W_DRUM, W_TOP, W_EX, W_EY, W_EZ = range(10)
+N_WARM = 10
 
 #: Heights within this of the gear height count as touching the ground [m].
 GROUND_EPS_M = 1e-6
@@ -70,7 +78,28 @@ def pack_params(params: SystemParams) -> np.ndarray:
     p[P_OMEGA_MAX] = w.motor_speed_limit_rad_s
     p[P_KV] = w.speed_limit_gain_n_m_s_rad
     p[P_BRAKE] = w.brake_torque_n_m
+    p[P_HALF_RHO_AIR] = 0.5 * env.air_density_kg_m3
+    p[P_CDA_X], p[P_CDA_Y], p[P_CDA_Z] = v.drag_area_m2
+    p[P_ATT_X], p[P_ATT_Y], p[P_ATT_Z] = v.tether_attachment_m
+    p[P_LUMPED] = 1.0 if t.kind == TetherModel.LUMPED else 0.0
     return p
+
+
+def pack_line_params(params: SystemParams) -> np.ndarray:
+    """The lumped line's parameters as :mod:`sitl.lumped` reads them."""
+    t, env = params.tether, params.environment
+    return line_params(env.gravity_m_s2, t.linear_density_kg_m, t.axial_stiffness_n,
+                       t.axial_damping_n_s, t.segment_length_m, t.diameter_m,
+                       t.normal_drag_coeff, t.tangential_drag_coeff, env.air_density_kg_m3,
+                       t.ground_stiffness_n_m2, t.ground_damping_n_s_m2,
+                       t.ground_friction_coeff, t.ground_friction_speed_m_s,
+                       max_line_nodes(params))
+
+
+def max_line_nodes(params: SystemParams) -> int:
+    """The most free nodes the lumped line can have (the whole drum paid out)."""
+    t = params.tether
+    return node_count(t.total_length_m, t.segment_length_m) + 1
 
 
 @njit
@@ -156,18 +185,61 @@ def tether_pull(p: np.ndarray, px: float, py: float, pz: float, length: float,
 @njit
 def rhs_kernel(x: np.ndarray, p: np.ndarray, setpoints: np.ndarray, winder_cmd_n_m: float,
                winder_enabled: bool, wind: np.ndarray, warm: np.ndarray) -> np.ndarray:
-    """dx/dt of the 19-state plant (layout in sitl/plant.py)."""
+    """dx/dt of the 19-state plant (layout in sitl/plant.py); for the lumped line, with the
+    pull ``warm`` holds."""
     dx = np.empty(19)
     rhs_into(dx, x, p, setpoints, winder_cmd_n_m, winder_enabled, wind, warm)
     return dx
 
 
 @njit
+def attachment_point(x: np.ndarray, p: np.ndarray) -> tuple[float, float, float,
+                                                            float, float, float]:
+    """The tether's attachment point B on the UAV at the state ``x``: position [m] and
+    velocity [m/s], inertial (p + R r_a, v + R (omega x r_a))."""
+    ax, ay, az = p[P_ATT_X], p[P_ATT_Y], p[P_ATT_Z]
+    if ax == 0.0 and ay == 0.0 and az == 0.0:
+        return x[0], x[1], x[2], x[3], x[4], x[5]
+    qw, qx, qy, qz = x[6], x[7], x[8], x[9]
+    wx, wy, wz = x[10], x[11], x[12]
+    cx, cy, cz = wy * az - wz * ay, wz * ax - wx * az, wx * ay - wy * ax
+    r00 = 1 - 2 * (qy * qy + qz * qz)
+    r01 = 2 * (qx * qy - qw * qz)
+    r02 = 2 * (qx * qz + qw * qy)
+    r10 = 2 * (qx * qy + qw * qz)
+    r11 = 1 - 2 * (qx * qx + qz * qz)
+    r12 = 2 * (qy * qz - qw * qx)
+    r20 = 2 * (qx * qz - qw * qy)
+    r21 = 2 * (qy * qz + qw * qx)
+    r22 = 1 - 2 * (qx * qx + qy * qy)
+    return (x[0] + r00 * ax + r01 * ay + r02 * az, x[1] + r10 * ax + r11 * ay + r12 * az,
+            x[2] + r20 * ax + r21 * ay + r22 * az, x[3] + r00 * cx + r01 * cy + r02 * cz,
+            x[4] + r10 * cx + r11 * cy + r12 * cz, x[5] + r20 * cx + r21 * cy + r22 * cz)
+
+
+@njit
 def rhs_into(dx: np.ndarray, x: np.ndarray, p: np.ndarray, setpoints: np.ndarray,
              winder_cmd_n_m: float, winder_enabled: bool, wind: np.ndarray,
              warm: np.ndarray) -> None:
-    """:func:`rhs_kernel` written into ``dx`` (19 floats, every one set)."""
-    px, py, pz = x[0], x[1], x[2]
+    """:func:`rhs_kernel` written into ``dx`` (19 floats, every one set). The tether's pull:
+    the catenary's at the attachment point (warm-started from ``warm``), or, for the lumped
+    line, the pull ``warm`` holds for the current state."""
+    if p[P_LUMPED] != 0.0:
+        fux, fuy, fuz, drum = warm[W_FX], warm[W_FY], warm[W_FZ], warm[W_DRUM]
+    else:
+        bx, by, bz, _, _, _ = attachment_point(x, p)
+        fux, fuy, fuz, drum = tether_pull(p, bx, by, bz, p[P_RW] * x[17], warm)
+    uav_rhs_into(dx, x, p, setpoints, winder_cmd_n_m, winder_enabled, wind, fux, fuy, fuz,
+                 drum)
+
+
+@njit
+def uav_rhs_into(dx: np.ndarray, x: np.ndarray, p: np.ndarray, setpoints: np.ndarray,
+                 winder_cmd_n_m: float, winder_enabled: bool, wind: np.ndarray,
+                 fux: float, fuy: float, fuz: float, drum_tension: float) -> None:
+    """dx/dt of the 19 states into ``dx`` given the tether's pull on the attachment point
+    (x, y, z) [N] and the tension at the drum [N]."""
+    pz = x[2]
     vx, vy, vz = x[3], x[4], x[5]
     qw, qx, qy, qz = x[6], x[7], x[8], x[9]
     wx, wy, wz = x[10], x[11], x[12]
@@ -194,13 +266,24 @@ def rhs_into(dx: np.ndarray, x: np.ndarray, p: np.ndarray, setpoints: np.ndarray
     r20 = 2 * (qx * qz - qw * qy)
     r21 = 2 * (qy * qz + qw * qx)
     r22 = 1 - 2 * (qx * qx + qy * qy)
-    # drag against the air-relative velocity, in body axes
+    # drag against the air-relative velocity, in body axes: linear (rotor drag) plus
+    # quadratic (the airframe's C_d A)
     ax_, ay_, az_ = vx - wind[0], vy - wind[1], vz - wind[2]
-    dbx = -p[P_DRAG_X] * (r00 * ax_ + r10 * ay_ + r20 * az_)
-    dby = -p[P_DRAG_Y] * (r01 * ax_ + r11 * ay_ + r21 * az_)
-    dbz = -p[P_DRAG_Z] * (r02 * ax_ + r12 * ay_ + r22 * az_)
-    # tether
-    fux, fuy, fuz, drum_tension = tether_pull(p, px, py, pz, p[P_RW] * theta, warm)
+    abx = r00 * ax_ + r10 * ay_ + r20 * az_
+    aby = r01 * ax_ + r11 * ay_ + r21 * az_
+    abz = r02 * ax_ + r12 * ay_ + r22 * az_
+    q = p[P_HALF_RHO_AIR] * math.sqrt(ax_ * ax_ + ay_ * ay_ + az_ * az_)
+    dbx = -(p[P_DRAG_X] + q * p[P_CDA_X]) * abx
+    dby = -(p[P_DRAG_Y] + q * p[P_CDA_Y]) * aby
+    dbz = -(p[P_DRAG_Z] + q * p[P_CDA_Z]) * abz
+    # the tether's moment about the centre of mass, body axes: r_a x (R^T F)
+    fbx = r00 * fux + r10 * fuy + r20 * fuz
+    fby = r01 * fux + r11 * fuy + r21 * fuz
+    fbz = r02 * fux + r12 * fuy + r22 * fuz
+    rax, ray, raz = p[P_ATT_X], p[P_ATT_Y], p[P_ATT_Z]
+    tau_x += ray * fbz - raz * fby
+    tau_y += raz * fbx - rax * fbz
+    tau_z += rax * fby - ray * fbx
     m = p[P_M]
     fx = thrust * r02 + r00 * dbx + r01 * dby + r02 * dbz + fux
     fy = thrust * r12 + r10 * dbx + r11 * dby + r12 * dbz + fuy
@@ -252,6 +335,63 @@ def rhs_into(dx: np.ndarray, x: np.ndarray, p: np.ndarray, setpoints: np.ndarray
                                                         and omega_d > 0.0):
         dtheta = 0.0
     dx[17] = dtheta
+
+
+@njit
+def coupled_rhs_into(dx: np.ndarray, dls: np.ndarray, x: np.ndarray, ls: np.ndarray,
+                     p: np.ndarray, lp: np.ndarray, setpoints: np.ndarray,
+                     winder_cmd_n_m: float, winder_enabled: bool, wind: np.ndarray,
+                     node_wind: np.ndarray, warm: np.ndarray) -> None:
+    """The UAV's (``dx``) and the lumped line's (``dls``) state derivatives together: the
+    line's top at the attachment point, its pull on the UAV, its exit tension on the drum.
+    The forces go into ``warm`` (W_FX .. W_EZ)."""
+    bx, by, bz, bvx, bvy, bvz = attachment_point(x, p)
+    rw = p[P_RW]
+    fx, fy, fz, drum, top, ex, ey, ez = line_rhs(ls, dls, lp, bx, by, bz, bvx, bvy, bvz,
+                                                 rw * x[17], rw * x[18], node_wind, wind)
+    warm[W_FX], warm[W_FY], warm[W_FZ], warm[W_DRUM], warm[W_TOP] = fx, fy, fz, drum, top
+    warm[W_EX], warm[W_EY], warm[W_EZ] = ex, ey, ez
+    uav_rhs_into(dx, x, p, setpoints, winder_cmd_n_m, winder_enabled, wind, fx, fy, fz, drum)
+
+
+@njit
+def coupled_rk4_into(x: np.ndarray, ls: np.ndarray, scratch: np.ndarray,
+                     lscratch: np.ndarray, dt: float, p: np.ndarray, lp: np.ndarray,
+                     setpoints: np.ndarray, winder_cmd_n_m: float, winder_enabled: bool,
+                     wind: np.ndarray, node_wind: np.ndarray, warm: np.ndarray) -> None:
+    """One classical RK4 step of ``dt`` [s] of the UAV (``x``, 19 floats) and the lumped
+    line (``ls``) together, in place; ``scratch`` (5, 19) and ``lscratch`` (5, len(ls))
+    hold the stages. Inputs and winds held."""
+    k1, k2, k3, k4, xt = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
+    m1, m2, m3, m4, lt = lscratch[0], lscratch[1], lscratch[2], lscratch[3], lscratch[4]
+    size = 1 + 6 * int(ls[0])
+    lt[0] = ls[0]
+    h2 = 0.5 * dt
+    coupled_rhs_into(k1, m1, x, ls, p, lp, setpoints, winder_cmd_n_m, winder_enabled, wind,
+                     node_wind, warm)
+    for i in range(19):
+        xt[i] = x[i] + h2 * k1[i]
+    for i in range(1, size):
+        lt[i] = ls[i] + h2 * m1[i]
+    coupled_rhs_into(k2, m2, xt, lt, p, lp, setpoints, winder_cmd_n_m, winder_enabled,
+                     wind, node_wind, warm)
+    for i in range(19):
+        xt[i] = x[i] + h2 * k2[i]
+    for i in range(1, size):
+        lt[i] = ls[i] + h2 * m2[i]
+    coupled_rhs_into(k3, m3, xt, lt, p, lp, setpoints, winder_cmd_n_m, winder_enabled,
+                     wind, node_wind, warm)
+    for i in range(19):
+        xt[i] = x[i] + dt * k3[i]
+    for i in range(1, size):
+        lt[i] = ls[i] + dt * m3[i]
+    coupled_rhs_into(k4, m4, xt, lt, p, lp, setpoints, winder_cmd_n_m, winder_enabled,
+                     wind, node_wind, warm)
+    c = dt / 6.0
+    for i in range(19):
+        x[i] = x[i] + c * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+    for i in range(1, size):
+        ls[i] = ls[i] + c * (m1[i] + 2.0 * m2[i] + 2.0 * m3[i] + m4[i])
 
 
 @njit

@@ -38,17 +38,41 @@ from typing import NamedTuple
 import numpy as np
 
 from sitl._jit import njit
+from sitl.catenary import CatenaryInfo, CatenaryRegime
 from sitl.kernel import (
     GROUND_EPS_M,
+    N_WARM,
     P_GEAR,
+    P_LUMPED,
     P_RW,
     STICK_SPEED_M_S,
+    W_DRUM,
+    W_EX,
+    W_EY,
+    W_EZ,
+    W_FX,
+    W_FY,
+    W_FZ,
+    attachment_point,
+    coupled_rhs_into,
+    coupled_rk4_into,
     drum_projection,
+    max_line_nodes,
+    pack_line_params,
     pack_params,
     rhs_into,
     rhs_kernel,
     rk4_into,
     tether_pull,
+)
+from sitl.lumped import (
+    L_LS,
+    lay_line,
+    line_energy_j,
+    line_wind,
+    manage_nodes,
+    relax,
+    substeps,
 )
 from sitl.tether import Tether, TetherForces, tether_forces_kernel
 from sitl.wind import WindModel, wind_kernel
@@ -56,7 +80,7 @@ from sitl.winder import WinderModel
 from tuavdefs.airframe import command_to_rotor_speed, rotor_speed_setpoints
 from tuavdefs.frames import euler_to_quat, quat_rotate, quat_to_euler
 from tuavdefs.jit import entry_point
-from tuavdefs.params import SystemParams
+from tuavdefs.params import SystemParams, TetherModel
 
 N_STATES = 19
 POS, VEL, QUAT, RATES, ROTORS, DRUM_ANGLE, DRUM_RATE = (
@@ -91,9 +115,10 @@ def advance_kernel(x: np.ndarray, t_s: float, dt: float, n: int, p: np.ndarray,
                    c0: float, c1: float, c2: float, c3: float, armed: bool,
                    speed_min: float, speed_max: float, setpoints: np.ndarray,
                    winder_cmd_n_m: float, winder_enabled: bool, wind: np.ndarray,
-                   warm: np.ndarray, wind_varies: bool, wind_p: np.ndarray,
-                   gusts: np.ndarray, wind_s: np.ndarray, noise: np.ndarray,
-                   noise_next: np.ndarray) -> tuple[int, int, float, float]:
+                   warm: np.ndarray, wind_varies: bool, line: np.ndarray, lp: np.ndarray,
+                   line_scratch: np.ndarray, node_wind: np.ndarray, n_sub: int,
+                   wind_p: np.ndarray, gusts: np.ndarray, wind_s: np.ndarray,
+                   noise: np.ndarray, noise_next: np.ndarray) -> tuple[int, int, float, float]:
     """Up to ``n`` plant steps of ``dt`` [s] from time ``t_s`` [s] with the inputs held,
     ``x`` updated in place. The rotor commands ``c0..c3`` in [0, 1] (and ``armed``) set the
     rotors' speed set-points (:func:`tuavdefs.airframe.rotor_speed_setpoints` for the
@@ -101,25 +126,85 @@ def advance_kernel(x: np.ndarray, t_s: float, dt: float, n: int, p: np.ndarray,
     samples the wind (when it varies:
     :func:`sitl.wind.wind_kernel` on the model's packed state, into ``wind``), takes
     :func:`_rk4_step`, then projects the drum's angle and rate (brake, hard stops:
-    :meth:`sitl.winder.WinderModel.project`). Returns (steps completed, why it stopped
-    (``ADVANCE_*``), the time after them [s], the drum rate before a step that ended on
-    the ground [rad/s])."""
+    :meth:`sitl.winder.WinderModel.project`). With the lumped line (``p[P_LUMPED]``), each
+    step is ``n_sub`` coupled RK4 sub-steps of the UAV and ``line`` (:func:`_lumped_step`)
+    and the line's pull at the state reached is left in ``warm``. Returns (steps
+    completed, why it stopped (``ADVANCE_*``), the time after them [s], the drum rate
+    before a step that ended on the ground [rad/s])."""
     rotor_speed_setpoints(setpoints, c0, c1, c2, c3, armed, speed_min, speed_max)
     scratch = np.empty((6, N_STATES))
     braked = not winder_enabled
     ground = p[P_GEAR] + GROUND_EPS_M
+    lumped = p[P_LUMPED] != 0.0
     for i in range(n):
         if wind_varies and not wind_kernel(wind_p, gusts, wind_s, noise, noise_next, t_s,
                                            x[2], x[3], x[4], x[5], wind):
+            if lumped:
+                _line_forces(x, line, p, lp, setpoints, winder_cmd_n_m, winder_enabled, wind,
+                             node_wind, warm, scratch, line_scratch)
             return i, ADVANCE_NOISE, t_s, 0.0
-        omega_before = _rk4_step(x, scratch, dt, p, setpoints, winder_cmd_n_m,
-                                 winder_enabled, wind, warm)
+        if lumped:
+            omega_before = _lumped_step(x, line, scratch, line_scratch, dt, n_sub, p, lp,
+                                        setpoints, winder_cmd_n_m, winder_enabled, wind,
+                                        node_wind, warm, wind_p)
+        else:
+            omega_before = _rk4_step(x, scratch, dt, p, setpoints, winder_cmd_n_m,
+                                     winder_enabled, wind, warm)
         if x[2] <= ground:
+            if lumped:
+                _line_forces(x, line, p, lp, setpoints, winder_cmd_n_m, winder_enabled, wind,
+                             node_wind, warm, scratch, line_scratch)
             return i, ADVANCE_GROUND, t_s, omega_before
         x[DRUM_ANGLE], x[DRUM_RATE] = drum_projection(p, x[DRUM_ANGLE], x[DRUM_RATE],
                                                       omega_before, braked)
         t_s += dt
+    if lumped:
+        _line_forces(x, line, p, lp, setpoints, winder_cmd_n_m, winder_enabled, wind,
+                     node_wind, warm, scratch, line_scratch)
     return n, ADVANCE_DONE, t_s, 0.0
+
+
+@njit
+def _normalise_quaternion(x: np.ndarray) -> None:
+    n = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
+    for i in range(6, 10):
+        x[i] = x[i] / n
+
+
+@njit
+def _lumped_step(x: np.ndarray, line: np.ndarray, scratch: np.ndarray,
+                 line_scratch: np.ndarray, dt: float, n_sub: int, p: np.ndarray,
+                 lp: np.ndarray, setpoints: np.ndarray, winder_cmd_n_m: float,
+                 winder_enabled: bool, wind: np.ndarray, node_wind: np.ndarray,
+                 warm: np.ndarray, wind_p: np.ndarray) -> float:
+    """One plant step of ``dt`` [s] with the lumped line: the air at the nodes sampled once,
+    ``n_sub`` coupled RK4 sub-steps (quaternion normalised and drum projected after each but
+    the last, whose projection the caller makes), then nodes added or removed at the exit.
+    Returns the drum rate before the last sub-step [rad/s]."""
+    line_wind(line, wind_p, wind, node_wind)
+    h = dt / n_sub
+    braked = not winder_enabled
+    omega_before = x[DRUM_RATE]
+    for s in range(n_sub):
+        omega_before = x[DRUM_RATE]
+        coupled_rk4_into(x, line, scratch, line_scratch, h, p, lp, setpoints, winder_cmd_n_m,
+                         winder_enabled, wind, node_wind, warm)
+        _normalise_quaternion(x)
+        if s < n_sub - 1:
+            x[DRUM_ANGLE], x[DRUM_RATE] = drum_projection(p, x[DRUM_ANGLE], x[DRUM_RATE],
+                                                          omega_before, braked)
+    manage_nodes(line, lp, p[P_RW] * x[DRUM_ANGLE])
+    return omega_before
+
+
+@njit
+def _line_forces(x: np.ndarray, line: np.ndarray, p: np.ndarray, lp: np.ndarray,
+                 setpoints: np.ndarray, winder_cmd_n_m: float, winder_enabled: bool,
+                 wind: np.ndarray, node_wind: np.ndarray, warm: np.ndarray,
+                 scratch: np.ndarray, line_scratch: np.ndarray) -> None:
+    """The lumped line's pull at the state ``x``, ``line`` into ``warm``."""
+    coupled_rhs_into(scratch[0], line_scratch[0], x, line, p, lp, setpoints, winder_cmd_n_m,
+                     winder_enabled, wind, node_wind, warm)
 
 
 @njit
@@ -128,7 +213,8 @@ def _truth_kernel(x: np.ndarray, p: np.ndarray, ea_n: float, w_n_per_m: float, h
     """:func:`sitl.tether.tether_forces_kernel` at the state ``x`` (the paid-out length
     from its drum angle, as :attr:`Plant.tether_length_m`); its last field (converged)
     is False also for a state the tether cannot take (non-finite, below the exit)."""
-    px, py, pz, length = x[0], x[1], x[2], p[P_RW] * x[DRUM_ANGLE]
+    px, py, pz, _, _, _ = attachment_point(x, p)
+    length = p[P_RW] * x[DRUM_ANGLE]
     if not (-math.inf < px < math.inf and -math.inf < py < math.inf
             and 0.0 <= pz < math.inf and 0.0 < length < math.inf):
         return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0.0,
@@ -172,7 +258,8 @@ class PlantInputs(NamedTuple):
 
 
 class PlantModel:
-    """Parameters digested for the state derivative, plus the tether solver (warm start)."""
+    """Parameters digested for the state derivative, plus the tether solver (warm start) and
+    the lumped line's state (``line``, used when ``lumped``)."""
 
     def __init__(self, params: SystemParams) -> None:
         self.params = params
@@ -191,7 +278,14 @@ class PlantModel:
         self.tether = Tether(params.tether, self.g)
         self.winder = WinderModel(params.winder, params.tether)
         self.p = pack_params(params)
-        self.warm = np.zeros(2)   # the kernel's tether warm start (H, V)
+        # the kernel's tether array: the catenary's warm start (H, V), the lumped line's pull
+        self.warm = np.zeros(N_WARM)
+        self.lumped = params.tether.kind == TetherModel.LUMPED
+        self.lp = pack_line_params(params)
+        n_max = max_line_nodes(params)
+        self.line = np.zeros(1 + 6 * n_max)
+        self.line_scratch = np.zeros((5, 1 + 6 * n_max))
+        self.node_wind = np.zeros((n_max, 3))
 
     def rotor_setpoints(self, u: PlantInputs) -> tuple[float, ...]:
         """Rotor-speed set-points [rad/s] for the commands in ``u``."""
@@ -204,7 +298,8 @@ def rhs(t: float, x: Sequence[float], u: PlantInputs, model: PlantModel,
         rotor_setpoints: Sequence[float] | None = None) -> np.ndarray:
     """dx/dt of the whole plant at time ``t`` [s] for state ``x`` and inputs ``u``.
 
-    ``wind_m_s`` is the air velocity at the UAV (held over a step). ``rotor_setpoints``
+    ``wind_m_s`` is the air velocity at the UAV (held over a step). With the lumped line,
+    its pull is the one the model holds for the plant's current state. ``rotor_setpoints``
     may pass the rotor-speed set-points precomputed from ``u``. The equations live in the
     compiled kernel (:func:`sitl.kernel.rhs_kernel`); the time does not enter them (the
     plant is autonomous given its inputs). Pure apart from the tether solver's warm start,
@@ -213,7 +308,7 @@ def rhs(t: float, x: Sequence[float], u: PlantInputs, model: PlantModel,
     sp = model.rotor_setpoints(u) if rotor_setpoints is None else rotor_setpoints
     return rhs_kernel(np.asarray(x, dtype=float), model.p, np.asarray(sp, dtype=float),
                       float(u.winder_torque_n_m), bool(u.winder_enabled),
-                      np.asarray(wind_m_s, dtype=float), model.warm)
+                      np.asarray(wind_m_s[:3], dtype=float), model.warm)
 
 
 def initial_state(model: PlantModel, position_m: Sequence[float] | None = None,
@@ -258,7 +353,9 @@ class Plant:
         self.wind_m_s: tuple[float, float, float] = tuple(self.params.wind.steady_m_s)
         # what the kernel is handed besides the state: the wind at the UAV, the rotors'
         # speed set-points, the wind model's packed state
-        self._wind = np.array(self.wind_m_s, dtype=float)
+        self._wind = np.zeros(6)   # at the UAV, then the part the same at every height
+        self._wind[:3] = self.wind_m_s
+        self._n_sub = substeps(dt_s, self.model.lp)
         self._speed_min = self.params.vehicle.rotor_speed_min_rad_s
         self._speed_max = self.params.vehicle.rotor_speed_max_rad_s
         self._setpoints = np.zeros(4)
@@ -268,12 +365,15 @@ class Plant:
         self._advance = entry_point(advance_kernel, self.x, 0.0, float(dt_s), 1, m.p, 0.0,
                                     0.0, 0.0, 0.0, False, self._speed_min, self._speed_max,
                                     self._setpoints, 0.0, False, self._wind, m.warm, False,
+                                    m.line, m.lp, m.line_scratch, m.node_wind, 1,
                                     *self.wind.kernel_args)
         tether = m.tether
         self._truth = entry_point(_truth_kernel, self.x, m.p, tether.ea_n, tether.w_n_per_m,
                                   0.0, 0.0)
         self._specific_force = entry_point(specific_force_kernel, self.x, m.p, 0.0, 0.0,
                                            0.0, m.warm, m.g)
+        if m.lumped:
+            self.lay_line()
 
     def step(self, u: PlantInputs) -> None:
         """Advance the plant by one step of ``dt_s`` with inputs ``u``."""
@@ -301,8 +401,8 @@ class Plant:
             # (the entry point converts the numbers to the kernel's float and bool)
             done, why, t, omega_before = self._advance(
                 x, t, dt, n, m.p, c0, c1, c2, c3, armed, self._speed_min, self._speed_max,
-                self._setpoints, command, enabled, self._wind, m.warm, varies,
-                *wind.kernel_args)
+                self._setpoints, command, enabled, self._wind, m.warm, varies, m.line, m.lp,
+                m.line_scratch, m.node_wind, self._n_sub, *wind.kernel_args)
             if why == ADVANCE_DONE:
                 break
             n -= done
@@ -320,7 +420,7 @@ class Plant:
         self.x = x
         self.t_s = t
         if varies:
-            self.wind_m_s = tuple(self._wind.tolist())  # type: ignore[assignment]
+            self.wind_m_s = tuple(self._wind[:3].tolist())  # type: ignore[assignment]
         else:  # what sample returns for a constant wind
             self.wind_m_s = wind.steady_m_s
 
@@ -346,8 +446,12 @@ class Plant:
         thrust = m.kf * float(o @ o)
         qw, qx, qy, _ = x[QUAT]
         r22 = 1 - 2 * (qx * qx + qy * qy)
-        pull_z = tether_pull(m.p, float(x[0]), float(x[1]), float(x[2]),
-                             m.winder.length_m(float(x[DRUM_ANGLE])), m.warm)[2]
+        if m.lumped:
+            pull_z = float(m.warm[W_FZ])
+        else:
+            bx, by, bz, _, _, _ = attachment_point(x, m.p)
+            pull_z = tether_pull(m.p, bx, by, bz, m.winder.length_m(float(x[DRUM_ANGLE])),
+                                 m.warm)[2]
         return thrust * r22 + pull_z - m.m * m.g
 
     # ----- read-outs
@@ -402,7 +506,12 @@ class Plant:
 
     def tether_forces(self) -> TetherForces:
         """The tether's forces at the current state (:meth:`sitl.tether.Tether.forces`,
-        warm-started from its last solution)."""
+        warm-started from its last solution; for the lumped line, its pull as the last step
+        left it, with a :class:`~sitl.catenary.CatenaryInfo` describing the nodes: the
+        top's and exit's force components, the line lying on the ground, SUSPENDED or
+        TOUCHDOWN, its lowest node)."""
+        if self.model.lumped:
+            return self._line_forces()
         tether = self.model.tether
         r = self._truth(self.x, self.model.p, tether.ea_n, tether.w_n_per_m, tether._hf0,
                         tether._vf0)
@@ -410,6 +519,62 @@ class Plant:
             x = self.x
             return tether.forces(float(x[0]), float(x[1]), float(x[2]), self.tether_length_m)
         return tether.accept(r)
+
+    def _line_forces(self) -> TetherForces:
+        w = self.model.warm.tolist()
+        line, lp = self.model.line, self.model.lp
+        n = int(line[0])
+        z = line[3:1 + 6 * n:6]
+        lowest = float(z.min()) if n else 0.0
+        on_ground = float(np.count_nonzero(z <= 0.0)) * lp[L_LS]
+        top = (w[W_FX], w[W_FY], w[W_FZ])
+        exit_ = (w[W_EX], w[W_EY], w[W_EZ])
+        regime = CatenaryRegime.TOUCHDOWN if on_ground > 0.0 else CatenaryRegime.SUSPENDED
+        info = CatenaryInfo(-math.hypot(top[0], top[1]), -top[2], math.hypot(*exit_[:2]),
+                            exit_[2], on_ground, regime, 0, lowest, False)
+        return TetherForces(top, exit_, w[W_DRUM], math.hypot(*top), info)
+
+    def lay_line(self, settle_s: float = 2.0) -> None:
+        """The lumped line laid at rest on the catenary from the exit to the attachment
+        point, then relaxed towards its own static shape for ``settle_s`` [s] of simulated
+        time with the UAV held (velocities damped), and its pull left for the read-outs.
+        Call it after setting the state by hand; nothing for the catenary."""
+        m = self.model
+        if not m.lumped:
+            return
+        x = self.x
+        bx, by, bz, _, _, _ = attachment_point(x, m.p)
+        length = self.tether_length_m
+        points = m.tether.shape(bx, by, max(bz, 0.0), length, n_points=401)
+        lay_line(m.line, m.lp, points, length)
+        top = np.array([bx, by, bz, 0.0, 0.0, 0.0])
+        steps = round(settle_s / (self.dt_s / self._n_sub))
+        line_wind(m.line, self.wind.packed, self._wind, m.node_wind)
+        if steps > 0:
+            relax(m.line, m.line_scratch, m.lp, self.dt_s / self._n_sub, steps, top, length,
+                  m.node_wind, self._wind, 0.995)
+        _line_forces(x, m.line, m.p, m.lp, self._setpoints, 0.0, False, self._wind,
+                     m.node_wind, m.warm, np.empty((6, N_STATES)), m.line_scratch)
+
+    def line_nodes_m(self) -> np.ndarray:
+        """The lumped line's points from the exit to the attachment point, (n + 2, 3) [m]
+        (empty for the catenary)."""
+        m = self.model
+        if not m.lumped:
+            return np.zeros((0, 3))
+        n = int(m.line[0])
+        nodes = m.line[1:1 + 6 * n].reshape(n, 6)[::-1, :3]
+        bx, by, bz, _, _, _ = attachment_point(self.x, m.p)
+        return np.vstack((np.zeros((1, 3)), nodes, [[bx, by, bz]]))
+
+    def line_energy_j(self) -> float:
+        """The lumped line's kinetic, gravitational and elastic energy [J] (0 for the
+        catenary)."""
+        m = self.model
+        if not m.lumped:
+            return 0.0
+        bx, by, bz, _, _, _ = attachment_point(self.x, m.p)
+        return float(line_energy_j(m.line, m.lp, bx, by, bz, self.tether_length_m))
 
     def energy_j(self) -> float:
         """Kinetic plus gravitational energy of the UAV (reference: ground) [J]."""

@@ -43,7 +43,7 @@ import numpy as np
 
 from sitl._jit import njit
 from sitl.pymath import hypot3
-from tuavdefs.params import WindParams
+from tuavdefs.params import WindParams, WindProfile
 
 __all__ = [
     "FT_M", "KNOT_M_S", "W20_DEFAULT_M_S", "MIN_ALTITUDE_M", "MAX_ALTITUDE_M",
@@ -164,7 +164,30 @@ def _second_order_coeffs(x: float) -> tuple[float, float, float, float, float]:
 # The model's packed parameters (WindModel._wp) and state (WindModel._ws), as the compiled
 # step reads them; the gusts are rows (start, duration, end, amplitude x/2, y/2, z/2).
 WP_STEADY, WP_TURBULENT, WP_W20, WP_DIR, WP_DT = 0, 3, 4, 5, 7
-N_WIND_PARAMS = 8
+WP_PROFILE, WP_Z_REF, WP_Z0, WP_ALPHA, WP_LOG_REF = 8, 9, 10, 11, 12
+N_WIND_PARAMS = 13
+#: WP_PROFILE's values (tuavdefs.params.WindProfile).
+PROFILE_UNIFORM, PROFILE_LOG, PROFILE_POWER = 0, 1, 2
+_PROFILE_CODES = {WindProfile.UNIFORM: PROFILE_UNIFORM, WindProfile.LOG: PROFILE_LOG,
+                  WindProfile.POWER: PROFILE_POWER}
+
+
+@njit
+def profile_factor(wp: np.ndarray, height_m: float) -> float:
+    """The mean wind at ``height_m`` [m] above the ground over its value at the reference
+    height: 1 (uniform), ln(z/z0)/ln(z_ref/z0) (log; 0 at and below z0) or
+    (z/z_ref)^alpha (power; 0 at and below the ground)."""
+    kind = wp[WP_PROFILE]
+    if kind == PROFILE_UNIFORM:
+        return 1.0
+    if kind == PROFILE_LOG:
+        z0 = wp[WP_Z0]
+        if height_m <= z0:
+            return 0.0
+        return math.log(height_m / z0) / wp[WP_LOG_REF]
+    if height_m <= 0.0:
+        return 0.0
+    return (height_m / wp[WP_Z_REF]) ** wp[WP_ALPHA]
 (WS_ZU, WS_ZV1, WS_ZV2, WS_ZW1, WS_ZW2, WS_H_REF, WS_V_REF, WS_SIG_U, WS_SIG_W, WS_CU, WS_CV,
  WS_CW, WS_TURB_XYZ, WS_TURB_UVW) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 16, 21, 24)
 N_WIND_STATES = 27
@@ -193,10 +216,14 @@ def wind_kernel(wp: np.ndarray, gusts: np.ndarray, ws: np.ndarray, noise: np.nda
                 noise_next: np.ndarray, t_s: float, altitude_m: float, vx: float,
                 vy: float, vz: float, out: np.ndarray) -> bool:
     """:meth:`WindModel.sample` on the packed parameters and state: writes the air velocity
-    (x, y, z) [m/s] into ``out`` and advances the turbulence by one step, drawing five
-    standard normals from ``noise`` at ``noise_next[0]``. Returns False, having changed
-    nothing, when the turbulence needs draws and ``noise`` has fewer than five left."""
-    wx, wy, wz = wp[WP_STEADY], wp[WP_STEADY + 1], wp[WP_STEADY + 2]
+    (x, y, z) [m/s] at the vehicle's height into ``out[0:3]`` (and, when ``out`` has six
+    elements, its part that is the same at every height, turbulence and gusts, into
+    ``out[3:6]``) and advances the turbulence by one step, drawing five standard normals
+    from ``noise`` at ``noise_next[0]``. Returns False, having changed nothing, when the
+    turbulence needs draws and ``noise`` has fewer than five left."""
+    f = profile_factor(wp, altitude_m)
+    sx, sy, sz = f * wp[WP_STEADY], f * wp[WP_STEADY + 1], f * wp[WP_STEADY + 2]
+    wx, wy, wz = sx, sy, sz
     if wp[WP_TURBULENT] != 0.0:
         k = noise_next[0]
         if k + 5 > noise.size:
@@ -240,13 +267,17 @@ def wind_kernel(wp: np.ndarray, gusts: np.ndarray, ws: np.ndarray, noise: np.nda
     for i in range(gusts.shape[0]):
         t0, dur, t1 = gusts[i, 0], gusts[i, 1], gusts[i, 2]
         if t0 <= t_s <= t1:
-            f = 1.0 - math.cos(2.0 * math.pi * (t_s - t0) / dur)
-            wx += gusts[i, 3] * f
-            wy += gusts[i, 4] * f
-            wz += gusts[i, 5] * f
+            g = 1.0 - math.cos(2.0 * math.pi * (t_s - t0) / dur)
+            wx += gusts[i, 3] * g
+            wy += gusts[i, 4] * g
+            wz += gusts[i, 5] * g
     out[0] = wx
     out[1] = wy
     out[2] = wz
+    if out.size >= 6:
+        out[3] = wx - sx
+        out[4] = wy - sy
+        out[5] = wz - sz
     return True
 
 
@@ -285,7 +316,14 @@ class WindModel:
         wp[WP_W20] = self._w20
         wp[WP_DIR:WP_DIR + 2] = self._dir
         wp[WP_DT] = self._dt
+        kind = params.profile_kind
+        wp[WP_PROFILE] = _PROFILE_CODES[kind]
+        wp[WP_Z_REF] = params.reference_height_m
+        wp[WP_Z0] = params.roughness_length_m
+        wp[WP_ALPHA] = params.power_exponent
+        wp[WP_LOG_REF] = math.log(params.reference_height_m / params.roughness_length_m)
         self._wp = wp
+        self._sheared = kind != WindProfile.UNIFORM and any(c != 0.0 for c in self._steady)
         self._out = np.zeros(3)
         self.reset()
 
@@ -308,9 +346,15 @@ class WindModel:
 
     @property
     def constant(self) -> bool:
-        """True when the wind is the steady wind at every instant (no turbulence, no gusts):
-        :meth:`sample` then returns :attr:`steady_m_s` and changes nothing."""
-        return not (self._turbulent or self._gusts)
+        """True when the wind is the steady wind at every instant and height (no turbulence,
+        no gusts, no mean wind varying with height): :meth:`sample` then returns
+        :attr:`steady_m_s` and changes nothing."""
+        return not (self._turbulent or self._gusts or self._sheared)
+
+    @property
+    def packed(self) -> np.ndarray:
+        """The packed parameters the compiled kernels read (:func:`profile_factor`)."""
+        return self._wp
 
     @property
     def w20_m_s(self) -> float:
@@ -348,12 +392,13 @@ class WindModel:
                vehicle_velocity_m_s: Sequence[float]) -> tuple[float, float, float]:
         """Air velocity at the vehicle at time ``t_s`` [s] (x, y, z) [m/s].
 
-        ``altitude_m`` [m] is the height above ground that sets the turbulence scales and
+        ``altitude_m`` [m] is the height above ground that sets the mean wind (the profile),
+        the turbulence scales, and
         ``vehicle_velocity_m_s`` [m/s] the inertial velocity of the vehicle; the turbulence
         field passes it at ``V = max(|steady - vehicle velocity|, MIN_PASSING_SPEED_M_S)``.
         Returns steady + turbulence + gusts, then advances the turbulence by one ``dt_s``.
         """
-        if not (self._turbulent or self._gusts):  # constant: the same answer, faster
+        if self.constant:  # the same answer, faster
             return self._steady
         vx, vy, vz = vehicle_velocity_m_s
         out = self._out

@@ -21,7 +21,13 @@ from sitl.plant import (
 )
 from sitl.trim import hover_trim
 from tuavdefs.airframe import Mixer, allocation_matrix, command_to_rotor_speed
-from tuavdefs.params import SystemParams, TetherParams, VehicleParams, WinderParams
+from tuavdefs.params import (
+    EnvironmentParams,
+    SystemParams,
+    TetherParams,
+    VehicleParams,
+    WinderParams,
+)
 
 #: A tether too light to matter, for tests that need the UAV on its own.
 FEATHER = TetherParams(linear_density_kg_m=1e-12, total_length_m=500.0)
@@ -66,7 +72,8 @@ def test_hover_stays_put_for_a_while():
 def test_torque_free_spin_conserves_energy_and_momentum():
     params = _params(
         tether=FEATHER,
-        vehicle=VehicleParams(rotational_damping_n_m_s_rad=0.0, drag_coeff_n_s_m=(0, 0, 0)),
+        vehicle=VehicleParams(rotational_damping_n_m_s_rad=0.0, drag_coeff_n_s_m=(0, 0, 0),
+                              drag_area_m2=(0, 0, 0)),
         environment=SystemParams().environment.replace(gravity_m_s2=1e-12),
     )
     model = PlantModel(params)
@@ -101,7 +108,8 @@ def _rotation(q):
 
 
 def test_free_fall_matches_gravity():
-    params = _params(tether=FEATHER, vehicle=VehicleParams(drag_coeff_n_s_m=(0, 0, 0)))
+    params = _params(tether=FEATHER, vehicle=VehicleParams(drag_coeff_n_s_m=(0, 0, 0),
+                                                                drag_area_m2=(0, 0, 0)))
     x = initial_state(PlantModel(params), position_m=(3.0, 4.0, 100.0), tether_length_m=200.0)
     plant = Plant(params, state=x)
     for _ in range(2000):
@@ -115,7 +123,8 @@ def test_free_fall_matches_gravity():
 
 def test_fall_with_linear_drag_matches_analytic():
     c = 0.8
-    params = _params(tether=FEATHER, vehicle=VehicleParams(drag_coeff_n_s_m=(0.3, 0.3, c)))
+    params = _params(tether=FEATHER, vehicle=VehicleParams(drag_coeff_n_s_m=(0.3, 0.3, c),
+                                                                drag_area_m2=(0, 0, 0)))
     x = initial_state(PlantModel(params), position_m=(0.0, 0.0, 100.0), tether_length_m=200.0)
     plant = Plant(params, state=x)
     for _ in range(3000):
@@ -125,6 +134,23 @@ def test_fall_with_linear_drag_matches_analytic():
     want_v = -v_term * (1.0 - math.exp(-c * t / m))
     want_z = 100.0 - v_term * (t - m / c * (1.0 - math.exp(-c * t / m)))
     assert plant.velocity_m_s[2] == pytest.approx(want_v, rel=1e-9)
+    assert plant.position_m[2] == pytest.approx(want_z, rel=1e-9)
+
+
+def test_fall_with_quadratic_drag_matches_analytic():
+    # m dv/dt = -m g + rho/2 CdA v^2: v = -v_t tanh(g t / v_t), z = z0 - v_t^2/g ln cosh(g t/v_t)
+    cda, rho = 0.12, 1.1
+    params = _params(tether=FEATHER, environment=EnvironmentParams(air_density_kg_m3=rho),
+                     vehicle=VehicleParams(drag_coeff_n_s_m=(0, 0, 0),
+                                           drag_area_m2=(0.5, 0.7, cda)))
+    x = initial_state(PlantModel(params), position_m=(0.0, 0.0, 150.0), tether_length_m=300.0)
+    plant = Plant(params, state=x)
+    for _ in range(4000):
+        plant.step(PlantInputs())
+    m, g, t = params.vehicle.mass_kg, params.environment.gravity_m_s2, plant.t_s
+    v_t = math.sqrt(2.0 * m * g / (rho * cda))
+    assert plant.velocity_m_s[2] == pytest.approx(-v_t * math.tanh(g * t / v_t), rel=1e-9)
+    want_z = 150.0 - v_t ** 2 / g * math.log(math.cosh(g * t / v_t))
     assert plant.position_m[2] == pytest.approx(want_z, rel=1e-9)
 
 

@@ -27,6 +27,12 @@ from sitl.wind import (
 )
 from tuavdefs.params import GustParams, WindParams
 
+
+def uniform_wind(**fields) -> WindParams:
+    """Wind parameters with a mean wind the same at every height (the Dryden and gust
+    tests: the profile has tests of its own)."""
+    return WindParams(profile="uniform", **fields)
+
 N_SE = 4.0  # tolerance in standard errors of the estimator
 
 
@@ -87,7 +93,7 @@ def sample_acf(x: np.ndarray, k: int) -> float:
 # --- calm, steady, gusts ---------------------------------------------------------------
 
 def test_calm_is_zero_everywhere():
-    m = WindModel(WindParams(), 0.01)
+    m = WindModel(uniform_wind(), 0.01)
     for k in range(100):
         assert m.sample(0.37 * k, 10.0 * k - 5.0, (3.0 * k, -k, 0.5)) == (0.0, 0.0, 0.0)
     assert m.turbulence_m_s == (0.0, 0.0, 0.0)
@@ -95,7 +101,7 @@ def test_calm_is_zero_everywhere():
 
 def test_steady_only_is_exactly_the_steady_vector():
     steady = (3.25, -1.5, 0.125)
-    m = WindModel(WindParams(steady_m_s=steady, seed=7), 0.004)
+    m = WindModel(uniform_wind(steady_m_s=steady, seed=7), 0.004)
     assert m.steady_m_s == steady
     for k in range(200):
         assert m.sample(0.004 * k, 0.3 * k, (k, 2.0, -1.0)) == steady
@@ -104,7 +110,7 @@ def test_steady_only_is_exactly_the_steady_vector():
 def test_gust_exact_values_and_zero_outside():
     t0, dur, amp = 2.0, 1.6, (3.0, -2.0, 1.0)
     steady = (1.0, 0.5, 0.0)
-    m = WindModel(WindParams(steady_m_s=steady, gusts=(
+    m = WindModel(uniform_wind(steady_m_s=steady, gusts=(
         GustParams(start_s=t0, duration_s=dur, amplitude_m_s=amp),)), 0.01)
 
     def gust(t):
@@ -123,7 +129,7 @@ def test_gust_exact_values_and_zero_outside():
 def test_overlapping_gusts_add():
     g1 = GustParams(start_s=1.0, duration_s=2.0, amplitude_m_s=(2.0, 0.0, 0.0))
     g2 = GustParams(start_s=1.5, duration_s=1.0, amplitude_m_s=(1.0, 0.0, -4.0))
-    m = WindModel(WindParams(gusts=(g1, g2)), 0.01)
+    m = WindModel(uniform_wind(gusts=(g1, g2)), 0.01)
     # t = 2: g1 at its peak (2, 0, 0), g2 at its peak (1, 0, -4).
     assert m.sample(2.0, 1.0, (0.0, 0.0, 0.0)) == pytest.approx((3.0, 0.0, -4.0), abs=1e-12)
     # t = 2.75: g2 is over; g1 at 7/8 of its duration.
@@ -136,7 +142,7 @@ def test_overlapping_gusts_add():
        amp=st.tuples(*[st.floats(-20.0, 20.0)] * 3),
        steady=st.tuples(*[st.floats(-15.0, 15.0)] * 3))
 def test_no_turbulence_is_steady_plus_gust_formula(t, start, dur, amp, steady):
-    m = WindModel(WindParams(steady_m_s=steady, gusts=(
+    m = WindModel(uniform_wind(steady_m_s=steady, gusts=(
         GustParams(start_s=start, duration_s=dur, amplitude_m_s=amp),)), 0.01)
     inside = start <= t <= start + dur
     f = 0.5 * (1.0 - math.cos(2.0 * math.pi * (t - start) / dur)) if inside else 0.0
@@ -148,7 +154,7 @@ def test_no_turbulence_is_steady_plus_gust_formula(t, start, dur, amp, steady):
 @given(alt=st.floats(-1e4, 1e5), vel=st.tuples(*[st.floats(-100.0, 100.0)] * 3),
        level=st.sampled_from(["light", "moderate", "severe"]), dt=st.floats(1e-4, 0.5))
 def test_turbulent_output_is_finite_for_any_altitude_and_velocity(alt, vel, level, dt):
-    m = WindModel(WindParams(steady_m_s=(0.0, 0.0, 0.0), turbulence=level), dt)
+    m = WindModel(uniform_wind(steady_m_s=(0.0, 0.0, 0.0), turbulence=level), dt)
     for k in range(5):
         w = m.sample(k * dt, alt, vel)
         assert all(math.isfinite(c) for c in w)
@@ -158,13 +164,13 @@ def test_turbulent_output_is_finite_for_any_altitude_and_velocity(alt, vel, leve
 def test_bad_step_rejected():
     for dt in (0.0, -0.01, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="dt_s"):
-            WindModel(WindParams(), dt)
+            WindModel(uniform_wind(), dt)
 
 
 # --- determinism -----------------------------------------------------------------------
 
 def turbulent(seed: int, **kw) -> WindParams:
-    return WindParams(steady_m_s=(4.0, 3.0, 0.0), turbulence="moderate", seed=seed, **kw)
+    return uniform_wind(steady_m_s=(4.0, 3.0, 0.0), turbulence="moderate", seed=seed, **kw)
 
 
 def test_same_seed_same_sequence_different_seed_different():
@@ -206,7 +212,7 @@ def test_turbulence_scales_linearly_with_w20():
 
 def test_default_w20_per_intensity():
     for level, knots in (("light", 15.0), ("moderate", 30.0), ("severe", 45.0)):
-        m = WindModel(WindParams(turbulence=level), 0.01)
+        m = WindModel(uniform_wind(turbulence=level), 0.01)
         assert m.w20_m_s == pytest.approx(knots * 0.514444, rel=1e-5)
     assert WindModel(turbulent(0, wind_speed_at_6m_m_s=4.0), 0.01).w20_m_s == 4.0
 
@@ -286,7 +292,7 @@ W20 = 30.0 * KNOT_M_S
 def long_run() -> tuple[np.ndarray, float]:
     """4000 s at dt = 10 ms: the turbulence part (n x 3) and dt."""
     dt = 0.01
-    p = WindParams(steady_m_s=STEADY, turbulence="moderate", seed=2024)
+    p = uniform_wind(steady_m_s=STEADY, turbulence="moderate", seed=2024)
     x = run(WindModel(p, dt), 400_000, ALT_M, VEHICLE)
     return x - np.array(STEADY), dt
 
@@ -333,7 +339,7 @@ def test_variance_does_not_depend_on_dt():
     duration = 1000.0
     stds = {}
     for dt in (0.001, 0.01):
-        p = WindParams(steady_m_s=(0.0, 0.0, 0.0), turbulence="severe", seed=99)
+        p = uniform_wind(steady_m_s=(0.0, 0.0, 0.0), turbulence="severe", seed=99)
         n = round(duration / dt)
         x = run(WindModel(p, dt), n, alt, (0.0, -v, 0.0))
         models = component_models(alt, v)
@@ -356,7 +362,7 @@ def test_exact_at_steps_comparable_to_the_correlation_times():
     approximate discretisation would be far off; the exact one keeps sigma and the
     one-step correlation."""
     alt, v, dt, n = 0.0, 40.0, 0.25, 100_000
-    p = WindParams(turbulence="severe", seed=17)
+    p = uniform_wind(turbulence="severe", seed=17)
     x = run(WindModel(p, dt), n, alt, (v, 0.0, 0.0))
     sigmas = dryden_sigmas_m_s(alt, 45.0 * KNOT_M_S)
     for axis, (rho, t_c, _) in enumerate(component_models(alt, v)):
@@ -373,7 +379,7 @@ def test_initial_state_is_stationary():
     transient): across seeds its standard deviation is sigma."""
     n = 1500
     first = np.array([
-        WindModel(WindParams(turbulence="light", seed=s), 0.01).sample(0.0, 30.0, (5, 0, 0))
+        WindModel(uniform_wind(turbulence="light", seed=s), 0.01).sample(0.0, 30.0, (5, 0, 0))
         for s in range(n)])
     sigmas = dryden_sigmas_m_s(30.0, 15.0 * KNOT_M_S)
     tol = N_SE * math.sqrt(0.5 / n)  # independent samples: rel. SE of s is 1/sqrt(2n)
@@ -384,7 +390,7 @@ def test_initial_state_is_stationary():
 
 def test_u_lies_along_a_mean_wind_along_y():
     dt, n, v = 0.01, 120_000, 20.0
-    m = WindModel(WindParams(steady_m_s=(0.0, 6.0, 0.0), turbulence="light", seed=8), dt)
+    m = WindModel(uniform_wind(steady_m_s=(0.0, 6.0, 0.0), turbulence="light", seed=8), dt)
     rows = []
     for k in range(n):
         m.sample(dt * k, 3.0, (0.0, 6.0 - v, 0.0))  # the field passes at 20 m/s
@@ -408,7 +414,7 @@ def test_u_lies_along_a_mean_wind_along_y():
 
 
 def test_u_along_an_oblique_mean_wind():
-    m = WindModel(WindParams(steady_m_s=(3.0, 4.0, 1.0), turbulence="light", seed=1), 0.01)
+    m = WindModel(uniform_wind(steady_m_s=(3.0, 4.0, 1.0), turbulence="light", seed=1), 0.01)
     for k in range(50):
         m.sample(0.01 * k, 10.0, (0.0, 0.0, 0.0))
         tx, ty, tz = m.turbulence_m_s
@@ -420,10 +426,44 @@ def test_u_along_an_oblique_mean_wind():
 
 def test_no_mean_wind_still_gives_turbulence_with_speed_floored_at_1_m_s():
     def seq(vel):
-        return run(WindModel(WindParams(turbulence="severe", seed=3), 0.01), 2000, 0.0, vel)
+        return run(WindModel(uniform_wind(turbulence="severe", seed=3), 0.01), 2000, 0.0, vel)
     hover = seq((0.0, 0.0, 0.0))
     assert np.all(np.isfinite(hover))
     assert np.all(np.std(hover, axis=0) > 0.0)
     np.testing.assert_array_equal(hover, seq((0.0, 0.0, 0.5)))
     np.testing.assert_array_equal(hover, seq((0.0, MIN_PASSING_SPEED_M_S, 0.0)))
     assert not np.array_equal(hover, seq((0.0, 1.5 * MIN_PASSING_SPEED_M_S, 0.0)))
+
+
+# --- mean wind profile with height -----------------------------------------------------
+
+@pytest.mark.parametrize("profile", ["log", "power"])
+def test_mean_wind_follows_its_profile(profile):
+    steady = (6.0, -2.0, 0.0)
+    p = WindParams(steady_m_s=steady, profile=profile, reference_height_m=10.0,
+                   roughness_length_m=0.05, power_exponent=0.2)
+    m = WindModel(p, 0.001)
+    assert not m.constant
+    for z in (0.01, 0.5, 3.0, 10.0, 20.0, 75.0):
+        if profile == "log":
+            f = max(math.log(z / 0.05), 0.0) / math.log(10.0 / 0.05)
+        else:
+            f = (z / 10.0) ** 0.2
+        w = m.sample(0.0, z, (0.0, 0.0, 0.0))
+        assert w == pytest.approx(tuple(f * c for c in steady), rel=1e-12, abs=1e-12)
+    # at the reference height the wind is the steady wind
+    assert m.sample(0.0, 10.0, (0.0, 0.0, 0.0)) == pytest.approx(steady, rel=1e-14)
+
+
+def test_uniform_part_is_the_wind_less_its_mean():
+    p = WindParams(steady_m_s=(5.0, 0.0, 0.0), turbulence="moderate", seed=3,
+                   gusts=(GustParams(start_s=0.0, duration_s=1.0, amplitude_m_s=(1.0, 2.0, 0.5)),))
+    m = WindModel(p, 0.01)
+    out = np.zeros(6)
+    from sitl.wind import profile_factor, wind_kernel
+    for k in range(50):
+        while not wind_kernel(*m.kernel_args, 0.01 * k, 17.0, 0.0, 0.0, 0.0, out):
+            m.refill()
+        f = profile_factor(m.packed, 17.0)
+        np.testing.assert_allclose(out[3:], out[:3] - f * np.array([5.0, 0.0, 0.0]),
+                                   atol=1e-12)

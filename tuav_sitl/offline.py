@@ -276,6 +276,7 @@ class OfflineRunner:
             length0, _ = self.winder_host.lbar.length(start)
             x0, _ = hover_trim(params, start, length0, sc.initial.yaw_rad)
             self.plant.x[:] = x0
+        self.plant.lay_line()       # a lumped tether laid out to the state just set
         #: the navigator's events: (kind, value, time [s])
         self.nav_events: list[tuple[NavEvent, object, float]] = []
         nav_params = sc.navigation

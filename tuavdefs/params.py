@@ -6,15 +6,31 @@ chosen here and the reason is stated in ``docs/model.md``. All units are SI.
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass
 
 from tuavdefs.paramspec import Params, quantity
 
 __all__ = [
-    "EnvironmentParams", "VehicleParams", "TetherParams", "WinderParams", "GustParams",
-    "WindParams", "SystemParams",
+    "EnvironmentParams", "VehicleParams", "TetherModel", "TetherParams", "WinderParams",
+    "GustParams", "WindProfile", "WindParams", "SystemParams",
 ]
+
+
+class TetherModel(enum.Enum):
+    """Which tether the plant integrates as the truth."""
+
+    CATENARY = "catenary"   #: quasi-static elastic catenary (sitl/catenary.py)
+    LUMPED = "lumped"       #: dynamic lumped-mass line with drag (sitl/lumped.py)
+
+
+class WindProfile(enum.Enum):
+    """How the mean wind varies with height above the ground."""
+
+    UNIFORM = "uniform"     #: the same at every height
+    LOG = "log"             #: logarithmic: ln(z/z0) / ln(z_ref/z0)
+    POWER = "power"         #: power law: (z/z_ref)^alpha
 
 
 @dataclass(frozen=True)
@@ -44,8 +60,14 @@ class VehicleParams(Params):
     motor_time_constant_s: float = quantity(
         0.03, "s", "first-order lag of rotor speed behind its command", gt=0)
     drag_coeff_n_s_m: tuple[float, ...] = quantity(
-        (0.25, 0.25, 0.5), "N*s/m", "linear drag per body axis (x forward, y left, z up) "
-        "against air-relative velocity", ge=0, length=3)
+        (0.25, 0.25, 0.5), "N*s/m", "linear (rotor) drag per body axis (x forward, y left, "
+        "z up) against air-relative velocity", ge=0, length=3)
+    drag_area_m2: tuple[float, ...] = quantity(
+        (0.06, 0.06, 0.12), "m^2", "quadratic drag C_d*A per body axis (x forward, y left, "
+        "z up): F_i = -rho/2 C_dA_i |v_air| v_air_i", ge=0, length=3)
+    tether_attachment_m: tuple[float, ...] = quantity(
+        (0.0, 0.0, 0.0), "m", "where the tether is attached, body frame (x forward, y left, "
+        "z up) from the centre of mass (paper: at the centre of mass)", length=3)
     rotational_damping_n_m_s_rad: float = quantity(
         0.01, "N*m*s/rad", "aerodynamic damping of body rates", ge=0)
     gear_height_m: float = quantity(
@@ -75,18 +97,57 @@ class VehicleParams(Params):
 
 @dataclass(frozen=True)
 class TetherParams(Params):
-    """The tether: weight, stiffness and how much of it the drum holds."""
+    """The tether: weight, size, stiffness, air drag, ground contact, how much the drum holds,
+    and which model of it the plant integrates."""
 
+    model: str = quantity(
+        "catenary", "1", "the truth model: quasi-static catenary or dynamic lumped masses",
+        choices=tuple(m.value for m in TetherModel))
     linear_density_kg_m: float = quantity(0.034, "kg/m", "mass per unit length (paper)", gt=0)
-    section_area_m2: float = quantity(1.1e-4, "m^2", "cross-section area (paper)", gt=0)
+    diameter_m: float = quantity(
+        0.006, "m", "outer diameter (drag, section area); not the paper's 1.1e-4 m^2", gt=0)
     youngs_modulus_pa: float = quantity(
-        1.0e9, "Pa", "effective axial modulus (not in the paper; a braided power tether)", gt=0)
+        3.9e9, "Pa", "effective axial modulus on the diameter's section (EA = 1.1e5 N)", gt=0)
     total_length_m: float = quantity(50.0, "m", "length wound on the full drum, L_T", gt=0)
+    segments: int = quantity(
+        25, "1", "lumped model: segments of the full length L_T (nominal segment L_T/N)",
+        ge=1, le=200)
+    axial_damping_n_s: float = quantity(
+        30.0, "N*s", "lumped model: internal damping BA, tension += BA * strain rate", ge=0)
+    normal_drag_coeff: float = quantity(
+        1.2, "1", "lumped model: drag coefficient normal to the line, on its diameter", ge=0)
+    tangential_drag_coeff: float = quantity(
+        0.01, "1", "lumped model: drag coefficient along the line, on pi * diameter", ge=0)
+    ground_stiffness_n_m2: float = quantity(
+        3000.0, "N/m^2", "lumped model: ground reaction per metre of line per metre of "
+        "penetration", gt=0)
+    ground_damping_n_s_m2: float = quantity(
+        20.0, "N*s/m^2", "lumped model: ground damping per metre of line", ge=0)
+    ground_friction_coeff: float = quantity(
+        0.5, "1", "lumped model: Coulomb friction of the line on the ground", ge=0)
+    ground_friction_speed_m_s: float = quantity(
+        0.01, "m/s", "lumped model: sliding speed at which friction reaches its full value",
+        gt=0)
+
+    @property
+    def kind(self) -> TetherModel:
+        """:attr:`model` as its enum."""
+        return TetherModel(self.model)
+
+    @property
+    def section_area_m2(self) -> float:
+        """pi d^2 / 4 [m^2]."""
+        return math.pi * self.diameter_m ** 2 / 4.0
 
     @property
     def axial_stiffness_n(self) -> float:
         """EA [N]."""
         return self.youngs_modulus_pa * self.section_area_m2
+
+    @property
+    def segment_length_m(self) -> float:
+        """Nominal segment length of the lumped model, L_T / segments [m]."""
+        return self.total_length_m / self.segments
 
     def weight_per_length_n_m(self, gravity_m_s2: float) -> float:
         """w = rho * g [N/m]."""
@@ -143,6 +204,24 @@ class WindParams(Params):
         0.0, "m/s", "W20, the mean wind at 20 ft that scales low-altitude turbulence; "
         "0 takes the MIL-F-8785C value for the intensity", ge=0)
     seed: int = quantity(0, "1", "seed of the turbulence noise", ge=0)
+    profile: str = quantity(
+        "log", "1", "how the mean wind varies with height (steady_m_s is its value at "
+        "reference_height_m)", choices=tuple(p.value for p in WindProfile))
+    reference_height_m: float = quantity(
+        10.0, "m", "height at which the mean wind is steady_m_s (meteorological 10 m)", gt=0)
+    roughness_length_m: float = quantity(
+        0.03, "m", "log profile: surface roughness z0 (open flat terrain)", gt=0)
+    power_exponent: float = quantity(
+        0.143, "1", "power profile: exponent alpha (1/7, open terrain)", gt=0, le=1)
+
+    def check(self) -> None:
+        if self.roughness_length_m >= self.reference_height_m:
+            raise ValueError("roughness_length_m: must be below reference_height_m")
+
+    @property
+    def profile_kind(self) -> WindProfile:
+        """:attr:`profile` as its enum."""
+        return WindProfile(self.profile)
     gusts: tuple[GustParams, ...] = quantity((), "", "discrete gusts")
 
 

@@ -1,0 +1,386 @@
+"""The tether as a dynamic body: lumped masses joined by elastic segments, in the air.
+
+The line runs from the UAV's attachment point B (the top, moving with the UAV) down to the
+winder's exit A (the origin, fixed). Its unstretched length is the paid-out length
+``L = r_w * theta`` of the drum. It is cut into segments of the nominal length ``l_s``
+(``TetherParams.segment_length_m``) from the top; the last one, at the exit, takes the rest,
+``l_e = L - n l_s``, and grows and shrinks as the drum turns. Between the segments sit ``n``
+free nodes, numbered from the top (node 0 below B, node n-1 above A), each carrying half of
+the mass of the two segments beside it; the half segments at the ends belong to B (the UAV
+carries its weight and drag) and to A (the ground carries it).
+
+Each segment pulls with ``T = EA e + BA de/dt`` while stretched (strain ``e > 0``) and not
+at all when slack (no compression stiffness, and never a push). Each node feels gravity,
+the air drag of its share of line in the local wind (normal and tangential coefficients on
+the diameter, MoorDyn's convention), and, below the ground (z < 0), a spring-damper
+reaction with Coulomb friction smoothed below a sliding speed. The node above the exit
+gains the mass paid out, with the momentum it brings.
+
+Nodes are added and removed at the exit between steps (``manage_nodes``): a new node when
+``l_e > SPLIT l_s``, one merged into its neighbour when ``l_e < MERGE l_s``, both conserving
+the line's mass and momentum. The equations, the integrator (classical RK4 on the coupled
+UAV and line, sub-stepped within the plant's step to the line's stability limit) and what is
+neglected are in docs/model.md.
+
+The line's state is a float array: ``ls[0]`` the number of free nodes ``n``, then for node k
+its position (x, y, z) [m] and velocity [m/s] at ``ls[1 + 6k : 7 + 6k]`` (inertial, z up,
+origin at the exit). The parameters are the plant's packed array (``sitl.kernel``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sitl._jit import njit
+from sitl.wind import WP_STEADY, profile_factor
+
+#: The exit segment is split when longer than this many nominal segments, ...
+SPLIT = 1.6
+#: ... and merged into the next one when shorter than this.
+MERGE = 0.5
+#: Largest sub-step times the line's fastest rate (RK4 is stable within about 2.6 of the
+#: origin in the left half-plane: 2.83 on the imaginary axis, 2.79 on the real one).
+STEP_SAFETY = 2.0
+
+
+def substeps(dt_s: float, lp: np.ndarray) -> int:
+    """RK4 sub-steps of the coupled UAV and line per plant step of ``dt_s`` [s]."""
+    return max(1, math.ceil(dt_s * lp[L_RATE] / STEP_SAFETY))
+
+# packed-parameter indices this module reads (filled by sitl.kernel.pack_params)
+(L_G, L_RHO, L_EA, L_BA, L_LS, L_DIAM, L_CDN, L_CDT, L_RHO_AIR, L_KG, L_CG, L_MUG, L_VG,
+ L_RATE, L_MAXN) = range(15)
+N_LINE_PARAMS = 15
+
+
+def line_params(g: float, rho_kg_m: float, ea_n: float, ba_n_s: float, segment_m: float,
+                diameter_m: float, cdn: float, cdt: float, rho_air: float, kg: float,
+                cg: float, mu: float, v_slip: float, max_nodes: int) -> np.ndarray:
+    """The line's packed parameters, with its fastest rate [1/s] estimated for the
+    sub-step: the highest axial mode of the shortest segments, plus the damping rates."""
+    lp = np.zeros(N_LINE_PARAMS)
+    lp[:13] = (g, rho_kg_m, ea_n, ba_n_s, segment_m, diameter_m, cdn, cdt, rho_air, kg, cg,
+               mu, v_slip)
+    # the fastest node: between a nominal and a shortest exit segment (stiffness
+    # EA (1/l + 1/(MERGE l)), mass rho l (1 + MERGE)/2), on the ground; Gershgorin bounds of
+    # its stiffness and damping rates (the alternating mode doubles the relative motion)
+    shortest = MERGE * segment_m
+    m_node = rho_kg_m * 0.5 * (segment_m + shortest)
+    k_node = ea_n / segment_m + ea_n / shortest
+    omega = math.sqrt(2.0 * k_node / m_node + kg / rho_kg_m)
+    damping = (2.0 * (ba_n_s / segment_m + ba_n_s / shortest) / m_node + cg / rho_kg_m
+               + mu * g / v_slip)
+    lp[L_RATE] = max(omega, damping)
+    lp[L_MAXN] = max_nodes
+    return lp
+
+
+def node_count(length_m: float, segment_m: float) -> int:
+    """Free nodes of a freshly laid line of ``length_m`` [m]: the fewest that leave the exit
+    segment no longer than ``SPLIT`` nominal ones (so between SPLIT - 1 and SPLIT of them;
+    no node, one segment, for a line that short)."""
+    return max(0, math.ceil(length_m / segment_m - SPLIT))
+
+
+@njit
+def _tension(ux: float, uy: float, uz: float, vx: float, vy: float, vz: float, l0: float,
+             l0_rate: float, ea: float, ba: float) -> tuple[float, float, float, float]:
+    """Pull of one segment on its lower end, towards its upper end [N] (x, y, z), and its
+    tension [N]: ``u`` = upper - lower end [m], ``v`` their relative velocity [m/s], ``l0``
+    the unstretched length [m] and its rate [m/s]."""
+    d = math.sqrt(ux * ux + uy * uy + uz * uz)
+    strain = d / l0 - 1.0
+    if strain <= 0.0 or d == 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    rate = (ux * vx + uy * vy + uz * vz) / (d * l0) - d * l0_rate / (l0 * l0)
+    t = ea * strain + ba * rate
+    if t <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    k = t / d
+    return k * ux, k * uy, k * uz, t
+
+
+@njit
+def _drag(lp: np.ndarray, length: float, qx: float, qy: float, qz: float, rx: float,
+          ry: float, rz: float) -> tuple[float, float, float]:
+    """Air drag [N] on ``length`` [m] of line along the unit tangent ``q`` in the air
+    velocity ``r`` relative to it [m/s]: normal on the diameter, tangential on pi times it."""
+    along = rx * qx + ry * qy + rz * qz
+    tx, ty, tz = along * qx, along * qy, along * qz
+    nx, ny, nz = rx - tx, ry - ty, rz - tz
+    vn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    c = 0.5 * lp[L_RHO_AIR] * lp[L_DIAM] * length
+    cn = c * lp[L_CDN] * vn
+    ct = c * lp[L_CDT] * math.pi * abs(along)
+    return cn * nx + ct * tx, cn * ny + ct * ty, cn * nz + ct * tz
+
+
+@njit
+def line_rhs(ls: np.ndarray, dls: np.ndarray, lp: np.ndarray, bx: float, by: float,
+             bz: float, bvx: float, bvy: float, bvz: float, length: float,
+             length_rate: float, node_wind: np.ndarray, top_wind: np.ndarray
+             ) -> tuple[float, float, float, float, float, float, float, float]:
+    """The line's state derivative into ``dls`` (positions' and velocities' rates of the
+    ``ls[0]`` nodes) for the top B at ``b`` [m] moving at ``bv`` [m/s], ``length`` [m] paid
+    out at ``length_rate`` [m/s], the air velocity at each node ``node_wind`` ((n, 3) [m/s])
+    and at B ``top_wind``. Returns the force of the line on B (x, y, z) [N] (the top
+    segment's pull, its half's weight and drag), the tension at the exit (what the drum
+    feels) [N], the top segment's tension [N] and the line's pull on the exit (x, y, z)
+    [N]."""
+    n = int(ls[0])
+    g, rho, ea, ba, ls_m = lp[L_G], lp[L_RHO], lp[L_EA], lp[L_BA], lp[L_LS]
+    kg, cg, mu, vslip = lp[L_KG], lp[L_CG], lp[L_MUG], lp[L_VG]
+    exit_len = length - n * ls_m
+    # segment j joins upper end U_j (B for j = 0, node j-1) and lower end D_j (node j,
+    # the exit for j = n); t_j is its pull on D_j, -t_j on U_j
+    ux, uy, uz, uvx, uvy, uvz = bx, by, bz, bvx, bvy, bvz     # the current upper end
+    prev_tx = prev_ty = prev_tz = 0.0
+    top_fx = top_fy = top_fz = 0.0
+    top_t = 0.0
+    above_x, above_y, above_z = bx, by, bz                      # the node above node j-1
+    for j in range(n + 1):
+        if j < n:
+            o = 1 + 6 * j
+            dx_, dy_, dz_ = ls[o], ls[o + 1], ls[o + 2]
+            dvx, dvy, dvz = ls[o + 3], ls[o + 4], ls[o + 5]
+            l0, l0r = ls_m, 0.0
+        else:
+            dx_ = dy_ = dz_ = 0.0
+            dvx = dvy = dvz = 0.0
+            l0, l0r = exit_len, length_rate
+        tx, ty, tz, t = _tension(ux - dx_, uy - dy_, uz - dz_, uvx - dvx, uvy - dvy,
+                                 uvz - dvz, l0, l0r, ea, ba)
+        if j == 0:
+            # the top: the segment's pull, its upper half's weight and drag
+            half = 0.5 * l0
+            top_t = t
+            sx, sy, sz = bx - dx_, by - dy_, bz - dz_
+            s = math.sqrt(sx * sx + sy * sy + sz * sz)
+            fx, fy, fz = 0.0, 0.0, 0.0
+            if s > 0.0:
+                fx, fy, fz = _drag(lp, half, sx / s, sy / s, sz / s, top_wind[0] - bvx,
+                                   top_wind[1] - bvy, top_wind[2] - bvz)
+            top_fx = -tx + fx
+            top_fy = -ty + fy
+            top_fz = -tz + fz - rho * half * g
+        else:
+            # node j-1 (the current upper end U_j) between segments j-1 and j
+            k = j - 1
+            o = 1 + 6 * k
+            seg_above = ls_m
+            seg_below = l0
+            share = 0.5 * (seg_above + seg_below)
+            m = rho * share
+            fx = prev_tx - tx
+            fy = prev_ty - ty
+            fz = prev_tz - tz - m * g
+            qx, qy, qz = above_x - dx_, above_y - dy_, above_z - dz_
+            q = math.sqrt(qx * qx + qy * qy + qz * qz)
+            if q > 0.0:
+                ax_, ay_, az_ = _drag(lp, share, qx / q, qy / q, qz / q,
+                                      node_wind[k, 0] - uvx, node_wind[k, 1] - uvy,
+                                      node_wind[k, 2] - uvz)
+                fx += ax_
+                fy += ay_
+                fz += az_
+            if uz < 0.0:
+                nrm = share * (-kg * uz - cg * uvz)
+                if nrm > 0.0:
+                    fz += nrm
+                    sl = math.sqrt(uvx * uvx + uvy * uvy)
+                    if sl > 0.0:
+                        f = mu * nrm * (sl / vslip if sl < vslip else 1.0) / sl
+                        fx -= f * uvx
+                        fy -= f * uvy
+            if j == n and length_rate > 0.0:
+                # line paid out enters this node's share at the exit's speed along the
+                # exit segment: d(m v)/dt = F + dm/dt v_in
+                r = math.sqrt(ux * ux + uy * uy + uz * uz)
+                dm = 0.5 * rho * length_rate
+                if r > 0.0:
+                    c = length_rate / r
+                    fx += dm * (c * ux - uvx)
+                    fy += dm * (c * uy - uvy)
+                    fz += dm * (c * uz - uvz)
+                else:
+                    fx -= dm * uvx
+                    fy -= dm * uvy
+                    fz -= dm * uvz
+            dls[o], dls[o + 1], dls[o + 2] = uvx, uvy, uvz
+            dls[o + 3], dls[o + 4], dls[o + 5] = fx / m, fy / m, fz / m
+            above_x, above_y, above_z = ux, uy, uz
+        prev_tx, prev_ty, prev_tz = tx, ty, tz
+        ux, uy, uz, uvx, uvy, uvz = dx_, dy_, dz_, dvx, dvy, dvz
+    # the exit: the last segment's pull, less its lower half's weight, which the ground
+    # carries where the line does not lift it
+    vz = prev_tz - rho * 0.5 * exit_len * g
+    if vz < 0.0:
+        vz = 0.0
+    drum = math.sqrt(prev_tx * prev_tx + prev_ty * prev_ty + vz * vz)
+    return top_fx, top_fy, top_fz, drum, top_t, prev_tx, prev_ty, vz
+
+
+@njit
+def line_wind(ls: np.ndarray, wp: np.ndarray, wind: np.ndarray, out: np.ndarray) -> None:
+    """The air velocity at every node [m/s] into ``out`` ((n, 3)): the mean wind at the
+    node's height (the wind's packed parameters ``wp``, :func:`sitl.wind.profile_factor`)
+    plus the part the same everywhere (turbulence and gusts, ``wind[3:6]`` of
+    :func:`sitl.wind.wind_kernel`)."""
+    uniform = (wind[3], wind[4], wind[5])
+    n = int(ls[0])
+    sx, sy, sz = wp[WP_STEADY], wp[WP_STEADY + 1], wp[WP_STEADY + 2]
+    calm = sx == 0.0 and sy == 0.0 and sz == 0.0
+    for k in range(n):
+        f = 0.0 if calm else profile_factor(wp, ls[3 + 6 * k])
+        out[k, 0] = f * sx + uniform[0]
+        out[k, 1] = f * sy + uniform[1]
+        out[k, 2] = f * sz + uniform[2]
+
+
+@njit
+def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float) -> int:
+    """Adds or removes the node at the exit so that the exit segment stays between
+    ``MERGE`` and ``SPLIT`` nominal lengths, conserving mass and momentum (a new node on the
+    exit segment's chord, at the velocity the line had there, interpolated towards the
+    exit at rest; a removed node's momentum given to its neighbour). The free nodes'
+    momentum is the same before and after. Returns the change in the number of nodes."""
+    ls_m = lp[L_LS]
+    maxn = int(lp[L_MAXN])
+    n0 = int(ls[0])
+    n = n0
+    while True:
+        exit_len = length - n * ls_m
+        if exit_len > SPLIT * ls_m and n < maxn:
+            # the node above the exit keeps its place and velocity; the new one sits at
+            # (exit_len - ls_m)/exit_len of the way from the exit
+            f = (exit_len - ls_m) / exit_len
+            if n > 0:
+                o = 1 + 6 * (n - 1)
+                for i in range(6):
+                    ls[o + 6 + i] = f * ls[o + i]
+            else:
+                for i in range(6):
+                    ls[1 + i] = 0.0
+            n += 1
+        elif exit_len < MERGE * ls_m and n > 0:
+            # node n-1 goes; node n-2 (if any), whose share becomes ls_m + exit_len/2 (the
+            # exit's share takes the other ls_m/2), takes the momentum of both
+            if n > 1:
+                o = 1 + 6 * (n - 2)
+                m_keep = ls_m
+                m_gone = 0.5 * (ls_m + exit_len)
+                m_new = ls_m + 0.5 * exit_len
+                for i in range(3, 6):
+                    ls[o + i] = (m_keep * ls[o + i] + m_gone * ls[o + 6 + i]) / m_new
+            n -= 1
+        else:
+            break
+        ls[0] = n
+    return n - n0
+
+
+@njit
+def line_energy_j(ls: np.ndarray, lp: np.ndarray, bx: float, by: float, bz: float,
+                  length: float) -> float:
+    """Kinetic, gravitational, elastic and ground-spring energy of the free nodes and
+    segments [J] (the top half segment's weight counted at B, the exit's not)."""
+    n = int(ls[0])
+    g, rho, ea, ls_m, kg = lp[L_G], lp[L_RHO], lp[L_EA], lp[L_LS], lp[L_KG]
+    exit_len = length - n * ls_m
+    e = 0.0
+    ux, uy, uz = bx, by, bz
+    for j in range(n + 1):
+        if j < n:
+            o = 1 + 6 * j
+            x, y, z = ls[o], ls[o + 1], ls[o + 2]
+            l0 = ls_m
+        else:
+            x = y = z = 0.0
+            l0 = exit_len
+        d = math.sqrt((ux - x) ** 2 + (uy - y) ** 2 + (uz - z) ** 2)
+        if d > l0:
+            e += 0.5 * ea * (d - l0) ** 2 / l0
+        if j == 0:
+            e += rho * 0.5 * l0 * g * bz
+        if j < n:
+            share = 0.5 * (ls_m + (ls_m if j < n - 1 else exit_len))
+            m = rho * share
+            o = 1 + 6 * j
+            v2 = ls[o + 3] ** 2 + ls[o + 4] ** 2 + ls[o + 5] ** 2
+            e += 0.5 * m * v2 + m * g * z
+            if z < 0.0:
+                e += 0.5 * kg * share * z * z
+        ux, uy, uz = x, y, z
+    return e
+
+
+@njit
+def line_rk4_prescribed(ls: np.ndarray, scratch: np.ndarray, lp: np.ndarray, h: float,
+                        b0: np.ndarray, b1: np.ndarray, b2: np.ndarray, length: float,
+                        node_wind: np.ndarray, top_wind: np.ndarray) -> tuple:
+    """One RK4 step of ``h`` [s] of the line alone, its top prescribed: ``b0``, ``b1``,
+    ``b2`` the top's (position, velocity) (6 floats) at the step's start, middle and end;
+    the length fixed. Returns :func:`line_rhs`'s forces at the step's start."""
+    n = int(ls[0])
+    size = 1 + 6 * n
+    k1, k2, k3, k4, xt = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
+    xt[0] = ls[0]
+    out = line_rhs(ls, k1, lp, b0[0], b0[1], b0[2], b0[3], b0[4], b0[5], length, 0.0,
+                   node_wind, top_wind)
+    for i in range(1, size):
+        xt[i] = ls[i] + 0.5 * h * k1[i]
+    line_rhs(xt, k2, lp, b1[0], b1[1], b1[2], b1[3], b1[4], b1[5], length, 0.0,
+             node_wind, top_wind)
+    for i in range(1, size):
+        xt[i] = ls[i] + 0.5 * h * k2[i]
+    line_rhs(xt, k3, lp, b1[0], b1[1], b1[2], b1[3], b1[4], b1[5], length, 0.0,
+             node_wind, top_wind)
+    for i in range(1, size):
+        xt[i] = ls[i] + h * k3[i]
+    line_rhs(xt, k4, lp, b2[0], b2[1], b2[2], b2[3], b2[4], b2[5], length, 0.0,
+             node_wind, top_wind)
+    c = h / 6.0
+    for i in range(1, size):
+        ls[i] = ls[i] + c * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+    return out
+
+
+@njit
+def relax(ls: np.ndarray, scratch: np.ndarray, lp: np.ndarray, h: float, steps: int,
+          top: np.ndarray, length: float, node_wind: np.ndarray, top_wind: np.ndarray,
+          keep: float) -> tuple:
+    """Dynamic relaxation towards the static shape: ``steps`` RK4 steps of ``h`` [s] with
+    the top held at ``top`` (position, zero velocity: 6 floats), each followed by the
+    nodes' velocities scaled by ``keep`` (< 1). Returns :func:`line_rhs`'s forces at the
+    end."""
+    for _ in range(steps):
+        line_rk4_prescribed(ls, scratch, lp, h, top, top, top, length, node_wind, top_wind)
+        n = int(ls[0])
+        for k in range(n):
+            o = 1 + 6 * k
+            ls[o + 3] *= keep
+            ls[o + 4] *= keep
+            ls[o + 5] *= keep
+    return line_rhs(ls, scratch[0], lp, top[0], top[1], top[2], 0.0, 0.0, 0.0, length, 0.0,
+                    node_wind, top_wind)
+
+
+def lay_line(ls: np.ndarray, lp: np.ndarray, points: np.ndarray, length: float) -> None:
+    """The nodes at rest on a drawn shape: ``points`` ((m, 3) [m], from the exit to the top,
+    at equal steps of unstretched arc length, e.g. :meth:`sitl.tether.Tether.shape`), each
+    node at its arc length (linear interpolation)."""
+    ls_m = lp[L_LS]
+    n = node_count(length, ls_m)
+    if 1 + 6 * n > ls.size:
+        raise ValueError(f"length {length!r} m needs {n} nodes, more than the line holds")
+    m = points.shape[0]
+    s = np.linspace(0.0, length, m)
+    ls[:] = 0.0
+    ls[0] = n
+    for k in range(n):
+        sk = length - (k + 1) * ls_m           # arc length from the exit
+        o = 1 + 6 * k
+        for c in range(3):
+            ls[o + c] = float(np.interp(sk, s, points[:, c]))

@@ -1,0 +1,436 @@
+"""The lumped-mass tether (sitl/lumped.py) against independent truths: MoorPy's catenary
+(statics), the conservation of energy, the taut string's transverse frequency, MoorDyn (the
+same line in the same air: frequency and top tension under a prescribed top motion), and
+the coupled plant (hover on the lumped line, its pull and moment at an offset attachment)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sitl.kernel import max_line_nodes, pack_line_params
+from sitl.lumped import (
+    lay_line,
+    line_energy_j,
+    line_rhs,
+    line_rk4_prescribed,
+    manage_nodes,
+    relax,
+)
+from sitl.plant import Plant, PlantInputs
+from sitl.tether import Tether
+from sitl.trim import hover_trim
+from tuavdefs.params import EnvironmentParams, SystemParams, TetherParams, VehicleParams
+
+G = 9.81
+
+
+class Line:
+    """A lumped line alone, its top held or prescribed, in still air."""
+
+    def __init__(self, length_m: float, **tether) -> None:
+        fields = {"total_length_m": 60.0, "segments": 60, **tether}
+        self.params = SystemParams().replace(tether=TetherParams(**fields))
+        self.tp = self.params.tether
+        self.lp = pack_line_params(self.params)
+        n = max_line_nodes(self.params)
+        self.ls = np.zeros(1 + 6 * n)
+        self.scratch = np.zeros((5, self.ls.size))
+        self.node_wind = np.zeros((n, 3))
+        self.top_wind = np.zeros(6)
+        self.length = length_m
+
+    def lay(self, top: tuple[float, float, float]) -> None:
+        """On the elastic catenary to ``top`` (the plant's own solver)."""
+        cat = Tether(self.tp, G)
+        cat.forces(*top, self.length)
+        lay_line(self.ls, self.lp, cat.shape(*top, self.length, 2001), self.length)
+
+    def settle(self, top, seconds: float = 6.0, h: float = 2e-4) -> tuple:
+        b = np.array([*top, 0.0, 0.0, 0.0])
+        return relax(self.ls, self.scratch, self.lp, h, round(seconds / h), b, self.length,
+                     self.node_wind, self.top_wind, 0.998)
+
+    def forces(self, top, vel=(0.0, 0.0, 0.0)) -> tuple:
+        return line_rhs(self.ls, self.scratch[0], self.lp, *top, *vel, self.length, 0.0,
+                        self.node_wind, self.top_wind)
+
+    @property
+    def n(self) -> int:
+        return int(self.ls[0])
+
+    def node(self, k: int) -> np.ndarray:
+        return self.ls[1 + 6 * k:7 + 6 * k]
+
+
+# --- statics against MoorPy ----------------------------------------------------------
+
+moorpy_catenary = pytest.importorskip("moorpy.Catenary").catenary
+
+# (span, height, length, regime): suspended, lying on the ground, near taut, short steep
+STATIC_CASES = [
+    (20.0, 20.0, 31.0, "suspended"),
+    (25.0, 10.0, 30.0, "on the ground"),
+    (24.0, 18.0, 30.05, "near taut"),
+    (4.0, 12.0, 13.0, "steep"),
+]
+
+
+@pytest.mark.parametrize(("span", "height", "length", "regime"), STATIC_CASES)
+def test_static_end_forces_match_moorpy(span, height, length, regime):
+    line = Line(length, ground_friction_coeff=0.0, normal_drag_coeff=0.0,
+                tangential_drag_coeff=0.0)
+    top = (span, 0.0, height)
+    line.lay(top)
+    fx, fy, fz, drum, _, ex, ey, ez = line.settle(top)
+    ea, w = line.tp.axial_stiffness_n, line.tp.linear_density_kg_m * G
+    fah, fav, fbh, fbv, info = moorpy_catenary(span, height, length, ea, w, CB=0.0)
+    # MoorPy: forces on the ends (A the anchor, B the top), horizontal along A -> B
+    scale = math.hypot(fbh, fbv)
+    assert fx == pytest.approx(fbh, abs=0.01 * scale), regime
+    assert fz == pytest.approx(fbv, abs=0.01 * scale), regime
+    assert fy == pytest.approx(0.0, abs=1e-9)
+    assert ex == pytest.approx(fah, abs=0.01 * scale), regime
+    assert ez == pytest.approx(max(fav, 0.0), abs=0.01 * scale), regime
+    assert drum == pytest.approx(math.hypot(fah, fav), abs=0.01 * scale), regime
+
+
+def test_slack_line_misses_at_most_half_a_node_s_weight():
+    # hanging straight down onto the ground (MoorPy: H = 0, V = w h): the node where the
+    # line meets the ground rests on it, so the lumped top carries up to half its weight less
+    line = Line(30.0, ground_friction_coeff=0.0)
+    top = (15.0, 0.0, 10.0)
+    line.lay(top)
+    fx, _, fz, *_ = line.settle(top)
+    w = line.tp.linear_density_kg_m * G
+    assert abs(fx) < 1e-3
+    assert -fz == pytest.approx(w * 10.0, abs=0.5 * w * line.tp.segment_length_m + 1e-3)
+
+
+# --- energy ---------------------------------------------------------------------------
+
+def test_energy_is_conserved_without_drag_and_damping():
+    line = Line(30.0, axial_damping_n_s=0.0, normal_drag_coeff=0.0,
+                tangential_drag_coeff=0.0)
+    top = (22.0, 0.0, 20.0)
+    line.lay(top)
+    line.settle(top)
+    # a transverse (y) and an in-plane kick: half a sine over the line
+    n = line.n
+    for k in range(n):
+        s = (k + 1) / (n + 1)
+        line.node(k)[4] = 1.5 * math.sin(math.pi * s)
+        line.node(k)[5] = 0.8 * math.sin(2 * math.pi * s)
+    b = np.array([*top, 0.0, 0.0, 0.0])
+    h = 2.5e-4
+    e0 = line_energy_j(line.ls, line.lp, *top, line.length)
+    energies = []
+    for _ in range(round(10.0 / h)):
+        line_rk4_prescribed(line.ls, line.scratch, line.lp, h, b, b, b, line.length,
+                            line.node_wind, line.top_wind)
+        energies.append(line_energy_j(line.ls, line.lp, *top, line.length))
+    energies = np.array(energies)
+    kinetic0 = sum(0.5 * line.tp.linear_density_kg_m * line.tp.segment_length_m
+                   * float(line.node(k)[3:] @ line.node(k)[3:]) for k in range(n))
+    assert kinetic0 > 0.0
+    drift = np.max(np.abs(energies - e0))
+    # 0.1 % of the total (gravity referred to the exit's level) and of what moves
+    assert drift < 1e-3 * abs(e0)
+    assert drift < 1e-3 * (np.max(energies) - np.min(energies) + e0 - np.min(energies)) or \
+        drift < 1e-3 * abs(e0)
+
+
+# --- the taut string's transverse frequency ------------------------------------------
+
+def _zero_crossing_frequency(t: np.ndarray, y: np.ndarray) -> float:
+    s = np.signbit(y)
+    idx = np.nonzero(s[1:] != s[:-1])[0]
+    # linear interpolation of the crossings
+    tc = t[idx] - y[idx] * (t[idx + 1] - t[idx]) / (y[idx + 1] - y[idx])
+    return 0.5 / float(np.mean(np.diff(tc)))
+
+
+def test_transverse_frequency_of_a_taut_line_is_the_strings():
+    # weightless (g = 0), vertical, stretched 0.2 %: a string of point masses, T uniform
+    length, stretch = 30.0, 1.002
+    params = SystemParams().replace(
+        environment=EnvironmentParams(gravity_m_s2=1e-9),
+        tether=TetherParams(total_length_m=60.0, segments=60, axial_damping_n_s=0.0,
+                            normal_drag_coeff=0.0, tangential_drag_coeff=0.0))
+    lp = pack_line_params(params)
+    tp = params.tether
+    n_max = max_line_nodes(params)
+    ls = np.zeros(1 + 6 * n_max)
+    top = (0.0, 0.0, length * stretch)
+    points = np.column_stack((np.zeros(101), np.zeros(101), np.linspace(0, top[2], 101)))
+    lay_line(ls, lp, points, length)
+    n = int(ls[0])
+    assert length - n * tp.segment_length_m == pytest.approx(tp.segment_length_m)
+    amp = 0.01
+    for k in range(n):
+        z = ls[3 + 6 * k]
+        ls[1 + 6 * k] = amp * math.sin(math.pi * z / top[2])
+    scratch = np.zeros((5, ls.size))
+    b = np.array([*top, 0.0, 0.0, 0.0])
+    h = 2.5e-4
+    mid = n // 2
+    ts, ys = [], []
+    for i in range(round(6.0 / h)):
+        ts.append(i * h)
+        ys.append(ls[1 + 6 * mid])
+        line_rk4_prescribed(ls, scratch, lp, h, b, b, b, length, np.zeros((n_max, 3)),
+                            np.zeros(6))
+    f = _zero_crossing_frequency(np.array(ts), np.array(ys))
+    tension = tp.axial_stiffness_n * (stretch - 1.0)
+    segs = n + 1
+    m = tp.linear_density_kg_m * tp.segment_length_m
+    d = top[2] / segs
+    discrete = 2.0 * math.sqrt(tension / (m * d)) * math.sin(math.pi / (2 * segs)) / (2 * math.pi)
+    continuous = math.sqrt(tension / (tp.linear_density_kg_m * length / top[2])) / (2 * top[2])
+    assert f == pytest.approx(discrete, rel=2e-3)
+    assert f == pytest.approx(continuous, rel=2e-3)
+
+
+# --- nodes at the exit -----------------------------------------------------------------
+
+def test_paying_out_and_in_conserves_mass_and_momentum():
+    line = Line(20.0)
+    top = (12.0, 0.0, 14.0)
+    line.lay(top)
+    rng = np.random.default_rng(4)
+    for k in range(line.n):
+        line.node(k)[3:] = rng.normal(size=3)
+
+    def totals(length):
+        n, ls_m = line.n, line.tp.segment_length_m
+        exit_len = length - n * ls_m
+        masses = [ls_m] * (n - 1) + [0.5 * (ls_m + exit_len)]
+        rho = line.tp.linear_density_kg_m
+        mom = sum(rho * m * line.node(k)[3:] for k, m in enumerate(masses))
+        # free nodes plus the top's half segment plus the exit's half segment
+        mass = rho * (sum(masses) + 0.5 * ls_m + 0.5 * exit_len)
+        return mass, mom
+
+    mass0, mom0 = totals(20.0)
+    seen = set()
+    for length in np.concatenate((np.linspace(20.0, 26.0, 300), np.linspace(26.0, 20.0, 300))):
+        before = totals(length)[1]
+        change = manage_nodes(line.ls, line.lp, length)
+        seen.add(change)
+        mass, mom = totals(length)
+        assert mass == pytest.approx(line.tp.linear_density_kg_m * length)
+        if change:
+            np.testing.assert_allclose(mom, before, rtol=1e-12, atol=1e-14)
+    assert {1, -1} <= seen
+    assert line.n == int(line.ls[0])
+    del mass0, mom0
+
+
+# --- MoorDyn ---------------------------------------------------------------------------
+
+moordyn = pytest.importorskip("moordyn")
+
+DEPTH = 100.0   # MoorDyn's seabed depth; our exit sits on it, everything in its "water"
+
+
+def _moordyn_system(tmp_path: Path, tp: TetherParams, length: float, segs: int,
+                    top: tuple[float, float, float], rho_air: float, dt: float):
+    text = f"""--------------------- MoorDyn Input File ------------------------------------
+a tether in air
+---------------------- LINE TYPES ------------------------------------------------------
+TypeName Diam Mass/m EA BA/-zeta EI Cd Ca CdAx CaAx
+(name) (m) (kg/m) (N) (N-s/-) (N-m^2) (-) (-) (-) (-)
+tether {tp.diameter_m} {tp.linear_density_kg_m} {tp.axial_stiffness_n} {tp.axial_damping_n_s} 0 {tp.normal_drag_coeff} 0 {tp.tangential_drag_coeff} 0
+---------------------- POINTS --------------------------------------------------------
+ID Attachment X Y Z Mass Volume CdA Ca
+(#) (-) (m) (m) (m) (kg) (m^3) (m^2) (-)
+1 Fixed 0 0 {-DEPTH} 0 0 0 0
+2 Coupled {top[0]} {top[1]} {top[2] - DEPTH} 0 0 0 0
+---------------------- LINES --------------------------------------------------------
+ID LineType AttachA AttachB UnstrLen NumSegs LineOutputs
+(#) (name) (#) (#) (m) (-) (-)
+1 tether 1 2 {length} {segs} -
+---------------------- OPTIONS -----------------------------------------------------
+{dt} dtM
+RK4 tScheme
+{G} g
+{rho_air} rho
+{DEPTH} WtrDpth
+{tp.ground_stiffness_n_m2 / tp.diameter_m} kBot
+{tp.ground_damping_n_s_m2 / tp.diameter_m} cBot
+0 writeLog
+1 disableOutput
+1 disableOutTime
+------------------------- need this line -------------------------------------------
+"""  # noqa: E501
+    path = tmp_path / "tether.txt"
+    path.write_text(text)
+    system = moordyn.Create(str(path))
+    x0 = [top[0], top[1], top[2] - DEPTH]
+    assert moordyn.Init(system, x0, [0.0, 0.0, 0.0]) == 0
+    return system
+
+
+def _top_motion(t: float, top0, amp: float, freq: float) -> np.ndarray:
+    """The top's (position, velocity): from rest, a figure of eight in x and y with a
+    vertical bob."""
+    w = 2 * math.pi * freq
+    s = math.sin(w * t)
+    c = math.cos(w * t)
+    s2 = math.sin(2 * w * t)
+    c2 = math.cos(2 * w * t)
+    return np.array([top0[0] + amp * (1 - c), top0[1] + 0.25 * amp * (1 - c2),
+                     top0[2] + 0.2 * amp * (1 - c), amp * w * s, 0.5 * amp * w * s2,
+                     0.2 * amp * w * s])
+
+
+@pytest.mark.xfail(strict=True, reason="not yet within 5 %: 19 % RMS at 0.3 m, 0.5 Hz; the "
+                   "tension's axial ringing is damped differently (here no damping in a slack "
+                   "segment, MoorDyn's BA acts always): 9.8 % with BA = 300 N s")
+def test_top_tension_under_prescribed_motion_matches_moordyn(tmp_path):
+    length, segs = 30.0, 15
+    tp = TetherParams(total_length_m=60.0, segments=30)   # 2 m segments, as shipped
+    top0 = (18.0, 0.0, 19.0)
+    rho_air = 1.225
+    line = Line(length, total_length_m=60.0, segments=30)
+    assert line.tp.segment_length_m * segs == pytest.approx(length)
+    # MoorDyn's initial state is its own static solution; ours is relaxed likewise
+    line.lay(top0)
+    line.settle(top0, seconds=20.0, h=2.5e-4)
+    assert line.n == segs - 1
+    dt = 2.5e-4
+    system = _moordyn_system(tmp_path, tp, length, segs, top0, rho_air, 1e-4)
+    amp, freq, duration = 0.3, 0.5, 8.0
+    ours, theirs = [], []
+    t = 0.0
+    steps = round(duration / dt)
+    for _ in range(steps):
+        b0 = _top_motion(t, top0, amp, freq)
+        b1 = _top_motion(t + 0.5 * dt, top0, amp, freq)
+        b2 = _top_motion(t + dt, top0, amp, freq)
+        line_rk4_prescribed(line.ls, line.scratch, line.lp, dt, b0, b1, b2, length,
+                            line.node_wind, line.top_wind)
+        f = moordyn.Step(system, [b2[0], b2[1], b2[2] - DEPTH], list(b2[3:]), t, dt)
+        t += dt
+        fx, fy, fz = line.forces(b2[:3], b2[3:])[:3]
+        ours.append(math.sqrt(fx * fx + fy * fy + fz * fz))
+        theirs.append(math.sqrt(f[0] ** 2 + f[1] ** 2 + f[2] ** 2))
+    moordyn.Close(system)
+    ours, theirs = np.array(ours), np.array(theirs)
+    skip = round(1.0 / dt)        # MoorDyn's first step settles its coupled point
+    rms = math.sqrt(np.mean((ours[skip:] - theirs[skip:]) ** 2))
+    assert rms < 0.05 * math.sqrt(np.mean(theirs[skip:] ** 2))
+    # and the motion did load the line
+    assert np.ptp(theirs[skip:]) > 0.2 * np.mean(theirs[skip:])
+
+
+def test_transverse_frequency_matches_moordyn(tmp_path):
+    # the same taut line in both, plucked sideways: the midpoint's frequency
+    length, segs = 30.0, 15
+    top = (18.0, 0.0, 24.2)
+    tp = TetherParams(total_length_m=60.0, segments=30, normal_drag_coeff=0.0,
+                      tangential_drag_coeff=0.0)
+    line = Line(length, total_length_m=60.0, segments=30, normal_drag_coeff=0.0,
+                tangential_drag_coeff=0.0)
+    line.lay(top)
+    line.settle(top, seconds=10.0, h=2.5e-4)
+    system = _moordyn_system(tmp_path, tp, length, segs, top, 1.225, 1e-4)
+    dt = 2.5e-4
+    # a sideways push of the top for 0.2 s, then held: both lines ring
+    mid = line.n // 2
+    ours, theirs, ts = [], [], []
+    t = 0.0
+    for _ in range(round(8.0 / dt)):
+        def top_at(tt):
+            y = 0.3 * (1 - math.cos(math.pi * min(tt, 0.2) / 0.2)) / 2
+            v = 0.3 * math.pi / 0.4 * math.sin(math.pi * tt / 0.2) if tt < 0.2 else 0.0
+            return np.array([top[0], y, top[2], 0.0, v, 0.0])
+        b0, b1, b2 = top_at(t), top_at(t + dt / 2), top_at(t + dt)
+        line_rk4_prescribed(line.ls, line.scratch, line.lp, dt, b0, b1, b2, length,
+                            line.node_wind, line.top_wind)
+        moordyn.Step(system, [b2[0], b2[1], b2[2] - DEPTH], list(b2[3:]), t, dt)
+        t += dt
+        ts.append(t)
+        ours.append(line.node(mid)[1])
+        # MoorDyn numbers its nodes from the anchor: our node k is its node segs - 1 - k
+        theirs.append(moordyn.GetLineNodePos(moordyn.GetLine(system, 1), segs - 1 - mid)[1])
+    moordyn.Close(system)
+    ts = np.array(ts)
+    keep = ts > 1.0
+    y_ours = np.array(ours)[keep] - 0.3 * (segs - 1 - mid) / segs
+    y_theirs = np.array(theirs)[keep] - 0.3 * (segs - 1 - mid) / segs
+    f_ours = _zero_crossing_frequency(ts[keep], y_ours - y_ours.mean())
+    f_theirs = _zero_crossing_frequency(ts[keep], y_theirs - y_theirs.mean())
+    assert f_ours == pytest.approx(f_theirs, rel=0.02)
+
+
+# --- coupled with the UAV --------------------------------------------------------------
+
+def _lumped(**vehicle) -> SystemParams:
+    p = SystemParams()
+    return p.replace(tether=p.tether.replace(model="lumped"),
+                     vehicle=p.vehicle.replace(**vehicle) if vehicle else p.vehicle)
+
+
+def test_hover_trim_holds_on_the_lumped_line():
+    params = _lumped()
+    x, u = hover_trim(params, (22.0, 0.0, 20.0), 31.0)
+    plant = Plant(params, state=x)
+    cat = Tether(params.tether, G).forces(22.0, 0.0, 20.0, 31.0)
+    lump = plant.tether_forces()
+    np.testing.assert_allclose(lump.on_uav_n, cat.on_uav_n, atol=0.01 * cat.top_tension_n)
+    assert lump.drum_tension_n == pytest.approx(cat.drum_tension_n, rel=0.01)
+    plant.advance(u, 3000)
+    # the trim was the catenary's: within 1 % of its pull the UAV barely moves in 3 s
+    assert np.linalg.norm(plant.position_m - (22.0, 0.0, 20.0)) < 0.1
+    nodes = plant.line_nodes_m()
+    assert nodes.shape[0] == int(plant.model.line[0]) + 2
+    np.testing.assert_allclose(nodes[0], 0.0)
+    np.testing.assert_allclose(nodes[-1], plant.position_m)
+
+
+def test_offset_attachment_tilts_the_trim_by_the_pull_s_moment():
+    # tether 0.1 m below the centre of mass: held still, the pull F at r_a makes a moment
+    # r_a x R^T F that the rotors must cancel
+    r_a = (0.0, 0.0, -0.1)
+    params = _lumped(tether_attachment_m=r_a)
+    x, u = hover_trim(params, (22.0, 0.0, 20.0), 31.0)
+    plant = Plant(params, state=x)
+    f = np.array(plant.tether_forces().on_uav_n)
+    from sitl.plant import rhs
+    dx = rhs(0.0, plant.x, u, plant.model, plant.wind_m_s, rotor_setpoints=plant.x[13:17])
+    from tuavdefs.frames import quat_rotate
+    q = plant.quaternion
+    f_body = np.array(quat_rotate((q[0], -q[1], -q[2], -q[3]), tuple(f)))
+    torque = np.cross(r_a, f_body)
+    j = np.array(params.vehicle.inertia_diag)
+    np.testing.assert_allclose(dx[10:13] * j, torque, rtol=1e-9, atol=1e-9)
+    # the pull is backwards (towards the winder) and down: pitch moment about body y
+    assert abs(torque[1]) > 0.3
+
+
+def test_plant_lumped_energy_with_no_losses():
+    # the UAV unpowered, swinging on the line with no drag, damping or friction: the UAV's
+    # energy plus the line's is constant
+    params = SystemParams().replace(
+        tether=TetherParams(model="lumped", axial_damping_n_s=0.0, normal_drag_coeff=0.0,
+                            tangential_drag_coeff=0.0, ground_damping_n_s_m2=0.0,
+                            ground_friction_coeff=0.0),
+        vehicle=VehicleParams(drag_coeff_n_s_m=(0, 0, 0), drag_area_m2=(0, 0, 0),
+                              rotational_damping_n_m_s_rad=0.0))
+    x, _ = hover_trim(params, (20.0, 0.0, 24.0), 32.0)
+    x[13:17] = 0.0
+    x[3:6] = (0.0, 2.0, 0.0)
+    plant = Plant(params, state=x)
+    def total():
+        return plant.energy_j() + plant.line_energy_j()
+    e0 = total()
+    es = []
+    for _ in range(100):    # 1 s: falling and swinging, above the ground
+        plant.advance(PlantInputs(), 10)
+        es.append(total())
+    assert plant.position_m[2] > 1.0
+    assert max(abs(e - e0) for e in es) < 1e-3 * abs(e0)
