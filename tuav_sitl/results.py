@@ -7,6 +7,7 @@ results file, and writes the table of metrics against the project's targets.
 
 from __future__ import annotations
 
+import math
 import os
 import platform
 import shutil
@@ -34,6 +35,11 @@ TARGETS: list[tuple[str, str, str, float, str]] = [
      "GNSS: estimate - truth"),
     ("circle-windy-gnss", "position_rmse_m", "<=", 1.5, "windy circle on the EKF, consumer "
      "GNSS: position RMSE"),
+    *((name, "estimate_attitude_rmse_rad", "<=", math.radians(0.5), f"{label}: attitude "
+       "estimate - truth (0.5 deg)")
+      for name, label in (("circle-rtk", "circle on the EKF, RTK"),
+                          ("circle-gnss", "circle on the EKF, consumer GNSS"),
+                          ("circle-windy-gnss", "windy circle on the EKF, consumer GNSS"))),
 ]
 FIGURES_FOR_DOCS = {
     "setpoint": ["states.png", "errors.png", "lyapunov.png"],

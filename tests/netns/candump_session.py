@@ -23,6 +23,30 @@ FRAMES = [
 ]
 
 
+def _group_members() -> int:
+    """How many sockets of this network namespace have joined a multicast group beyond the
+    all-hosts ones (the users columns of /proc/net/igmp and igmp6; the namespace is ours
+    alone)."""
+    users = 0
+    for line in Path("/proc/net/igmp").read_text().splitlines()[1:]:
+        fields = line.split()
+        if line.startswith("\t") and len(fields) >= 2 and fields[0] != "010000E0":
+            users += int(fields[1])
+    for line in Path("/proc/net/igmp6").read_text().splitlines():
+        fields = line.split()
+        if len(fields) >= 4 and not fields[2].startswith(("ff02", "ff01")):
+            users += int(fields[3])
+    return users
+
+
+def _wait_for_members(n: int, timeout_s: float) -> None:
+    """Wait until ``n`` sockets have joined (then a little longer), at most ``timeout_s``."""
+    end = time.monotonic() + timeout_s
+    while _group_members() < n and time.monotonic() < end:
+        time.sleep(0.05)
+    time.sleep(0.2)
+
+
 def main() -> int:
     log = Path(sys.argv[1]) / "bus.log"
     cmd = [sys.executable, "-m", "tuav_sitl", "candump", "--can", "udp_multicast",
@@ -30,7 +54,7 @@ def main() -> int:
     dump_l = subprocess.Popen([*cmd, "-L", "--log", str(log)], cwd=ROOT,
                               stdout=subprocess.PIPE, text=True)
     dump_d = subprocess.Popen([*cmd, "--decode"], cwd=ROOT, stdout=subprocess.PIPE, text=True)
-    time.sleep(2.0)   # let both join the group
+    _wait_for_members(2, 60.0)   # both have joined the group (a busy machine is slow)
     link = CanLink("udp_multicast")
     for fid, data, remote in FRAMES:
         link.send(fid, data, is_remote=remote, dlc=len(data))
