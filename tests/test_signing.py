@@ -12,6 +12,7 @@ import time
 
 import pytest
 from gcs_util import Vehicle, arm, command, wait_msg
+from netns_util import netns_available, run_session
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -72,9 +73,12 @@ def _client(veh, key: bytes | None):
     whatever the vehicle sends, whatever its signature."""
     c = mavutil.mavlink_connection(f"tcp:127.0.0.1:{veh.tcp_port}", source_system=254,
                                    source_component=190)
+    # (pymavlink makes a new MAVLink 2 parser, without the key, at the first frame)
+    assert c.wait_heartbeat(timeout=20) is not None
     if key is not None:
         c.setup_signing(key, sign_outgoing=True, allow_unsigned_callback=lambda *_: True)
-    assert c.wait_heartbeat(timeout=20) is not None
+        assert c.mav.command_long_encode(1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0).pack(
+            c.mav)[2] & M.MAVLINK_IFLAG_SIGNED      # what it sends is signed
     return c
 
 
@@ -144,6 +148,26 @@ def test_signing_off_by_an_all_zero_key(vehicle):
 def test_the_summary_counts_the_refused_frames(vehicle):
     _, comp_log = vehicle["veh"].stop()
     assert "unsigned or badly signed)" in comp_log
+
+
+@pytest.mark.skipif(not netns_available(),
+                    reason="needs root (unshare) for a private network namespace")
+def test_up_with_a_passphrase_signs_the_vehicle_and_the_winch(tmp_path):
+    """``tuav-sitl up --signing-passphrase``: the winch's frames reach a ground station
+    signed, it answers a signed DO_WINCH and ignores an unsigned LOCK; a new key set by
+    SETUP_SIGNING reaches it over the component link and the run's key file."""
+    s = run_session("tests.netns.signing_session", str(tmp_path), timeout_s=300)
+    assert s["rc"] == 0, s["stderr"]
+    assert "MAVLink 2 signing on" in s["banner"]
+    assert s["key_file"] == sg.key_from_passphrase("tethered-uav-signing").hex()
+    assert s["vehicle_signed"]
+    assert s["winch"] == {"status_signed": True, "heartbeat_signed": True,
+                          "ack": M.MAV_RESULT_ACCEPTED}
+    assert not s["unsigned_ack"] and s["still_armed"] and not s["winch_locked"]
+    assert s["winch_new_key"] == {"status_signed": True, "heartbeat_signed": True,
+                                  "ack": M.MAV_RESULT_ACCEPTED}
+    assert s["key_file_after"] == sg.key_from_passphrase("the-next-key").hex()
+    assert "signing key set by the vehicle" in s["groundstation_log"]
 
 
 # ----- the rules on their own
