@@ -29,6 +29,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from pymavlink.dialects.v20 import common as mavlink2
+
 from companion.autopilot import Autopilot
 from companion.component_server import ComponentServer
 from companion.estimator import ESTIMATOR_KINDS, EstimatorParams
@@ -70,7 +72,9 @@ NAV_NAMES = {
     "takeoff_accept_m": "TKOFF_ACCEPT", "disarm_delay_s": "DISARM_DELAY",
     "land_detect_s": "LAND_DETECT_T", "reach_fraction": "TETH_REACH",
     "reach_slack_m": "TETH_SLACK", "guided_velocity_timeout_s": "GUID_TIMEOUT",
+    "tension_limit_n": "TETH_TENS_MAX", "tension_step_m": "TETH_TENS_STEP",
 }
+CLUTCH_ENGAGED = mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED
 #: Wall time without a state from the plant after which the companion gives up [s].
 SIM_SILENCE_S = 30.0
 #: Longest wait for input before the wall-clock duties (heartbeat, timeouts) run [s].
@@ -232,7 +236,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     onboard.on_start = on_start
     autopilot.on_winch_status(lambda m: onboard.winch_report(
-        last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None))
+        last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None,
+        bool(m.status & CLUTCH_ENGAGED)))
     stop = {"signal": None}
     signal.signal(signal.SIGTERM, lambda s, _f: stop.update(signal=s))
     signal.signal(signal.SIGINT, lambda s, _f: stop.update(signal=s))

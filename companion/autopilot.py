@@ -391,6 +391,9 @@ class Autopilot:
             self._mission_winch_command(*value)
         elif kind == NavEvent.FAILSAFE:
             self.statustext(M.MAV_SEVERITY_CRITICAL, str(value))
+            self.send_heartbeat()     # the mode it may have changed
+        elif kind == NavEvent.WARNING:
+            self.statustext(M.MAV_SEVERITY_WARNING, str(value))
 
     def _mission_winch_command(self, seq: int, params: tuple[float, float, float, float]
                                ) -> None:
