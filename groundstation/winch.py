@@ -98,6 +98,11 @@ class WinchMode(enum.IntEnum):
     RETRACT = mavlink2.WINCH_RETRACT
 
 
+#: A line longer than L-bar by more than this [m] when RELAXED begins is wound back to it
+#: at ``rejoin_rate_m_s``.
+REJOIN_MARGIN_M = 0.5
+#: How fast that wind-in speeds up and slows down [m/s^2].
+REJOIN_ACC_M_S2 = 0.5
 #: The shortest wall time between two re-arms of an axis that disarmed itself [s].
 REARM_S = 1.0
 #: How long [s, wall] a frame from another host leaves the winch unhealthy, and the
@@ -129,6 +134,9 @@ class WinchParams(Params):
         0.5, "m/s", "line speed of RELATIVE_LENGTH_CONTROL when param4 is 0 or NaN", gt=0)
     retract_rate_m_s: float = quantity(
         0.5, "m/s", "line speed of RETRACT when param4 is 0 or NaN", gt=0)
+    rejoin_rate_m_s: float = quantity(
+        1.0, "m/s", "fastest wind-in of RELAXED back to L-bar from a longer line (after "
+        "a pay-out: no jerk of the UAV)", gt=0)
     status_rate_hz: float = quantity(
         20.0, "Hz", "WINCH_STATUS rate in simulated time (encoder frames)", gt=0)
     status_wall_period_s: float = quantity(
@@ -289,6 +297,8 @@ class Winch:
         self._speed_m_s = 0.0               # |ramp rate| (1, 6) or signed rate (2)
         self._retract_reached = False
         self._hold_m = math.nan
+        self._rejoin_m = math.nan           # RELAXED's reference while rejoining L-bar
+        self._rejoin_rate = 0.0             # its wind-in speed [m/s]
         self._limit_noticed = False
         self._lock_noticed = False
         #: the torque law's last output (torque, Lyapunov function, ...), for diagnostics
@@ -539,7 +549,24 @@ class Winch:
         length, omega = self.length_m, self.omega_rad_s
         if self.mode == WinchMode.RELAXED:
             uav = self.uav_now()
-            if uav is not None:
+            if uav is not None and math.isfinite(self._rejoin_m):
+                # rejoining L-bar from a longer line: wound in at rejoin_rate_m_s at most
+                # a trapezoid: speeding up and slowing down at REJOIN_ACC_M_S2
+                lbar_m = self.host.lbar.length(uav[0])[0]
+                dt = self.dt_s
+                left = self._rejoin_m - lbar_m
+                rate = min(self.p.rejoin_rate_m_s, self._rejoin_rate + REJOIN_ACC_M_S2 * dt,
+                           math.sqrt(2.0 * REJOIN_ACC_M_S2 * max(left, 0.0)))
+                if left <= max(rate * dt, 1e-3):
+                    self._rejoin_m = math.nan      # there: L-bar's own law from now on
+                else:
+                    self._rejoin_rate = rate
+                    self._rejoin_m -= rate * dt
+                    self.ref_m, self.ref_rate_m_s = self._rejoin_m, -rate
+            if uav is not None and math.isfinite(self._rejoin_m):
+                command = self.host.controller.update(self.dt_s, length, omega, tension,
+                                                      self.ref_m, self.ref_rate_m_s)
+            elif uav is not None:
                 pos, vel = uav
                 step = self.host.update(length, omega, tension, pos, vel)
                 self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
@@ -758,6 +785,12 @@ class Winch:
         start = self.length_m
         if mode == WinchMode.RELAXED:
             self._hold_m = start
+            # a line longer than L-bar (after a pay-out) is wound back in at a bounded rate
+            uav = self.uav_now()
+            lbar_m = self.host.lbar.length(uav[0])[0] if uav is not None else math.nan
+            self._rejoin_m = (start if math.isfinite(start) and math.isfinite(lbar_m)
+                              and start > lbar_m + REJOIN_MARGIN_M else math.nan)
+            self._rejoin_rate = 0.0
         elif mode == WinchMode.RELATIVE_LENGTH:
             self.ref_m, self._speed_m_s = start, speed
             target = start + length

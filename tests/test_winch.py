@@ -568,6 +568,26 @@ class Bench:
         return [bool(st.flags & wm.FLAG_HEALTHY) for t, st in self.statuses if t >= since_s]
 
 
+def test_relaxed_after_a_long_pay_out_winds_back_in_at_a_bounded_rate():
+    """DO_WINCH pays out 10 m, then RELAXED: the line goes back to L-bar no faster than
+    rejoin_rate_m_s (full speed, 5.4 m/s, jerked the UAV), then follows L-bar's law."""
+    b = Bench(14.0)
+    b.run(2.0)
+    lbar = b.winch.host.lbar.length(UAV[0])[0]
+    assert b.command(request(1, 10.0, 2.0)).result == ACK
+    b.run(7.0)
+    assert b.length == pytest.approx(lbar + 10.0, abs=0.05)
+    assert b.command(request(mavlink2.WINCH_RELAXED)).result == ACK
+    rate = b.winch.p.rejoin_rate_m_s
+    fastest = 0.0
+    for _ in range(140):       # 14 s: 10 m at 1 m/s and the settling
+        b.run(0.1)
+        fastest = max(fastest, -b.omega * R_W)
+    assert fastest <= rate * 1.05 + 0.02
+    assert fastest >= 0.8 * rate                       # it did wind in, at that rate
+    assert b.length == pytest.approx(lbar, abs=0.02)   # and is back on L-bar
+
+
 def test_an_axis_that_disarmed_itself_is_re_armed_and_reported_truthfully():
     """The ground station's frames lost for half a second (a stall): the axis's watchdog
     trips it to IDLE. WINCH_STATUS says unhealthy while it is, and the winch re-arms it as
