@@ -29,6 +29,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from pymavlink.dialects.v20 import common as mavlink2
+
 from companion.autopilot import Autopilot
 from companion.component_server import ComponentServer
 from companion.estimator import ESTIMATOR_KINDS, EstimatorParams
@@ -44,9 +46,11 @@ from companion.mavlink_io import (
 from companion.navigation import NavigationParams
 from companion.onboard import Companion, OnboardInputs
 from companion.param_protocol import params_to_defs
+from companion.signing import VehicleSigning
 from companion.simlink_client import SimLinkClient
 from companion.telemetry import Telemetry
 from tuavdefs import component_link as cl
+from tuavdefs import signing as sg
 from tuavdefs import simlink as sl
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
@@ -68,7 +72,9 @@ NAV_NAMES = {
     "takeoff_accept_m": "TKOFF_ACCEPT", "disarm_delay_s": "DISARM_DELAY",
     "land_detect_s": "LAND_DETECT_T", "reach_fraction": "TETH_REACH",
     "reach_slack_m": "TETH_SLACK", "guided_velocity_timeout_s": "GUID_TIMEOUT",
+    "tension_limit_n": "TETH_TENS_MAX", "tension_step_m": "TETH_TENS_STEP",
 }
+CLUTCH_ENGAGED = mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED
 #: Wall time without a state from the plant after which the companion gives up [s].
 SIM_SILENCE_S = 30.0
 #: Longest wait for input before the wall-clock duties (heartbeat, timeouts) run [s].
@@ -153,6 +159,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "than real time)")
     ap.add_argument("--param-file", default=None,
                     help="parameters persisted here (.parm); loaded at start if present")
+    ap.add_argument("--signing-key-file", default=None, metavar="FILE",
+                    help="MAVLink 2 signing key (64 hexadecimal digits): signing is on from "
+                         "the start if the file holds a key; a key a ground station sets "
+                         "with SETUP_SIGNING is kept here")
     ap.add_argument("--connect-timeout", type=float, default=30.0, help="[s]")
     ap.add_argument("--component-port", type=int, default=cl.COMPONENT_PORT_DEFAULT,
                     help="TCP port of the component link (0: none)")
@@ -170,10 +180,18 @@ def main(argv: Sequence[str] | None = None) -> int:
            [_address(a) for a in args.gcs_udp] if args.gcs_udp else
            [("127.0.0.1", UDP_GCS_PORT_DEFAULT), ("127.0.0.1", UDP_API_PORT_DEFAULT)])
     try:
-        components = ComponentServer(args.component_port) if args.component_port else None
+        key = (sg.read_key_file(args.signing_key_file) if args.signing_key_file else None)
+    except sg.SigningError as exc:
+        print(f"companion: {exc}", file=sys.stderr)
+        return 2
+    signing = VehicleSigning(key, args.signing_key_file)
+    try:
+        components = (ComponentServer(args.component_port, signing=signing.component)
+                      if args.component_port else None)
         endpoints = MavlinkEndpoints(None if args.gcs_tcp < 0 else args.gcs_tcp, udp,
                                      tlog=TelemetryLog(args.tlog) if args.tlog else None,
-                                     batch_s=max(args.telemetry_batch, 0.0))
+                                     batch_s=max(args.telemetry_batch, 0.0),
+                                     signing=signing.gcs)
     except OSError as exc:
         print(f"companion: cannot listen: {exc.strerror} ({exc})", file=sys.stderr)
         return 1
@@ -203,7 +221,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     defs += params_to_defs(nav_params, NAV_NAMES, onboard.set_nav_params)
     autopilot = Autopilot(endpoints, nav, tuple(args.home), defs,
                           param_file=Path(args.param_file) if args.param_file else None,
-                          component=components)
+                          component=components, signing=signing)
     if args.param_file and Path(args.param_file).exists():
         for warning in autopilot.params.load() or []:
             print(f"companion: {warning}", flush=True)
@@ -218,7 +236,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     onboard.on_start = on_start
     autopilot.on_winch_status(lambda m: onboard.winch_report(
-        last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None))
+        last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None,
+        bool(m.status & CLUTCH_ENGAGED)))
     stop = {"signal": None}
     signal.signal(signal.SIGTERM, lambda s, _f: stop.update(signal=s))
     signal.signal(signal.SIGINT, lambda s, _f: stop.update(signal=s))
@@ -226,7 +245,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     tcp_text = f"tcp:127.0.0.1:{endpoints.tcp_port}" if endpoints.tcp_port else "no tcp"
     print(f"companion: connected to the plant at {client.address}; MAVLink on {tcp_text}, "
           f"{udp_text}"
-          + (f"; component link on tcp:127.0.0.1:{components.port}" if components else ""),
+          + (f"; component link on tcp:127.0.0.1:{components.port}" if components else "")
+          + ("; MAVLink signing on" if signing.enabled else ""),
           flush=True)
     last_t = [0.0]
     was_armed = False
@@ -292,6 +312,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         client.close()
         autopilot.params.close()   # the parameter file written out
+        signing.close()            # and the signing key
         endpoints.close()
         if endpoints.tlog is not None:
             endpoints.tlog.close()
@@ -302,7 +323,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     c = autopilot.counters
     print(f"companion: {reason} after {onboard.steps} control periods; {c['commands']} commands "
           f"({c['unsupported']} unsupported), {c['rejected_targets']} targets refused; "
-          f"{endpoints.bad_frames} bad MAVLink frames dropped", flush=True)
+          f"{endpoints.bad_frames} bad MAVLink frames dropped"
+          + (f" ({signing.refused} unsigned or badly signed)" if signing.refused else ""),
+          flush=True)
     return 0
 
 

@@ -17,6 +17,12 @@ each ground-station message to the piece that handles it and composes them:
   armed bit and system_status STANDBY on the ground, ACTIVE when armed; STATUSTEXT;
   TIMESYNC; the navigator's events (mission item current and reached, take-off done,
   landed, ...) as MAVLink messages and STATUSTEXT.
+- MAVLink 2 signing (``companion.signing``): ``SETUP_SIGNING`` from a ground station sets
+  the key of every link (an all-zero key with a zero timestamp turns signing off); the
+  winch is given the same key on the component link first, under the key it had. Once a
+  key is set, frames without a good signature never reach this class (RADIO_STATUS
+  aside); how many were dropped is said in a STATUSTEXT at most every
+  :data:`SIGNING_NOTICE_S`.
 - The winch (component 169, the ground-station process, on the component link) is routed:
   what ground stations send it goes there, and everything it sends (its HEARTBEAT with
   autopilot INVALID, WINCH_STATUS, COMMAND_ACK, STATUSTEXT) reaches every ground station
@@ -44,12 +50,17 @@ from companion.mission_items import ItemRefused, mission_home, nav_command, nav_
 from companion.mission_protocol import MissionItem, MissionProtocol
 from companion.navigation import FlightMode, NavEvent, Navigator, Refusal
 from companion.param_protocol import ParamDef, ParamProtocol
+from companion.signing import VehicleSigning
 from companion.telemetry import DUE_TOLERANCE_S, Telemetry, TelemetryStreams
 from tuavdefs import component_link as cl
+from tuavdefs import signing as sg
 
 M = mavlink2
 
 _WINCH_ACK_TIMEOUT_S = 0.4
+#: The shortest wall time between two STATUSTEXTs about refused (unsigned, badly signed,
+#: replayed) frames [s].
+SIGNING_NOTICE_S = 5.0
 
 
 class Autopilot:
@@ -59,14 +70,21 @@ class Autopilot:
 
     ``home`` is the winder's (latitude deg, longitude deg, ground altitude m AMSL);
     ``params`` the parameters ground stations may read and set; ``component`` the
-    component link to the winch (or None).
+    component link to the winch (or None); ``signing`` the links' signing (whose states
+    ``endpoints`` and ``component`` were built on), or None for none ever.
     """
 
     def __init__(self, endpoints: MavlinkEndpoints, nav: Navigator,
                  home: tuple[float, float, float], params: list[ParamDef],
                  param_file: Any = None, component: Any = None,
-                 log: Callable[[str], None] | None = None) -> None:
+                 log: Callable[[str], None] | None = None,
+                 signing: VehicleSigning | None = None) -> None:
         self.io = endpoints
+        self.signing = signing
+        self._refused_said = 0
+        self._refused_wall = -math.inf
+        if signing is not None:
+            endpoints.on_setup_signing = self._on_setup_signing
         self.nav = nav
         self.origin = tuple(float(v) for v in home)
         self.component = component
@@ -171,6 +189,8 @@ class Autopilot:
         t = tm.t_s if tm is not None else -math.inf
         if (now_wall - self._last_hb_wall >= 1.0
                 or t - self._last_hb_sim >= 1.0 - DUE_TOLERANCE_S):
+            if self.signing is not None:
+                self._signing_duties(now_wall)
             self.send_heartbeat()
         if tm is not None and (t >= streams.due_s - DUE_TOLERANCE_S
                                or io.generation != streams.generation):
@@ -205,6 +225,8 @@ class Autopilot:
         tsys = getattr(msg, "target_system", None)
         tcomp = getattr(msg, "target_component", None)
         if tsys is not None and tsys not in (0, cl.SYSTEM_ID):
+            return
+        if mtype == "SETUP_SIGNING":     # the vehicle's alone: never forwarded to the winch
             return
         if tcomp == cl.WINCH_COMPONENT_ID:
             self._to_winch(msg)
@@ -283,6 +305,44 @@ class Autopilot:
                 return True
         return False
 
+    # ----- signing
+
+    def _on_setup_signing(self, peer: Peer, msg: Any) -> None:
+        """SETUP_SIGNING (correctly signed if signing is on: the endpoints see to that):
+        the winch gets the key first, under the old one, then every link takes it."""
+        assert self.signing is not None
+        if msg.target_system not in (0, cl.SYSTEM_ID):
+            return
+        key = bytes(msg.secret_key)
+        if len(key) != sg.KEY_BYTES:     # pymavlink pads and cuts: never, but bounded
+            return
+        off = sg.is_disable(key, msg.initial_timestamp)
+        if self.component is not None and self.component.connected:
+            self.component.send(M.MAVLink_setup_signing_message(
+                cl.SYSTEM_ID, cl.WINCH_COMPONENT_ID, list(key), msg.initial_timestamp))
+        # said under the key every ground station can check: a station with no key
+        # checks nothing, one with a key checks it
+        if off:
+            self.statustext(M.MAV_SEVERITY_NOTICE, "Signing: off")
+        self.signing.set_key(None if off else key, msg.initial_timestamp)
+        if not off:
+            self.statustext(M.MAV_SEVERITY_NOTICE, "Signing: key set, signed links only")
+
+    def _signing_duties(self, now_wall: float) -> None:
+        """About once a second: the timestamps kept at the clock; refused frames and
+        failed key writes said."""
+        signing = self.signing
+        assert signing is not None
+        signing.refresh()
+        for exc in signing.write_errors():
+            self.statustext(M.MAV_SEVERITY_ERROR, f"Signing: key not saved: {exc.strerror}")
+        refused = signing.refused
+        if refused != self._refused_said and now_wall - self._refused_wall >= SIGNING_NOTICE_S:
+            self.statustext(M.MAV_SEVERITY_WARNING,
+                            f"Signing: {refused - self._refused_said} unsigned or badly "
+                            "signed frames dropped")
+            self._refused_said, self._refused_wall = refused, now_wall
+
     # ----- time
 
     def _on_timesync(self, peer: Peer, msg: Any) -> None:
@@ -331,6 +391,9 @@ class Autopilot:
             self._mission_winch_command(*value)
         elif kind == NavEvent.FAILSAFE:
             self.statustext(M.MAV_SEVERITY_CRITICAL, str(value))
+            self.send_heartbeat()     # the mode it may have changed
+        elif kind == NavEvent.WARNING:
+            self.statustext(M.MAV_SEVERITY_WARNING, str(value))
 
     def _mission_winch_command(self, seq: int, params: tuple[float, float, float, float]
                                ) -> None:

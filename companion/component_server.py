@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import socket
 import struct
+from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -29,9 +30,12 @@ class ComponentServer:
 
     Input is read when a caller's ``select`` finds :attr:`selectable` readable
     (:meth:`poll`); output that the component cannot take at once is queued and written
-    by later calls (:meth:`flush`)."""
+    by later calls (:meth:`flush`). ``signing`` is the link's pymavlink ``MAVLinkSigning``
+    state: with a key set, what is sent is signed and only correctly signed frames are
+    taken."""
 
-    def __init__(self, port: int = cl.COMPONENT_PORT_DEFAULT, host: str = "127.0.0.1") -> None:
+    def __init__(self, port: int = cl.COMPONENT_PORT_DEFAULT, host: str = "127.0.0.1",
+                 signing: Any = None) -> None:
         self.listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self.listener.bind((host, port))
@@ -40,6 +44,8 @@ class ComponentServer:
         self.port = self.listener.getsockname()[1]
         self.conn: socket.socket | None = None
         self.mav = cl.new_mavlink(cl.AUTOPILOT_COMPONENT_ID)
+        if signing is not None:     # the link's signing state (companion.signing)
+            self.mav.signing = signing
         self._next_position_s = 0.0
         self._pending = bytearray()
         self.bad_frames = 0

@@ -24,7 +24,7 @@ import select
 import socket
 import struct
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -32,6 +32,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from tuavdefs import gcs
 from tuavdefs.gcs import GCS_TCP_PORT_DEFAULT, UDP_API_PORT_DEFAULT, UDP_GCS_PORT_DEFAULT
+from tuavdefs.signing import SigningMavlink
 
 Peer = tuple[Any, ...]
 Address = tuple[str, int]
@@ -78,11 +79,13 @@ class TelemetryLog:
 
 
 class _Link:
-    """One peer's parser (accepts MAVLink 1 and 2)."""
+    """One peer's parser (accepts MAVLink 1 and 2), on the endpoints' shared signing
+    state."""
 
-    def __init__(self) -> None:
-        self.parser = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+    def __init__(self, signing: Any) -> None:
+        self.parser = SigningMavlink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         self.parser.robust_parsing = True
+        self.parser.signing = signing
         self.last_rx = time.monotonic()
 
 
@@ -100,14 +103,25 @@ class MavlinkEndpoints:
     it, so the order is kept). In lockstep many times faster than real time a period's
     telemetry otherwise wakes a ground station several hundred times a second of wall
     time, and its CPU is taken from the simulation.
+
+    ``signing`` is the pymavlink ``MAVLinkSigning`` state every link shares (the key, the
+    outgoing timestamp, the replay table: ``companion.signing``); with a key set, what is
+    sent is signed and only correctly signed frames are taken (the others are counted in
+    its ``reject_count`` and dropped). :attr:`on_setup_signing`, when set, is called with
+    (peer, message) for each ``SETUP_SIGNING`` as soon as it is parsed, before the frames
+    after it, which may already be signed with the new key.
     """
 
     def __init__(self, tcp_port: int | None = GCS_TCP_PORT_DEFAULT,
                  udp_targets: Iterable[Address] = (("127.0.0.1", UDP_GCS_PORT_DEFAULT),
                                                    ("127.0.0.1", UDP_API_PORT_DEFAULT)),
                  host: str = "127.0.0.1", tlog: TelemetryLog | None = None,
-                 batch_s: float = 0.0) -> None:
-        self.mav = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+                 batch_s: float = 0.0, signing: Any = None) -> None:
+        self.mav = SigningMavlink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        if signing is not None:
+            self.mav.signing = signing
+        self.signing = self.mav.signing
+        self.on_setup_signing: Callable[[Peer, Any], None] | None = None
         self.tlog = tlog
         self.batch_s = batch_s
         self._last_write: dict[int, float] = {}   # wall time of each TCP client's last write
@@ -237,7 +251,7 @@ class MavlinkEndpoints:
             conn.setblocking(False)
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._tcp[conn.fileno()] = conn
-            self._links[("tcp", conn.fileno())] = _Link()
+            self._links[("tcp", conn.fileno())] = _Link(self.signing)
             self._changed()
 
     def _read_tcp(self, sock: socket.socket, out: list[tuple[Peer, Any]]) -> None:
@@ -298,22 +312,29 @@ class MavlinkEndpoints:
     def _parse(self, peer: Peer, data: bytes, out: list[tuple[Peer, Any]]) -> None:
         link = self._links.get(peer)
         if link is None:
-            link = self._links[peer] = _Link()
+            link = self._links[peer] = _Link(self.signing)
         link.last_rx = time.monotonic()
         p = link.parser
         before = p.total_receive_errors
-        try:
-            msgs = p.parse_buffer(data) or []
-        except (mavlink2.MAVError, struct.error, ValueError, IndexError):
-            self.bad_frames += 1
-            msgs = []
-        self.bad_frames += p.total_receive_errors - before
-        for m in msgs:
+        chunk = data
+        while True:     # pymavlink's parse_buffer, one message at a time
+            try:
+                m = p.parse_char(chunk)
+            except (mavlink2.MAVError, struct.error, ValueError, IndexError):
+                self.bad_frames += 1
+                m = None
+            if m is None:
+                break
+            chunk = b""
             if m.get_type() == "BAD_DATA":   # already in the parser's error count
                 continue
             if self.tlog is not None:
                 self.tlog.write(m.get_msgbuf())
+            if m.get_type() == "SETUP_SIGNING" and self.on_setup_signing is not None:
+                self.on_setup_signing(peer, m)   # the frames after it: on the new key
+                continue
             out.append((peer, m))
+        self.bad_frames += p.total_receive_errors - before
 
     @property
     def closed_pending(self) -> bool:

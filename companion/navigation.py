@@ -116,7 +116,13 @@ class NavigationParams(Params):
     reach_slack_m: float = quantity(0.5, "m", "slack added to a target's distance in the "
                                     "reach check (L-bar exceeds it by under 4 %)", ge=0)
     guided_velocity_timeout_s: float = quantity(3.0, "s", "a guided velocity target stops "
-                                                "after this without an update", gt=0)
+                                                "after this without an update "
+                                                "(ArduCopter's GUID_TIMEOUT range)",
+                                                ge=0.1, le=5.0)
+    tension_limit_n: float = quantity(30.0, "N", "tether tension the winch reports above "
+                                      "which the vehicle moves towards the winder", gt=0)
+    tension_step_m: float = quantity(2.0, "m", "how far towards the winder each over-"
+                                     "tension move goes", gt=0, le=10)
 
 
 # ----- mission commands (the autopilot converts MAVLink items into these)
@@ -172,6 +178,7 @@ class NavEvent(Enum):
     WINCH = "winch"              # a DO_WINCH item began: (seq, (instance, action, length,
                                  # rate)) for the winch
     FAILSAFE = "failsafe"        # a failsafe took over (text)
+    WARNING = "warning"          # a command was cut back to what is safe (text)
 
 
 class MotorState(Enum):
@@ -318,6 +325,9 @@ class Navigator:
         self._vel_now: Vec3 = _ZERO3
         self._quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
         self._auto_takeoff_pending = False
+        self._locked_length_m: float | None = None   # the drum's length while braked
+        self._tension_move_t = -math.inf             # the last over-tension move [s]
+        self._vel_limited = False                    # a velocity target cut at the reach
         #: the pre-arm checks of the rest of the vehicle (the estimator's), or None
         self.prearm: Callable[[], Refusal | None] | None = None
 
@@ -335,8 +345,38 @@ class Navigator:
 
     @property
     def reach_m(self) -> float:
-        """Largest straight-line distance [m] from the winder a target may have."""
-        return self.p.reach_fraction * self.tether_length_m - self.p.reach_slack_m
+        """Largest straight-line distance [m] from the winder a target may have: of the
+        whole tether, or of the length paid out while the winch's drum is braked
+        (LOCK, HOLD, a lost winder: it pays out no more)."""
+        length = self.tether_length_m
+        if self._locked_length_m is not None:
+            length = min(length, self._locked_length_m)
+        return self.p.reach_fraction * length - self.p.reach_slack_m
+
+    def winch_report(self, length_m: float, tension_n: float | None,
+                     braked: bool) -> None:
+        """The winch's report: paid-out length [m], drum tension [N] (None: unknown),
+        whether its drum is braked. A braked drum bounds the reach; a tension above
+        ``tension_limit_n`` moves the vehicle towards the winder, ``tension_step_m`` at a
+        time (again every 2 s while it lasts), in GUIDED."""
+        self._locked_length_m = (float(length_m) if braked and math.isfinite(length_m)
+                                 else None)
+        if (tension_n is None or not tension_n > self.p.tension_limit_n or not self.flying
+                or self.mode in (FlightMode.RTL, FlightMode.LAND)   # on the way in already
+                or self._t - self._tension_move_t < 2.0):
+            return
+        self._tension_move_t = self._t
+        x, y, z = self._current_ref().pos_m
+        d = math.sqrt(x * x + y * y + z * z)
+        k = max(d - self.p.tension_step_m, 0.0) / d if d > 0 else 0.0
+        # towards the winder, but no lower than 1 m above the gear unless already lower
+        target = (k * x, k * y, max(k * z, min(z, self.gear_height_m + 1.0)))
+        self._emit(NavEvent.FAILSAFE, f"Tether over-tension ({tension_n:.0f} N > "
+                   f"{self.p.tension_limit_n:.0f} N): moving towards the winder")
+        self.mode = FlightMode.GUIDED
+        self.mission_running = False
+        self._vel = None
+        self._fly_to(target, None)
 
     @property
     def speed_m_s(self) -> float:
@@ -535,6 +575,7 @@ class Navigator:
         self._vel.yaw_rate = yaw_rate_rad_s if (yaw_rate_rad_s is not None
                                                 and math.isfinite(yaw_rate_rad_s)) else 0.0
         self._vel_deadline = self._t + self.p.guided_velocity_timeout_s
+        self._vel_limited = False
         return None
 
     def follow(self, source: Callable[[float, Vec3], RefSample]) -> Refusal | None:
@@ -675,6 +716,7 @@ class Navigator:
         if self._vel is not None:
             if t > self._vel_deadline:
                 self._vel.cmd = _ZERO3
+            self._limit_velocity()
             return self._vel.step(dt)
         if self._leg is None:
             self._hold()
@@ -690,6 +732,31 @@ class Navigator:
             leg.finished = True
             self._leg_done(t, leg)
         return ref
+
+    def _limit_velocity(self) -> None:
+        """A velocity target whose stopping point (with margin) leaves the tether's reach
+        or goes below the ground loses its outward (downward) part, said once."""
+        v = self._vel
+        assert v is not None
+        speed = math.sqrt(sum(c * c for c in v.vel))
+        margin = 1.5 * speed * speed / (2.0 * self.p.acc_m_s2) + 0.2
+        pos = v.pos
+        d = math.sqrt(sum(c * c for c in pos))
+        cmd = list(v.cmd)
+        cut = False
+        if d > 0 and d + margin > self.reach_m:
+            out = sum(cmd[i] * pos[i] for i in range(3)) / d
+            if out > 0:
+                cmd = [cmd[i] - out * pos[i] / d for i in range(3)]
+                cut = True
+        if pos[2] - margin < self.gear_height_m and cmd[2] < 0:
+            cmd[2] = 0.0
+            cut = True
+        if cut:
+            v.cmd = (cmd[0], cmd[1], cmd[2])
+            if not self._vel_limited:
+                self._vel_limited = True
+                self._emit(NavEvent.WARNING, "Guided velocity stopped at the tether's reach")
 
     def _leg_done(self, t: float, leg: _Leg) -> None:
         if leg.tag is LegTag.TAKEOFF:
@@ -792,6 +859,15 @@ class Navigator:
         alt = max(ref.pos_m[2], self.gear_height_m + self.p.rtl_alt_m)
         legs: list[_Leg] = []
         stop = _stop_point(ref, self.p.acc_m_s2)
+        # the climb and the way home stay within the tether's reach, whatever RTL_ALT says
+        # (a level line's farthest point from the winder is one of its ends)
+        reach = self.reach_m
+        far_h = max(math.hypot(stop[0], stop[1]), math.hypot(home[0], home[1]))
+        cap = math.sqrt(max(reach * reach - far_h * far_h, 0.0))
+        if alt > cap:
+            self._emit(NavEvent.WARNING, f"RTL: altitude {alt:.1f} m limited to {cap:.1f} m "
+                       "by the tether's reach")
+            alt = max(cap, self.gear_height_m)
         if alt > stop[2] + 0.5:
             legs.append(_Leg(self._follower(self.p.speed_up_m_s),
                              GotoItem((stop[0], stop[1], alt), None), seq=seq,
@@ -843,6 +919,15 @@ class Navigator:
         if self.flying:
             self._hold()
 
+    def _check_item_here(self, c: NavCommand, xy: tuple[float, float]) -> Refusal | None:
+        """Why an item without a position of its own cannot be flown from ``xy``."""
+        ref_z = self._current_ref().pos_m[2]
+        z = c.z_m if c.z_m is not None else (self.p.rtl_alt_m if c.kind is NavKind.TAKEOFF
+                                             else ref_z)
+        if c.kind is NavKind.TAKEOFF:
+            z = max(z, ref_z)
+        return self.check_target(_far_point(c, xy, z))
+
     def _item_xy(self, c: NavCommand) -> tuple[float, float]:
         if c.xy_m is not None:
             return c.xy_m
@@ -851,6 +936,15 @@ class Navigator:
 
     def _fly_item(self, c: NavCommand) -> None:
         xy = self._item_xy(c)
+        if c.xy_m is None and c.kind in (NavKind.WAYPOINT, NavKind.LOITER_TURNS,
+                                         NavKind.TAKEOFF):
+            # checked at the upload at the winder; flown from here: checked here
+            why = self._check_item_here(c, xy)
+            if why is not None:
+                self._emit(NavEvent.ERROR, f"Mission: item {c.seq} {why}; holding")
+                self.mission_running = False
+                self._hold()
+                return
         if c.kind is NavKind.TAKEOFF:
             z = c.z_m if c.z_m is not None else self.p.rtl_alt_m
             if self.landed:
@@ -887,6 +981,14 @@ class Navigator:
                                   tag=LegTag.LAND_APPROACH)])
         elif c.kind is NavKind.RTL:
             self._rtl(seq=c.seq)
+
+
+def _far_point(c: NavCommand, xy: tuple[float, float], z: float) -> Vec3:
+    """The point of item ``c`` flown around ``xy`` at ``z`` farthest from the winder."""
+    if c.kind is not NavKind.LOITER_TURNS:
+        return (xy[0], xy[1], z)
+    h = math.hypot(xy[0], xy[1]) + abs(c.circle_radius_m)
+    return (h, 0.0, z)
 
 
 def _stop_point(ref: RefSample, acc: float) -> Vec3:

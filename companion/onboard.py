@@ -139,10 +139,12 @@ class Companion:
         self.nav.p = params
 
     def winch_report(self, t_s: float, length_m: float, speed_m_s: float,
-                     tension_n: float | None) -> None:
+                     tension_n: float | None, braked: bool = False) -> None:
         """A report of the winch at ``t_s`` [s]: paid-out length [m], line speed [m/s],
-        drum tension [N] (None: not measured)."""
+        drum tension [N] (None: not measured), whether its drum is braked (the navigator
+        bounds its reach by it and acts on an over-tension)."""
         self.flight.winch_report(t_s, length_m, speed_m_s, tension_n)
+        self.nav.winch_report(length_m, tension_n, braked)
 
     @property
     def last_status(self) -> FilterStatus | None:

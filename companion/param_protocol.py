@@ -187,7 +187,7 @@ def write_atomically(path: Path, text: str) -> None:
         raise
 
 
-class _Writer:
+class FileWriter:
     """Writes the parameter file off the control path: :meth:`submit` hands over the text
     and returns at once; a thread of its own writes the latest text submitted (older ones
     are dropped: the file only ever needs the newest) with :func:`write_atomically`."""
@@ -274,7 +274,7 @@ class ParamProtocol:
         self._send = send
         self._statustext = statustext
         self.persist_path = Path(persist_path) if persist_path is not None else None
-        self._writer = _Writer(self.persist_path) if self.persist_path is not None else None
+        self._writer = FileWriter(self.persist_path) if self.persist_path is not None else None
         self.stream_rate_hz = float(stream_rate_hz)
         self.stream_burst = int(stream_burst)
         self._streams: dict[Hashable, _Stream] = {}

@@ -37,6 +37,7 @@ from groundstation.winch_link import WinchLinkClient
 from groundstation.winder_control import WinderControlParams
 from groundstation.winder_host import WinderHost
 from tuavdefs import can_protocol as cp
+from tuavdefs import signing as sg
 from tuavdefs.canbus import CanBusError, CanLink
 from tuavdefs.component_link import COMPONENT_PORT_DEFAULT
 from tuavdefs.params import SystemParams
@@ -58,6 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="HOST:PORT of the companion's component link ('none' to run alone)")
     ap.add_argument("--params", default=None, help="system parameters TOML (winder, tether)")
     ap.add_argument("--node", type=int, default=cp.AXIS_NODE_ID_DEFAULT, help="axis node id")
+    ap.add_argument("--signing-key-file", default=None, metavar="FILE",
+                    help="MAVLink 2 signing key of the component link (64 hexadecimal "
+                         "digits; a missing or empty file: unsigned until the vehicle "
+                         "sets a key)")
     ap.add_argument("--duration", type=float, default=None, help="stop after [s] of wall time")
     return ap
 
@@ -67,6 +72,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     params = load_option(SystemParams, args.params, "groundstation")
     try:
+        key = sg.read_key_file(args.signing_key_file) if args.signing_key_file else None
+    except sg.SigningError as exc:
+        print(f"groundstation: {exc}", file=sys.stderr)
+        return 2
+    try:
         link = CanLink(args.can)
     except CanBusError as exc:
         print(f"groundstation: {exc}", file=sys.stderr)
@@ -74,7 +84,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     g = params.environment.gravity_m_s2
     host = WinderHost(WinderControlParams(), LBarParams(), params.winder, params.tether, g)
     winch = Winch(host, params.winder, params.tether, g, axis_node_id=args.node)
-    mav = None if args.mavlink == "none" else WinchLinkClient(args.mavlink)
+    mav = None if args.mavlink == "none" else WinchLinkClient(args.mavlink, signing_key=key)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())

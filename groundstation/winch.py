@@ -98,6 +98,19 @@ class WinchMode(enum.IntEnum):
     RETRACT = mavlink2.WINCH_RETRACT
 
 
+#: A line longer than L-bar by more than this [m] when RELAXED begins is wound back to it
+#: at ``rejoin_rate_m_s``.
+REJOIN_MARGIN_M = 0.5
+#: How fast that wind-in speeds up and slows down [m/s^2].
+REJOIN_ACC_M_S2 = 0.5
+#: The shortest wall time between two re-arms of an axis that disarmed itself [s].
+REARM_S = 1.0
+#: How long [s, wall] a frame from another host leaves the winch unhealthy, and the
+#: shortest time between two STATUSTEXTs about it.
+FOREIGN_NOTICE_S = 5.0
+#: Host-to-axis commands: heard on the bus, another host sent them.
+HOST_COMMANDS = (cp.Cmd.ESTOP, cp.Cmd.SET_AXIS_STATE, cp.Cmd.SET_CONTROLLER_MODE,
+                 cp.Cmd.SET_INPUT_TORQUE, cp.Cmd.SET_LIMITS, cp.Cmd.CLEAR_ERRORS)
 #: Modes in which the brake holds the drum (axis IDLE).
 BRAKED_MODES = frozenset({WinchMode.LOCK, WinchMode.HOLD})
 #: ``WINCH_ACTIONS`` this winch does not implement (ACK UNSUPPORTED).
@@ -121,6 +134,9 @@ class WinchParams(Params):
         0.5, "m/s", "line speed of RELATIVE_LENGTH_CONTROL when param4 is 0 or NaN", gt=0)
     retract_rate_m_s: float = quantity(
         0.5, "m/s", "line speed of RETRACT when param4 is 0 or NaN", gt=0)
+    rejoin_rate_m_s: float = quantity(
+        1.0, "m/s", "fastest wind-in of RELAXED back to L-bar from a longer line (after "
+        "a pay-out: no jerk of the UAV)", gt=0)
     status_rate_hz: float = quantity(
         20.0, "Hz", "WINCH_STATUS rate in simulated time (encoder frames)", gt=0)
     status_wall_period_s: float = quantity(
@@ -281,12 +297,23 @@ class Winch:
         self._speed_m_s = 0.0               # |ramp rate| (1, 6) or signed rate (2)
         self._retract_reached = False
         self._hold_m = math.nan
+        self._rejoin_m = math.nan           # RELAXED's reference while rejoining L-bar
+        self._rejoin_rate = 0.0             # its wind-in speed [m/s]
         self._limit_noticed = False
         self._lock_noticed = False
         #: the torque law's last output (torque, Lyapunov function, ...), for diagnostics
         self.last_command: WinderCommand | None = None
         # axis
         self._arm_pending = False
+        self._rearm_wall = -math.inf        # the last re-arm of a self-disarmed axis [s]
+        self._estop_noticed = False
+        self.rearms = 0
+        """Times the axis was re-armed after it had disarmed itself."""
+        # another host on the bus commanding the axis
+        self.foreign_commands = 0
+        """Host-to-axis frames on the axis's ids this process did not send."""
+        self._foreign_wall = -math.inf      # the last one [s]
+        self._foreign_said_wall = -math.inf
         # reporting
         self._frames_since_status = 0
         self._last_status_wall: float | None = None
@@ -299,6 +326,11 @@ class Winch:
             handlers[cp.frame_id(self.node, cp.Cmd.HEARTBEAT)] = self._axis_heartbeat_frame
             handlers[cp.frame_id(self.node, cp.Cmd.GET_BUS_VOLTAGE_CURRENT)] = (
                 self._bus_voltage_current_frame)
+            # what only a host sends: this process never hears its own frames, so these
+            # come from a second host on the bus
+            for cmd in HOST_COMMANDS:
+                handlers[cp.frame_id(self.node, cmd)] = (
+                    lambda wall_s, data, cmd=cmd: self._foreign_command(wall_s, cmd))
         if 0 <= self.sensor_node <= cp.MAX_NODE_ID:
             handlers[cp.frame_id(self.sensor_node, cp.SensorCmd.WINCH_LENGTH)] = (
                 self._winch_length_frame)
@@ -394,7 +426,18 @@ class Winch:
         return self._on_encoder(wall_s, pos_rev, vel_rev_s)
 
     def _axis_heartbeat_frame(self, wall_s: float, data: bytes) -> WinchOutput:
-        return self._on_axis_heartbeat(cp.decode_heartbeat(data))
+        return self._on_axis_heartbeat(cp.decode_heartbeat(data), wall_s)
+
+    def _foreign_command(self, wall_s: float, cmd: cp.Cmd) -> WinchOutput | None:
+        """A host-to-axis frame another host sent: counted, said at most every
+        :data:`FOREIGN_NOTICE_S`, and the winch unhealthy for as long."""
+        self.foreign_commands += 1
+        self._foreign_wall = wall_s
+        if wall_s - self._foreign_said_wall < FOREIGN_NOTICE_S:
+            return None
+        self._foreign_said_wall = wall_s
+        return WinchOutput(notices=[_notice(
+            mavlink2.MAV_SEVERITY_CRITICAL, f"winch: another CAN host sends {cmd.name}")])
 
     def _bus_voltage_current_frame(self, wall_s: float, data: bytes) -> None:
         self.voltage_v, self.current_a = cp.decode_bus_voltage_current(data)
@@ -415,12 +458,31 @@ class Winch:
         self.at_full_stop = hb.at_full_stop
         self.sensor_brake = hb.brake_engaged
 
-    def _on_axis_heartbeat(self, hb: cp.Heartbeat) -> WinchOutput:
+    def _on_axis_heartbeat(self, hb: cp.Heartbeat, wall_s: float) -> WinchOutput:
         out = WinchOutput()
         if hb.axis_error and hb.axis_error != self.axis_error:
             out.notices.append(_notice(mavlink2.MAV_SEVERITY_CRITICAL,
                                        f"winch: axis error 0x{hb.axis_error:08X}"))
         self.axis_error, self.axis_state = hb.axis_error, hb.axis_state
+        closed = hb.axis_state == cp.AxisState.CLOSED_LOOP_CONTROL
+        if closed:
+            self._estop_noticed = False
+        elif not self.braked and self.encoder_frames and not self._arm_pending:
+            # the axis disarmed itself (watchdog after a stall, an error) while the winch
+            # needs it: re-armed with the next encoder frame, at most every REARM_S; an
+            # Estop is someone's act, and only a DO_WINCH (the operator's) re-arms it
+            if hb.axis_error & cp.ODriveError.ESTOP_REQUESTED:
+                if not self._estop_noticed:
+                    self._estop_noticed = True
+                    out.notices.append(_notice(mavlink2.MAV_SEVERITY_CRITICAL,
+                                               "winch: axis estopped; DO_WINCH re-arms"))
+            elif wall_s - self._rearm_wall >= REARM_S:
+                self._rearm_wall = wall_s
+                self._arm_pending = True
+                self.rearms += 1
+                out.notices.append(_notice(mavlink2.MAV_SEVERITY_WARNING,
+                                           f"winch: axis disarmed (0x{hb.axis_error:08X}), "
+                                           "re-arming"))
         return out
 
     def _arm_frames(self) -> list[cp.Frame]:
@@ -487,7 +549,24 @@ class Winch:
         length, omega = self.length_m, self.omega_rad_s
         if self.mode == WinchMode.RELAXED:
             uav = self.uav_now()
-            if uav is not None:
+            if uav is not None and math.isfinite(self._rejoin_m):
+                # rejoining L-bar from a longer line: wound in at rejoin_rate_m_s at most
+                # a trapezoid: speeding up and slowing down at REJOIN_ACC_M_S2
+                lbar_m = self.host.lbar.length(uav[0])[0]
+                dt = self.dt_s
+                left = self._rejoin_m - lbar_m
+                rate = min(self.p.rejoin_rate_m_s, self._rejoin_rate + REJOIN_ACC_M_S2 * dt,
+                           math.sqrt(2.0 * REJOIN_ACC_M_S2 * max(left, 0.0)))
+                if left <= max(rate * dt, 1e-3):
+                    self._rejoin_m = math.nan      # there: L-bar's own law from now on
+                else:
+                    self._rejoin_rate = rate
+                    self._rejoin_m -= rate * dt
+                    self.ref_m, self.ref_rate_m_s = self._rejoin_m, -rate
+            if uav is not None and math.isfinite(self._rejoin_m):
+                command = self.host.controller.update(self.dt_s, length, omega, tension,
+                                                      self.ref_m, self.ref_rate_m_s)
+            elif uav is not None:
                 pos, vel = uav
                 step = self.host.update(length, omega, tension, pos, vel)
                 self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
@@ -580,11 +659,19 @@ class Winch:
 
     # ------------------------------------------------------------------------- status
 
+    def _foreign_recent(self) -> bool:
+        """Whether another host commanded the axis within :data:`FOREIGN_NOTICE_S` of the
+        last status."""
+        last = self._last_status_wall
+        return last is not None and last - self._foreign_wall < FOREIGN_NOTICE_S
+
     def status_flags(self) -> int:
         """``MAV_WINCH_STATUS_FLAG`` bits of the present state."""
         flags = 0
-        if (self.encoder_frames and not self.lost and not self.axis_error
-                and self.load_cell_healthy is not False):
+        axis_ok = self.braked or self.axis_state in (None, cp.AxisState.CLOSED_LOOP_CONTROL)
+        if (self.encoder_frames and not self.lost and not self.axis_error and axis_ok
+                and self.load_cell_healthy is not False
+                and not self._foreign_recent()):
             flags |= FLAG_HEALTHY
         length = self._report_length()
         floor, _ = self.taut_floor()
@@ -698,6 +785,12 @@ class Winch:
         start = self.length_m
         if mode == WinchMode.RELAXED:
             self._hold_m = start
+            # a line longer than L-bar (after a pay-out) is wound back in at a bounded rate
+            uav = self.uav_now()
+            lbar_m = self.host.lbar.length(uav[0])[0] if uav is not None else math.nan
+            self._rejoin_m = (start if math.isfinite(start) and math.isfinite(lbar_m)
+                              and start > lbar_m + REJOIN_MARGIN_M else math.nan)
+            self._rejoin_rate = 0.0
         elif mode == WinchMode.RELATIVE_LENGTH:
             self.ref_m, self._speed_m_s = start, speed
             target = start + length

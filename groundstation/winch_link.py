@@ -5,17 +5,21 @@ forwards ground stations' commands as they were sent, so their sender ids are th
 station's). Out, as system 1 component 169: ``HEARTBEAT`` (1 Hz of wall time, from
 :meth:`WinchLinkClient.poll`), ``WINCH_STATUS``, ``COMMAND_ACK`` and ``STATUSTEXT``. The
 client connects, and reconnects after a drop, on its own; sends while unconnected are lost.
+With a signing key (given at start, or by the vehicle's ``SETUP_SIGNING`` from component 1)
+everything sent is signed and only correctly signed frames are taken (``tuavdefs.signing``).
 """
 
 from __future__ import annotations
 
 import socket
 import time
+from collections.abc import Callable
 
 from pymavlink.dialects.v20 import common as mavlink2
 
 from groundstation.winch import TEMPERATURE_UNKNOWN, CommandRequest
 from tuavdefs import component_link as cl
+from tuavdefs import signing as sg
 from tuavdefs.frames import ned_to_enu
 from tuavdefs.simlink import frame_codecs, whole_frames
 
@@ -38,9 +42,13 @@ class WinchLinkClient:
     """Receives the UAV's position and velocity and commands; sends WINCH_STATUS,
     COMMAND_ACK, STATUSTEXT and heartbeats."""
 
-    def __init__(self, address: str, connect_timeout_s: float = 30.0) -> None:
+    def __init__(self, address: str, connect_timeout_s: float = 30.0,
+                 signing_key: bytes | None = None,
+                 log: Callable[[str], None] | None = None) -> None:
         host, _, port = address.rpartition(":")
         self.mav = cl.new_mavlink(cl.WINCH_COMPONENT_ID)
+        sg.set_key(self.mav.signing, signing_key)
+        self.log = log or (lambda text: print(f"groundstation: {text}", flush=True))
         self.sock: socket.socket | None = None
         self._addr = (host, int(port))
         self._deadline = time.monotonic() + connect_timeout_s
@@ -51,6 +59,7 @@ class WinchLinkClient:
         self._last_heartbeat = 0.0
         self._commands: list[CommandRequest] = []
         self.bad_frames = 0
+        self._refused_said = 0
 
     def _connect(self) -> bool:
         if self.sock is not None:
@@ -85,6 +94,12 @@ class WinchLinkClient:
         now = time.monotonic()
         if now - self._last_heartbeat >= 1.0:
             self._last_heartbeat = now
+            signing = self.mav.signing
+            sg.refresh_timestamp(signing)
+            if signing.reject_count != self._refused_said:
+                self.log(f"{signing.reject_count - self._refused_said} unsigned or badly "
+                         "signed frames dropped on the component link")
+                self._refused_said = signing.reject_count
             self._send(self.mav.heartbeat_encode(
                 mavlink2.MAV_TYPE_WINCH, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0,
                 mavlink2.MAV_STATE_ACTIVE))
@@ -100,12 +115,16 @@ class WinchLinkClient:
                 mav.total_bytes_received += len(data)
                 mav.total_packets_received += len(positions)
                 return
-        try:
-            msgs = mav.parse_buffer(data) or []
-        except mavlink2.MAVError:
-            self.bad_frames += 1
-            msgs = []
-        for m in msgs:
+        chunk = data
+        while True:     # parse_buffer, one message at a time: SETUP_SIGNING applies at once
+            try:
+                m = mav.parse_char(chunk)
+            except mavlink2.MAVError:
+                self.bad_frames += 1
+                m = None
+            if m is None:
+                break
+            chunk = b""
             kind = m.get_type()
             if kind == "LOCAL_POSITION_NED":
                 self._set_state(m.time_boot_ms, m.x, m.y, m.z, m.vx, m.vy, m.vz)
@@ -115,6 +134,19 @@ class WinchLinkClient:
                     m.command, m.target_system, m.target_component, m.get_srcSystem(),
                     m.get_srcComponent(), m.param1, m.param2, m.param3, m.param4,
                     m.confirmation if kind == "COMMAND_LONG" else 0))
+            elif kind == "SETUP_SIGNING":
+                self._setup_signing(m)
+
+    def _setup_signing(self, m: mavlink2.MAVLink_setup_signing_message) -> None:
+        """The vehicle's new key, from its autopilot (component 1) alone: the frames
+        after it are on the new key."""
+        if (m.get_srcComponent() != cl.AUTOPILOT_COMPONENT_ID
+                or m.target_component not in (0, cl.WINCH_COMPONENT_ID)):
+            return
+        key = bytes(m.secret_key)
+        off = sg.is_disable(key, m.initial_timestamp)
+        sg.set_key(self.mav.signing, None if off else key, m.initial_timestamp)
+        self.log("MAVLink signing off" if off else "MAVLink signing key set by the vehicle")
 
     def _set_state(self, time_boot_ms: int, x: float, y: float, z: float, vx: float,
                    vy: float, vz: float) -> None:

@@ -22,11 +22,13 @@ Behaviour modelled on ODrive's:
   unchanged.
 - **Estop** latches ESTOP_REQUESTED and disarms to IDLE. **Clear_Errors** clears the errors
   and the disarm reason; the axis stays IDLE until a new ``Set_Axis_State 8``.
-- **Watchdog.** Every frame the host addresses to this node id feeds it (any command id, a
-  remote request, or even a frame then dropped as malformed, as an ODrive's CAN handler feeds
-  before it parses). Frames for other node ids, the winch sensor node's frames, and data
-  frames on the axis's own transmit ids (its echoes on a loop-back bus such as
-  ``udp_multicast``) do not. If ``watchdog_timeout_s`` passes without a feed while in closed
+- **Watchdog.** Every data frame a host addresses to this node id feeds it (any command id,
+  or even a frame then dropped as malformed, as an ODrive's CAN handler feeds before it
+  parses). Remote requests (polls for the axis's telemetry, which any bystander on the bus
+  may send) do not: only a host that commands the axis keeps it armed. Frames for other
+  node ids, the winch sensor node's frames, and data frames on the axis's own transmit ids
+  (its echoes on a loop-back bus such as ``udp_multicast``) do not either. If
+  ``watchdog_timeout_s`` passes without a feed while in closed
   loop, the axis latches WATCHDOG_TIMER_EXPIRED, disarms to IDLE (brake holds), and stays
   there until Clear_Errors and a new closed-loop request. ``watchdog_timeout_s <= 0``
   disables it. The time check runs at the start of :meth:`handle` and :meth:`tick`, so a
@@ -259,17 +261,15 @@ class OdriveAxis:
         # the axis's own transmit ids: requests are host frames, data frames are not
         if spec is not None and spec.direction == "axis->host":
             if is_remote or len(data) == 0:
-                self._feed(t_s)
-                return [self._reply(cmd)]
+                return [self._reply(cmd)]     # a poll: answered, not a feed
             self.counters["wrong_direction"] += 1
             return []
-
+        if is_remote:
+            self.counters["unknown_cmd" if spec is None else "not_requestable"] += 1
+            return []
         self._feed(t_s)
         if spec is None:
             self.counters["unknown_cmd"] += 1
-            return []
-        if is_remote:
-            self.counters["not_requestable"] += 1
             return []
         if not spec.min_len <= len(data) <= MAX_DLC:
             self.counters["bad_dlc"] += 1

@@ -46,6 +46,13 @@ from sitl.sensor_batch import SensorBatches
 from sitl.sensors import SensorNoise, SensorSuite
 from tuavdefs import simlink as sl
 
+#: In lockstep, a wait for the companion's answer longer than this [s, wall] is said ...
+LOCKSTEP_NOTICE_S = 5.0
+#: ... and again every this [s, wall] while it lasts.
+LOCKSTEP_REPEAT_S = 30.0
+#: The simulator link's send buffer in real time [bytes]: about a tenth of a second of
+#: batches at 250 Hz once the kernel has doubled it.
+REAL_TIME_SNDBUF = 4096
 #: How often a waiting loop looks at its stop event [s].
 STOP_POLL_S = 0.05
 
@@ -190,10 +197,17 @@ class SimLinkServer:
                  on_step: Callable[[SimLinkServer], None] | None = None,
                  speedup: float | None = None,
                  before_physics: Callable[[SimLinkServer], None] | None = None,
-                 unix_path: str | None = None) -> None:
+                 unix_path: str | None = None,
+                 log: Callable[[str], None] | None = None) -> None:
         if unix_path is None:
             _check_loopback(host)
         self.plant = plant
+        self.log = log or (lambda text: print(f"plant: {text}", flush=True))
+        # real time: what the companion's link could not take yet (the rest of a batch)
+        self._unsent = bytearray()
+        #: Batches not sent in real time because the companion had not read the last.
+        self.dropped_batches = 0
+        self._stalled_since: int | None = None    # dropped_batches when the stall began
         self.control_rate_hz = float(control_rate_hz)
         self.period_us = sl.control_period_us(control_rate_hz)
         self.physics_steps = sl.physics_steps_per_period(control_rate_hz, plant.dt_s)
@@ -326,6 +340,8 @@ class SimLinkServer:
         self.steps = 0
         self._parser = sl.FrameParser()
         self.batches.reset()
+        self._unsent.clear()
+        self._stalled_since = None
         end = None if timeout_s is None else time.monotonic() + timeout_s
         while not stop.is_set():
             wait = STOP_POLL_S if end is None else min(STOP_POLL_S, end - time.monotonic())
@@ -336,6 +352,10 @@ class SimLinkServer:
                 sock, _ = self._listener.accept()
                 if sock.family != socket.AF_UNIX:
                     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                if self.real_time:
+                    # a companion that stops reading holds a fraction of a second of
+                    # batches, not seconds of stale ones (the kernel doubles the value)
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, REAL_TIME_SNDBUF)
                 sock.setblocking(True)
                 # lockstep: recv itself waits for the answer, STOP_POLL_S at a time
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, sl.timeval(STOP_POLL_S))
@@ -347,10 +367,45 @@ class SimLinkServer:
 
     def send_batch(self, t_us: int) -> None:
         """Send HIL_GPS (when due), HIL_STATE_QUATERNION and HIL_SENSOR for the current
-        state, stamped ``t_us`` [us]."""
+        state, stamped ``t_us`` [us].
+
+        In real time this never waits: what the link cannot take now is kept and written
+        before the next batch, and a batch finding the last one still unsent is dropped
+        (the plant flies on the commands it holds; said when it begins and ends). In
+        lockstep the plant waits for the companion anyway."""
+        sock = self._sock
+        assert sock is not None
+        if not self.real_time:
+            try:
+                sock.sendall(self.batches.batch(t_us))
+            except OSError as e:
+                raise DisconnectedError from e
+            return
+        if self._unsent:
+            del self._unsent[:self._send_nowait(sock, self._unsent)]
+            if self._unsent:
+                self.dropped_batches += 1
+                if self._stalled_since is None:
+                    self._stalled_since = self.dropped_batches - 1
+                    self.log(f"the companion does not read the simulator link (t = "
+                             f"{t_us * 1e-6:.3f} s): flying on its last commands")
+                return
         data = self.batches.batch(t_us)
+        n = self._send_nowait(sock, data)
+        if n < len(data):
+            self._unsent += data[n:]
+        if self._stalled_since is not None:
+            self.log(f"the companion reads again (t = {t_us * 1e-6:.3f} s) after "
+                     f"{self.dropped_batches - self._stalled_since} batches dropped")
+            self._stalled_since = None
+
+    @staticmethod
+    def _send_nowait(sock: socket.socket, data: bytes | bytearray) -> int:
+        """How many bytes of ``data`` the link took at once."""
         try:
-            self._sock.sendall(data)  # type: ignore[union-attr]
+            return sock.send(data, socket.MSG_DONTWAIT)
+        except BlockingIOError:
+            return 0
         except OSError as e:
             raise DisconnectedError from e
 
@@ -364,9 +419,19 @@ class SimLinkServer:
         assert sock is not None and poller is not None
         parser = self._parser
         late = ignored = 0
+        # lockstep: a wait this long is said (and again every LOCKSTEP_REPEAT_S)
+        notice_at = None if deadline is not None else time.monotonic() + LOCKSTEP_NOTICE_S
+        waited_from = time.monotonic() if notice_at is not None else 0.0
+        said = False
         while True:
             if stop.is_set():
                 raise StoppedError
+            if notice_at is not None and time.monotonic() >= notice_at:
+                notice_at += LOCKSTEP_REPEAT_S
+                said = True
+                self.log(f"lockstep: waiting for the companion's answer to t = "
+                         f"{t_us * 1e-6:.3f} s ({time.monotonic() - waited_from:.0f} s so "
+                         "far); the simulation stands still until it answers")
             if deadline is not None:
                 wait = deadline - time.monotonic()
                 if wait <= 0:
@@ -401,6 +466,9 @@ class SimLinkServer:
                 else:
                     ignored += 1
             if answered:
+                if said:
+                    self.log(f"lockstep: the companion answered after "
+                             f"{time.monotonic() - waited_from:.1f} s")
                 return True, late, ignored
 
     def _hold(self, answer: tuple[int, tuple[float, float, float, float], bool, bool]

@@ -162,12 +162,12 @@ def test_watchdog_trips_after_timeout_without_host_frames(timeout):
     assert err["Active_Errors"] == err["Disarm_Reason"] == 0x01000000
 
 
-def test_watchdog_fed_by_any_host_frame_to_this_node():
+def test_watchdog_fed_by_any_host_data_frame_to_this_node():
     axis, host = make(watchdog_timeout_s=0.1)
     host.arm(0.0)
     feeders = [
         lambda t: host.torque(t, 1.0),
-        lambda t: host.send(t, Cmd.GET_ENCODER_ESTIMATES, bytes(8), rtr=True),
+        lambda t: host.send(t, Cmd.SET_LIMITS, cp.encode_set_limits(10.0, 40.0)),
         lambda t: host.send(t, 0x0D, cp.encode_encoder_estimates(0, 0)),  # unknown here
         lambda t: host.send(t, Cmd.SET_INPUT_TORQUE, b"\x00"),  # malformed, still a feed
     ]
@@ -205,6 +205,27 @@ def test_watchdog_not_fed_by_other_nodes_or_echoes(source):
     if source != "own_echo":
         assert sum(axis.counters.values()) == 0  # other nodes are ignored, not "bad"
         assert axis.rx_frames == 2  # only the host's arm() frames
+
+
+def test_watchdog_not_fed_by_a_bystanders_polls():
+    """A node polling the axis by remote request at 50 Hz while the host is silent: the
+    polls are answered, and the axis still disarms on its watchdog (it kept its last
+    torque before)."""
+    axis, host = make(watchdog_timeout_s=0.1)
+    host.arm(0.0)
+    host.torque(0.0, 3.0)
+    answers = []
+
+    def poll(t):
+        if round(t * 1000) % 20 == 0:
+            for cmd in (Cmd.GET_ENCODER_ESTIMATES, Cmd.HEARTBEAT, Cmd.GET_TORQUES):
+                answers.extend(axis.handle(t, (axis.node_id << 5) | cmd, b"", True))
+
+    t_trip = _trip_time(axis, 0.0, 1.0, poll)
+    assert t_trip is not None and t_trip <= 0.1015
+    assert axis.active_errors & ODriveError.WATCHDOG_TIMER_EXPIRED
+    assert axis.torque_command_nm == 0.0
+    assert len(answers) >= 3 * 5           # every poll answered
 
 
 def test_watchdog_recovery_needs_clear_errors_then_closed_loop():

@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.simlink_client import SimLinkClient
+from sitl import simlink_server
 from sitl.plant import Plant
 from sitl.sensors import SensorNoise
 from sitl.simlink_server import SimLinkServer, WinderInputs
@@ -673,3 +674,66 @@ def test_the_actuator_frame_is_the_general_packing():
         ref.mav.seq, ref.mav.total_packets_sent, ref.mav.total_bytes_sent)
     with pytest.raises(ValueError):
         fast.actuator_controls(0, (0.5,) * 3, True)
+
+
+class _SmallWindowClient(SimLinkClient):
+    """The companion's client with a 2 KiB receive buffer (set before it connects, so the
+    TCP window is that small): a companion that stops reading fills the link at once."""
+
+    def _open(self, timeout_s: float) -> socket.socket:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 2048)
+        sock.settimeout(timeout_s)
+        try:
+            sock.connect((self.host, self.port))
+        except OSError:
+            sock.close()
+            raise
+        return sock
+
+
+def test_real_time_flies_on_when_the_companion_stops_reading():
+    """A companion that stops reading (stalled) must not freeze the physics: the plant
+    drops the batches its link cannot take, flies on the held commands, and says so."""
+    plant, u = _hover()
+    said: list[str] = []
+    server = SimLinkServer(plant, port=0, home=HOME, real_time=True,
+                           sensor_noise=SensorNoise.off(), log=said.append)
+    with serving(server) as out:
+        client = _SmallWindowClient(port=server.port, home=HOME)
+        client.connect(timeout_s=10.0)
+        for _ in range(20):
+            s = client.receive_state(timeout_s=10)
+            client.send_actuators(s.time_usec, u.rotor_commands, armed=True)
+        t_stall = server.plant.t_s
+        time.sleep(4.0)                 # stalled: reads nothing, answers nothing
+        advanced_s = server.plant.t_s - t_stall
+        for _ in range(50):             # reading again
+            s = client.receive_state(timeout_s=10)
+            client.send_actuators(s.time_usec, u.rotor_commands, armed=True)
+        summary = _finish(out, client)
+    # blocked in sendall, the plant stood still once the small window and its own
+    # buffer were full (a few tenths of a second); flying on, it kept up with the clock
+    assert advanced_s > 2.0
+    assert server.dropped_batches > 0
+    assert any("does not read" in t and "last commands" in t for t in said)
+    assert any("reads again" in t for t in said)
+    assert summary.missed_deadlines > 0
+
+
+def test_lockstep_says_it_is_waiting_for_the_companion():
+    plant, u = _hover()
+    said: list[str] = []
+    server = SimLinkServer(plant, port=0, home=HOME, sensor_noise=SensorNoise.off(),
+                           log=said.append)
+    with serving(server) as out:
+        client = _client(server)
+        for k in range(6):
+            s = client.receive_state(timeout_s=10)
+            if k == 3:
+                time.sleep(simlink_server.LOCKSTEP_NOTICE_S + 1.0)
+            client.send_actuators(s.time_usec, u.rotor_commands, armed=True)
+        summary = _finish(out, client)
+    assert summary.steps >= 5
+    assert any("lockstep: waiting for the companion" in t for t in said)
+    assert any("answered after" in t for t in said)

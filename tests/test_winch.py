@@ -506,6 +506,7 @@ class Bench:
         self.statuses: list[tuple[float, wm.WinchStatusReport]] = []
         self.notices: list[str] = []
         self.encoder_on = True
+        self.host_on = True          # False: the winch's frames never reach the axis
         self.last_encoder_t = math.nan
 
     @property
@@ -517,6 +518,8 @@ class Bench:
             spec = cp.spec_for_id(f.arbitration_id)
             self.host_frames.append((self.t, spec.name,
                                      None if f.is_remote else spec.decode(f.data)))
+            if not self.host_on:
+                continue
             for reply in self.axis.handle(self.t, f.arbitration_id, f.data, f.is_remote):
                 self._handle(self.winch.on_frame(self.t, reply.arbitration_id, reply.data))
         self.notices += [n.text for n in out.notices]
@@ -553,6 +556,88 @@ class Bench:
         reply = self.winch.command(req, self.t)
         self.notices += [n.text for n in reply.notices]
         return reply
+
+    def other_host(self, cmd: cp.Cmd, data: bytes) -> None:
+        """A frame from a second host on the bus: the axis and the winch both hear it."""
+        fid = cp.frame_id(0, cmd)
+        self.axis.handle(self.t, fid, data)
+        self._handle(self.winch.on_frame(self.t, fid, data))
+
+    def healthy(self, since_s: float) -> list[bool]:
+        """HEALTHY in each WINCH_STATUS since ``since_s`` [s]."""
+        return [bool(st.flags & wm.FLAG_HEALTHY) for t, st in self.statuses if t >= since_s]
+
+
+def test_relaxed_after_a_long_pay_out_winds_back_in_at_a_bounded_rate():
+    """DO_WINCH pays out 10 m, then RELAXED: the line goes back to L-bar no faster than
+    rejoin_rate_m_s (full speed, 5.4 m/s, jerked the UAV), then follows L-bar's law."""
+    b = Bench(14.0)
+    b.run(2.0)
+    lbar = b.winch.host.lbar.length(UAV[0])[0]
+    assert b.command(request(1, 10.0, 2.0)).result == ACK
+    b.run(7.0)
+    assert b.length == pytest.approx(lbar + 10.0, abs=0.05)
+    assert b.command(request(mavlink2.WINCH_RELAXED)).result == ACK
+    rate = b.winch.p.rejoin_rate_m_s
+    fastest = 0.0
+    for _ in range(140):       # 14 s: 10 m at 1 m/s and the settling
+        b.run(0.1)
+        fastest = max(fastest, -b.omega * R_W)
+    assert fastest <= rate * 1.05 + 0.02
+    assert fastest >= 0.8 * rate                       # it did wind in, at that rate
+    assert b.length == pytest.approx(lbar, abs=0.02)   # and is back on L-bar
+
+
+def test_an_axis_that_disarmed_itself_is_re_armed_and_reported_truthfully():
+    """The ground station's frames lost for half a second (a stall): the axis's watchdog
+    trips it to IDLE. WINCH_STATUS says unhealthy while it is, and the winch re-arms it as
+    soon as its frames get through (it kept sending torque into an IDLE axis)."""
+    b = Bench(14.0)
+    b.run(2.0)
+    assert b.axis.enabled and all(b.healthy(1.0))
+    b.host_on = False
+    b.run(0.5)
+    assert not b.axis.enabled
+    assert b.axis.active_errors & cp.ODriveError.WATCHDOG_TIMER_EXPIRED
+    t_back = b.t
+    b.host_on = True
+    b.run(0.2)
+    assert not all(b.healthy(t_back))                  # said while it was IDLE
+    # re-armed within a re-arm interval (an attempt while its frames were lost failed)
+    b.run(wm.REARM_S)
+    assert b.axis.enabled and b.axis.active_errors == 0
+    assert any("re-arming" in n for n in b.notices)
+    b.run(0.5)
+    assert all(b.healthy(b.t - 0.5))
+    lbar = b.winch.host.lbar.length(UAV[0])[0]
+    b.run(2.0)
+    assert b.length == pytest.approx(lbar, abs=0.02)   # back on L-bar
+
+
+def test_an_estop_from_another_host_is_said_and_only_a_command_re_arms():
+    b = Bench(14.0)
+    b.run(2.0)
+    b.other_host(cp.Cmd.ESTOP, b"")
+    b.run(1.5)
+    assert not b.axis.enabled                            # not re-armed by itself
+    assert any("another CAN host sends ESTOP" in n for n in b.notices)
+    assert any("estopped" in n for n in b.notices)
+    assert not any(b.healthy(b.t - 1.0))
+    assert b.command(request(mavlink2.WINCH_RELAXED)).result == ACK
+    b.run(0.5)
+    assert b.axis.enabled
+
+
+def test_a_second_host_sending_torque_is_noticed():
+    b = Bench(14.0)
+    b.run(2.0)
+    for k in range(50):     # +/-4 N m at 50 Hz for a second, as the attack did
+        b.other_host(cp.Cmd.SET_INPUT_TORQUE, cp.encode_set_input_torque(4.0 * (-1) ** k))
+        b.run(0.02)
+    assert b.winch.foreign_commands == 50
+    said = [n for n in b.notices if "another CAN host sends SET_INPUT_TORQUE" in n]
+    assert len(said) == 1                                # once per 5 s, not per frame
+    assert not any(b.healthy(b.t - 0.9))
 
 
 def test_closed_loop_on_the_plants_axis_and_drum():

@@ -418,8 +418,9 @@ class OfflineRunner:
                 winder_lyap = cmd.lyapunov if cmd is not None else math.nan
                 lbar_m, lbar_rate = winch.reference()
                 if status is not None:   # WINCH_STATUS reaches the companion
-                    companion.winch_report(t, status.line_length_m, status.speed_m_s,
-                                           status.tension_kg * g)
+                    companion.winch_report(
+                        t, status.line_length_m, status.speed_m_s, status.tension_kg * g,
+                        bool(status.flags & mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED))
             if k % n_ctrl == 0:
                 x = plant.x.tolist()
                 self._t = t

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import NamedTuple, TextIO
 
 from tuavdefs import component_link as cl
+from tuavdefs import signing as sg
 from tuavdefs import simlink as sl
 from tuavdefs.canbus import DEFAULT_GROUP, resolve_spec
 from tuavdefs.gcs import (
@@ -270,6 +271,13 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--parm", default=None, metavar="FILE",
                     help="start the companion with these ground-station parameters (.parm, "
                          "e.g. a previous run's companion.parm or MAVProxy's 'param save')")
+    key = ap.add_mutually_exclusive_group()
+    key.add_argument("--signing-passphrase", default=None, metavar="WORDS",
+                     help="MAVLink 2 signing on from the start, with MAVProxy's key for "
+                          "'signing setup WORDS' (SHA-256 of the ASCII text)")
+    key.add_argument("--signing-key-file", default=None, metavar="FILE",
+                     help="MAVLink 2 signing on from the start with this key (64 "
+                          "hexadecimal digits)")
     ap.add_argument("--logdir", default="runs", help="where run folders go")
     ap.add_argument("--instance", type=int, default=0,
                     help="offset every port (by 10 per instance) to run stacks side by side")
@@ -313,6 +321,22 @@ def _system_params(args: argparse.Namespace) -> SystemParams:
         params = dataclasses.replace(params, wind=dataclasses.replace(
             params.wind, steady_m_s=steady, turbulence=turb))
     return params
+
+
+def signing_key(args: argparse.Namespace) -> bytes | None:
+    """The signing key ``--signing-passphrase`` or ``--signing-key-file`` gives (None:
+    signing off until a ground station sets a key)."""
+    if args.signing_passphrase is not None:
+        return sg.key_from_passphrase(args.signing_passphrase)
+    if args.signing_key_file is not None:
+        if not Path(args.signing_key_file).is_file():
+            raise sg.SigningError(f"--signing-key-file: no file {args.signing_key_file}")
+        key = sg.read_key_file(args.signing_key_file)
+        if key is None:
+            raise sg.SigningError(f"--signing-key-file: {args.signing_key_file} holds no "
+                                  "key (empty or all zeros)")
+        return key
+    return None
 
 
 class Ports(NamedTuple):
@@ -359,6 +383,11 @@ def run_up(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         print(f"tuav-sitl up: bad parameter: {exc}", file=sys.stderr)
         return 2
+    try:
+        key = signing_key(args)
+    except sg.SigningError as exc:
+        print(f"tuav-sitl up: {exc}", file=sys.stderr)
+        return 2
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     run_dir = Path(args.logdir) / f"up-{stamp}-{args.instance}"
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -371,6 +400,11 @@ def run_up(args: argparse.Namespace) -> int:
         except OSError as exc:
             print(f"tuav-sitl up: --parm: {exc}", file=sys.stderr)
             return 2
+    key_file = run_dir / "signing.key"   # the vehicle's key, set here or by SETUP_SIGNING
+    if key is not None:
+        fd = os.open(key_file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w") as f:
+            f.write(sg.key_file_text(key))
     can = _can_spec(args.can, args.instance)
     home = [str(v) for v in args.home]
     common = ["--params", str(run_dir / "params.toml")]
@@ -396,13 +430,14 @@ def run_up(args: argparse.Namespace) -> int:
                  "--gcs-udp", f"127.0.0.1:{ports.udp_api}",
                  "--tlog", str(run_dir / "flight.tlog"),
                  "--param-file", str(run_dir / "companion.parm"),
-                 "--estimator", str(run_dir / "estimator.toml"), *common]
+                 "--estimator", str(run_dir / "estimator.toml"),
+                 "--signing-key-file", str(key_file), *common]
     if args.goto is not None:
         comp_args += ["--goto", *map(str, args.goto)]
     if speedup != 1.0:
         comp_args += ["--telemetry-batch", repr(TELEMETRY_BATCH_S)]
     gs_args = ["-m", "groundstation", "--can", can, "--mavlink",
-               f"127.0.0.1:{ports.component}", *common]
+               f"127.0.0.1:{ports.component}", "--signing-key-file", str(key_file), *common]
     stack = Stack(run_dir, echo=args.verbose)
     stopping = {"signal": None}
 
@@ -431,7 +466,7 @@ def run_up(args: argparse.Namespace) -> int:
         elif speedup != 1.0 and not args.no_pin:
             sched = _pin(stack)
         if not args.headless:
-            print(_banner(run_dir, ports, sim, can, args, speedup, sched), flush=True)
+            print(_banner(run_dir, ports, sim, can, args, speedup, sched, key), flush=True)
         while stopping["signal"] is None:
             stack.echo_new()
             ended = stack.first_exit()
@@ -502,7 +537,8 @@ def _pin(stack: Stack) -> str:
 
 
 def _banner(run_dir: Path, ports: Ports, sim: tuple[str, int] | str, can: str,
-            args: argparse.Namespace, speedup: float, sched: str = "normal") -> str:
+            args: argparse.Namespace, speedup: float, sched: str = "normal",
+            key: bytes | None = None) -> str:
     interface, channel = resolve_spec(can)
     watch = (f"candump {channel}   (or: tuav-sitl candump --can {interface}:{channel})"
              if interface == "socketcan" else
@@ -517,6 +553,9 @@ def _banner(run_dir: Path, ports: Ports, sim: tuple[str, int] | str, can: str,
         f"    UDP pushed to udp:127.0.0.1:{ports.udp_gcs} (ground stations) and "
         f"udp:127.0.0.1:{ports.udp_api} (APIs)",
         f"    e.g. mavproxy.py --master tcp:127.0.0.1:{ports.gcs_tcp}",
+        *([f"    MAVLink 2 signing on: key in {run_dir / 'signing.key'} (MAVProxy: "
+           "signing key PASSPHRASE; pymavlink: mav.setup_signing(key))"]
+          if key is not None else []),
         f"  simulator link (plant <-> companion): {sl.format_sim_address(sim)}",
         f"  component link (companion <-> winch): tcp:127.0.0.1:{ports.component}",
         f"  winder CAN bus: {interface}:{channel}   watch it: {watch}",

@@ -5,12 +5,15 @@ The companion listens on TCP 127.0.0.1:5762 (ArduPilot SITL's second serial port
 the UAV's ``LOCAL_POSITION_NED`` (100 Hz of simulated time); the winch component (system 1,
 component 169 ``MAV_COMP_ID_WINCH``) sends ``WINCH_STATUS`` and a ``HEARTBEAT`` with
 autopilot ``MAV_AUTOPILOT_INVALID`` and type ``MAV_TYPE_WINCH`` so that ground stations do
-not take it for a second vehicle. MAVLink 2.
+not take it for a second vehicle. MAVLink 2, signed with the vehicle's key when it has
+one (the companion hands the winch a new key with ``SETUP_SIGNING`` from component 1).
 """
 
 from __future__ import annotations
 
 from pymavlink.dialects.v20 import common as mavlink2
+
+from tuavdefs.signing import SigningMavlink
 
 COMPONENT_PORT_DEFAULT = 5762
 SYSTEM_ID = 1
@@ -30,8 +33,9 @@ def winch_status_flags(brake_engaged: bool, moving: bool, healthy: bool = True) 
 
 
 def new_mavlink(component_id: int) -> mavlink2.MAVLink:
-    """A MAVLink 2 packer/parser for system 1 and ``component_id``."""
-    mav = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=component_id)
+    """A MAVLink 2 packer/parser for system 1 and ``component_id`` (signing as
+    ``tuavdefs.signing`` checks it, once a key is set on its ``signing``)."""
+    mav = SigningMavlink(None, srcSystem=SYSTEM_ID, srcComponent=component_id)
     mav.robust_parsing = True
     return mav
 

@@ -172,7 +172,27 @@ def main() -> int:
             comp.pump()
             time.sleep(0.0003)
 
-    def ack_after(t0: float, timeout: float = 1.0) -> dict | None:
+    def run_until(cond, timeout: float = 30.0) -> bool:
+        """Run until ``cond()`` holds (a busy machine may take much longer than the
+        physics needs), at most ``timeout`` [s wall]."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if cond():
+                return True
+            run(0.01)
+        return False
+
+    def settled(since: list) -> bool:
+        """The drum still (under 1 mm/s) for 0.5 s of its own time."""
+        if abs(winder.omega * winder.r_w) > 1e-3:
+            since[0] = winder.n
+        return winder.n - since[0] >= 500
+
+    def run_until_settled(timeout: float = 30.0) -> bool:
+        mark = [winder.n]
+        return run_until(lambda: settled(mark), timeout)
+
+    def ack_after(t0: float, timeout: float = 5.0) -> dict | None:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             acks = comp.of("COMMAND_ACK", t0)
@@ -193,30 +213,38 @@ def main() -> int:
         hb = comp.of("HEARTBEAT")
         out["heartbeat"] = hb[0][1] if hb else None
         winder = Winder(link)
-        run(2.0)
+        # (its first answer may take seconds on a busy machine: the compiled law loads)
+        run_until(lambda: winder.axis.state == cp.AxisState.CLOSED_LOOP_CONTROL, 180.0)
+        run(0.2)
+        run_until_settled()
         out["armed_state"] = int(winder.axis.state)
+        out["first_answer_after_s"] = (winder.host_frames[0][0] - winder.t0
+                                       if winder.host_frames else None)
         out["first_host_frames"] = [[n, str(v)] for _, n, v in winder.host_frames[:4]]
         out["relaxed_length_m"] = winder.length
         # WINCH_STATUS rate while frames flow (real time: simulated = wall)
-        t0 = time.monotonic()
+        # (per second of the winder's own time: the rate is of simulated time)
+        t0, n0 = time.monotonic(), winder.n
         run(2.0)
         st = comp.of("WINCH_STATUS", t0)
-        out["status_rate_hz"] = len(st) / 2.0
+        out["status_rate_hz"] = len(st) / ((winder.n - n0) * 1e-3)
         out["status_sample"] = st[-1][1]
 
         # 1. pay out 1 m at 0.5 m/s (COMMAND_LONG to the winch)
         start = winder.length
         t0 = comp.command_long(169, 0, 1, 1.0, 0.5)
         out["length_ack"] = ack_after(t0)
-        run(1.0)
+        run_until(lambda: winder.length - start >= 0.5)
         out["length_mid_speed_m_s"] = winder.omega * winder.r_w
-        run(2.0)
+        run_until(lambda: winder.length - start >= 0.99, 10.0)
+        run_until_settled()
         out["length_paid_m"] = winder.length - start
 
         # 2. wind in 5 m (COMMAND_INT to the autopilot): clamped to the taut floor
         t0 = comp.command_int(1, 0, 1, -5.0, 0.5)
         out["clamp_ack"] = ack_after(t0)
-        run(3.5)
+        run(0.5)
+        run_until_settled()
         out["clamp_texts"] = texts_after(t0)
         out["clamp_length_m"] = winder.length
 
@@ -224,14 +252,16 @@ def main() -> int:
         start = winder.length
         t0 = comp.command_long(0, 0, 2, NAN, 0.25)
         out["rate_ack"] = ack_after(t0)
-        run(2.0)
+        n0 = winder.n
+        run_until(lambda: winder.n - n0 >= 2000)      # 2 s of the winder's time
         out["rate_paid_m"] = winder.length - start
         out["rate_status_flags"] = comp.of("WINCH_STATUS")[-1][1]["status"]
 
         # 4. retract: to the straight-line distance + min slack
         t0 = comp.command_long(169, 1, 6)
         out["retract_ack"] = ack_after(t0)
-        run(2.5)
+        run(0.5)
+        run_until_settled()
         out["retract_texts"] = texts_after(t0)
         out["retract_length_m"] = winder.length
         out["retract_status"] = comp.of("WINCH_STATUS")[-1][1]
@@ -239,6 +269,7 @@ def main() -> int:
         # 5. hold: the axis idles, the brake holds the drum
         t0 = comp.command_int(0, 0, 5)
         out["hold_ack"] = ack_after(t0)
+        run_until(lambda: winder.axis.state == cp.AxisState.IDLE)
         run(0.3)
         out["hold_frames"] = [[n, str(v)] for t, n, v in winder.host_frames
                               if t >= t0 and n == "Set_Axis_State"][:3]
@@ -251,7 +282,9 @@ def main() -> int:
         # 6. relaxed again: re-armed, back on L-bar
         t0 = comp.command_long(1, 0, 0)
         out["relax_ack"] = ack_after(t0)
-        run(2.0)
+        run_until(lambda: winder.axis.state == cp.AxisState.CLOSED_LOOP_CONTROL)
+        run(0.5)
+        run_until_settled()
         out["relax_frames"] = [[n, str(v)] for t, n, v in winder.host_frames
                                if t >= t0 and n != "Get_Bus_Voltage_Current"][:4]
         out["relax_state"] = int(winder.axis.state)
@@ -279,6 +312,8 @@ def main() -> int:
         winder.encoder_on = True
         t_back = time.monotonic()
         run(1.5)
+        run_until(lambda: winder.axis.state == cp.AxisState.CLOSED_LOOP_CONTROL)
+        run_until_settled()
         idles = [t - t_stop for t, n, v in winder.host_frames
                  if t > t_stop and n == "Set_Axis_State" and v == cp.AxisState.IDLE]
         out["lost_idle_after_s"] = idles[0] if idles else None
