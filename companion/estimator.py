@@ -1215,6 +1215,8 @@ class NavFilter:
         # the baro offset is referenced to the GNSS height: their errors are opposed
         P[IDX_BH, IDX_BH] = var_v + p.baro_offset_sigma_m ** 2
         P[IDX_P + 2, IDX_BH] = P[IDX_BH, IDX_P + 2] = -var_v
+        # ... and the fix's height held the receiver's wander, which the offset took too
+        P[IDX_BP + 2, IDX_BH] = P[IDX_BH, IDX_BP + 2] = P[IDX_BP + 2, IDX_BP + 2]
         # the baro's reference: its mean altitude then minus the GNSS height then
         if self._baro_n:
             self._baro_ref_m = self._baro_sum / self._baro_n - float(x[2])

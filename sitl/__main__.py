@@ -16,10 +16,11 @@ import signal
 import sys
 from collections.abc import Sequence
 
+from sitl.faults import FaultSchedule, FaultsFile
 from sitl.plant import Plant, initial_state
 from sitl.plant_loop import PlantLoop
 from sitl.sensors import GnssPreset, SensorNoise
-from sitl.simlink_server import SimLinkServer
+from sitl.simlink_server import SimLinkServer, WinderInputs
 from sitl.trim import hover_trim
 from sitl.truth_log import TruthLog
 from sitl.winder_node import WinderCanNode
@@ -46,6 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "default: lockstep as fast as possible)")
     ap.add_argument("--duration", type=float, default=None, help="stop after [s] of sim time")
     ap.add_argument("--params", default=None, help="system parameters TOML")
+    ap.add_argument("--faults", default=None, metavar="FILE",
+                    help="faults to inject: a TOML file of [[faults]] tables (sitl/faults.py: "
+                         "kind = gnss_loss | wind | motor | winder_motor, start_s, end_s, ...)")
     ap.add_argument("--position", type=float, nargs=3, default=(2.0, 0.0, 10.0),
                     metavar=("X", "Y", "Z"),
                     help="start here [m], z-up frame: in hover trim, or resting on the "
@@ -85,6 +89,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"plant: --sensor-seed: {exc}", file=sys.stderr)
         return 2
     params = load_option(SystemParams, args.params, "plant")
+    faults = load_option(FaultsFile, args.faults, "plant").faults
     pos = tuple(args.position)
     gear = params.vehicle.gear_height_m
     if pos[2] <= gear:
@@ -118,7 +123,16 @@ def main(argv: Sequence[str] | None = None) -> int:
                                       else (sl.SIM_HOST_DEFAULT, args.port))
         print(f"plant: cannot listen on {where}: {exc.strerror}", file=sys.stderr)
         return 1
-    loop = PlantLoop(server, node=node, truth_log=log)
+    before_physics = None
+    if faults:
+        schedule = FaultSchedule(faults, plant, server.batches)
+
+        def before_physics(srv: SimLinkServer) -> None:
+            for line in schedule.apply(plant.t_s):
+                print(f"plant: {line}", flush=True)
+            if schedule.winder_motor_failed and srv.winder_inputs.torque_n_m != 0.0:
+                srv.winder_inputs = WinderInputs(0.0, srv.winder_inputs.enabled)
+    loop = PlantLoop(server, node=node, truth_log=log, before_physics=before_physics)
     signal.signal(signal.SIGTERM, lambda *_: loop.stop())
     signal.signal(signal.SIGINT, lambda *_: loop.stop())
     can_text = f", winder on CAN {node.link.description}" if node else ", winder braked"

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
@@ -80,7 +81,7 @@ from sitl.winder import WinderModel
 from tuavdefs.airframe import command_to_rotor_speed, rotor_speed_setpoints
 from tuavdefs.frames import euler_to_quat, quat_rotate, quat_to_euler
 from tuavdefs.jit import entry_point
-from tuavdefs.params import SystemParams, TetherModel
+from tuavdefs.params import SystemParams, TetherModel, WindParams
 
 N_STATES = 19
 POS, VEL, QUAT, RATES, ROTORS, DRUM_ANGLE, DRUM_RATE = (
@@ -359,6 +360,8 @@ class Plant:
         self._speed_min = self.params.vehicle.rotor_speed_min_rad_s
         self._speed_max = self.params.vehicle.rotor_speed_max_rad_s
         self._setpoints = np.zeros(4)
+        #: What each rotor gives of its command (1: all; a failed motor less: sitl.faults).
+        self.rotor_gains: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
         # load (or compile) the kernels' machine code now, not in the first step, and call
         # it without numba's dispatch (the arguments' types never change)
         m = self.model
@@ -392,6 +395,9 @@ class Plant:
         if n <= 0:
             return
         c0, c1, c2, c3 = rotor_commands
+        gains = self.rotor_gains
+        if gains != (1.0, 1.0, 1.0, 1.0):
+            c0, c1, c2, c3 = c0 * gains[0], c1 * gains[1], c2 * gains[2], c3 * gains[3]
         command, enabled = winder_torque_n_m, winder_enabled
         m, dt, wind = self.model, self.dt_s, self.wind
         varies = not wind.constant
@@ -423,6 +429,14 @@ class Plant:
             self.wind_m_s = tuple(self._wind[:3].tolist())  # type: ignore[assignment]
         else:  # what sample returns for a constant wind
             self.wind_m_s = wind.steady_m_s
+
+    def set_wind(self, params: WindParams) -> None:
+        """From now on the wind of ``params`` (a wind fault, sitl.faults): its model
+        started afresh, the state of the plant kept."""
+        self.params = replace(self.params, wind=params)
+        self.wind = WindModel(params, self.dt_s)
+        self.wind_m_s = tuple(params.steady_m_s)  # type: ignore[assignment]
+        self._wind[:3] = self.wind_m_s
 
     def _ground(self, x: np.ndarray) -> None:
         """Ground contact after a step that ended at or below the gear's height."""

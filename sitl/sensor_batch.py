@@ -35,6 +35,8 @@ class SensorBatches:
         #: The batches in one compiled call (None without numba: :meth:`interpreted`).
         self.packer = batch_packer(plant, sensors, home, encoder, period_us)
         self._last_gps_us: int | None = None
+        #: Whether the receiver delivers fixes (False: a GNSS-loss fault, sitl.faults).
+        self.gps_enabled = True
 
     def reset(self) -> None:
         """A new session: the GPS schedule starts again and the recorded truth is
@@ -47,7 +49,7 @@ class SensorBatches:
         when one is due)."""
         gps_dt: float | None = None
         last = self._last_gps_us
-        if last is None or t_us - last >= self.gps_period_us:
+        if self.gps_enabled and (last is None or t_us - last >= self.gps_period_us):
             gps_dt = (self.gps_period_us if last is None else t_us - last) * 1e-6
             self._last_gps_us = t_us
         data = None if self.packer is None else self.packer.pack(t_us, gps_dt)

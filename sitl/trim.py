@@ -12,7 +12,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from sitl.plant import QUAT, ROTORS, PlantInputs, PlantModel, initial_state
+from sitl.plant import QUAT, ROTORS, VEL, PlantInputs, PlantModel, initial_state, rhs
+from sitl.wind import WindModel, profile_factor
 from tuavdefs.airframe import Mixer
 from tuavdefs.params import SystemParams
 
@@ -53,17 +54,29 @@ def _matrix_to_quat(r: np.ndarray) -> tuple[float, float, float, float]:
 def hover_trim(params: SystemParams, position_m: Sequence[float], tether_length_m: float,
                yaw_rad: float = 0.0) -> tuple[np.ndarray, PlantInputs]:
     """State and inputs that hold the UAV at ``position_m`` with ``tether_length_m`` paid
-    out (drum braked): thrust balances weight and the tether's pull, rotors at speed."""
+    out (drum braked): thrust balances weight, the tether's pull and the steady wind's drag
+    at that height (the drag's dependence on the attitude by a few fixed-point passes),
+    rotors at speed."""
     model = PlantModel(params)
     tf = model.tether.forces(*position_m, tether_length_m)
-    need = np.array([0.0, 0.0, params.vehicle.mass_kg * params.environment.gravity_m_s2])
+    m = params.vehicle.mass_kg
+    need = np.array([0.0, 0.0, m * params.environment.gravity_m_s2])
     need -= np.asarray(tf.on_uav_n)
-    mix = Mixer(params.vehicle).mix(float(np.linalg.norm(need)), (0.0, 0.0, 0.0))
-    if mix.saturated:
-        raise ValueError("the rotors cannot hold the UAV there: thrust needed "
-                         f"{np.linalg.norm(need):.1f} N")
-    u = PlantInputs(rotor_commands=mix.commands, armed=True)
+    wind_model = WindModel(params.wind, 1e-3)
+    wind = np.asarray(wind_model.steady_m_s) * profile_factor(wind_model.packed,
+                                                              float(position_m[2]))
     x = initial_state(model, position_m=position_m, tether_length_m=tether_length_m)
-    x[QUAT] = thrust_aligned_quaternion(need, yaw_rad)
-    x[ROTORS] = model.rotor_setpoints(u)
+    mixer = Mixer(params.vehicle)
+    for _ in range(4):
+        mix = mixer.mix(float(np.linalg.norm(need)), (0.0, 0.0, 0.0))
+        if mix.saturated:
+            raise ValueError("the rotors cannot hold the UAV there: thrust needed "
+                             f"{np.linalg.norm(need):.1f} N")
+        u = PlantInputs(rotor_commands=mix.commands, armed=True)
+        x[QUAT] = thrust_aligned_quaternion(need, yaw_rad)
+        x[ROTORS] = model.rotor_setpoints(u)
+        if not np.any(wind):
+            break
+        # what is left of the acceleration (the drag) is thrust still to be found
+        need = need - m * rhs(0.0, x, u, model, tuple(wind))[VEL]
     return x, u

@@ -35,7 +35,7 @@ def test_a_run_ends_cleanly_with_its_folder(session):
 
 def test_ctrl_c_stops_all_three_within_3_s(session):
     s = session["sigint"]
-    assert "tcp:127.0.0.1:4560" in s["banner"] and "clock: real time" in s["banner"]
+    assert "tcp:127.0.0.1:4560" in s["banner"] and "clock: real time" in s["banner"], s
     assert "scheduling: SCHED_FIFO priority 10" in s["banner"]   # root in CI
     assert s["rc"] == 0
     assert s["stop_s"] < 3.0

@@ -32,6 +32,7 @@ from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
 from groundstation.winch import CommandRequest, Winch, WinchStatusReport
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
+from sitl.faults import FaultSchedule
 from sitl.plant import (
     DRUM_ANGLE,
     DRUM_RATE,
@@ -317,6 +318,11 @@ class OfflineRunner:
         self.sensors = (SensorFeed(self.plant, sc.sensors.noise_model(), self.home,
                                    1.0 / sc.control.rate_hz)
                         if self.companion.filter is not None else None)
+        #: the plant's faults (scenario [[faults]])
+        self.faults = FaultSchedule(sc.faults, self.plant,
+                                    self.sensors.batches if self.sensors else None)
+        #: what began or ended, with its time (metrics.json's "faults")
+        self.fault_log: list[str] = []
 
     def _on_start(self) -> None:
         """The ground station's script, once the vehicle has a state: upload the mission,
@@ -397,6 +403,7 @@ class OfflineRunner:
         g = self.params.environment.gravity_m_s2
         mission = sc.flies_mission
         sensors = self.sensors
+        faults = bool(sc.faults)
         filt = companion.filter
         was_armed = False
         advance, tether_forces = plant.advance, plant.tether_forces
@@ -406,6 +413,8 @@ class OfflineRunner:
         while True:
             t = k * dt
             fresh = k % n_wind == 0
+            if faults and k % n_ctrl == 0:
+                self.fault_log += self.faults.apply(t)
             if fresh:
                 # ground station: encoder, load cell and the UAV's telemetry
                 drum_tension = tether_forces().drum_tension_n
@@ -414,6 +423,8 @@ class OfflineRunner:
                 status = ground.period(t, length, drum_rate, drum_tension, tuple(x[POS]),
                                        tuple(x[VEL]))
                 winder_torque, winder_enabled = ground.torque_n_m, ground.axis_enabled
+                if faults and self.faults.winder_motor_failed:
+                    winder_torque = 0.0
                 cmd = winch.last_command
                 winder_lyap = cmd.lyapunov if cmd is not None else math.nan
                 lbar_m, lbar_rate = winch.reference()
@@ -492,6 +503,8 @@ class OfflineRunner:
         bar.close()
         series = log.arrays()
         metrics = compute_metrics(sc, series, self.reference, wall)
+        if sc.faults:
+            metrics["faults"] = self.fault_log
         reached = [(int(v), ts) for kind, v, ts in self.nav_events if kind is NavEvent.REACHED]
         if self._waypoints:
             metrics["waypoints_reached"] = [{"index": seq - 1, "t_s": round(ts, 3)}

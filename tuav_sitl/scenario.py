@@ -29,6 +29,7 @@ from companion.navigation import NavigationParams
 from groundstation.lbar import LBarParams
 from groundstation.winch import WinchParams
 from groundstation.winder_control import WinderControlParams
+from sitl.faults import FaultParams
 from sitl.sensors import GnssPreset, SensorNoise
 from tuavdefs.frames import local_enu_to_global
 from tuavdefs.params import (
@@ -199,6 +200,9 @@ class ScenarioParams(Params):
                                           "state")
     winch: WinchParams = quantity(WinchParams(), "", "the winch component (its WINCH_STATUS "
                                   "rate: what the companion's tether model hears)")
+    faults: tuple[FaultParams, ...] = quantity(
+        (), "", "faults the plant injects (sitl/faults.py: gnss_loss, wind, motor, "
+        "winder_motor over start_s..end_s)")
 
     def check(self) -> None:
         if self.mission and self.mission_file:

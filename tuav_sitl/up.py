@@ -268,6 +268,10 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="when starting in the air, fly here [m] at once")
     ap.add_argument("--duration", type=float, default=None,
                     help="stop after [s] of simulated time")
+    ap.add_argument("--faults", default=None, metavar="FILE",
+                    help="faults the plant injects: a TOML file of [[faults]] tables, as a "
+                         "scenario's (kind = gnss_loss | wind | motor | winder_motor, "
+                         "start_s, end_s in simulated time)")
     ap.add_argument("--parm", default=None, metavar="FILE",
                     help="start the companion with these ground-station parameters (.parm, "
                          "e.g. a previous run's companion.parm or MAVProxy's 'param save')")
@@ -400,6 +404,17 @@ def run_up(args: argparse.Namespace) -> int:
         except OSError as exc:
             print(f"tuav-sitl up: --parm: {exc}", file=sys.stderr)
             return 2
+    faults_args: list[str] = []
+    if args.faults is not None:
+        from sitl.faults import FaultsFile
+
+        try:
+            faults = load_toml(FaultsFile, Path(args.faults))
+        except (ParameterError, OSError) as exc:
+            print(f"tuav-sitl up: --faults: {exc}", file=sys.stderr)
+            return 2
+        (run_dir / "faults.toml").write_text(_to_toml(to_dict(faults)))
+        faults_args = ["--faults", str(run_dir / "faults.toml")]
     key_file = run_dir / "signing.key"   # the vehicle's key, set here or by SETUP_SIGNING
     if key is not None:
         fd = os.open(key_file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
@@ -419,7 +434,7 @@ def run_up(args: argparse.Namespace) -> int:
     (run_dir / "estimator.toml").write_text(_to_toml(to_dict(estimator)))
     plant_args = ["-m", "sitl", *plant_listen_args(sim), "--can", can, "--home", *home,
                   "--gnss", args.gnss, "--position", *map(str, args.position),
-                  "--truth-log", str(run_dir / "truth.csv"), *common]
+                  "--truth-log", str(run_dir / "truth.csv"), *faults_args, *common]
     if math.isfinite(speedup):
         plant_args += ["--speedup", repr(speedup)]
     if args.duration is not None:

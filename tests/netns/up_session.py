@@ -84,7 +84,7 @@ def main() -> int:
     p.send_signal(signal.SIGINT)
     so, se = p.communicate(timeout=30)
     out["sigint"] = {"rc": p.returncode, "banner": banner, "stop_s": time.monotonic() - t0,
-                     "stdout": so, "left": processes_mentioning(str(d2))}
+                     "stdout": so, "stderr": se, "left": processes_mentioning(str(d2))}
     # 3. one process dies: the others are stopped and the exit code says so
     out["dies"] = kill_one(base / "dies", "groundstation")
     # 3b. the bus recorder dies: up says so and stops (can.log would stay silent)
