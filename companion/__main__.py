@@ -75,6 +75,7 @@ NAV_NAMES = {
     "tension_limit_n": "TETH_TENS_MAX", "tension_step_m": "TETH_TENS_STEP",
 }
 CLUTCH_ENGAGED = mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED
+WINCH_HEALTHY = mavlink2.MAV_WINCH_STATUS_HEALTHY
 #: Wall time without a state from the plant after which the companion gives up [s].
 SIM_SILENCE_S = 30.0
 #: Longest wait for input before the wall-clock duties (heartbeat, timeouts) run [s].
@@ -237,7 +238,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     onboard.on_start = on_start
     autopilot.on_winch_status(lambda m: onboard.winch_report(
         last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None,
-        bool(m.status & CLUTCH_ENGAGED)))
+        bool(m.status & CLUTCH_ENGAGED), bool(m.status & WINCH_HEALTHY)))
+    autopilot.on_gcs_heartbeat(lambda: onboard.gcs_heard(last_t[0]))
     stop = {"signal": None}
     signal.signal(signal.SIGTERM, lambda s, _f: stop.update(signal=s))
     signal.signal(signal.SIGINT, lambda s, _f: stop.update(signal=s))

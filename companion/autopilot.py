@@ -101,8 +101,8 @@ class Autopilot:
                                        self.log)
         # ground-station message type -> handler(peer, msg), after the protocols' turn
         self._handlers: dict[str, Callable[[Peer, Any], None]] = {
-            "TIMESYNC": self._on_timesync, **self.streams.handlers(),
-            **self.commands.handlers()}
+            "TIMESYNC": self._on_timesync, "HEARTBEAT": self._on_heartbeat,
+            **self.streams.handlers(), **self.commands.handlers()}
         self._boot_wall = time.monotonic()
         self._last_hb_sim = -math.inf
         self._last_hb_wall = -math.inf
@@ -111,6 +111,7 @@ class Autopilot:
         #: the mission's DO_WINCH items sent to the winch and not yet answered (seq)
         self._mission_winch: list[int] = []
         self._winch_sink: Callable[[Any], None] | None = None
+        self._gcs_sink: Callable[[], None] | None = None
         self._watch: list[Any] = []
         self._watch_gen = -1
         self._watch_comp: Any = None
@@ -293,6 +294,14 @@ class Autopilot:
     def on_winch_status(self, sink: Callable[[Any], None]) -> None:
         """Call ``sink(msg)`` with every WINCH_STATUS the winch sends."""
         self._winch_sink = sink
+
+    def on_gcs_heartbeat(self, sink: Callable[[], None]) -> None:
+        """Call ``sink()`` with every ground station's HEARTBEAT (MAV_TYPE_GCS)."""
+        self._gcs_sink = sink
+
+    def _on_heartbeat(self, peer: Peer, msg: Any) -> None:
+        if msg.type == M.MAV_TYPE_GCS and self._gcs_sink is not None:
+            self._gcs_sink()
 
     def _winch_acked(self, ack: Any) -> bool:
         """Answer a DO_WINCH that was sent to the autopilot with the winch's result;

@@ -518,9 +518,14 @@ class Navigator:
     def failsafe_land(self, text: str) -> None:
         """A failsafe's action: LAND where it is (ArduCopter's FS_EKF_ACTION 1), said as a
         NavEvent.FAILSAFE."""
+        self.failsafe(FlightMode.LAND, text)
+
+    def failsafe(self, mode: FlightMode, text: str) -> None:
+        """A failsafe's action: ``mode`` (RTL or LAND; a vehicle already landing keeps
+        landing), said as a NavEvent.FAILSAFE."""
         self._emit(NavEvent.FAILSAFE, text)
-        if self.mode != FlightMode.LAND:
-            self.set_mode(FlightMode.LAND)
+        if self.mode != FlightMode.LAND and self.mode != mode:
+            self.set_mode(mode)
 
     def takeoff(self, alt_m: float) -> Refusal | None:
         """GUIDED take-off to ``alt_m`` [m above the ground]."""

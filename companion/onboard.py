@@ -23,6 +23,7 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from companion.estimator import EstimatorParams, FilterStatus, NavFilter
+from companion.failsafes import FailsafeParams, Failsafes
 from companion.flight_controller import FlightController, FlightStep, VehicleState
 from companion.gains import FlightControlParams
 from companion.navigation import (
@@ -88,7 +89,8 @@ class Companion:
 
     def __init__(self, params: SystemParams, gains: FlightControlParams,
                  nav_params: NavigationParams, estimator: EstimatorParams | None = None, *,
-                 on_event: Callable[[NavEvent, object], None] | None = None) -> None:
+                 on_event: Callable[[NavEvent, object], None] | None = None,
+                 failsafes: FailsafeParams | None = None) -> None:
         self.params = params
         veh = params.vehicle
         g = params.environment.gravity_m_s2
@@ -109,6 +111,8 @@ class Companion:
         self.flight = FlightController(gains, veh, params.tether, g)
         self.nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m,
                              on_event=on_event)
+        #: the link failsafes (a lost ground station, a lost winder)
+        self.failsafes = Failsafes(failsafes or FailsafeParams(), self.nav)
         self.dt_s = 1.0 / gains.rate_hz
         self._min_speed = veh.rotor_speed_min_rad_s
         #: the rotor speed [rad/s] the vehicle's own model says hovers it (the motor model
@@ -139,12 +143,19 @@ class Companion:
         self.nav.p = params
 
     def winch_report(self, t_s: float, length_m: float, speed_m_s: float,
-                     tension_n: float | None, braked: bool = False) -> None:
+                     tension_n: float | None, braked: bool = False,
+                     healthy: bool = True) -> None:
         """A report of the winch at ``t_s`` [s]: paid-out length [m], line speed [m/s],
         drum tension [N] (None: not measured), whether its drum is braked (the navigator
-        bounds its reach by it and acts on an over-tension)."""
+        bounds its reach by it and acts on an over-tension), whether it says it is healthy
+        (the winder failsafe)."""
+        self.failsafes.winch_heard(t_s, length_m, healthy)
         self.flight.winch_report(t_s, length_m, speed_m_s, tension_n)
-        self.nav.winch_report(length_m, tension_n, braked)
+        self.nav.winch_report(length_m, tension_n, braked or self.failsafes.winch_lost)
+
+    def gcs_heard(self, t_s: float) -> None:
+        """A ground station's HEARTBEAT at ``t_s`` [s] (the ground-station failsafe)."""
+        self.failsafes.gcs_heard(t_s)
 
     @property
     def last_status(self) -> FilterStatus | None:
@@ -241,6 +252,7 @@ class Companion:
                 self.on_start()
         if self.filter is not None:
             self._ekf_failsafe(t)
+        self.failsafes.check(t)
         ref, motors = self.nav.step(t, state.pos_m, state.vel_m_s, state.quat, self.dt_s)
         fs = None
         if motors is MotorState.FLY and ref is not None:

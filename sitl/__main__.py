@@ -130,6 +130,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         def before_physics(srv: SimLinkServer) -> None:
             for line in schedule.apply(plant.t_s):
                 print(f"plant: {line}", flush=True)
+            if node is not None:
+                node.bus_down = schedule.can_down
             if schedule.winder_motor_failed and srv.winder_inputs.torque_n_m != 0.0:
                 srv.winder_inputs = WinderInputs(0.0, srv.winder_inputs.enabled)
     loop = PlantLoop(server, node=node, truth_log=log, before_physics=before_physics)

@@ -15,7 +15,10 @@ A :class:`FaultParams` is one fault over a window of simulated time (``start_s``
 - ``motor``: rotor ``motor`` (0-3, tuavdefs.airframe's order) gives ``thrust_multiplier``
   of its commanded output (``SIM_ENGINE_FAIL``, ``SIM_ENGINE_MUL``);
 - ``winder_motor``: the winder's motor produces no torque (its drive failed; the brake stays
-  as the drive last set it).
+  as the drive last set it);
+- ``can_loss``: the winder's CAN bus carries nothing, either way (the axis's watchdog then
+  disarms it: the drum brakes; the ground station hears no encoder and its winch reports
+  unhealthy).
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ class FaultKind(Enum):
     WIND = "wind"
     MOTOR = "motor"
     WINDER_MOTOR = "winder_motor"
+    CAN_LOSS = "can_loss"
 
 
 @dataclass(frozen=True)
@@ -97,8 +101,8 @@ class GnssSwitch(Protocol):
 
 class FaultSchedule:
     """``faults`` applied to ``plant`` and the receiver ``gnss`` (module docstring).
-    :meth:`apply` every control period; :attr:`winder_motor_failed` is read where the
-    winder's torque reaches the plant."""
+    :meth:`apply` every control period; :attr:`winder_motor_failed` and :attr:`can_down`
+    are read where the winder's torque and frames reach the plant."""
 
     def __init__(self, faults: tuple[FaultParams, ...], plant: Plant,
                  gnss: GnssSwitch | None) -> None:
@@ -110,6 +114,8 @@ class FaultSchedule:
         self._active: tuple[bool, ...] = (False,) * len(self.faults)
         #: Whether the winder's motor gives no torque now.
         self.winder_motor_failed = False
+        #: Whether the winder's CAN bus is down now.
+        self.can_down = False
 
     def apply(self, t_s: float) -> list[str]:
         """Bring the faults to their state at ``t_s`` [s]; returns what began or ended (a
@@ -126,6 +132,7 @@ class FaultSchedule:
         if self.gnss is not None:
             self.gnss.gps_enabled = FaultKind.GNSS_LOSS not in kinds
         self.winder_motor_failed = FaultKind.WINDER_MOTOR in kinds
+        self.can_down = FaultKind.CAN_LOSS in kinds
         gains = [1.0, 1.0, 1.0, 1.0]
         for f in on:
             if f.fault_kind == FaultKind.MOTOR:

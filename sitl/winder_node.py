@@ -56,6 +56,10 @@ class WinderCanNode:
         self.sensors = WinchSensors(sensor_node_id)
         self.frames_received = 0
         self.frames_sent = 0
+        #: A CAN-loss fault (sitl.faults): no frame reaches the node or leaves it.
+        self.bus_down = False
+        #: Frames lost to it, both ways.
+        self.frames_lost = 0
         self._encoder_id = frame_id(axis_node_id, Cmd.GET_ENCODER_ESTIMATES)
         self._drum_radius = w.drum_radius_m
         wm = plant.model.winder
@@ -64,11 +68,15 @@ class WinderCanNode:
         self._theta_max = wm.theta_max - 1e-9   # at the empty stop at or above [rad]
 
     def service(self, t_s: float) -> None:
-        """Feed every frame the bus holds to the axis, and send its replies."""
+        """Feed every frame the bus holds to the axis, and send its replies (with
+        :attr:`bus_down`, a CAN-loss fault, the frames are lost)."""
         while True:
             rx = self.link.recv(timeout_s=0.0)
             if rx is None:
                 break
+            if self.bus_down:
+                self.frames_lost += 1
+                continue
             self._receive(t_s, rx)
 
     def _receive(self, t_s: float, rx: RxFrame) -> None:
@@ -89,6 +97,8 @@ class WinderCanNode:
         """In lockstep, once a host has shown itself, wait (at most ``answer_timeout_s`` of
         wall time) for its answer to the last encoder frame sent, if it has not come yet;
         ``t_s`` [s] is the simulated time it is received at."""
+        if self.bus_down:
+            self._awaiting = False
         if not (self.lockstep and self.host_seen and self._awaiting):
             return
         end = time.monotonic() + self.answer_timeout_s
@@ -153,4 +163,7 @@ class WinderCanNode:
         return self.axis.torque_command_nm, self.axis.enabled
 
     def _send(self, frames: list) -> None:
+        if self.bus_down:
+            self.frames_lost += len(frames)
+            return
         self.frames_sent += self.link.send_frames(frames)

@@ -46,6 +46,10 @@ class Loop:
         self.motors = MotorState.OFF
         self.events: list[tuple[float, object, object]] = []
         self.max_taut = -math.inf
+        #: whether the winch's reports reach the companion (False: the link is lost), and
+        #: whether they say HEALTHY
+        self.winch_link = True
+        self.winch_healthy = True
         self.companion.start(0.0, self._state())
 
     def _state(self) -> VehicleState:
@@ -72,9 +76,11 @@ class Loop:
             ws = self.winder.update(plant.tether_length_m, plant.drum_rate_rad_s, tension,
                                     tuple(x[POS]), tuple(x[VEL]))
             self.torque = ws.torque_n_m
-            self.companion.winch_report(t, plant.tether_length_m,
-                                     plant.drum_rate_rad_s * self.params.winder.drum_radius_m,
-                                     tension)
+            if self.winch_link:
+                self.companion.winch_report(
+                    t, plant.tether_length_m,
+                    plant.drum_rate_rad_s * self.params.winder.drum_radius_m, tension,
+                    healthy=self.winch_healthy)
             d = math.dist(tuple(x[POS]), (0.0, 0.0, 0.0))
             self.max_taut = max(self.max_taut, d - plant.tether_length_m)
         if k % self.n_ctrl == 0:

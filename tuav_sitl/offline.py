@@ -420,9 +420,15 @@ class OfflineRunner:
                 drum_tension = tether_forces().drum_tension_n
                 x = plant.x.tolist()
                 length, drum_rate = r_w * x[DRUM_ANGLE], x[DRUM_RATE]
-                status = ground.period(t, length, drum_rate, drum_tension, tuple(x[POS]),
-                                       tuple(x[VEL]))
-                winder_torque, winder_enabled = ground.torque_n_m, ground.axis_enabled
+                if faults and self.faults.can_down:
+                    # no frame either way: the axis's watchdog disarms it (the drum
+                    # brakes), the winch hears nothing and says nothing
+                    status = None
+                    winder_torque, winder_enabled = 0.0, False
+                else:
+                    status = ground.period(t, length, drum_rate, drum_tension,
+                                           tuple(x[POS]), tuple(x[VEL]))
+                    winder_torque, winder_enabled = ground.torque_n_m, ground.axis_enabled
                 if faults and self.faults.winder_motor_failed:
                     winder_torque = 0.0
                 cmd = winch.last_command
@@ -431,7 +437,8 @@ class OfflineRunner:
                 if status is not None:   # WINCH_STATUS reaches the companion
                     companion.winch_report(
                         t, status.line_length_m, status.speed_m_s, status.tension_kg * g,
-                        bool(status.flags & mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED))
+                        bool(status.flags & mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED),
+                        bool(status.flags & mavlink2.MAV_WINCH_STATUS_HEALTHY))
             if k % n_ctrl == 0:
                 x = plant.x.tolist()
                 self._t = t
