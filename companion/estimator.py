@@ -94,6 +94,9 @@ class EstimatorParams(Params):
     earth_field_ned_gauss: tuple[float, ...] = quantity(
         (0.2, 0.0, 0.45), "gauss", "the Earth's magnetic field at home (north, east, down), "
         "as a world magnetic model gives it", length=3)
+    accel_offsets_m_s2: tuple[float, ...] = quantity(
+        (0.0, 0.0, 0.0), "m/s^2", "the accelerometer's offsets (body FLU) its calibration "
+        "found, taken off every reading (ArduPilot's INS_ACCOFFS_X/Y/Z)", length=3)
     imu_rate_hz: float = quantity(
         250.0, "Hz", "nominal IMU rate: sizes the delay buffer; a gap longer than 5 "
         "periods is integrated as 5 periods", gt=0, le=2000)
@@ -845,6 +848,7 @@ class NavFilter:
         self._prm[_P_BM_W] = p.mag_bias_walk_gauss_sqrt_s
         self._prm[_P_BP_TAU] = p.gnss_pos_tau_s
         self._wander = p.gnss_pos_tau_s > 0.0
+        self._accel_offsets = _vec3(p.accel_offsets_m_s2)
         self._mag3d = p.mag_fusion == "3d"
         self._prm[_P_DT_MAX] = 5.0 / p.imu_rate_hz
         self._var_min = 1e-14
@@ -970,6 +974,8 @@ class NavFilter:
         FLU. Before alignment the sample is averaged for it."""
         gx, gy, gz = gyro_flu_rad_s
         ax, ay, az = accel_flu_m_s2
+        ox, oy, oz = self._accel_offsets
+        ax, ay, az = ax - ox, ay - oy, az - oz
         if not self._aligned:
             self._rates[0:3] = (gx, gy, gz)
             self._align_sample(t_s, ax, ay, az)

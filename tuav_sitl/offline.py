@@ -45,6 +45,7 @@ from sitl.plant import (
     initial_state,
 )
 from sitl.trim import hover_trim
+from tuav_sitl.calibration import CALIBRATED_ACCEL_BIAS_SIGMA_M_S2, accel_calibration
 from tuav_sitl.scenario import ScenarioParams
 from tuav_sitl.sensor_feed import SensorFeed
 from tuavdefs import can_protocol as cp
@@ -287,7 +288,14 @@ class OfflineRunner:
             nav_params = nav_params.replace(speed_m_s=tr.max_speed_m_s,
                                             acc_m_s2=tr.max_acc_m_s2,
                                             acceptance_radius_m=tr.acceptance_radius_m)
-        self.companion = Companion(params, sc.control, nav_params, sc.estimator,
+        estimator = sc.estimator
+        if estimator.kind == "ekf" and sc.sensors.noise and sc.sensors.accel_calibration:
+            # the user calibrated the accelerometer before the flight (on these sensors)
+            estimator = estimator.replace(
+                accel_offsets_m_s2=accel_calibration(sc.sensors.noise_model(), tuple(sc.home),
+                                                     params.environment.gravity_m_s2),
+                accel_bias_sigma_m_s2=CALIBRATED_ACCEL_BIAS_SIGMA_M_S2)
+        self.companion = Companion(params, sc.control, nav_params, estimator,
                                    on_event=self._on_nav_event)
         self.companion.on_start = self._on_start
         self._t = 0.0

@@ -65,6 +65,10 @@ class SensorParams(Params):
                          choices=tuple(p.value for p in GnssPreset))
     seed: int = quantity(0, "", "seed of the sensors' random streams", ge=0)
     noise: bool = quantity(True, "", "false: every reading is the exact truth")
+    accel_calibration: bool = quantity(
+        True, "", "the accelerometer was calibrated before the flight (ArduPilot's "
+        "six-position calibration, run on these sensors: tuav_sitl/calibration.py); its "
+        "offsets become the companion's [estimator] accel_offsets_m_s2")
 
     def noise_model(self) -> SensorNoise:
         """The sensors' error models."""

@@ -431,6 +431,17 @@ def run_up(args: argparse.Namespace) -> int:
     receiver = GNSS_MODELS[GnssPreset(args.gnss)]
     estimator = EstimatorParams(kind=args.state, gnss_delay_s=receiver.latency_s,
                                 gnss_pos_tau_s=receiver.horizontal.gm_tau_s)
+    if args.state == "ekf":
+        # the user calibrated the accelerometer before the flight (on the plant's sensors:
+        # the preset and seed the plant is started with)
+        from sitl.sensors import SensorNoise
+        from tuav_sitl.calibration import CALIBRATED_ACCEL_BIAS_SIGMA_M_S2, accel_calibration
+
+        estimator = estimator.replace(
+            accel_offsets_m_s2=accel_calibration(SensorNoise.preset(args.gnss, 0),
+                                                 tuple(args.home),
+                                                 params.environment.gravity_m_s2),
+            accel_bias_sigma_m_s2=CALIBRATED_ACCEL_BIAS_SIGMA_M_S2)
     (run_dir / "estimator.toml").write_text(_to_toml(to_dict(estimator)))
     plant_args = ["-m", "sitl", *plant_listen_args(sim), "--can", can, "--home", *home,
                   "--gnss", args.gnss, "--position", *map(str, args.position),
