@@ -18,7 +18,6 @@ flies to ``--goto`` if given); on the ground it waits, disarmed, for a ground st
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import gc
 import math
 import select
@@ -43,7 +42,7 @@ from companion.mavlink_io import (
 )
 from companion.navigation import NavigationParams
 from companion.onboard import Companion, OnboardInputs
-from companion.param_protocol import params_to_defs
+from companion.param_names import build_defs
 from companion.simlink_client import SimLinkClient
 from companion.telemetry import Telemetry
 from tuavdefs import component_link as cl
@@ -51,24 +50,6 @@ from tuavdefs import simlink as sl
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
 
-#: Ground-station names of the flight-control gains (SI units; docs/protocols.md).
-GAIN_NAMES = {
-    "rate_hz": "CTL_RATE_HZ", "pos_k1_1_s": "PSC_K1", "pos_k2_1_s": "PSC_K2",
-    "disturbance_gain_1_s2": "PSC_DIST_GAIN",
-    "disturbance_limit_m_s2": "PSC_DIST_LIM", "max_tilt_rad": "PSC_TILT_MAX",
-    "max_thrust_fraction": "PSC_THR_MAX", "att_k3_1_s": "ATC_K3", "att_k4_n_m_s": "ATC_K4",
-    "command_filter_hz": "ATC_FILT_HZ", "command_filter_damping": "ATC_FILT_ZETA",
-    "use_tether_model": "TETH_MODEL", "use_measured_tension": "TETH_TENSION",
-}
-#: Ground-station names of the navigation parameters.
-NAV_NAMES = {
-    "speed_m_s": "WP_SPEED", "speed_up_m_s": "WP_SPEED_UP", "speed_down_m_s": "WP_SPEED_DN",
-    "acc_m_s2": "WP_ACCEL", "land_speed_m_s": "LAND_SPEED", "land_alt_low_m": "LAND_ALT_LOW",
-    "rtl_alt_m": "RTL_ALT", "rtl_loiter_s": "RTL_LOIT_TIME", "acceptance_radius_m": "WP_RADIUS",
-    "takeoff_accept_m": "TKOFF_ACCEPT", "disarm_delay_s": "DISARM_DELAY",
-    "land_detect_s": "LAND_DETECT_T", "reach_fraction": "TETH_REACH",
-    "reach_slack_m": "TETH_SLACK", "guided_velocity_timeout_s": "GUID_TIMEOUT",
-}
 #: Wall time without a state from the plant after which the companion gives up [s].
 SIM_SILENCE_S = 30.0
 #: Longest wait for input before the wall-clock duties (heartbeat, timeouts) run [s].
@@ -193,14 +174,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"companion: {exc}", file=sys.stderr)
         return 1
 
-    def read_only_rate(value: float) -> str | None:
-        if value == gains.rate_hz:
-            return None
-        return "CTL_RATE_HZ is read-only: the plant sets the control rate"
-
-    defs = [d if d.name != "CTL_RATE_HZ" else dataclasses.replace(d, set=read_only_rate)
-            for d in params_to_defs(gains, GAIN_NAMES, onboard.set_gains)]
-    defs += params_to_defs(nav_params, NAV_NAMES, onboard.set_nav_params)
+    defs = build_defs(gains, nav_params, onboard.set_gains, onboard.set_nav_params,
+                      lambda: onboard.arming_check,
+                      lambda v: setattr(onboard, "arming_check", v))
     autopilot = Autopilot(endpoints, nav, tuple(args.home), defs,
                           param_file=Path(args.param_file) if args.param_file else None,
                           component=components)

@@ -122,6 +122,8 @@ class Companion:
         #: first step (the process announces home there, a script uploads its mission)
         self.on_start: Callable[[], None] | None = None
         self.nav.prearm = self._prearm
+        #: ArduPilot's ARMING_CHECK bitmask: 0 skips the pre-arm checks, else they run
+        self.arming_check = 1
         self._was_flying = False
         self.steps = 0
 
@@ -167,8 +169,8 @@ class Companion:
         self._healthy = f.aligned and st.healthy
 
     def _prearm(self) -> Refusal | None:
-        """ArduCopter's pre-arm check of the estimator."""
-        if self.navigation_healthy:
+        """ArduCopter's pre-arm check of the estimator (skipped with ARMING_CHECK 0)."""
+        if self.navigation_healthy or self.arming_check == 0:
             return None
         return Refusal(Reason.PREARM, "PreArm: EKF not healthy")
 

@@ -97,21 +97,21 @@ def test_heartbeat_identifies_an_arducopter_on_the_ground(flight):
 
 def test_set_a_parameter_and_read_it_back(flight):
     m = flight["m"]
-    m.mav.param_set_send(1, 1, b"PSC_K1_Z", 2.5, M.MAV_PARAM_TYPE_REAL32)
-    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "PSC_K1_Z")
+    m.mav.param_set_send(1, 1, b"TUAV_PSC_K1_Z", 2.5, M.MAV_PARAM_TYPE_REAL32)
+    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "TUAV_PSC_K1_Z")
     assert v.param_value == pytest.approx(2.5)
-    m.mav.param_request_read_send(1, 1, b"PSC_K1_Z", -1)
-    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "PSC_K1_Z")
+    m.mav.param_request_read_send(1, 1, b"TUAV_PSC_K1_Z", -1)
+    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "TUAV_PSC_K1_Z")
     assert v.param_value == pytest.approx(2.5)
     # out of bounds: refused by name, value unchanged
-    m.mav.param_set_send(1, 1, b"PSC_K1_Z", -1.0, M.MAV_PARAM_TYPE_REAL32)
-    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "PSC_K1_Z")
+    m.mav.param_set_send(1, 1, b"TUAV_PSC_K1_Z", -1.0, M.MAV_PARAM_TYPE_REAL32)
+    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "TUAV_PSC_K1_Z")
     assert v.param_value == pytest.approx(2.5)
     # the .parm file is written off the control loop, soon after
     parm, end = flight["veh"].param_file, time.monotonic() + 10.0
-    while not (parm.exists() and "PSC_K1_Z" in parm.read_text()) and time.monotonic() < end:
+    while not (parm.exists() and "TUAV_PSC_K1_Z" in parm.read_text()) and time.monotonic() < end:
         time.sleep(0.05)
-    assert "PSC_K1_Z" in parm.read_text()
+    assert "TUAV_PSC_K1_Z" in parm.read_text()
     # the whole list arrives
     m.mav.param_request_list_send(1, 1)
     names = set()
@@ -123,7 +123,8 @@ def test_set_a_parameter_and_read_it_back(flight):
             names.add(p.param_id)
             count = p.param_count
     assert count is not None and len(names) == count
-    assert {"WP_SPEED", "PSC_K1_X", "ATC_K3_Z", "RTL_ALT", "TETH_REACH"} <= names
+    assert {"WPNAV_SPEED", "TUAV_PSC_K1_X", "TUAV_ATC_K3_Z", "RTL_ALT", "RTL_ALT_M",
+            "TUAV_TETH_REACH", "ARMING_CHECK"} <= names
 
 
 def test_guided_arm_and_take_off_to_10_m(flight):
@@ -198,8 +199,9 @@ def test_winch_commands_without_a_winch_fail_cleanly(flight):
 def test_guided_target_and_reposition(flight):
     m = flight["m"]
     # a waypoint-speed change takes effect on the next move
-    m.mav.param_set_send(1, 1, b"WP_SPEED", 3.0, M.MAV_PARAM_TYPE_REAL32)
-    assert wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "WP_SPEED").param_value == 3.0
+    m.mav.param_set_send(1, 1, b"WPNAV_SPEED", 300.0, M.MAV_PARAM_TYPE_REAL32)   # cm/s
+    assert wait_msg(m, "PARAM_VALUE",
+                    lambda p: p.param_id == "WPNAV_SPEED").param_value == 300.0
     # SET_POSITION_TARGET_LOCAL_NED: 14 m east, 10 m north, 12 m up (NED: x north, y east)
     mask = 0b0000111111111000
     m.mav.set_position_target_local_ned_send(0, 1, 1, M.MAV_FRAME_LOCAL_NED, mask,
@@ -211,7 +213,7 @@ def test_guided_target_and_reposition(flight):
         return math.dist(local(g), (14.0, 10.0, 12.0)) < 0.2
 
     assert wait_msg(m, "GLOBAL_POSITION_INT", arrived, 60) is not None
-    assert 2.7 < max(speeds) < 3.3                           # cruised at WP_SPEED
+    assert 2.7 < max(speeds) < 3.3                           # cruised at WPNAV_SPEED
     # SET_POSITION_TARGET_GLOBAL_INT, relative altitude
     lat, lon = ll(2.0, 6.0)
     m.mav.set_position_target_global_int_send(0, 1, 1, REL, mask, round(lat * 1e7),
