@@ -300,6 +300,7 @@ class Autopilot:
 
     def _mission_changed(self, items: list[MissionItem]) -> None:
         self.nav.set_mission(nav_commands(items, self.origin, self.nav))
+        self.streams.mission_started = self.streams.mission_complete = False
         self.log(f"mission of {len(items) - 1} items accepted")
 
     def _update_mission_home(self) -> None:
@@ -312,11 +313,14 @@ class Autopilot:
 
     def _nav_event(self, kind: NavEvent, value: object) -> None:
         if kind == NavEvent.CURRENT:
+            self.streams.mission_started, self.streams.mission_complete = True, False
             self.io.send(self.streams.mission_current())
         elif kind == NavEvent.REACHED:
             self.io.send(M.MAVLink_mission_item_reached_message(int(value)))
             self.statustext(M.MAV_SEVERITY_INFO, f"Reached command #{int(value)}")
         elif kind == NavEvent.MISSION_DONE:
+            self.streams.mission_complete = True
+            self.io.send(self.streams.mission_current())
             self.statustext(M.MAV_SEVERITY_INFO, "Mission: complete")
         elif kind == NavEvent.TAKEOFF_DONE:
             self.statustext(M.MAV_SEVERITY_INFO, "Takeoff complete")

@@ -149,6 +149,10 @@ class TelemetryStreams:
         self.generation = -1
         """The endpoints' ``generation`` (their set of links) :attr:`due_s` was found for."""
         self._links: dict[Peer, _LinkState] = {}
+        self.mission_started = False
+        """The stored mission has begun an item since it was uploaded."""
+        self.mission_complete = False
+        """The stored mission ran to its end (until it begins again or is replaced)."""
 
     def position(self) -> Vec3:
         """The latest position [m] (the winder's exit before the first period)."""
@@ -395,14 +399,19 @@ class TelemetryStreams:
             0.0, 0.0, 0.0, int(self.telem.t_s * 1e6) if self.telem else 0)
 
     def mission_current(self) -> Any:
-        """MISSION_CURRENT: the current item, the mission's size (without home), its
-        state."""
+        """MISSION_CURRENT: the current item, the mission's size (without home), its state
+        as ArduCopter reports it: NO_MISSION without items, ACTIVE while flown in AUTO,
+        COMPLETE once it ran to its end, PAUSED when begun and left, else NOT_STARTED."""
         nav = self.nav
         total = len(self.missions.items) if hasattr(self.missions, "items") else 0
-        if nav.mission_running:
-            state = M.MISSION_STATE_ACTIVE
-        elif total <= 1:
+        if total <= 1:
             state = M.MISSION_STATE_NO_MISSION
+        elif nav.mission_running:
+            state = M.MISSION_STATE_ACTIVE
+        elif self.mission_complete:
+            state = M.MISSION_STATE_COMPLETE
+        elif self.mission_started:
+            state = M.MISSION_STATE_PAUSED
         else:
             state = M.MISSION_STATE_NOT_STARTED
         return M.MAVLink_mission_current_message(nav.current_seq, max(total - 1, 0), state,

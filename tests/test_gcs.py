@@ -338,6 +338,10 @@ def test_mission_in_auto_reaches_every_item_then_lands_and_disarms(flight):
     assert ack.type == M.MAV_MISSION_ACCEPTED
     got = download_mission(m)
     assert [i.command for i in got[1:]] == [c[0] for c in items]
+    # MISSION_CURRENT's mission_state as ArduCopter reports it: not started, active,
+    # complete at the end (what MAVSDK's is_mission_finished reads)
+    before = wait_msg(m, "MISSION_CURRENT")
+    assert (before.total, before.mission_state) == (6, M.MISSION_STATE_NOT_STARTED)
     m.set_mode("AUTO")
     seen: list = []
     reached: list[int] = []
@@ -367,6 +371,9 @@ def test_mission_in_auto_reaches_every_item_then_lands_and_disarms(flight):
         winch.close()
     assert reached == [1, 2, 4, 5, 6]          # a DO_ item is run, not reached
     assert disarmed is not None
+    states = [x.mission_state for x in seen if x.get_type() == "MISSION_CURRENT"]
+    assert M.MISSION_STATE_ACTIVE in states
+    assert wait_msg(m, "MISSION_CURRENT").mission_state == M.MISSION_STATE_COMPLETE
     assert len(to_winch) == 1
     w = to_winch[0]
     assert (w.command, w.target_system, w.target_component) == (M.MAV_CMD_DO_WINCH, 1, 169)
