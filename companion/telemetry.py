@@ -299,9 +299,13 @@ class TelemetryStreams:
                                               round(100 * tm.throttle),
                                               self.origin[2] + tm.pos_m[2], -vn[2])
         if name == "SYS_STATUS":
-            # the fence's health bit is set as ArduPilot sets it while no fence is breached
-            return M.MAVLink_sys_status_message(_SENSORS, _SENSORS,
-                                                _SENSORS | M.MAV_SYS_STATUS_GEOFENCE, 100, 48000,
+            # the fence's health bit is set as ArduPilot sets it while no fence is breached;
+            # the pre-arm bit only while the pre-arm checks pass (MAVSDK's is_armable)
+            prearm = self.nav.prearm
+            health = _SENSORS | M.MAV_SYS_STATUS_GEOFENCE
+            if prearm is not None and prearm() is not None:
+                health &= ~M.MAV_SYS_STATUS_PREARM_CHECK
+            return M.MAVLink_sys_status_message(_SENSORS, _SENSORS, health, 100, 48000,
                                                 round(100 * 100 * tm.throttle), 100, 0, 0, 0,
                                                 0, 0, 0)
         if name == "BATTERY_STATUS":
