@@ -193,6 +193,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         autopilot.armed_changed()
 
     onboard.on_start = on_start
+    autopilot.streams.wind_source = onboard.wind_estimate
     autopilot.on_winch_status(lambda m: onboard.winch_report(
         last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None))
     stop = {"signal": None}
@@ -257,7 +258,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             throttle = sum(cmds) / 4.0 if armed else 0.0
             autopilot.service(Telemetry(t, state.pos_m, state.vel_m_s, state.quat,
                                         state.rates_rad_s, throttle, onboard.imu,
-                                        onboard.gps, onboard.last_status))
+                                        onboard.gps, onboard.last_status, cmds))
             if nav.armed and not was_armed:
                 autopilot.armed_changed()
             was_armed = nav.armed

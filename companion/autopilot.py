@@ -251,9 +251,13 @@ class Autopilot:
                     continue   # the autopilot's own command
                 if self._winch_acked(msg):
                     continue   # answered from the autopilot, to whom it was sent
+            if msg.get_type() == "WINCH_STATUS":
+                # on each link's WINCH_STATUS schedule (SET_MESSAGE_INTERVAL, EXTRA3)
+                self.streams.forward("WINCH_STATUS", msg.get_msgbuf())
+                if self._winch_sink is not None:
+                    self._winch_sink(msg)
+                continue
             self.io.send_bytes(msg.get_msgbuf())
-            if msg.get_type() == "WINCH_STATUS" and self._winch_sink is not None:
-                self._winch_sink(msg)
 
     def _expire_winch(self, now_wall: float) -> None:
         """Fail the DO_WINCH commands the winch has not answered in time."""

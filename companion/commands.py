@@ -191,6 +191,8 @@ class CommandHandler:
                 result = self.streams.request_message(peer, p[0])
         elif cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
             result = self.streams.set_interval(peer, p[0], p[1])
+        elif cmd == M.MAV_CMD_GET_MESSAGE_INTERVAL:
+            result = self.streams.get_interval(peer, p[0])
         elif cmd == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             self.io.send(self.streams.autopilot_version(), peer)
         elif cmd == M.MAV_CMD_REQUEST_PROTOCOL_VERSION:

@@ -355,6 +355,18 @@ class Navigator:
             return self.mission[self.mission_index].seq
         return 0
 
+    @property
+    def target_m(self) -> Vec3 | None:
+        """Where the current leg goes [m] (a circle: its centre at its altitude); None
+        without one."""
+        leg = self._leg
+        if leg is None:
+            return None
+        item = leg.item
+        if isinstance(item, GotoItem):
+            return item.pos_m
+        return (item.centre_xy_m[0], item.centre_xy_m[1], item.altitude_m)
+
     def reference(self) -> RefSample | None:
         """The last reference produced (None before the first flying step)."""
         return self._ref

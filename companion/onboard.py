@@ -140,6 +140,22 @@ class Companion:
         """Fly with these navigation parameters from the next step on."""
         self.nav.p = params
 
+    def wind_estimate(self) -> tuple[float, float, float]:
+        """The wind the position loop's disturbance estimate implies [m/s], z-up: the
+        horizontal disturbance read as linear drag in moving air (v + m d / D per axis;
+        what is left of the tether's pull after its model shows as wind too); zero on the
+        ground."""
+        if not self.nav.flying:
+            return (0.0, 0.0, 0.0)
+        d = self.flight.position.d_hat
+        veh = self.params.vehicle
+        drag = veh.drag_coeff_n_s_m
+        ref = self.nav.reference()
+        v = ref.vel_m_s if ref is not None else (0.0, 0.0, 0.0)   # the velocity flown
+        wx, wy = (v[i] + veh.mass_kg * d[i] / drag[i] if drag[i] > 0 else 0.0
+                  for i in range(2))
+        return (wx, wy, 0.0)
+
     def winch_report(self, t_s: float, length_m: float, speed_m_s: float,
                      tension_n: float | None) -> None:
         """A report of the winch at ``t_s`` [s]: paid-out length [m], line speed [m/s],

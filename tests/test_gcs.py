@@ -147,6 +147,14 @@ def test_guided_arm_and_take_off_to_10_m(flight):
     assert ack.result == M.MAV_RESULT_ACCEPTED
     assert wait_msg(m, "GLOBAL_POSITION_INT", lambda g: g.relative_alt > 9700, 60)
     assert wait_msg(m, "STATUSTEXT", lambda s: "Takeoff complete" in s.text, 30)
+    # hovering at the take-off point: the rotors near hover (PWM 1000..2000), the target
+    # reached, no wind in this run (the disturbance estimate is the tether model's error)
+    servo = wait_msg(m, "SERVO_OUTPUT_RAW")
+    pwm = [servo.servo1_raw, servo.servo2_raw, servo.servo3_raw, servo.servo4_raw]
+    assert all(1200 < v < 1900 for v in pwm) and max(pwm) - min(pwm) < 100
+    nav = wait_msg(m, "NAV_CONTROLLER_OUTPUT")
+    assert nav.wp_dist == 0 and abs(nav.alt_error) < 0.3 and nav.xtrack_error < 0.2
+    assert wait_msg(m, "WIND").speed < 1.0
 
 
 def test_streams_follow_set_message_interval_and_request_data_stream(flight):
