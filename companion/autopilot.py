@@ -112,7 +112,10 @@ class Autopilot:
             self.io.send(M.MAVLink_statustext_message(severity, data, 0, 0))
             return
         self._statustext_id = self._statustext_id % 65535 + 1
-        for i in range(0, len(data), 50):
+        data = data[:50 * 255]      # chunk_seq is a byte
+        # a receiver takes a chunk shorter than 50 as the last: one of exactly 50 is
+        # followed by an empty one
+        for i in range(0, len(data) + (len(data) % 50 == 0), 50):
             self.io.send(M.MAVLink_statustext_message(severity, data[i:i + 50],
                                                       self._statustext_id, i // 50))
 

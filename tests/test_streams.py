@@ -150,3 +150,38 @@ def test_request_data_stream_all_off_stops_everything_including_the_winch(stack)
     m.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_ALL, 4, 1)
     assert get_interval(m, "RC_CHANNELS") == 250_000
     assert wait_msg(m, "SERVO_OUTPUT_RAW", timeout=10) is not None
+
+
+@pytest.mark.parametrize("length", [49, 50, 51, 100, 137])
+def test_long_statustext_goes_in_chunks_a_receiver_reassembles(length):
+    """As MAVLink 2 defines it: up to 50 characters in one message of id 0; longer, one id,
+    chunk_seq 0, 1, ..., the text ending at the first chunk shorter than 50 characters (an
+    empty one after an exact multiple of 50)."""
+    from companion.autopilot import Autopilot
+    from companion.mavlink_io import MavlinkEndpoints
+    from companion.navigation import NavigationParams, Navigator
+
+    port = free_port(socket.SOCK_DGRAM)
+    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="ardupilotmega")
+    io = MavlinkEndpoints(None, [("127.0.0.1", port)])
+    try:
+        ap = Autopilot(io, Navigator(NavigationParams(), 0.2, 50.0), (0.0, 0.0, 0.0), [],
+                       log=lambda _t: None)
+        text = "".join(chr(ord("a") + i % 26) for i in range(length))
+        ap.statustext(M.MAV_SEVERITY_INFO, text)
+        chunks = []
+        while True:
+            s = rx.recv_match(type="STATUSTEXT", blocking=True, timeout=5)
+            assert s is not None
+            chunks.append(s)
+            if s.id == 0 or len(s.text) < 50:
+                break
+        if length <= 50:
+            assert chunks[0].id == 0 and chunks[0].text == text
+        else:
+            assert len({c.id for c in chunks}) == 1 and chunks[0].id != 0
+            assert [c.chunk_seq for c in chunks] == list(range(len(chunks)))
+            assert "".join(c.text for c in chunks) == text
+    finally:
+        io.close()
+        rx.close()
