@@ -194,6 +194,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     onboard.on_start = on_start
     autopilot.streams.wind_source = onboard.wind_estimate
+
+    def reboot() -> None:
+        """The onboard state restarted; ground stations see the new state at once."""
+        onboard.reboot()
+        autopilot.streams.mission_started = autopilot.streams.mission_complete = False
+        autopilot.send_heartbeat()
+
+    autopilot.commands.reboot = reboot
     autopilot.on_winch_status(lambda m: onboard.winch_report(
         last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None))
     stop = {"signal": None}

@@ -321,6 +321,14 @@ class Navigator:
         #: the pre-arm checks of the rest of the vehicle (the estimator's), or None
         self.prearm: Callable[[], Refusal | None] | None = None
 
+    def reboot(self) -> None:
+        """Back to the power-on state (disarmed, STABILIZE, on the ground, no home, no
+        reference), keeping what a reboot keeps: the parameters and the stored mission (and
+        the pre-arm check and the event listener it is wired to)."""
+        mission, prearm = self.mission, self.prearm
+        self.__init__(self.p, self.gear_height_m, self.tether_length_m, self.on_event)
+        self.mission, self.prearm = mission, prearm
+
     # ----- state
 
     @property

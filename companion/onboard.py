@@ -140,6 +140,25 @@ class Companion:
         """Fly with these navigation parameters from the next step on."""
         self.nav.p = params
 
+    def reboot(self) -> None:
+        """Restart the onboard state as a reboot would (call it disarmed): a new navigation
+        filter, aligning again before arming is allowed; the navigator at power-on with its
+        parameters and stored mission (:meth:`Navigator.reboot`); the flight controller is
+        reset when it next flies; the next state starts the navigator again (and calls
+        :attr:`on_start`). The parameters stay, as in storage."""
+        est = self.estimator_params
+        g = self.params.environment.gravity_m_s2
+        self.filter = (NavFilter(est, g, ned_to_enu(tuple(est.earth_field_ned_gauss)))
+                       if est.kind == "ekf" else None)
+        self._airborne_at_boot = None
+        self._unhealthy_since = None
+        self._healthy = self.filter is None
+        self._health_t_s = -math.inf
+        self._status = None
+        self.nav.reboot()
+        self.started = False
+        self._was_flying = False
+
     def wind_estimate(self) -> tuple[float, float, float]:
         """The wind the position loop's disturbance estimate implies [m/s], z-up: the
         horizontal disturbance read as linear drag in moving air (v + m d / D per axis;
