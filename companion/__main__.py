@@ -32,7 +32,9 @@ from companion.autopilot import Autopilot
 from companion.component_server import ComponentServer
 from companion.estimator import ESTIMATOR_KINDS, EstimatorParams
 from companion.flight_controller import VehicleState
+from companion.flight_log import FlightLog
 from companion.gains import FlightControlParams
+from companion.log_protocol import LogProtocol
 from companion.mavlink_io import (
     GCS_TCP_PORT_DEFAULT,
     UDP_API_PORT_DEFAULT,
@@ -132,6 +134,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "broadcasts) at most every S seconds of wall time, replies at once "
                          "(0: everything at once; tuav-sitl up uses 0.01 in lockstep faster "
                          "than real time)")
+    ap.add_argument("--log-dir", default=None, metavar="DIR",
+                    help="write an onboard DataFlash log per boot here (NNNNNNNN.BIN) and "
+                         "serve them with LOG_REQUEST_LIST / LOG_REQUEST_DATA")
     ap.add_argument("--param-file", default=None,
                     help="parameters persisted here (.parm); loaded at start if present")
     ap.add_argument("--connect-timeout", type=float, default=30.0, help="[s]")
@@ -198,12 +203,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     def reboot() -> None:
         """The onboard state restarted; ground stations see the new state at once."""
         onboard.reboot()
+        if args.log_dir:
+            new_log()
         autopilot.streams.mission_started = autopilot.streams.mission_complete = False
         autopilot.send_heartbeat()
 
     autopilot.commands.reboot = reboot
-    autopilot.on_winch_status(lambda m: onboard.winch_report(
-        last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None))
+
+    def new_log() -> None:
+        """This boot's onboard log, its parameters first."""
+        if autopilot.flight_log is not None:
+            autopilot.flight_log.close()
+        autopilot.flight_log = fl = FlightLog(Path(args.log_dir), tuple(args.home))
+        for d in defs:
+            fl.param(d.name, d.get())
+
+    if args.log_dir:
+        new_log()
+        autopilot.logs = LogProtocol(
+            Path(args.log_dir), autopilot._send_to,
+            lambda: autopilot.flight_log.number if autopilot.flight_log else None)
+    def on_winch_status(m: Any) -> None:
+        tension_n = m.tension * g if math.isfinite(m.tension) else None
+        onboard.winch_report(last_t[0], m.line_length, m.speed, tension_n)
+        if autopilot.flight_log is not None:
+            autopilot.flight_log.tether(last_t[0], m.line_length, m.speed,
+                                        tension_n if tension_n is not None else math.nan)
+
+    autopilot.on_winch_status(on_winch_status)
     stop = {"signal": None}
     signal.signal(signal.SIGTERM, lambda s, _f: stop.update(signal=s))
     signal.signal(signal.SIGINT, lambda s, _f: stop.update(signal=s))
@@ -277,6 +304,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         client.close()
         autopilot.params.close()   # the parameter file written out
+        if autopilot.flight_log is not None:
+            autopilot.flight_log.close()
+        if autopilot.logs is not None:
+            autopilot.logs.close()
         endpoints.close()
         if endpoints.tlog is not None:
             endpoints.tlog.close()

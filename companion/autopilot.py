@@ -96,17 +96,26 @@ class Autopilot:
         self._watch: list[Any] = []
         self._watch_gen = -1
         self._watch_comp: Any = None
+        self.logs: Any = None
+        """The onboard-log service (``companion.log_protocol.LogProtocol``) or None."""
+        self.flight_log: Any = None
+        """This boot's onboard log (``companion.flight_log.FlightLog``) or None."""
+        self._logged_mode: Any = None
 
     # ----- sending helpers
 
     def _send_to(self, peer: Peer | None, msg: Any) -> None:
         self.io.send(msg, peer)
+        if peer is None and self.flight_log is not None and msg.get_type() == "PARAM_VALUE":
+            self.flight_log.param(msg.param_id, msg.param_value)   # an accepted change
 
     def statustext(self, severity: int, text: str | Refusal) -> None:
         """STATUSTEXT to every link (chunked past 50 characters, as MAVLink 2 allows) and
         the process log."""
         text = str(text)
         self.log(text)
+        if self.flight_log is not None:
+            self.flight_log.message(text)
         data = text.encode("utf-8", "replace")
         if len(data) <= 50:
             self.io.send(M.MAVLink_statustext_message(severity, data, 0, 0))
@@ -161,10 +170,21 @@ class Autopilot:
             for peer in io.pop_closed():
                 self.missions.peer_closed(peer)
                 self.params.peer_closed(peer)
+                if self.logs is not None:
+                    self.logs.peer_closed(peer)
                 streams.forget(peer)
         now_wall = time.monotonic()
         self.missions.tick(now_wall)
         self.params.tick(now_wall)
+        if self.logs is not None:
+            self.logs.tick()
+        fl = self.flight_log
+        if fl is not None and telem is not None:
+            nav = self.nav
+            if nav.mode != self._logged_mode:
+                self._logged_mode = nav.mode
+                fl.mode(int(nav.mode))
+            fl.record(telem, nav.reference() if nav.flying else None, nav.home_m)
         if self._winch_pending:
             self._expire_winch(now_wall)
         if self.nav.has_events:
@@ -215,6 +235,8 @@ class Autopilot:
         if self.missions.handle(peer, msg, time.monotonic()):
             return
         if self.params.handle(peer, msg, time.monotonic()):
+            return
+        if self.logs is not None and self.logs.handle(peer, msg):
             return
         if tcomp is not None and tcomp not in (0, cl.AUTOPILOT_COMPONENT_ID):
             return

@@ -420,6 +420,7 @@ def run_up(args: argparse.Namespace) -> int:
                  *[a for host, port in args.out for a in ("--gcs-udp", f"{host}:{port}")],
                  "--tlog", str(run_dir / "flight.tlog"),
                  "--param-file", str(run_dir / "companion.parm"),
+                 "--log-dir", str(run_dir / "logs"),
                  "--estimator", str(run_dir / "estimator.toml"), *common]
     if args.goto is not None:
         comp_args += ["--goto", *map(str, args.goto)]
