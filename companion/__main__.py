@@ -34,6 +34,7 @@ from companion.estimator import ESTIMATOR_KINDS, EstimatorParams
 from companion.flight_controller import VehicleState
 from companion.flight_log import FlightLog
 from companion.gains import FlightControlParams
+from companion.geofence import FenceParams
 from companion.log_protocol import LogProtocol
 from companion.mavlink_io import (
     GCS_TCP_PORT_DEFAULT,
@@ -179,12 +180,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"companion: {exc}", file=sys.stderr)
         return 1
 
+    fence_holder: list = []
+
+    def set_fence(p: FenceParams) -> None:
+        """New fence parameters: the geofence's, and SYS_STATUS's bits."""
+        for ap in fence_holder:
+            ap.fence.p = p
+            ap.streams.fence_enabled = p.enable
+
     defs = build_defs(gains, nav_params, onboard.set_gains, onboard.set_nav_params,
                       lambda: onboard.arming_check,
-                      lambda v: setattr(onboard, "arming_check", v))
+                      lambda v: setattr(onboard, "arming_check", v),
+                      FenceParams(), set_fence)
     autopilot = Autopilot(endpoints, nav, tuple(args.home), defs,
                           param_file=Path(args.param_file) if args.param_file else None,
                           component=components)
+    fence_holder.append(autopilot)
     if args.param_file and Path(args.param_file).exists():
         for warning in autopilot.params.load() or []:
             print(f"companion: {warning}", flush=True)

@@ -39,6 +39,13 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.commands import CommandHandler
+from companion.geofence import (
+    FenceAction,
+    FenceBreach,
+    FenceParams,
+    Geofence,
+    check_fence_item,
+)
 from companion.mavlink_io import MavlinkEndpoints, Peer
 from companion.mission_items import ItemRefused, mission_home, nav_command, nav_commands
 from companion.mission_protocol import MissionItem, MissionProtocol
@@ -50,6 +57,8 @@ from tuavdefs import component_link as cl
 M = mavlink2
 
 _WINCH_ACK_TIMEOUT_S = 0.4
+#: How often the fences are checked [s of simulated time].
+FENCE_CHECK_S = 0.1
 
 
 class Autopilot:
@@ -72,7 +81,15 @@ class Autopilot:
         self.component = component
         self.log = log or (lambda text: print(f"companion: {text}", flush=True))
         self.missions = MissionProtocol(self._send_to, self.statustext,
-                                        self._validate_item, self._mission_changed)
+                                        self._validate_item, self._mission_changed,
+                                        validate_other=self._validate_other,
+                                        on_other_changed=self._other_changed)
+        self.fence = Geofence(FenceParams(), self.origin)
+        """The geofence (its parameters set by the parameter table)."""
+        self.rally: list[MissionItem] = []
+        """The rally points uploaded (stored; not yet flown to by RTL)."""
+        self._breach: FenceBreach | None = None
+        self._fence_next_s = -math.inf
         self.params = ParamProtocol(params, self._send_to, self.statustext,
                                     persist_path=param_file)
         self.streams = TelemetryStreams(endpoints, nav, self.origin, self.missions)
@@ -185,6 +202,9 @@ class Autopilot:
                 self._logged_mode = nav.mode
                 fl.mode(int(nav.mode))
             fl.record(telem, nav.reference() if nav.flying else None, nav.home_m)
+        if telem is not None and telem.t_s >= self._fence_next_s:
+            self._fence_next_s = telem.t_s + FENCE_CHECK_S
+            self._check_fence(telem.pos_m)
         if self._winch_pending:
             self._expire_winch(now_wall)
         if self.nav.has_events:
@@ -337,6 +357,48 @@ class Autopilot:
         if home is None:
             return
         self.missions.set_home(mission_home(home, self.origin))
+
+    # ----- fence and rally points
+
+    def _validate_other(self, mission_type: int, seq: int, item: MissionItem
+                        ) -> tuple[int, str] | None:
+        if mission_type == M.MAV_MISSION_TYPE_FENCE:
+            return check_fence_item(seq, item)
+        if item.command != M.MAV_CMD_NAV_RALLY_POINT:
+            return M.MAV_MISSION_UNSUPPORTED, f"Rally: item {seq}: command {item.command}"
+        return None
+
+    def _other_changed(self, mission_type: int, items: list[MissionItem]) -> None:
+        if mission_type == M.MAV_MISSION_TYPE_FENCE:
+            why = self.fence.set_items(items)
+            if why is not None:
+                self.statustext(M.MAV_SEVERITY_WARNING, why)
+            else:
+                self.log(f"fence of {len(items)} items accepted")
+        else:
+            self.rally = items
+            self.log(f"{len(items)} rally points accepted")
+
+    def _check_fence(self, pos_m: tuple[float, float, float]) -> None:
+        """A breach begun (in flight): said, and acted on as FENCE_ACTION says (the
+        tether's reach: RTL, always)."""
+        nav = self.nav
+        breach = self.fence.breach(pos_m, nav.home_m, nav.reach_m) if nav.flying else None
+        self.streams.fence_breached = breach is not None
+        if breach is None or breach == self._breach:
+            self._breach = breach
+            return
+        self._breach = breach
+        self.statustext(M.MAV_SEVERITY_CRITICAL, f"Fence breach: {breach.value}")
+        action = (FenceAction.RTL if breach is FenceBreach.TETHER
+                  else FenceAction(self.fence.p.action))
+        if action is FenceAction.REPORT or nav.mode in (FlightMode.RTL, FlightMode.LAND):
+            return
+        if action is FenceAction.RTL and nav.set_mode(FlightMode.RTL) is None:
+            self.send_heartbeat()
+            return
+        nav.failsafe_land(f"Fence breach: {breach.value}: landing")
+        self.send_heartbeat()
 
     # ----- navigator events
 

@@ -19,6 +19,7 @@ from xml.sax.saxutils import quoteattr
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.gains import FlightControlParams
+from companion.geofence import FenceParams
 from companion.navigation import NavigationParams
 from companion.param_names import build_defs
 from companion.param_protocol import ParamDef
@@ -36,7 +37,7 @@ _INT_TYPES = {mavlink2.MAV_PARAM_TYPE_INT8, mavlink2.MAV_PARAM_TYPE_INT16,
 def default_defs() -> list[ParamDef]:
     """The companion's parameters at their defaults (what a fresh companion serves)."""
     return build_defs(FlightControlParams(), NavigationParams(), lambda _p: None,
-                      lambda _p: None, lambda: 1, lambda _v: None)
+                      lambda _p: None, lambda: 1, lambda _v: None, FenceParams())
 
 
 def _number(v: float) -> str:

@@ -18,10 +18,12 @@ from collections.abc import Callable
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.gains import FlightControlParams
+from companion.geofence import FenceParams
 from companion.navigation import NavigationParams
 from companion.param_protocol import ParamDef, WireName, params_to_defs
 
-__all__ = ["ARMING_CHECK_ALL", "GAIN_NAMES", "NAV_NAMES", "arming_check_def", "build_defs"]
+__all__ = ["ARMING_CHECK_ALL", "FENCE_NAMES", "GAIN_NAMES", "NAV_NAMES", "arming_check_def",
+           "build_defs"]
 
 M = mavlink2
 _CM = 100.0
@@ -64,6 +66,14 @@ NAV_NAMES: dict[str, str | WireName | tuple[WireName, ...]] = {
     "guided_velocity_timeout_s": "GUID_TIMEOUT",
 }
 
+#: Fence parameters (``companion.geofence.FenceParams``), as ArduCopter's (FENCE_ENABLE,
+#: FENCE_TYPE, FENCE_ACTION INT8; FENCE_RADIUS, FENCE_ALT_MAX, FENCE_MARGIN REAL32 m).
+FENCE_NAMES: dict[str, str | WireName | tuple[WireName, ...]] = {
+    "enable": "FENCE_ENABLE", "type_mask": WireName("FENCE_TYPE", param_type=_I8),
+    "radius_m": "FENCE_RADIUS", "alt_max_m": "FENCE_ALT_MAX",
+    "action": WireName("FENCE_ACTION", param_type=_I8), "margin_m": "FENCE_MARGIN",
+}
+
 #: ARMING_CHECK's "all checks" bit (ArduPilot's bitmask; 0 skips them).
 ARMING_CHECK_ALL = 1
 
@@ -86,10 +96,11 @@ def arming_check_def(get: Callable[[], int], set_: Callable[[int], None]) -> Par
 def build_defs(gains: FlightControlParams, nav: NavigationParams,
                set_gains: Callable[[FlightControlParams], None],
                set_nav: Callable[[NavigationParams], None],
-               get_arming: Callable[[], int], set_arming: Callable[[int], None]
-               ) -> list[ParamDef]:
+               get_arming: Callable[[], int], set_arming: Callable[[int], None],
+               fence: FenceParams | None = None,
+               set_fence: Callable[[FenceParams], None] = lambda _f: None) -> list[ParamDef]:
     """Every parameter of the companion, in index order: the gains (SCHED_LOOP_RATE
-    read-only), the navigation parameters, ARMING_CHECK."""
+    read-only), the navigation parameters, ARMING_CHECK, the fence's."""
 
     def read_only_rate(value: float) -> str | None:
         if value == round(gains.rate_hz):
@@ -100,4 +111,6 @@ def build_defs(gains: FlightControlParams, nav: NavigationParams,
             for d in params_to_defs(gains, GAIN_NAMES, set_gains)]
     defs += params_to_defs(nav, NAV_NAMES, set_nav)
     defs.append(arming_check_def(get_arming, set_arming))
+    defs += params_to_defs(fence if fence is not None else FenceParams(), FENCE_NAMES,
+                           set_fence)
     return defs

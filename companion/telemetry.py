@@ -167,6 +167,10 @@ class TelemetryStreams:
         """``f()`` -> the onboard wind estimate (velocity the air moves with, z-up [m/s]),
         asked only when WIND is due; None: no estimate (zero wind reported)."""
         self._forwarded: dict[str, bytes] = {}     # the last frame of each forwarded message
+        self.fence_enabled = False
+        """FENCE_ENABLE (SYS_STATUS's geofence bits)."""
+        self.fence_breached = False
+        """A fence is breached now."""
 
     def position(self) -> Vec3:
         """The latest position [m] (the winder's exit before the first period)."""
@@ -350,13 +354,17 @@ class TelemetryStreams:
                                               round(100 * tm.throttle),
                                               self.origin[2] + tm.pos_m[2], -vn[2])
         if name == "SYS_STATUS":
-            # the fence's health bit is set as ArduPilot sets it while no fence is breached;
-            # the pre-arm bit only while the pre-arm checks pass (MAVSDK's is_armable)
+            # the fence (the tether's reach at least) is present, enabled with FENCE_ENABLE,
+            # healthy while not breached; the pre-arm bit only while the pre-arm checks
+            # pass (MAVSDK's is_armable)
             prearm = self.nav.prearm
-            health = _SENSORS | M.MAV_SYS_STATUS_GEOFENCE
+            fence = M.MAV_SYS_STATUS_GEOFENCE
+            health = _SENSORS | (0 if self.fence_breached else fence)
             if prearm is not None and prearm() is not None:
                 health &= ~M.MAV_SYS_STATUS_PREARM_CHECK
-            return M.MAVLink_sys_status_message(_SENSORS, _SENSORS, health, 100, 48000,
+            return M.MAVLink_sys_status_message(_SENSORS | fence,
+                                                _SENSORS | (fence if self.fence_enabled else 0),
+                                                health, 100, 48000,
                                                 round(100 * 100 * tm.throttle), 100, 0, 0, 0,
                                                 0, 0, 0)
         if name == "BATTERY_STATUS":

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from gcs_util import Vehicle
 
-from companion.param_metadata import SHIPPED
+from companion.param_metadata import SHIPPED, default_defs
 
 pytestmark = pytest.mark.skipif(shutil.which("mavproxy.py") is None,
                                 reason="MAVProxy is a test extra")
@@ -89,7 +89,7 @@ def session(tmp_path_factory):
     veh = Vehicle(tmp)
     mp = MavProxy(veh.tcp_port, tmp)
     try:
-        mp.wait_for("Received 40 parameters")
+        mp.wait_for(f"Received {len(default_defs())} parameters")
         yield {"mp": mp, "veh": veh, "tmp": tmp}
     finally:
         mp.close()

@@ -15,6 +15,7 @@ from gcs_util import Vehicle, arm, command, wait_msg
 from pymavlink import DFReader, mavutil
 
 from companion.flight_log import RATE_HZ
+from companion.param_metadata import default_defs
 
 M = mavutil.mavlink
 
@@ -78,7 +79,7 @@ def test_the_log_reads_with_dfreader_and_holds_the_flight(flown):
     rec = read_log(flown["tmp"] / "download.bin")
     parm = {p.Name: p.Value for p in rec["PARM"]}
     assert parm["RTL_ALT"] == 1000 and parm["WPNAV_SPEED"] == 200
-    assert len(parm) == 40
+    assert len(parm) == len(default_defs())
     texts = [x.Message for x in rec["MSG"]]
     assert "Takeoff complete" in texts and "Landed" in texts
     assert [x.ModeNum for x in rec["MODE"]][-2:] == [4, 9]      # GUIDED, then LAND

@@ -75,6 +75,11 @@ class Table:
     ("ARMING_CHECK", M.MAV_PARAM_TYPE_INT32, 1.0),
     ("GUID_TIMEOUT", M.MAV_PARAM_TYPE_REAL32, 3.0),
     ("SCHED_LOOP_RATE", M.MAV_PARAM_TYPE_INT16, 250.0),
+    ("FENCE_ENABLE", M.MAV_PARAM_TYPE_INT8, 0.0),
+    ("FENCE_TYPE", M.MAV_PARAM_TYPE_INT8, 7.0),
+    ("FENCE_RADIUS", M.MAV_PARAM_TYPE_REAL32, 300.0),
+    ("FENCE_ALT_MAX", M.MAV_PARAM_TYPE_REAL32, 100.0),
+    ("FENCE_ACTION", M.MAV_PARAM_TYPE_INT8, 1.0),
 ])
 def test_arducopter_names_types_and_units_at_the_defaults(name, ptype, value):
     v = Table().read(name)
@@ -124,7 +129,8 @@ def test_names_fit_mavlink_and_project_ones_are_prefixed():
     arducopter = {"SCHED_LOOP_RATE", "ANGLE_MAX", "WPNAV_SPEED", "WPNAV_SPEED_UP",
                   "WPNAV_SPEED_DN", "WPNAV_ACCEL", "WPNAV_RADIUS", "LAND_SPEED",
                   "LAND_ALT_LOW", "RTL_ALT", "RTL_ALT_M", "RTL_LOIT_TIME", "DISARM_DELAY",
-                  "GUID_TIMEOUT", "ARMING_CHECK"}
+                  "GUID_TIMEOUT", "ARMING_CHECK", "FENCE_ENABLE", "FENCE_TYPE", "FENCE_RADIUS",
+                  "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN"}
     assert arducopter <= set(names)
     assert all(n in arducopter or n.startswith("TUAV_") for n in names)
 
