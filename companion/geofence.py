@@ -53,7 +53,8 @@ class FenceParams(Params):
     radius_m: float = quantity(300.0, "m", "circle fence about home", ge=30, le=10000)
     alt_max_m: float = quantity(100.0, "m", "maximum altitude above home", ge=10, le=1000)
     action: int = quantity(1, "", "on a breach: 0 report, 1 RTL, 2 land", ge=0, le=2)
-    margin_m: float = quantity(2.0, "m", "distance inside a fence kept by planned moves",
+    margin_m: float = quantity(2.0, "m", "ArduCopter's margin (kept for its ground "
+                               "stations; the breach checks here use the fence itself)",
                                ge=1, le=10)
 
 
