@@ -18,7 +18,6 @@ flies to ``--goto`` if given); on the ground it waits, disarmed, for a ground st
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import gc
 import math
 import select
@@ -35,7 +34,10 @@ from companion.autopilot import Autopilot
 from companion.component_server import ComponentServer
 from companion.estimator import ESTIMATOR_KINDS, EstimatorParams
 from companion.flight_controller import VehicleState
+from companion.flight_log import FlightLog
 from companion.gains import FlightControlParams
+from companion.geofence import FenceParams
+from companion.log_protocol import LogProtocol
 from companion.mavlink_io import (
     GCS_TCP_PORT_DEFAULT,
     UDP_API_PORT_DEFAULT,
@@ -45,7 +47,7 @@ from companion.mavlink_io import (
 )
 from companion.navigation import NavigationParams
 from companion.onboard import Companion, OnboardInputs
-from companion.param_protocol import params_to_defs
+from companion.param_names import build_defs
 from companion.signing import VehicleSigning
 from companion.simlink_client import SimLinkClient
 from companion.telemetry import Telemetry
@@ -55,25 +57,6 @@ from tuavdefs import simlink as sl
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
 
-#: Ground-station names of the flight-control gains (SI units; docs/protocols.md).
-GAIN_NAMES = {
-    "rate_hz": "CTL_RATE_HZ", "pos_k1_1_s": "PSC_K1", "pos_k2_1_s": "PSC_K2",
-    "disturbance_gain_1_s2": "PSC_DIST_GAIN",
-    "disturbance_limit_m_s2": "PSC_DIST_LIM", "max_tilt_rad": "PSC_TILT_MAX",
-    "max_thrust_fraction": "PSC_THR_MAX", "att_k3_1_s": "ATC_K3", "att_k4_n_m_s": "ATC_K4",
-    "command_filter_hz": "ATC_FILT_HZ", "command_filter_damping": "ATC_FILT_ZETA",
-    "use_tether_model": "TETH_MODEL", "use_measured_tension": "TETH_TENSION",
-}
-#: Ground-station names of the navigation parameters.
-NAV_NAMES = {
-    "speed_m_s": "WP_SPEED", "speed_up_m_s": "WP_SPEED_UP", "speed_down_m_s": "WP_SPEED_DN",
-    "acc_m_s2": "WP_ACCEL", "land_speed_m_s": "LAND_SPEED", "land_alt_low_m": "LAND_ALT_LOW",
-    "rtl_alt_m": "RTL_ALT", "rtl_loiter_s": "RTL_LOIT_TIME", "acceptance_radius_m": "WP_RADIUS",
-    "takeoff_accept_m": "TKOFF_ACCEPT", "disarm_delay_s": "DISARM_DELAY",
-    "land_detect_s": "LAND_DETECT_T", "reach_fraction": "TETH_REACH",
-    "reach_slack_m": "TETH_SLACK", "guided_velocity_timeout_s": "GUID_TIMEOUT",
-    "tension_limit_n": "TETH_TENS_MAX", "tension_step_m": "TETH_TENS_STEP",
-}
 CLUTCH_ENGAGED = mavlink2.MAV_WINCH_STATUS_CLUTCH_ENGAGED
 WINCH_HEALTHY = mavlink2.MAV_WINCH_STATUS_HEALTHY
 #: Wall time without a state from the plant after which the companion gives up [s].
@@ -158,6 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "broadcasts) at most every S seconds of wall time, replies at once "
                          "(0: everything at once; tuav-sitl up uses 0.01 in lockstep faster "
                          "than real time)")
+    ap.add_argument("--log-dir", default=None, metavar="DIR",
+                    help="write an onboard DataFlash log per boot here (NNNNNNNN.BIN) and "
+                         "serve them with LOG_REQUEST_LIST / LOG_REQUEST_DATA")
     ap.add_argument("--param-file", default=None,
                     help="parameters persisted here (.parm); loaded at start if present")
     ap.add_argument("--signing-key-file", default=None, metavar="FILE",
@@ -212,17 +198,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"companion: {exc}", file=sys.stderr)
         return 1
 
-    def read_only_rate(value: float) -> str | None:
-        if value == gains.rate_hz:
-            return None
-        return "CTL_RATE_HZ is read-only: the plant sets the control rate"
+    fence_holder: list = []
 
-    defs = [d if d.name != "CTL_RATE_HZ" else dataclasses.replace(d, set=read_only_rate)
-            for d in params_to_defs(gains, GAIN_NAMES, onboard.set_gains)]
-    defs += params_to_defs(nav_params, NAV_NAMES, onboard.set_nav_params)
+    def set_fence(p: FenceParams) -> None:
+        """New fence parameters: the geofence's, and SYS_STATUS's bits."""
+        for ap in fence_holder:
+            ap.fence.p = p
+            ap.streams.fence_enabled = p.enable
+
+    defs = build_defs(gains, nav_params, onboard.set_gains, onboard.set_nav_params,
+                      lambda: onboard.arming_check,
+                      lambda v: setattr(onboard, "arming_check", v),
+                      FenceParams(), set_fence, onboard.failsafes.params,
+                      lambda p: setattr(onboard.failsafes, "params", p))
     autopilot = Autopilot(endpoints, nav, tuple(args.home), defs,
                           param_file=Path(args.param_file) if args.param_file else None,
                           component=components, signing=signing)
+    fence_holder.append(autopilot)
     if args.param_file and Path(args.param_file).exists():
         for warning in autopilot.params.load() or []:
             print(f"companion: {warning}", flush=True)
@@ -236,10 +228,41 @@ def main(argv: Sequence[str] | None = None) -> int:
         autopilot.armed_changed()
 
     onboard.on_start = on_start
-    autopilot.on_winch_status(lambda m: onboard.winch_report(
-        last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None,
-        bool(m.status & CLUTCH_ENGAGED), bool(m.status & WINCH_HEALTHY)))
     autopilot.on_gcs_heartbeat(lambda: onboard.gcs_heard(last_t[0]))
+    autopilot.streams.wind_source = onboard.wind_estimate
+
+    def reboot() -> None:
+        """The onboard state restarted; ground stations see the new state at once."""
+        onboard.reboot()
+        if args.log_dir:
+            new_log()
+        autopilot.streams.mission_started = autopilot.streams.mission_complete = False
+        autopilot.send_heartbeat()
+
+    autopilot.commands.reboot = reboot
+
+    def new_log() -> None:
+        """This boot's onboard log, its parameters first."""
+        if autopilot.flight_log is not None:
+            autopilot.flight_log.close()
+        autopilot.flight_log = fl = FlightLog(Path(args.log_dir), tuple(args.home))
+        for d in defs:
+            fl.param(d.name, d.get())
+
+    if args.log_dir:
+        new_log()
+        autopilot.logs = LogProtocol(
+            Path(args.log_dir), autopilot._send_to,
+            lambda: autopilot.flight_log.number if autopilot.flight_log else None)
+    def on_winch_status(m: Any) -> None:
+        tension_n = m.tension * g if math.isfinite(m.tension) else None
+        onboard.winch_report(last_t[0], m.line_length, m.speed, tension_n,
+                             bool(m.status & CLUTCH_ENGAGED), bool(m.status & WINCH_HEALTHY))
+        if autopilot.flight_log is not None:
+            autopilot.flight_log.tether(last_t[0], m.line_length, m.speed,
+                                        tension_n if tension_n is not None else math.nan)
+
+    autopilot.on_winch_status(on_winch_status)
     stop = {"signal": None}
     signal.signal(signal.SIGTERM, lambda s, _f: stop.update(signal=s))
     signal.signal(signal.SIGINT, lambda s, _f: stop.update(signal=s))
@@ -303,7 +326,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             throttle = sum(cmds) / 4.0 if armed else 0.0
             autopilot.service(Telemetry(t, state.pos_m, state.vel_m_s, state.quat,
                                         state.rates_rad_s, throttle, onboard.imu,
-                                        onboard.gps, onboard.last_status))
+                                        onboard.gps, onboard.last_status, cmds))
             if nav.armed and not was_armed:
                 autopilot.armed_changed()
             was_armed = nav.armed
@@ -315,6 +338,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         client.close()
         autopilot.params.close()   # the parameter file written out
         signing.close()            # and the signing key
+        if autopilot.flight_log is not None:
+            autopilot.flight_log.close()
+        if autopilot.logs is not None:
+            autopilot.logs.close()
         endpoints.close()
         if endpoints.tlog is not None:
             endpoints.tlog.close()

@@ -45,6 +45,13 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.commands import CommandHandler
+from companion.geofence import (
+    FenceAction,
+    FenceBreach,
+    FenceParams,
+    Geofence,
+    check_fence_item,
+)
 from companion.mavlink_io import MavlinkEndpoints, Peer
 from companion.mission_items import ItemRefused, mission_home, nav_command, nav_commands
 from companion.mission_protocol import MissionItem, MissionProtocol
@@ -61,6 +68,8 @@ _WINCH_ACK_TIMEOUT_S = 0.4
 #: The shortest wall time between two STATUSTEXTs about refused (unsigned, badly signed,
 #: replayed) frames [s].
 SIGNING_NOTICE_S = 5.0
+#: How often the fences are checked [s of simulated time].
+FENCE_CHECK_S = 0.1
 
 
 class Autopilot:
@@ -90,7 +99,15 @@ class Autopilot:
         self.component = component
         self.log = log or (lambda text: print(f"companion: {text}", flush=True))
         self.missions = MissionProtocol(self._send_to, self.statustext,
-                                        self._validate_item, self._mission_changed)
+                                        self._validate_item, self._mission_changed,
+                                        validate_other=self._validate_other,
+                                        on_other_changed=self._other_changed)
+        self.fence = Geofence(FenceParams(), self.origin)
+        """The geofence (its parameters set by the parameter table)."""
+        self.rally: list[MissionItem] = []
+        """The rally points uploaded (stored; not yet flown to by RTL)."""
+        self._breach: FenceBreach | None = None
+        self._fence_next_s = -math.inf
         self.params = ParamProtocol(params, self._send_to, self.statustext,
                                     persist_path=param_file)
         self.streams = TelemetryStreams(endpoints, nav, self.origin, self.missions)
@@ -115,23 +132,35 @@ class Autopilot:
         self._watch: list[Any] = []
         self._watch_gen = -1
         self._watch_comp: Any = None
+        self.logs: Any = None
+        """The onboard-log service (``companion.log_protocol.LogProtocol``) or None."""
+        self.flight_log: Any = None
+        """This boot's onboard log (``companion.flight_log.FlightLog``) or None."""
+        self._logged_mode: Any = None
 
     # ----- sending helpers
 
     def _send_to(self, peer: Peer | None, msg: Any) -> None:
         self.io.send(msg, peer)
+        if peer is None and self.flight_log is not None and msg.get_type() == "PARAM_VALUE":
+            self.flight_log.param(msg.param_id, msg.param_value)   # an accepted change
 
     def statustext(self, severity: int, text: str | Refusal) -> None:
         """STATUSTEXT to every link (chunked past 50 characters, as MAVLink 2 allows) and
         the process log."""
         text = str(text)
         self.log(text)
+        if self.flight_log is not None:
+            self.flight_log.message(text)
         data = text.encode("utf-8", "replace")
         if len(data) <= 50:
             self.io.send(M.MAVLink_statustext_message(severity, data, 0, 0))
             return
         self._statustext_id = self._statustext_id % 65535 + 1
-        for i in range(0, len(data), 50):
+        data = data[:50 * 255]      # chunk_seq is a byte
+        # a receiver takes a chunk shorter than 50 as the last: one of exactly 50 is
+        # followed by an empty one
+        for i in range(0, len(data) + (len(data) % 50 == 0), 50):
             self.io.send(M.MAVLink_statustext_message(severity, data[i:i + 50],
                                                       self._statustext_id, i // 50))
 
@@ -177,10 +206,24 @@ class Autopilot:
             for peer in io.pop_closed():
                 self.missions.peer_closed(peer)
                 self.params.peer_closed(peer)
+                if self.logs is not None:
+                    self.logs.peer_closed(peer)
                 streams.forget(peer)
         now_wall = time.monotonic()
         self.missions.tick(now_wall)
         self.params.tick(now_wall)
+        if self.logs is not None:
+            self.logs.tick()
+        fl = self.flight_log
+        if fl is not None and telem is not None:
+            nav = self.nav
+            if nav.mode != self._logged_mode:
+                self._logged_mode = nav.mode
+                fl.mode(int(nav.mode))
+            fl.record(telem, nav.reference() if nav.flying else None, nav.home_m)
+        if telem is not None and telem.t_s >= self._fence_next_s:
+            self._fence_next_s = telem.t_s + FENCE_CHECK_S
+            self._check_fence(telem.pos_m)
         if self._winch_pending:
             self._expire_winch(now_wall)
         if self.nav.has_events:
@@ -236,6 +279,8 @@ class Autopilot:
             return
         if self.params.handle(peer, msg, time.monotonic()):
             return
+        if self.logs is not None and self.logs.handle(peer, msg):
+            return
         if tcomp is not None and tcomp not in (0, cl.AUTOPILOT_COMPONENT_ID):
             return
         handler = self._handlers.get(mtype)
@@ -274,9 +319,13 @@ class Autopilot:
                     continue   # the autopilot's own command
                 if self._winch_acked(msg):
                     continue   # answered from the autopilot, to whom it was sent
+            if msg.get_type() == "WINCH_STATUS":
+                # on each link's WINCH_STATUS schedule (SET_MESSAGE_INTERVAL, EXTRA3)
+                self.streams.forward("WINCH_STATUS", msg.get_msgbuf())
+                if self._winch_sink is not None:
+                    self._winch_sink(msg)
+                continue
             self.io.send_bytes(msg.get_msgbuf())
-            if msg.get_type() == "WINCH_STATUS" and self._winch_sink is not None:
-                self._winch_sink(msg)
 
     def _expire_winch(self, now_wall: float) -> None:
         """Fail the DO_WINCH commands the winch has not answered in time."""
@@ -369,6 +418,7 @@ class Autopilot:
 
     def _mission_changed(self, items: list[MissionItem]) -> None:
         self.nav.set_mission(nav_commands(items, self.origin, self.nav))
+        self.streams.mission_started = self.streams.mission_complete = False
         self.log(f"mission of {len(items) - 1} items accepted")
 
     def _update_mission_home(self) -> None:
@@ -377,15 +427,60 @@ class Autopilot:
             return
         self.missions.set_home(mission_home(home, self.origin))
 
+    # ----- fence and rally points
+
+    def _validate_other(self, mission_type: int, seq: int, item: MissionItem
+                        ) -> tuple[int, str] | None:
+        if mission_type == M.MAV_MISSION_TYPE_FENCE:
+            return check_fence_item(seq, item)
+        if item.command != M.MAV_CMD_NAV_RALLY_POINT:
+            return M.MAV_MISSION_UNSUPPORTED, f"Rally: item {seq}: command {item.command}"
+        return None
+
+    def _other_changed(self, mission_type: int, items: list[MissionItem]) -> None:
+        if mission_type == M.MAV_MISSION_TYPE_FENCE:
+            why = self.fence.set_items(items)
+            if why is not None:
+                self.statustext(M.MAV_SEVERITY_WARNING, why)
+            else:
+                self.log(f"fence of {len(items)} items accepted")
+        else:
+            self.rally = items
+            self.log(f"{len(items)} rally points accepted")
+
+    def _check_fence(self, pos_m: tuple[float, float, float]) -> None:
+        """A breach begun (in flight): said, and acted on as FENCE_ACTION says (the
+        tether's reach: RTL, always)."""
+        nav = self.nav
+        breach = self.fence.breach(pos_m, nav.home_m, nav.reach_m) if nav.flying else None
+        self.streams.fence_breached = breach is not None
+        if breach is None or breach == self._breach:
+            self._breach = breach
+            return
+        self._breach = breach
+        self.statustext(M.MAV_SEVERITY_CRITICAL, f"Fence breach: {breach.value}")
+        action = (FenceAction.RTL if breach is FenceBreach.TETHER
+                  else FenceAction(self.fence.p.action))
+        if action is FenceAction.REPORT or nav.mode in (FlightMode.RTL, FlightMode.LAND):
+            return
+        if action is FenceAction.RTL and nav.set_mode(FlightMode.RTL) is None:
+            self.send_heartbeat()
+            return
+        nav.failsafe_land(f"Fence breach: {breach.value}: landing")
+        self.send_heartbeat()
+
     # ----- navigator events
 
     def _nav_event(self, kind: NavEvent, value: object) -> None:
         if kind == NavEvent.CURRENT:
+            self.streams.mission_started, self.streams.mission_complete = True, False
             self.io.send(self.streams.mission_current())
         elif kind == NavEvent.REACHED:
             self.io.send(M.MAVLink_mission_item_reached_message(int(value)))
             self.statustext(M.MAV_SEVERITY_INFO, f"Reached command #{int(value)}")
         elif kind == NavEvent.MISSION_DONE:
+            self.streams.mission_complete = True
+            self.io.send(self.streams.mission_current())
             self.statustext(M.MAV_SEVERITY_INFO, "Mission: complete")
         elif kind == NavEvent.TAKEOFF_DONE:
             self.statustext(M.MAV_SEVERITY_INFO, "Takeoff complete")

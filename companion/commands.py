@@ -78,6 +78,8 @@ class CommandHandler:
         self.home_changed = home_changed
         self.forward_winch = forward_winch
         self.log = log
+        self.reboot: Callable[[], None] | None = None
+        """Restarts the onboard state (PREFLIGHT_REBOOT_SHUTDOWN); None: not offered."""
 
     def handlers(self) -> dict[str, Callable[[Peer, Any], None]]:
         """Handlers of the ground-station messages this takes: type -> ``f(peer, msg)``."""
@@ -191,6 +193,8 @@ class CommandHandler:
                 result = self.streams.request_message(peer, p[0])
         elif cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
             result = self.streams.set_interval(peer, p[0], p[1])
+        elif cmd == M.MAV_CMD_GET_MESSAGE_INTERVAL:
+            result = self.streams.get_interval(peer, p[0])
         elif cmd == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             self.io.send(self.streams.autopilot_version(), peer)
         elif cmd == M.MAV_CMD_REQUEST_PROTOCOL_VERSION:
@@ -199,6 +203,8 @@ class CommandHandler:
             if self.forward_winch(peer, msg):
                 return   # acknowledged when the winch answers
             why, result = "Winch: not connected", M.MAV_RESULT_FAILED
+        elif cmd == M.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN:
+            why, result = self._reboot(p)
         elif cmd == M.MAV_CMD_DO_SET_MISSION_CURRENT:
             why = nav.set_current(int(p[0])) if finite(p[0]) else "bad mission item"
             result = M.MAV_RESULT_ACCEPTED if why is None else M.MAV_RESULT_DENIED
@@ -214,6 +220,20 @@ class CommandHandler:
                             else M.MAV_SEVERITY_INFO, why)
         if send_hb:
             self.send_heartbeat()
+
+    def _reboot(self, p: list[float]) -> tuple[str | None, int]:
+        """MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN for the autopilot (p1), as ArduPilot answers
+        it: 1 (and 3, to the bootloader) reboots, refused while armed; 0 does nothing;
+        shutting down (2) is not offered."""
+        action = round(p[0]) if finite(p[0]) else -1
+        if action == 0:
+            return None, M.MAV_RESULT_ACCEPTED
+        if action not in (1, 3) or self.reboot is None:
+            return None, M.MAV_RESULT_UNSUPPORTED
+        if self.nav.armed:
+            return "Reboot: disarm first", M.MAV_RESULT_FAILED
+        self.reboot()
+        return "Rebooting: disarmed, on the ground, the EKF aligning", M.MAV_RESULT_ACCEPTED
 
     def _on_set_mode(self, peer: Peer, msg: Any) -> None:
         why = self.nav.set_mode(msg.custom_mode)

@@ -59,14 +59,12 @@ Download (vehicle -> GCS)
     ``MAV_MISSION_ERROR``). The GCS's closing MISSION_ACK is consumed. Downloads keep no state.
 
 Mission types
-    Only ``MAV_MISSION_TYPE_MISSION`` holds items. Geofence and rally points are not
-    implemented, but they answer as an empty, read-only-but-clearable store rather than with
-    ArduPilot's ``MAV_MISSION_UNSUPPORTED`` to everything: a download gives ``count`` 0, an
-    upload of ``count`` 0 and MISSION_CLEAR_ALL are accepted, an upload with items gets
-    ``MAV_MISSION_UNSUPPORTED`` (MAVSDK and QGC report that as "unsupported", not as a link
-    fault). The vehicle must therefore not advertise ``MAV_PROTOCOL_CAPABILITY_MISSION_FENCE``
-    or ``_RALLY``. ``MAV_MISSION_TYPE_ALL`` is accepted by MISSION_CLEAR_ALL only (it clears the
-    mission; ArduPilot answers it ``MAV_MISSION_UNSUPPORTED``); other values get
+    ``MAV_MISSION_TYPE_MISSION`` (home at seq 0), ``_FENCE`` and ``_RALLY`` (their items from
+    seq 0) are each a store uploaded, downloaded and cleared with the same exchanges, one
+    upload at a time; a fence or rally upload's items are checked by ``validate_other(type,
+    seq, item)`` and the new list handed to ``on_other_changed(type, items)``.
+    ``MAV_MISSION_TYPE_ALL`` is accepted by MISSION_CLEAR_ALL only (it clears the mission;
+    ArduPilot answers it ``MAV_MISSION_UNSUPPORTED``); other values get
     ``MAV_MISSION_UNSUPPORTED``.
 
 Not handled here (``handle`` returns False): MISSION_ITEM(_INT) with ``current`` 2 (guided
@@ -285,6 +283,7 @@ class _Upload:
     last_request_s: float = 0.0
     last_progress_s: float = 0.0
     retries: int = 0
+    mission_type: int = _MISSION
 
 
 @dataclass(frozen=True)
@@ -296,6 +295,7 @@ class _Finished:
     compid: int
     last_seq: int
     time_s: float
+    mission_type: int = _MISSION
 
 
 class MissionProtocol:
@@ -314,7 +314,11 @@ class MissionProtocol:
 
     def __init__(self, send: SendFn, statustext: StatusTextFn, validate: ValidateFn,
                  on_changed: ChangedFn, *, timeout_s: float = 1.5, max_retries: int = 5,
-                 max_items: int = 700) -> None:
+                 max_items: int = 700,
+                 validate_other: Callable[[int, int, MissionItem], tuple[int, str] | None]
+                 | None = None,
+                 on_other_changed: Callable[[int, list[MissionItem]], None] | None = None
+                 ) -> None:
         if timeout_s <= 0 or max_retries < 0 or max_items < 1:
             raise ValueError("timeout_s must be > 0, max_retries >= 0, max_items >= 1")
         self._send = send
@@ -327,6 +331,9 @@ class MissionProtocol:
         self._home = MissionItem(command=mavlink2.MAV_CMD_NAV_WAYPOINT,
                                  frame=mavlink2.MAV_FRAME_GLOBAL)
         self._body: list[MissionItem] = []
+        self._other: dict[int, list[MissionItem]] = {_FENCE: [], _RALLY: []}
+        self._validate_other = validate_other
+        self._on_other_changed = on_other_changed or (lambda _t, _items: None)
         self._upload: _Upload | None = None
         self._finished: _Finished | None = None
         #: Seq reported with ``current`` = 1 in downloads (None: no item is current).
@@ -338,6 +345,10 @@ class MissionProtocol:
     def items(self) -> list[MissionItem]:
         """The mission, home at index 0 (a copy)."""
         return [self._home, *self._body]
+
+    def stored(self, mission_type: int) -> list[MissionItem]:
+        """The fence's or the rally points' items (a copy)."""
+        return list(self._other[mission_type])
 
     @property
     def home(self) -> MissionItem:
@@ -392,7 +403,7 @@ class MissionProtocol:
     def _on_request_list(self, peer: Hashable, msg: Any, now_s: float) -> bool:
         mtype = msg.mission_type
         if mtype in (_FENCE, _RALLY):
-            self._reply_count(peer, msg, 0, mtype)
+            self._reply_count(peer, msg, len(self._other[mtype]), mtype)
         elif mtype != _MISSION:
             self._ack(peer, msg, mavlink2.MAV_MISSION_UNSUPPORTED, mtype)
         elif self._upload is not None:
@@ -404,7 +415,14 @@ class MissionProtocol:
     def _on_request(self, peer: Hashable, msg: Any, now_s: float) -> bool:
         mtype = msg.mission_type
         if mtype in (_FENCE, _RALLY):
-            self._ack(peer, msg, mavlink2.MAV_MISSION_INVALID_SEQUENCE, mtype)
+            store = self._other[mtype]
+            if not 0 <= msg.seq < len(store):
+                self._ack(peer, msg, mavlink2.MAV_MISSION_INVALID_SEQUENCE, mtype)
+            else:
+                sysid, compid = _source(msg)
+                self._send(peer, to_message(msg.seq, store[msg.seq],
+                                            msg.get_type() == "MISSION_REQUEST_INT", sysid,
+                                            compid, 0, mtype))
         elif mtype != _MISSION:
             self._ack(peer, msg, mavlink2.MAV_MISSION_UNSUPPORTED, mtype)
         elif self._upload is not None:
@@ -421,15 +439,7 @@ class MissionProtocol:
 
     def _on_count(self, peer: Hashable, msg: Any, now_s: float) -> bool:
         mtype = msg.mission_type
-        if mtype in (_FENCE, _RALLY):
-            if msg.count == 0:
-                self._ack(peer, msg, mavlink2.MAV_MISSION_ACCEPTED, mtype)
-            else:
-                kind = "Geofence" if mtype == _FENCE else "Rally points"
-                self._statustext(mavlink2.MAV_SEVERITY_WARNING, f"{kind} not supported")
-                self._ack(peer, msg, mavlink2.MAV_MISSION_UNSUPPORTED, mtype)
-            return True
-        if mtype != _MISSION:
+        if mtype not in (_MISSION, _FENCE, _RALLY):
             self._ack(peer, msg, mavlink2.MAV_MISSION_UNSUPPORTED, mtype)
             return True
         sysid, compid = _source(msg)
@@ -446,12 +456,11 @@ class MissionProtocol:
             return True
         self._finished = None
         if msg.count == 0:
-            self._body = []
             self._ack(peer, msg, mavlink2.MAV_MISSION_ACCEPTED, mtype)
-            self._on_changed(self.items)
+            self._store(mtype, [])
             return True
         up = _Upload(peer=peer, sysid=sysid, compid=compid, count=msg.count,
-                     last_progress_s=now_s)
+                     last_progress_s=now_s, mission_type=mtype)
         self._upload = up
         self._request(up, now_s)
         return True
@@ -460,7 +469,7 @@ class MissionProtocol:
         mtype = msg.mission_type
         if mtype == _MISSION and msg.current in (2, 3):
             return False  # a guided-mode target or altitude change, not a mission item
-        if mtype != _MISSION:
+        if mtype not in (_MISSION, _FENCE, _RALLY):
             self._ack(peer, msg, mavlink2.MAV_MISSION_UNSUPPORTED, mtype)
             return True
         sysid, compid = _source(msg)
@@ -468,13 +477,13 @@ class MissionProtocol:
         if up is None:
             fin = self._finished
             if (fin is not None and (fin.peer, fin.sysid, fin.compid) == (peer, sysid, compid)
-                    and msg.seq == fin.last_seq
+                    and msg.seq == fin.last_seq and mtype == fin.mission_type
                     and now_s - fin.time_s <= self.timeout_s * (self.max_retries + 1)):
                 self._ack(peer, msg, mavlink2.MAV_MISSION_ACCEPTED, mtype)
             else:
                 self._ack(peer, msg, mavlink2.MAV_MISSION_ERROR, mtype)
             return True
-        if (up.peer, up.sysid, up.compid) != (peer, sysid, compid):
+        if (up.peer, up.sysid, up.compid) != (peer, sysid, compid) or mtype != up.mission_type:
             self._ack(peer, msg, mavlink2.MAV_MISSION_DENIED, mtype)
             return True
         if msg.get_type() == "MISSION_ITEM":
@@ -483,7 +492,7 @@ class MissionProtocol:
             if now_s - up.last_request_s >= self.REREQUEST_HOLDOFF_S:
                 self._request(up, now_s)
             return True
-        if msg.seq > 0:
+        if msg.seq > 0 or mtype != _MISSION:
             try:
                 item = from_message(msg)
             except MissionItemError as exc:
@@ -494,7 +503,9 @@ class MissionProtocol:
                 self._abort(up, problem[0], f"Mission item {msg.seq}: {problem[1]}")
                 return True
             try:
-                problem = self._validate(msg.seq, item)
+                problem = (self._validate(msg.seq, item) if mtype == _MISSION
+                           else self._validate_other(mtype, msg.seq, item)
+                           if self._validate_other is not None else None)
             except Exception as exc:  # a validator tripping on odd content rejects the item
                 problem = (mavlink2.MAV_MISSION_ERROR, f"Mission item {msg.seq}: {exc}")
             if problem is not None:
@@ -508,25 +519,35 @@ class MissionProtocol:
             self._request(up, now_s)
             return True
         self._upload = None
-        self._body = up.received
-        self._finished = _Finished(peer, sysid, compid, up.count - 1, now_s)
+        self._finished = _Finished(peer, sysid, compid, up.count - 1, now_s, mtype)
         self._ack(peer, msg, mavlink2.MAV_MISSION_ACCEPTED, mtype)
-        self._statustext(mavlink2.MAV_SEVERITY_INFO, "Flight plan received")
-        self._on_changed(self.items)
+        if mtype == _MISSION:
+            self._statustext(mavlink2.MAV_SEVERITY_INFO, "Flight plan received")
+        self._store(mtype, up.received)
         return True
+
+    def _store(self, mtype: int, items: list[MissionItem]) -> None:
+        """Keep a complete upload (or a clear) of ``mtype`` and say it changed."""
+        if mtype == _MISSION:
+            self._body = items
+            self._on_changed(self.items)
+        else:
+            self._other[mtype] = items
+            self._on_other_changed(mtype, list(items))
 
     def _on_ack(self, peer: Hashable, msg: Any, now_s: float) -> bool:
         up = self._upload
-        if (up is not None and msg.mission_type == _MISSION
+        if (up is not None and msg.mission_type == up.mission_type
                 and (up.peer, up.sysid, up.compid) == (peer, *_source(msg))):
             self._upload = None  # the uploader cancelled
         return True
 
     def _on_clear_all(self, peer: Hashable, msg: Any, now_s: float) -> bool:
         mtype = msg.mission_type
-        if mtype in (_FENCE, _RALLY):
+        if mtype in (_FENCE, _RALLY) and self._upload is None:
             self._ack(peer, msg, mavlink2.MAV_MISSION_ACCEPTED, mtype)
-        elif mtype not in (_MISSION, _ALL):
+            self._store(mtype, [])
+        elif mtype not in (_MISSION, _FENCE, _RALLY, _ALL):
             self._ack(peer, msg, mavlink2.MAV_MISSION_UNSUPPORTED, mtype)
         elif self._upload is not None:
             self._ack(peer, msg, mavlink2.MAV_MISSION_ERROR, mtype)
@@ -569,13 +590,13 @@ class MissionProtocol:
     def _request(self, up: _Upload, now_s: float) -> None:
         cls = (mavlink2.MAVLink_mission_request_message if up.float_peer
                else mavlink2.MAVLink_mission_request_int_message)
-        self._send(up.peer, cls(up.sysid, up.compid, up.expected, _MISSION))
+        self._send(up.peer, cls(up.sysid, up.compid, up.expected, up.mission_type))
         up.last_request_s = now_s
 
     def _abort(self, up: _Upload, result: int, reason: str) -> None:
         self._upload = None
         self._send(up.peer, mavlink2.MAVLink_mission_ack_message(up.sysid, up.compid, result,
-                                                                 _MISSION))
+                                                                 up.mission_type))
         self._statustext(mavlink2.MAV_SEVERITY_WARNING, reason)
 
     def _give_up(self, up: _Upload) -> None:

@@ -331,6 +331,14 @@ class Navigator:
         #: the pre-arm checks of the rest of the vehicle (the estimator's), or None
         self.prearm: Callable[[], Refusal | None] | None = None
 
+    def reboot(self) -> None:
+        """Back to the power-on state (disarmed, STABILIZE, on the ground, no home, no
+        reference), keeping what a reboot keeps: the parameters and the stored mission (and
+        the pre-arm check and the event listener it is wired to)."""
+        mission, prearm = self.mission, self.prearm
+        self.__init__(self.p, self.gear_height_m, self.tether_length_m, self.on_event)
+        self.mission, self.prearm = mission, prearm
+
     # ----- state
 
     @property
@@ -394,6 +402,18 @@ class Navigator:
         if 0 <= self.mission_index < len(self.mission):
             return self.mission[self.mission_index].seq
         return 0
+
+    @property
+    def target_m(self) -> Vec3 | None:
+        """Where the current leg goes [m] (a circle: its centre at its altitude); None
+        without one."""
+        leg = self._leg
+        if leg is None:
+            return None
+        item = leg.item
+        if isinstance(item, GotoItem):
+            return item.pos_m
+        return (item.centre_xy_m[0], item.centre_xy_m[1], item.altitude_m)
 
     def reference(self) -> RefSample | None:
         """The last reference produced (None before the first flying step)."""

@@ -126,6 +126,8 @@ class Companion:
         #: first step (the process announces home there, a script uploads its mission)
         self.on_start: Callable[[], None] | None = None
         self.nav.prearm = self._prearm
+        #: ArduPilot's ARMING_CHECK bitmask: 0 skips the pre-arm checks, else they run
+        self.arming_check = 1
         self._was_flying = False
         self.steps = 0
 
@@ -141,6 +143,41 @@ class Companion:
     def set_nav_params(self, params: NavigationParams) -> None:
         """Fly with these navigation parameters from the next step on."""
         self.nav.p = params
+
+    def reboot(self) -> None:
+        """Restart the onboard state as a reboot would (call it disarmed): a new navigation
+        filter, aligning again before arming is allowed; the navigator at power-on with its
+        parameters and stored mission (:meth:`Navigator.reboot`); the flight controller is
+        reset when it next flies; the next state starts the navigator again (and calls
+        :attr:`on_start`). The parameters stay, as in storage."""
+        est = self.estimator_params
+        g = self.params.environment.gravity_m_s2
+        self.filter = (NavFilter(est, g, ned_to_enu(tuple(est.earth_field_ned_gauss)))
+                       if est.kind == "ekf" else None)
+        self._airborne_at_boot = None
+        self._unhealthy_since = None
+        self._healthy = self.filter is None
+        self._health_t_s = -math.inf
+        self._status = None
+        self.nav.reboot()
+        self.started = False
+        self._was_flying = False
+
+    def wind_estimate(self) -> tuple[float, float, float]:
+        """The wind the position loop's disturbance estimate implies [m/s], z-up: the
+        horizontal disturbance read as linear drag in moving air (v + m d / D per axis;
+        what is left of the tether's pull after its model shows as wind too); zero on the
+        ground."""
+        if not self.nav.flying:
+            return (0.0, 0.0, 0.0)
+        d = self.flight.position.d_hat
+        veh = self.params.vehicle
+        drag = veh.drag_coeff_n_s_m
+        ref = self.nav.reference()
+        v = ref.vel_m_s if ref is not None else (0.0, 0.0, 0.0)   # the velocity flown
+        wx, wy = (v[i] + veh.mass_kg * d[i] / drag[i] if drag[i] > 0 else 0.0
+                  for i in range(2))
+        return (wx, wy, 0.0)
 
     def winch_report(self, t_s: float, length_m: float, speed_m_s: float,
                      tension_n: float | None, braked: bool = False,
@@ -180,8 +217,8 @@ class Companion:
         self._healthy = f.aligned and st.healthy
 
     def _prearm(self) -> Refusal | None:
-        """ArduCopter's pre-arm check of the estimator."""
-        if self.navigation_healthy:
+        """ArduCopter's pre-arm check of the estimator (skipped with ARMING_CHECK 0)."""
+        if self.navigation_healthy or self.arming_check == 0:
             return None
         return Refusal(Reason.PREARM, "PreArm: EKF not healthy")
 

@@ -87,7 +87,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from tuavdefs.paramspec import ParameterError, Params
 
-__all__ = ["ParamDef", "ParamProtocol", "params_to_defs", "FTP_HEADER", "FTP_MAX_DATA"]
+__all__ = ["ParamDef", "ParamProtocol", "WireName", "params_to_defs", "FTP_HEADER",
+           "FTP_MAX_DATA"]
 
 log = logging.getLogger(__name__)
 
@@ -98,7 +99,6 @@ OWN_SYSTEM_ID = 1
 OWN_COMPONENT_ID = 1
 PARAM_NAME_MAX = 16
 _NAME_RE = re.compile(r"[A-Z][A-Z0-9_]*")
-STATUSTEXT_MAX = 50
 
 #: Inclusive value range of each integer MAV_PARAM_TYPE.
 _INT_RANGES = {
@@ -153,7 +153,9 @@ class ParamDef:
     letter (ArduPilot style). ``param_type``: a MAV_PARAM_TYPE (REAL32 for floats, INT8 for
     booleans, INT32 for integers). ``get()`` returns the current value as a float (booleans
     0/1); ``set(value)`` applies one and returns None, or the reason it refused (the value
-    unchanged). ``unit`` (SI) and ``description`` are for documentation.
+    unchanged). ``unit`` (the unit on the wire, ArduPilot's spelling: ``cm/s``, ``cdeg``),
+    ``description`` and the range ``low``..``high`` (on the wire, None: unbounded) are the
+    metadata ground stations show (:func:`companion.param_metadata.pdef_xml`).
     """
 
     name: str
@@ -162,6 +164,8 @@ class ParamDef:
     set: Callable[[float], str | None]
     unit: str = ""
     description: str = ""
+    low: float | None = None
+    high: float | None = None
 
     def __post_init__(self) -> None:
         if len(self.name) > PARAM_NAME_MAX or not _NAME_RE.fullmatch(self.name):
@@ -404,13 +408,13 @@ class ParamProtocol:
         index = self._by_name.get(name)
         if index is None:
             self._statustext(mavlink2.MAV_SEVERITY_WARNING,
-                             _clip(f"Unknown parameter {_printable(name)}"))
+                             f"Unknown parameter {_printable(name)}")
             return
         d = self.defs[index]
         value = _from_float32(float(msg.param_value))
         error = self._apply(d, value)
         if error is not None:
-            self._statustext(mavlink2.MAV_SEVERITY_WARNING, _clip(f"{d.name}: {error}"))
+            self._statustext(mavlink2.MAV_SEVERITY_WARNING, f"{d.name}: {error}")
             self._send(peer, self._value_message(index))
             return
         self._send(None, self._value_message(index))
@@ -497,10 +501,6 @@ def _printable(text: str) -> str:
     return "".join(c if " " <= c <= "~" else "?" for c in text)
 
 
-def _clip(text: str) -> str:
-    return text if len(text) <= STATUSTEXT_MAX else text[:STATUSTEXT_MAX - 3] + "..."
-
-
 def _from_float32(value: float) -> float:
     """The shortest decimal that rounds to the same float32 as ``value``."""
     if not math.isfinite(value):
@@ -514,16 +514,32 @@ def _format_value(d: ParamDef, value: float) -> str:
     return repr(float(value))
 
 
-def params_to_defs(obj: Params, names: dict[str, str],
+@dataclass(frozen=True)
+class WireName:
+    """How a field travels as a parameter: its ``name``, ``scale`` (wire value = field value
+    x scale: 100 for metres as ArduPilot's centimetres), ``param_type`` (a MAV_PARAM_TYPE;
+    None: from the field's type) and ``unit`` on the wire (None: the field's SI unit)."""
+
+    name: str
+    scale: float = 1.0
+    param_type: int | None = None
+    unit: str | None = None
+
+
+def params_to_defs(obj: Params, names: dict[str, str | WireName | tuple[WireName, ...]],
                    on_change: Callable[[Params], None]) -> list[ParamDef]:
     """Parameters for every number, boolean and number tuple of a frozen ``Params``.
 
-    ``names`` maps each such field to its parameter name; a tuple field gives one parameter
-    per element, named with the suffix ``_X``, ``_Y``, ``_Z`` (length 3) or ``_1``..``_n``.
-    Floats are REAL32, integers INT32, booleans INT8 (0/1). Setting one builds a new instance
-    with ``dataclasses.replace`` (so the dataclass's bounds and cross-field checks run; a
-    ``ParameterError`` becomes the refusal reason), keeps it as the current instance shared by
-    all the returned parameters, and calls ``on_change(new_instance)``.
+    ``names`` maps each such field to its parameter name, a :class:`WireName` (a scale, a
+    type, a unit on the wire) or several (one field under two names, e.g. ArduCopter's
+    ``RTL_ALT`` in cm and the newer ``RTL_ALT_M`` in m: setting either changes both); a
+    tuple field gives one parameter per element, named with the suffix ``_X``, ``_Y``,
+    ``_Z`` (length 3) or ``_1``..``_n``. By default floats are REAL32, integers INT32,
+    booleans INT8 (0/1); an integer type given to a float field carries the rounded scaled
+    value. The range is the field's bounds, scaled. Setting one builds a new instance with
+    ``dataclasses.replace`` (so the dataclass's bounds and cross-field checks run; a
+    ``ParameterError`` becomes the refusal reason), keeps it as the current instance shared
+    by all the returned parameters, and calls ``on_change(new_instance)``.
 
     Raises ValueError for a field without a name, a name for no such field (or for a field of
     another type), or a parameter name that is not ArduPilot style or longer than 16.
@@ -547,17 +563,21 @@ def params_to_defs(obj: Params, names: dict[str, str],
     meta = {f.name: f.metadata for f in dataclasses.fields(obj)}
     defs: list[ParamDef] = []
     for field_name, (elem_type, length) in exposable.items():
-        base = names[field_name]
-        unit = str(meta[field_name].get("unit", "") or "")
-        doc = str(meta[field_name].get("doc", "") or "")
-        if length is None:
-            defs.append(_field_def(base, field_name, None, elem_type, unit, doc, holder,
-                                   on_change))
-            continue
-        suffixes = ("X", "Y", "Z") if length == 3 else tuple(str(i + 1) for i in range(length))
-        for i, suffix in enumerate(suffixes):
-            defs.append(_field_def(f"{base}_{suffix}", field_name, i, elem_type, unit,
-                                   f"{doc} [{suffix}]", holder, on_change))
+        spec = names[field_name]
+        wires = (spec if isinstance(spec, tuple)
+                 else (spec if isinstance(spec, WireName) else WireName(spec),))
+        m = meta[field_name]
+        doc = str(m.get("doc", "") or "")
+        for wire in wires:
+            if length is None:
+                defs.append(_field_def(wire, wire.name, field_name, None, elem_type, m, doc,
+                                       holder, on_change))
+                continue
+            suffixes = (("X", "Y", "Z") if length == 3
+                        else tuple(str(i + 1) for i in range(length)))
+            for i, suffix in enumerate(suffixes):
+                defs.append(_field_def(wire, f"{wire.name}_{suffix}", field_name, i,
+                                       elem_type, m, f"{doc} [{suffix}]", holder, on_change))
     return defs
 
 
@@ -573,16 +593,21 @@ def _param_kind(tp: Any) -> tuple[type, bool] | None:
     return None
 
 
-def _field_def(name: str, field_name: str, index: int | None, elem_type: type, unit: str,
-               doc: str, holder: list[Params],
+def _field_def(wire: WireName, name: str, field_name: str, index: int | None,
+               elem_type: type, meta: Any, doc: str, holder: list[Params],
                on_change: Callable[[Params], None]) -> ParamDef:
-    param_type = {bool: mavlink2.MAV_PARAM_TYPE_INT8,
-                  int: mavlink2.MAV_PARAM_TYPE_INT32}.get(elem_type,
-                                                          mavlink2.MAV_PARAM_TYPE_REAL32)
+    param_type = wire.param_type
+    if param_type is None:
+        param_type = {bool: mavlink2.MAV_PARAM_TYPE_INT8,
+                      int: mavlink2.MAV_PARAM_TYPE_INT32}.get(elem_type,
+                                                              mavlink2.MAV_PARAM_TYPE_REAL32)
+    scale = float(wire.scale)
+    integral = param_type in _INT_RANGES
 
     def get() -> float:
         value = getattr(holder[0], field_name)
-        return float(value if index is None else value[index])
+        v = float(value if index is None else value[index]) * scale
+        return float(round(v)) if integral and elem_type is not bool else v
 
     def set_(value: float) -> str | None:
         if elem_type is bool:
@@ -590,11 +615,11 @@ def _field_def(name: str, field_name: str, index: int | None, elem_type: type, u
                 return "must be 0 or 1"
             new: Any = value == 1.0
         elif elem_type is int:
-            if not float(value).is_integer():
+            if not float(value / scale).is_integer():
                 return "must be an integer"
-            new = int(value)
+            new = int(value / scale)
         else:
-            new = float(value)
+            new = float(value) / scale
         current = holder[0]
         if index is not None:
             items = list(getattr(current, field_name))
@@ -608,8 +633,12 @@ def _field_def(name: str, field_name: str, index: int | None, elem_type: type, u
         on_change(replaced)
         return None
 
+    lows = [meta.get(k) for k in ("gt", "ge") if meta.get(k) is not None]
+    highs = [meta.get(k) for k in ("lt", "le") if meta.get(k) is not None]
+    unit = wire.unit if wire.unit is not None else str(meta.get("unit", "") or "")
     return ParamDef(name=name, param_type=param_type, get=get, set=set_, unit=unit,
-                    description=doc)
+                    description=doc, low=max(lows) * scale if lows else None,
+                    high=min(highs) * scale if highs else None)
 
 
 def _reason(exc: ParameterError) -> str:

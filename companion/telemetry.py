@@ -4,10 +4,12 @@ ArduCopter keeps one (:class:`TelemetryStreams`).
 
 Every ground-station link starts with :data:`DEFAULT_RATES_HZ` (in simulated time);
 SET_MESSAGE_INTERVAL changes one message on the link that asked, REQUEST_DATA_STREAM a group
-of them (:data:`STREAM_GROUPS`), REQUEST_MESSAGE sends one at once. The messages due at a
-period go out in one write per link. Positions: MAVLink's local NED has its origin at the
-winder, global positions come from ``origin`` (the winder's latitude deg, longitude deg,
-ground altitude m AMSL); inside, the inertial z-up frame and body FLU.
+of them (:data:`STREAM_GROUPS`), GET_MESSAGE_INTERVAL answers with MESSAGE_INTERVAL,
+REQUEST_MESSAGE sends one at once. The winch's WINCH_STATUS is scheduled the same way: each
+link gets the winch's frames at most at its rate (:meth:`TelemetryStreams.forward`). The
+messages due at a period go out in one write per link. Positions: MAVLink's local NED has
+its origin at the winder, global positions come from ``origin`` (the winder's latitude deg,
+longitude deg, ground altitude m AMSL); inside, the inertial z-up frame and body FLU.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ APM = ardupilotmega
 Vec3 = tuple[float, float, float]
 
 __all__ = ["CAPABILITIES", "DEFAULT_RATES_HZ", "DUE_TOLERANCE_S", "FLIGHT_SW_VERSION",
-           "STREAM_GROUPS", "Telemetry", "TelemetryStreams"]
+           "FORWARDED", "STREAM_GROUPS", "Telemetry", "TelemetryStreams"]
 
 #: ArduCopter 4.5.7 official, as AUTOPILOT_VERSION encodes it (major, minor, patch, type).
 FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (7 << 8) | M.FIRMWARE_VERSION_TYPE_OFFICIAL
@@ -71,8 +73,12 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "GPS_RAW_INT": 2.0, "GLOBAL_POSITION_INT": 5.0, "LOCAL_POSITION_NED": 5.0,
     "ATTITUDE": 10.0, "VFR_HUD": 2.0, "HOME_POSITION": 0.2, "MISSION_CURRENT": 1.0,
     "SYSTEM_TIME": 0.5, "EKF_STATUS_REPORT": 2.0, "RAW_IMU": 2.0, "SCALED_IMU": 2.0,
-    "SCALED_PRESSURE": 2.0,
+    "SCALED_PRESSURE": 2.0, "NAV_CONTROLLER_OUTPUT": 2.0, "RC_CHANNELS": 2.0,
+    "SERVO_OUTPUT_RAW": 2.0, "WIND": 1.0, "WINCH_STATUS": 20.0,
 }
+#: Messages another component sends that the autopilot forwards on each link's schedule
+#: (as ArduPilot streams its winch's status).
+FORWARDED = frozenset({"WINCH_STATUS"})
 #: A message due within this [s] of a period's time is sent in that period: its due times
 #: are sums of intervals in floating point, and without it messages due at the same instant
 #: (a 5 Hz one on a 10 Hz one's grid) land a period apart as their rounding falls, and a
@@ -80,12 +86,14 @@ DEFAULT_RATES_HZ: dict[str, float] = {
 DUE_TOLERANCE_S = 1e-6
 #: REQUEST_DATA_STREAM groups, as ArduPilot assigns messages to them.
 STREAM_GROUPS: dict[int, tuple[str, ...]] = {
-    M.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "GPS_RAW_INT", "MISSION_CURRENT"),
+    M.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "GPS_RAW_INT", "MISSION_CURRENT",
+                                        "NAV_CONTROLLER_OUTPUT"),
     M.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
+    M.MAV_DATA_STREAM_RC_CHANNELS: ("RC_CHANNELS", "SERVO_OUTPUT_RAW"),
     M.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
     M.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
     M.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "BATTERY_STATUS", "EXTENDED_SYS_STATE",
-                               "EKF_STATUS_REPORT"),
+                               "EKF_STATUS_REPORT", "WIND", "WINCH_STATUS"),
     M.MAV_DATA_STREAM_RAW_SENSORS: ("RAW_IMU", "SCALED_IMU", "SCALED_PRESSURE"),
 }
 _MSG_IDS = {name: getattr(APM, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_RATES_HZ}
@@ -116,6 +124,8 @@ class Telemetry(NamedTuple):
     ekf: FilterStatus | None = None
     """The navigation filter's status (EKF_STATUS_REPORT; None when flying on the
     simulator's state)."""
+    motors: tuple[float, float, float, float] | None = None
+    """The rotor commands in [0, 1], ArduPilot's quad-X order (SERVO_OUTPUT_RAW)."""
 
 
 @dataclass
@@ -149,6 +159,18 @@ class TelemetryStreams:
         self.generation = -1
         """The endpoints' ``generation`` (their set of links) :attr:`due_s` was found for."""
         self._links: dict[Peer, _LinkState] = {}
+        self.mission_started = False
+        """The stored mission has begun an item since it was uploaded."""
+        self.mission_complete = False
+        """The stored mission ran to its end (until it begins again or is replaced)."""
+        self.wind_source: Any = None
+        """``f()`` -> the onboard wind estimate (velocity the air moves with, z-up [m/s]),
+        asked only when WIND is due; None: no estimate (zero wind reported)."""
+        self._forwarded: dict[str, bytes] = {}     # the last frame of each forwarded message
+        self.fence_enabled = False
+        """FENCE_ENABLE (SYS_STATUS's geofence bits)."""
+        self.fence_breached = False
+        """A fence is breached now."""
 
     def position(self) -> Vec3:
         """The latest position [m] (the winder's exit before the first period)."""
@@ -185,7 +207,7 @@ class TelemetryStreams:
             frames: list[bytes] = []
             for name, entry in st.schedule.items():
                 interval, due = entry
-                if interval <= 0.0:
+                if interval <= 0.0 or name in FORWARDED:
                     continue
                 if t >= due - DUE_TOLERANCE_S:
                     entry[1] = max(due + interval, t) if t - due < interval else t + interval
@@ -201,6 +223,38 @@ class TelemetryStreams:
         for gone in [p for p in self._links if p not in links]:
             del self._links[gone]
         self.due_s, self.generation = next_due, gen
+
+    def forward(self, name: str, data: bytes) -> None:
+        """Another component's frame ``data`` of message ``name`` (in :data:`FORWARDED`) to
+        every link whose schedule has it due (the rest drop it)."""
+        self._forwarded[name] = data
+        t = self.telem.t_s if self.telem is not None else 0.0
+        io = self.io
+        for peer in io.links():
+            entry = self._link(peer).schedule[name]
+            interval, due = entry
+            if interval <= 0.0 or t < due - DUE_TOLERANCE_S:
+                continue
+            entry[1] = max(due + interval, t) if t - due < interval else t + interval
+            io.send_bytes(data, peer)
+
+    def get_interval(self, peer: Peer, msg_id: float) -> int:
+        """MAV_CMD_GET_MESSAGE_INTERVAL: MESSAGE_INTERVAL of ``msg_id`` on ``peer``'s link
+        to it (interval [us]; -1 stopped; 0 a message this vehicle does not stream); the
+        MAV_RESULT."""
+        if not finite(msg_id) or not 0 <= msg_id <= 0xFFFFFF:
+            return M.MAV_RESULT_DENIED
+        mid = int(msg_id)
+        name = _MSG_NAMES.get(mid)
+        if mid == M.MAVLINK_MSG_ID_HEARTBEAT:
+            interval_us = 1_000_000
+        elif name is None:
+            interval_us = 0
+        else:
+            interval = self._link(peer).schedule[name][0]
+            interval_us = round(interval * 1e6) if interval > 0 else -1
+        self.io.send(M.MAVLink_message_interval_message(mid, interval_us), peer)
+        return M.MAV_RESULT_ACCEPTED
 
     def set_interval(self, peer: Peer, msg_id: float, interval_us: float) -> int:
         """MAV_CMD_SET_MESSAGE_INTERVAL on ``peer``'s link: ``interval_us`` [us] between
@@ -247,6 +301,11 @@ class TelemetryStreams:
             if self.nav.home_m is None:
                 return M.MAV_RESULT_TEMPORARILY_REJECTED
             self.io.send(self.home_position(), peer)
+        elif _MSG_NAMES.get(mid) in FORWARDED:
+            data = self._forwarded.get(_MSG_NAMES[mid])
+            if data is None:
+                return M.MAV_RESULT_TEMPORARILY_REJECTED
+            self.io.send_bytes(data, peer)
         elif mid in _MSG_NAMES and self.telem is not None:
             self.io.send(self.build(_MSG_NAMES[mid], self.telem), peer)
         else:
@@ -295,9 +354,17 @@ class TelemetryStreams:
                                               round(100 * tm.throttle),
                                               self.origin[2] + tm.pos_m[2], -vn[2])
         if name == "SYS_STATUS":
-            # the fence's health bit is set as ArduPilot sets it while no fence is breached
-            return M.MAVLink_sys_status_message(_SENSORS, _SENSORS,
-                                                _SENSORS | M.MAV_SYS_STATUS_GEOFENCE, 100, 48000,
+            # the fence (the tether's reach at least) is present, enabled with FENCE_ENABLE,
+            # healthy while not breached; the pre-arm bit only while the pre-arm checks
+            # pass (MAVSDK's is_armable)
+            prearm = self.nav.prearm
+            fence = M.MAV_SYS_STATUS_GEOFENCE
+            health = _SENSORS | (0 if self.fence_breached else fence)
+            if prearm is not None and prearm() is not None:
+                health &= ~M.MAV_SYS_STATUS_PREARM_CHECK
+            return M.MAVLink_sys_status_message(_SENSORS | fence,
+                                                _SENSORS | (fence if self.fence_enabled else 0),
+                                                health, 100, 48000,
                                                 round(100 * 100 * tm.throttle), 100, 0, 0, 0,
                                                 0, 0, 0)
         if name == "BATTERY_STATUS":
@@ -315,7 +382,47 @@ class TelemetryStreams:
             return self.mission_current()
         if name == "SYSTEM_TIME":
             return M.MAVLink_system_time_message(int(time.time() * 1e6), boot_ms)
+        if name == "NAV_CONTROLLER_OUTPUT":
+            return self._nav_output(tm)
+        if name == "RC_CHANNELS":
+            # no RC receiver: no channels, every value "unused", RSSI unknown
+            return M.MAVLink_rc_channels_message(boot_ms, 0, *([65535] * 18), 255)
+        if name == "SERVO_OUTPUT_RAW":
+            # the rotor commands as PWM [us]: 1000 stopped .. 2000 full (ArduPilot's
+            # MOT_PWM_MIN, MOT_PWM_MAX defaults), motors 1-4 on outputs 1-4
+            pwm = [1000 + round(1000 * min(max(c, 0.0), 1.0)) for c in tm.motors or ()]
+            pwm += [0] * (8 - len(pwm))
+            return M.MAVLink_servo_output_raw_message(int(tm.t_s * 1e6) & 0xFFFFFFFF, 0,
+                                                      *pwm[:8])
+        if name == "WIND":
+            w = self.wind_source() if self.wind_source is not None else (0.0, 0.0, 0.0)
+            speed = math.hypot(w[0], w[1])
+            # the direction the wind comes from, clockwise from north [deg]
+            frm = math.degrees(math.atan2(-w[0], -w[1])) % 360.0 if speed > 0 else 0.0
+            return APM.MAVLink_wind_message(frm, speed, w[2])
         raise KeyError(name)
+
+    def _nav_output(self, tm: Telemetry) -> Any:
+        """NAV_CONTROLLER_OUTPUT: the attitude flown (roll, pitch, yaw [deg]; this
+        controller has no separate attitude target to show), the bearing [deg] and
+        horizontal distance [m] to the current target, the altitude error [m] (target
+        above the vehicle: positive) and the horizontal distance to the reference [m]
+        (the cross-track error)."""
+        roll, pitch, yaw = quat_to_euler(quat_enu_flu_to_ned_frd(tm.quat))
+        target = self.nav.target_m
+        ref = self.nav.reference()
+        p = tm.pos_m
+        if target is None:
+            bearing, dist, alt_err = round(math.degrees(yaw)) % 360, 0, 0.0
+        else:
+            dx, dy = target[0] - p[0], target[1] - p[1]
+            bearing = round(math.degrees(math.atan2(dx, dy))) % 360
+            dist = min(round(math.hypot(dx, dy)), 65535)
+            alt_err = target[2] - p[2]
+        xtrack = 0.0 if ref is None else math.hypot(ref.pos_m[0] - p[0], ref.pos_m[1] - p[1])
+        b = bearing - 360 if bearing > 180 else bearing
+        return M.MAVLink_nav_controller_output_message(
+            math.degrees(roll), math.degrees(pitch), b, b, dist, alt_err, 0.0, xtrack)
 
     def _gps_raw(self, tm: Telemetry) -> Any:
         """GPS_RAW_INT of the receiver's last fix (no fix before the first)."""
@@ -395,14 +502,19 @@ class TelemetryStreams:
             0.0, 0.0, 0.0, int(self.telem.t_s * 1e6) if self.telem else 0)
 
     def mission_current(self) -> Any:
-        """MISSION_CURRENT: the current item, the mission's size (without home), its
-        state."""
+        """MISSION_CURRENT: the current item, the mission's size (without home), its state
+        as ArduCopter reports it: NO_MISSION without items, ACTIVE while flown in AUTO,
+        COMPLETE once it ran to its end, PAUSED when begun and left, else NOT_STARTED."""
         nav = self.nav
         total = len(self.missions.items) if hasattr(self.missions, "items") else 0
-        if nav.mission_running:
-            state = M.MISSION_STATE_ACTIVE
-        elif total <= 1:
+        if total <= 1:
             state = M.MISSION_STATE_NO_MISSION
+        elif nav.mission_running:
+            state = M.MISSION_STATE_ACTIVE
+        elif self.mission_complete:
+            state = M.MISSION_STATE_COMPLETE
+        elif self.mission_started:
+            state = M.MISSION_STATE_PAUSED
         else:
             state = M.MISSION_STATE_NOT_STARTED
         return M.MAVLink_mission_current_message(nav.current_seq, max(total - 1, 0), state,

@@ -60,8 +60,8 @@ async def fly(address: str, grpc_port: int) -> list[int]:
         home = position
         break
     print(f"home at {home.latitude_deg:.7f}, {home.longitude_deg:.7f}")
-    await drone.param.set_param_float("WP_SPEED", 2.5)
-    print(f"WP_SPEED = {await drone.param.get_param_float('WP_SPEED')} m/s")
+    await drone.param.set_param_float("WPNAV_SPEED", 250.0)     # ArduCopter's cm/s
+    print(f"WPNAV_SPEED = {await drone.param.get_param_float('WPNAV_SPEED')} cm/s")
 
     await drone.action.set_takeoff_altitude(8.0)
     await drone.action.arm()

@@ -26,6 +26,7 @@ from sitl.truth_log import TruthLog
 from sitl.winder_node import WinderCanNode
 from tuavdefs import simlink as sl
 from tuavdefs.canbus import CanBusError, CanLink
+from tuavdefs.frames import quat_multiply
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
 
@@ -58,6 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="paid-out length at the start [m] (default 1.15 x the distance)")
     ap.add_argument("--home", type=float, nargs=3, default=sl.HOME_DEFAULT,
                     metavar=("LAT", "LON", "ALT"), help="the winder's global position")
+    ap.add_argument("--heading", type=float, default=None, metavar="DEG",
+                    help="the vehicle's heading at start, clockwise from north (default: "
+                         "facing east)")
     ap.add_argument("--no-noise", action="store_true",
                     help="exact sensor readings (no noise, no bias, no GNSS latency)")
     ap.add_argument("--gnss", choices=[p.value for p in GnssPreset],
@@ -103,6 +107,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         length = args.tether_length or 1.15 * math.dist(pos, (0.0, 0.0, 0.0))
         x0, _ = hover_trim(params, pos, length)
         plant = Plant(params, state=x0)
+    if args.heading is not None and math.isfinite(args.heading):
+        # the start's attitude turned about z-up to the heading (yaw-symmetric otherwise)
+        yaw = math.radians(90.0 - args.heading)
+        q = quat_multiply((math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)),
+                          tuple(float(v) for v in plant.x[6:10]))
+        plant.x[6:10] = q
     node = None
     if args.can:
         try:

@@ -97,21 +97,21 @@ def test_heartbeat_identifies_an_arducopter_on_the_ground(flight):
 
 def test_set_a_parameter_and_read_it_back(flight):
     m = flight["m"]
-    m.mav.param_set_send(1, 1, b"PSC_K1_Z", 2.5, M.MAV_PARAM_TYPE_REAL32)
-    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "PSC_K1_Z")
+    m.mav.param_set_send(1, 1, b"TUAV_PSC_K1_Z", 2.5, M.MAV_PARAM_TYPE_REAL32)
+    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "TUAV_PSC_K1_Z")
     assert v.param_value == pytest.approx(2.5)
-    m.mav.param_request_read_send(1, 1, b"PSC_K1_Z", -1)
-    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "PSC_K1_Z")
+    m.mav.param_request_read_send(1, 1, b"TUAV_PSC_K1_Z", -1)
+    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "TUAV_PSC_K1_Z")
     assert v.param_value == pytest.approx(2.5)
     # out of bounds: refused by name, value unchanged
-    m.mav.param_set_send(1, 1, b"PSC_K1_Z", -1.0, M.MAV_PARAM_TYPE_REAL32)
-    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "PSC_K1_Z")
+    m.mav.param_set_send(1, 1, b"TUAV_PSC_K1_Z", -1.0, M.MAV_PARAM_TYPE_REAL32)
+    v = wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "TUAV_PSC_K1_Z")
     assert v.param_value == pytest.approx(2.5)
     # the .parm file is written off the control loop, soon after
     parm, end = flight["veh"].param_file, time.monotonic() + 10.0
-    while not (parm.exists() and "PSC_K1_Z" in parm.read_text()) and time.monotonic() < end:
+    while not (parm.exists() and "TUAV_PSC_K1_Z" in parm.read_text()) and time.monotonic() < end:
         time.sleep(0.05)
-    assert "PSC_K1_Z" in parm.read_text()
+    assert "TUAV_PSC_K1_Z" in parm.read_text()
     # the whole list arrives
     m.mav.param_request_list_send(1, 1)
     names = set()
@@ -123,7 +123,8 @@ def test_set_a_parameter_and_read_it_back(flight):
             names.add(p.param_id)
             count = p.param_count
     assert count is not None and len(names) == count
-    assert {"WP_SPEED", "PSC_K1_X", "ATC_K3_Z", "RTL_ALT", "TETH_REACH"} <= names
+    assert {"WPNAV_SPEED", "TUAV_PSC_K1_X", "TUAV_ATC_K3_Z", "RTL_ALT", "RTL_ALT_M",
+            "TUAV_TETH_REACH", "ARMING_CHECK"} <= names
 
 
 def test_guided_arm_and_take_off_to_10_m(flight):
@@ -146,6 +147,14 @@ def test_guided_arm_and_take_off_to_10_m(flight):
     assert ack.result == M.MAV_RESULT_ACCEPTED
     assert wait_msg(m, "GLOBAL_POSITION_INT", lambda g: g.relative_alt > 9700, 60)
     assert wait_msg(m, "STATUSTEXT", lambda s: "Takeoff complete" in s.text, 30)
+    # hovering at the take-off point: the rotors near hover (PWM 1000..2000), the target
+    # reached, no wind in this run (the disturbance estimate is the tether model's error)
+    servo = wait_msg(m, "SERVO_OUTPUT_RAW")
+    pwm = [servo.servo1_raw, servo.servo2_raw, servo.servo3_raw, servo.servo4_raw]
+    assert all(1200 < v < 1900 for v in pwm) and max(pwm) - min(pwm) < 100
+    nav = wait_msg(m, "NAV_CONTROLLER_OUTPUT")
+    assert nav.wp_dist == 0 and abs(nav.alt_error) < 0.3 and nav.xtrack_error < 0.2
+    assert wait_msg(m, "WIND").speed < 1.0
 
 
 def test_streams_follow_set_message_interval_and_request_data_stream(flight):
@@ -198,8 +207,9 @@ def test_winch_commands_without_a_winch_fail_cleanly(flight):
 def test_guided_target_and_reposition(flight):
     m = flight["m"]
     # a waypoint-speed change takes effect on the next move
-    m.mav.param_set_send(1, 1, b"WP_SPEED", 3.0, M.MAV_PARAM_TYPE_REAL32)
-    assert wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "WP_SPEED").param_value == 3.0
+    m.mav.param_set_send(1, 1, b"WPNAV_SPEED", 300.0, M.MAV_PARAM_TYPE_REAL32)   # cm/s
+    assert wait_msg(m, "PARAM_VALUE",
+                    lambda p: p.param_id == "WPNAV_SPEED").param_value == 300.0
     # SET_POSITION_TARGET_LOCAL_NED: 14 m east, 10 m north, 12 m up (NED: x north, y east)
     mask = 0b0000111111111000
     m.mav.set_position_target_local_ned_send(0, 1, 1, M.MAV_FRAME_LOCAL_NED, mask,
@@ -211,7 +221,7 @@ def test_guided_target_and_reposition(flight):
         return math.dist(local(g), (14.0, 10.0, 12.0)) < 0.2
 
     assert wait_msg(m, "GLOBAL_POSITION_INT", arrived, 60) is not None
-    assert 2.7 < max(speeds) < 3.3                           # cruised at WP_SPEED
+    assert 2.7 < max(speeds) < 3.3                           # cruised at WPNAV_SPEED
     # SET_POSITION_TARGET_GLOBAL_INT, relative altitude
     lat, lon = ll(2.0, 6.0)
     m.mav.set_position_target_global_int_send(0, 1, 1, REL, mask, round(lat * 1e7),
@@ -336,6 +346,10 @@ def test_mission_in_auto_reaches_every_item_then_lands_and_disarms(flight):
     assert ack.type == M.MAV_MISSION_ACCEPTED
     got = download_mission(m)
     assert [i.command for i in got[1:]] == [c[0] for c in items]
+    # MISSION_CURRENT's mission_state as ArduCopter reports it: not started, active,
+    # complete at the end (what MAVSDK's is_mission_finished reads)
+    before = wait_msg(m, "MISSION_CURRENT")
+    assert (before.total, before.mission_state) == (6, M.MISSION_STATE_NOT_STARTED)
     m.set_mode("AUTO")
     seen: list = []
     reached: list[int] = []
@@ -365,6 +379,9 @@ def test_mission_in_auto_reaches_every_item_then_lands_and_disarms(flight):
         winch.close()
     assert reached == [1, 2, 4, 5, 6]          # a DO_ item is run, not reached
     assert disarmed is not None
+    states = [x.mission_state for x in seen if x.get_type() == "MISSION_CURRENT"]
+    assert M.MISSION_STATE_ACTIVE in states
+    assert wait_msg(m, "MISSION_CURRENT").mission_state == M.MISSION_STATE_COMPLETE
     assert len(to_winch) == 1
     w = to_winch[0]
     assert (w.command, w.target_system, w.target_component) == (M.MAV_CMD_DO_WINCH, 1, 169)

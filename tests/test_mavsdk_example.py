@@ -23,7 +23,7 @@ def test_mavsdk_flies_takeoff_goto_and_a_mission_raw_with_rtl(tmp_path):
     finally:
         _, comp_log = veh.stop()
     assert res.returncode == 0, res.stdout + res.stderr[-3000:] + comp_log
-    assert "WP_SPEED = 2.5" in res.stdout
+    assert "WPNAV_SPEED = 250.0 cm/s" in res.stdout
     assert "mission items reached: [1, 2, 3, 4]" in res.stdout
     assert "Reached command #3" in comp_log and "Disarmed" in comp_log
     assert "Traceback" not in comp_log

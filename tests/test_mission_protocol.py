@@ -60,7 +60,7 @@ def wire(msg, src_system: int = GCS_SYS, src_component: int = GCS_COMP):
 class Vehicle:
     """A MissionProtocol with recording callbacks; replies are put through the wire too."""
 
-    def __init__(self, validate=None, **kw):
+    def __init__(self, validate=None, **kw):  # kw: MissionProtocol's keywords
         self.sent: list[tuple[object, object]] = []
         self.texts: list[tuple[int, str]] = []
         self.changes: list[list[MissionItem]] = []
@@ -677,28 +677,67 @@ def test_clear_all(mission_type):
     assert v.proto.items == [HOME] and v.changes[-1] == [HOME]
 
 
+def fence_items() -> list[MissionItem]:
+    """An inclusion polygon of four vertices and an exclusion circle of 5 m (MAVLink's
+    fence commands, as QGC and MAVProxy upload them)."""
+    corners = [(47.3975, 8.5452), (47.3975, 8.5460), (47.3981, 8.5460), (47.3981, 8.5452)]
+    poly = [MissionItem(command=mavlink2.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+                        frame=mavlink2.MAV_FRAME_GLOBAL_INT, param1=4, x=degrees_to_e7(la),
+                        y=degrees_to_e7(lo)) for la, lo in corners]
+    circle = MissionItem(command=mavlink2.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION,
+                         frame=mavlink2.MAV_FRAME_GLOBAL_INT, param1=5.0,
+                         x=degrees_to_e7(47.3978), y=degrees_to_e7(8.5456))
+    return [*poly, circle]
+
+
 @pytest.mark.parametrize("mission_type", [FENCE, RALLY])
-def test_fence_and_rally_are_empty_and_reject_items(mission_type):
-    v = Vehicle()
+def test_fence_and_rally_are_stores_of_their_own(mission_type):
+    """Uploaded from seq 0 (no home), checked by validate_other, downloaded back as sent,
+    cleared; the mission is untouched."""
+    others: list = []
+    checked: list = []
+    v = Vehicle(validate_other=lambda t, seq, item: checked.append((t, seq)),
+                on_other_changed=lambda t, items: others.append((t, items)))
     upload(v, MISSION_A)
-    before = v.proto.items
-    changes = len(v.changes)
-    v.rx(mavlink2.MAVLink_mission_request_list_message(1, 1, mission_type))
-    (entry,) = v.take()
-    assert entry[1].get_type() == "MISSION_COUNT"
-    assert (entry[1].count, entry[1].mission_type) == (0, mission_type)
-    v.rx(mavlink2.MAVLink_mission_count_message(1, 1, 0, mission_type))
+    before, changes = v.proto.items, len(v.changes)
+    items = fence_items() if mission_type == FENCE else [
+        MissionItem(command=mavlink2.MAV_CMD_NAV_RALLY_POINT, frame=REL_ALT_INT, z=12.0,
+                    x=degrees_to_e7(47.3979), y=degrees_to_e7(8.5457))]
+    v.rx(mavlink2.MAVLink_mission_count_message(1, 1, len(items), mission_type))
+    for seq in range(len(items)):
+        (entry,) = v.take()
+        req = entry[1]
+        assert (req.get_type(), req.seq, req.mission_type) == ("MISSION_REQUEST_INT", seq,
+                                                               mission_type)
+        v.rx(item_msg(seq, items[seq], mission_type=mission_type))
     assert_ack(v.take()[0], mavlink2.MAV_MISSION_ACCEPTED, mission_type=mission_type)
-    v.rx(mavlink2.MAVLink_mission_count_message(1, 1, 4, mission_type))
-    assert_ack(v.take()[0], mavlink2.MAV_MISSION_UNSUPPORTED, mission_type=mission_type)
-    assert not v.proto.upload_in_progress
-    v.rx(item_msg(0, HOME, mission_type=mission_type))
-    assert_ack(v.take()[0], mavlink2.MAV_MISSION_UNSUPPORTED, mission_type=mission_type)
-    v.rx(mavlink2.MAVLink_mission_request_int_message(1, 1, 0, mission_type))
+    assert checked == [(mission_type, i) for i in range(len(items))]
+    assert others[-1] == (mission_type, items) and v.proto.stored(mission_type) == items
+    v.rx(mavlink2.MAVLink_mission_request_list_message(1, 1, mission_type))
+    assert v.take()[0][1].count == len(items)
+    for seq, item in enumerate(items):
+        v.rx(mavlink2.MAVLink_mission_request_int_message(1, 1, seq, mission_type))
+        got = v.take()[0][1]
+        assert (got.command, got.x, got.y, got.mission_type) == (item.command, item.x,
+                                                                 item.y, mission_type)
+    v.rx(mavlink2.MAVLink_mission_request_int_message(1, 1, len(items), mission_type))
     assert_ack(v.take()[0], mavlink2.MAV_MISSION_INVALID_SEQUENCE, mission_type=mission_type)
     v.rx(mavlink2.MAVLink_mission_clear_all_message(1, 1, mission_type))
     assert_ack(v.take()[0], mavlink2.MAV_MISSION_ACCEPTED, mission_type=mission_type)
+    assert v.proto.stored(mission_type) == [] and others[-1] == (mission_type, [])
     assert v.proto.items == before and len(v.changes) == changes
+
+
+def test_a_refused_fence_item_aborts_its_upload_only():
+    v = Vehicle(validate_other=lambda t, seq, item: (mavlink2.MAV_MISSION_INVALID_PARAM1,
+                                                     "bad vertex count") if seq == 2 else None)
+    items = fence_items()
+    v.rx(mavlink2.MAVLink_mission_count_message(1, 1, len(items), FENCE))
+    for seq in range(3):
+        v.take()
+        v.rx(item_msg(seq, items[seq], mission_type=FENCE))
+    assert_ack(v.take()[0], mavlink2.MAV_MISSION_INVALID_PARAM1, mission_type=FENCE)
+    assert v.proto.stored(FENCE) == [] and not v.proto.upload_in_progress
 
 
 @pytest.mark.parametrize("msg", [

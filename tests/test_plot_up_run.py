@@ -257,7 +257,7 @@ def test_metrics_are_their_definitions_on_the_csv(plotted, up_run):
     # the waypoints reached: the ones the client saw, when it saw them, with the UAV there
     reached = m["waypoints_reached"]
     assert [r["index"] for r in reached] == [seq for seq, _ in up_run["reached"]]
-    radius = 0.5   # the companion's default WP_RADIUS
+    radius = 0.5   # the companion's default WPNAV_RADIUS (50 cm)
     for r, (_, t_seen), wp in zip(reached, up_run["reached"], WAYPOINTS, strict=True):
         assert abs(r["t_s"] - t_seen) < 0.25
         at = [np.interp(r["t_s"], t, c[k]) for k in ("x_m", "y_m", "z_m")]

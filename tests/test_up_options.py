@@ -7,7 +7,10 @@ import subprocess
 import sys
 
 import pytest
+from netns_util import netns_available, run_session
+from pymavlink import mavutil
 
+from tuav_sitl.locations import Home, load_locations, user_locations_path
 from tuav_sitl.up import (
     SIM_LINK_DEFAULT,
     _home,
@@ -21,6 +24,8 @@ from tuav_sitl.up import (
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import ParameterError
 from tuavdefs.simlink import format_sim_address, parse_sim_address
+
+M = mavutil.mavlink
 
 
 def parse(*argv: str) -> argparse.Namespace:
@@ -40,9 +45,46 @@ def test_speedup_and_home_parse():
     for bad in ("0", "-2", "fast"):
         with pytest.raises(argparse.ArgumentTypeError):
             _speedup(bad)
-    assert _home("47.1,8.5,500") == (47.1, 8.5, 500.0)
-    with pytest.raises(argparse.ArgumentTypeError):
-        _home("95,8,1")
+    assert _home("47.1,8.5,500") == Home(47.1, 8.5, 500.0, None)
+    assert _home("47.1,8.5,500,-10") == Home(47.1, 8.5, 500.0, 350.0)
+    for bad in ("95,8,1", "47,8", "47,8,1,2,3", "47,8,x"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            _home(bad)
+
+
+def test_home_by_name_from_the_shipped_file_and_the_users_own(tmp_path, monkeypatch):
+    """ArduPilot's locations.txt form; the user's file (XDG config dir) overrides."""
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
+    assert user_locations_path() == tmp_path / "tuav-sitl" / "locations.txt"
+    cmac = _home("CMAC")        # ArduPilot SITL's own default location
+    assert (cmac.lat_deg, cmac.lon_deg, cmac.alt_m, cmac.heading_deg) == pytest.approx(
+        (-35.363261, 149.165230, 584.0, 353.0))
+    user = tmp_path / "tuav-sitl" / "locations.txt"
+    user.parent.mkdir(parents=True)
+    user.write_text("# mine\nFIELD = 51.5, -0.12, 20, 45  # a comment\nCMAC=1,2,3,4\n")
+    assert _home("FIELD") == Home(51.5, -0.12, 20.0, 45.0)
+    assert _home("CMAC") == Home(1.0, 2.0, 3.0, 4.0)
+    with pytest.raises(argparse.ArgumentTypeError, match="FIELD.*NAME=LAT,LON,ALT,HEADING"):
+        _home("NOWHERE")
+    user.write_text("BROKEN=1,2\n")
+    with pytest.raises(ValueError, match="locations.txt:1"):
+        load_locations([user])
+
+
+def test_out_is_repeatable_and_instance_has_sim_vehicles_short_option():
+    args = parse("--out", "udp:127.0.0.1:14551", "--out", "udpout:10.0.0.5:14552", "-I", "3")
+    assert args.out == [("127.0.0.1", 14551), ("10.0.0.5", 14552)]
+    assert args.instance == 3
+    for bad in ("127.0.0.1:14551", "tcp:127.0.0.1:5760", "udp:127.0.0.1:", "udp:h:70000"):
+        with pytest.raises(SystemExit):
+            parse("--out", bad)
+
+
+def test_wind_without_a_direction_says_what_to_write(capsys):
+    with pytest.raises(SystemExit):
+        parse("--wind", "5")
+    err = capsys.readouterr().err
+    assert "direction" in err and "--wind 5,270" in err
 
 
 def test_wind_from_the_west_blows_east():
@@ -156,3 +198,18 @@ def test_up_names_the_gnss_presets_and_estimator_kinds_as_their_packages_do():
 
     assert tuple(p.value for p in GnssPreset) == up.GNSS_PRESETS
     assert up.ESTIMATOR_KINDS == ESTIMATOR_KINDS
+
+
+@pytest.mark.skipif(not netns_available(),
+                    reason="needs root (unshare) for a private network namespace")
+def test_up_with_a_named_home_an_out_port_and_dash_i(tmp_path):
+    """A ground station on the --out port sees the vehicle at CMAC facing 353 degrees (as
+    ArduPilot SITL starts there); -I 1 moves the TCP port to 5770."""
+    out = run_session("tests.netns.up_options_session", str(tmp_path), timeout_s=300)
+    assert out["out"]["heartbeat"] == [1, M.MAV_AUTOPILOT_ARDUPILOTMEGA]
+    lat, lon = out["out"]["lat_lon"]
+    assert lat == pytest.approx(-35.363261, abs=1e-4)    # 2 m east of the winder
+    assert lon == pytest.approx(149.165230, abs=1e-4)
+    assert abs((out["out"]["yaw_deg"] - 353.0 + 180.0) % 360.0 - 180.0) < 3.0
+    assert out["tcp_5770"]
+    assert out["up_rc"] == 0 and out["left"] == []

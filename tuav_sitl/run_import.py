@@ -151,16 +151,16 @@ class ImportResult:
 
 
 def _acceptance_radius_m(run_dir: Path) -> float:
-    """The companion's waypoint acceptance radius: ``WP_RADIUS`` of ``companion.parm`` if
-    set there, else its default [m]."""
+    """The companion's waypoint acceptance radius [m]: ``WPNAV_RADIUS`` [cm] of
+    ``companion.parm`` if set there, else its default."""
     radius = NavigationParams().acceptance_radius_m
     parm = run_dir / "companion.parm"
     if parm.is_file():
         for line in parm.read_text().splitlines():
             parts = line.replace(",", " ").split()
-            if len(parts) >= 2 and parts[0] == "WP_RADIUS":
+            if len(parts) >= 2 and parts[0] == "WPNAV_RADIUS":
                 try:
-                    value = float(parts[1])
+                    value = float(parts[1]) / 100.0
                 except ValueError:
                     continue
                 if value > 0 and math.isfinite(value):

@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
+from tuav_sitl.locations import Home, parse_home
 from tuavdefs import component_link as cl
 from tuavdefs import signing as sg
 from tuavdefs import simlink as sl
@@ -202,17 +203,33 @@ def _last_line(path: Path) -> str:
     return lines[-1] if lines else "(no output)"
 
 
-def _home(text: str) -> tuple[float, float, float]:
-    parts = [float(v) for v in text.replace(" ", ",").split(",") if v]
-    if len(parts) != 3 or not (-90 <= parts[0] <= 90 and -180 <= parts[1] <= 180):
-        raise argparse.ArgumentTypeError("--home takes LAT,LON,ALT (degrees, degrees, m AMSL)")
-    return (parts[0], parts[1], parts[2])
+def _home(text: str) -> Home:
+    """``--home``: a named location (tuav_sitl/locations.py) or LAT,LON,ALT[,HEADING]."""
+    try:
+        return parse_home(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--home: {exc}") from None
+
+
+def _out(text: str) -> tuple[str, int]:
+    """``--out udp:HOST:PORT`` (or ``udpout:``, as MAVProxy and sim_vehicle.py write it)."""
+    kind, _, rest = text.partition(":")
+    host, _, port = rest.rpartition(":")
+    if kind not in ("udp", "udpout") or not host or not port.isdigit() \
+            or not 0 < int(port) < 65536:
+        raise argparse.ArgumentTypeError(
+            f"--out takes udp:HOST:PORT (e.g. udp:127.0.0.1:14551), got {text!r}")
+    return (host, int(port))
 
 
 def _wind(text: str) -> tuple[float, float, str]:
     parts = [v.strip() for v in text.split(",")]
+    if len(parts) < 2:
+        raise argparse.ArgumentTypeError(
+            f"--wind needs the direction it blows from: SPEED,FROM_DEG[,TURBULENCE], e.g. "
+            f"--wind {parts[0] or 5},270 for {parts[0] or 5} m/s from the west")
     try:
-        speed, from_deg = float(parts[0]), float(parts[1]) if len(parts) > 1 else 0.0
+        speed, from_deg = float(parts[0]), float(parts[1])
     except ValueError:
         raise argparse.ArgumentTypeError(
             "--wind takes SPEED,FROM_DEG[,TURBULENCE], e.g. 5,270,light") from None
@@ -251,8 +268,12 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          "Dryden turbulence none|light|moderate|severe, e.g. 5,270,light")
     ap.add_argument("--can", default="auto", metavar="SPEC",
                     help="CAN bus: auto, socketcan:IFACE, udp_multicast[:GROUP]")
-    ap.add_argument("--home", type=_home, default=sl.HOME_DEFAULT, metavar="LAT,LON,ALT",
-                    help="the winder's global position (ground altitude AMSL)")
+    ap.add_argument("--home", type=_home, default=Home(*sl.HOME_DEFAULT),
+                    metavar="NAME|LAT,LON,ALT[,HEADING]",
+                    help="the winder's global position (ground altitude AMSL) and the "
+                         "vehicle's heading at start [deg from north]: a name of "
+                         "tuav_sitl/data/locations.txt or ~/.config/tuav-sitl/locations.txt "
+                         "(e.g. CMAC), or the numbers")
     ap.add_argument("--position", type=float, nargs=3, default=(2.0, 0.0, 0.0),
                     metavar=("X", "Y", "Z"),
                     help="where the UAV starts [m], z-up frame from the winder: on the "
@@ -283,7 +304,10 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                      help="MAVLink 2 signing on from the start with this key (64 "
                           "hexadecimal digits)")
     ap.add_argument("--logdir", default="runs", help="where run folders go")
-    ap.add_argument("--instance", type=int, default=0,
+    ap.add_argument("--out", type=_out, action="append", default=[],
+                    metavar="udp:HOST:PORT",
+                    help="also push MAVLink by UDP here (repeatable, as MAVProxy's --out)")
+    ap.add_argument("-I", "--instance", type=int, default=0,
                     help="offset every port (by 10 per instance) to run stacks side by side")
     ap.add_argument("--sim-link", choices=("unix", "tcp"), default=SIM_LINK_DEFAULT,
                     help="the simulator link between plant and companion: a Unix-domain "
@@ -421,7 +445,8 @@ def run_up(args: argparse.Namespace) -> int:
         with os.fdopen(fd, "w") as f:
             f.write(sg.key_file_text(key))
     can = _can_spec(args.can, args.instance)
-    home = [str(v) for v in args.home]
+    h = args.home
+    home = [repr(h.lat_deg), repr(h.lon_deg), repr(h.alt_m)]
     common = ["--params", str(run_dir / "params.toml")]
     from companion.estimator import EstimatorParams
     from sitl.sensors import GNSS_MODELS, GnssPreset
@@ -439,12 +464,13 @@ def run_up(args: argparse.Namespace) -> int:
 
         estimator = estimator.replace(
             accel_offsets_m_s2=accel_calibration(SensorNoise.preset(args.gnss, 0),
-                                                 tuple(args.home),
+                                                 (h.lat_deg, h.lon_deg, h.alt_m),
                                                  params.environment.gravity_m_s2),
             accel_bias_sigma_m_s2=CALIBRATED_ACCEL_BIAS_SIGMA_M_S2)
     (run_dir / "estimator.toml").write_text(_to_toml(to_dict(estimator)))
     plant_args = ["-m", "sitl", *plant_listen_args(sim), "--can", can, "--home", *home,
                   "--gnss", args.gnss, "--position", *map(str, args.position),
+                  *(["--heading", repr(h.heading_deg)] if h.heading_deg is not None else []),
                   "--truth-log", str(run_dir / "truth.csv"), *faults_args, *common]
     if math.isfinite(speedup):
         plant_args += ["--speedup", repr(speedup)]
@@ -454,8 +480,10 @@ def run_up(args: argparse.Namespace) -> int:
                  str(ports.component), "--home", *home, "--gcs-tcp", str(ports.gcs_tcp),
                  "--gcs-udp", f"127.0.0.1:{ports.udp_gcs}",
                  "--gcs-udp", f"127.0.0.1:{ports.udp_api}",
+                 *[a for host, port in args.out for a in ("--gcs-udp", f"{host}:{port}")],
                  "--tlog", str(run_dir / "flight.tlog"),
                  "--param-file", str(run_dir / "companion.parm"),
+                 "--log-dir", str(run_dir / "logs"),
                  "--estimator", str(run_dir / "estimator.toml"),
                  "--signing-key-file", str(key_file), *common]
     if args.goto is not None:
@@ -569,7 +597,9 @@ def _banner(run_dir: Path, ports: Ports, sim: tuple[str, int] | str, can: str,
     watch = (f"candump {channel}   (or: tuav-sitl candump --can {interface}:{channel})"
              if interface == "socketcan" else
              f"tuav-sitl candump --can {interface}:{channel} [--decode | -L]")
-    lat, lon, alt = args.home
+    h = args.home
+    heading = f", facing {h.heading_deg:g} deg" if h.heading_deg is not None else ""
+    outs = "".join(f" and udp:{host}:{port}" for host, port in args.out)
     clock = ("real time" if speedup == 1.0 else
              "lockstep, as fast as possible" if math.isinf(speedup) else
              f"lockstep, paced at {speedup:g}x real time")
@@ -577,7 +607,7 @@ def _banner(run_dir: Path, ports: Ports, sim: tuple[str, int] | str, can: str,
         "tuav-sitl up: plant, companion and ground station are running",
         f"  MAVLink (connect a ground station or script): tcp:127.0.0.1:{ports.gcs_tcp}",
         f"    UDP pushed to udp:127.0.0.1:{ports.udp_gcs} (ground stations) and "
-        f"udp:127.0.0.1:{ports.udp_api} (APIs)",
+        f"udp:127.0.0.1:{ports.udp_api} (APIs){outs}",
         f"    e.g. mavproxy.py --master tcp:127.0.0.1:{ports.gcs_tcp}",
         *([f"    MAVLink 2 signing on: key in {run_dir / 'signing.key'} (MAVProxy: "
            "signing key PASSPHRASE; pymavlink: mav.setup_signing(key))"]
@@ -585,7 +615,8 @@ def _banner(run_dir: Path, ports: Ports, sim: tuple[str, int] | str, can: str,
         f"  simulator link (plant <-> companion): {sl.format_sim_address(sim)}",
         f"  component link (companion <-> winch): tcp:127.0.0.1:{ports.component}",
         f"  winder CAN bus: {interface}:{channel}   watch it: {watch}",
-        f"  home: {lat:.7f}, {lon:.7f}, {alt:.1f} m AMSL (the winder)",
+        f"  home: {h.lat_deg:.7f}, {h.lon_deg:.7f}, {h.alt_m:.1f} m AMSL (the winder)"
+        f"{heading}",
         f"  clock: {clock}; scheduling: {sched}",
         f"  logs: {run_dir} (flight.tlog, can.log, truth.csv, a log per process)",
         "  Ctrl-C stops all three.",

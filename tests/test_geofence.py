@@ -1,0 +1,135 @@
+"""The geofence: its geometry against shapely (a reference library) and analytic cases,
+the tether's reach always on, the fence items' checks; and in the real processes, a
+polygon uploaded with pymavlink (mission type 1) that the vehicle, flown out of it in
+GUIDED, answers by RTL as FENCE_ACTION 1 says."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import pytest
+from gcs_util import Vehicle, arm, command, wait_msg
+from pymavlink import mavutil
+
+from companion.geofence import FenceBreach, FenceParams, Geofence, check_fence_item
+from companion.mission_protocol import MissionItem, degrees_to_e7
+from tuavdefs.frames import local_enu_to_global
+from tuavdefs.simlink import HOME_DEFAULT
+
+M = mavutil.mavlink
+INC = M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+EXC = M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+CIRC_EXC = M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
+
+
+def item(command: int, x: float, y: float, param1: float) -> MissionItem:
+    lat, lon, _ = local_enu_to_global((x, y, 0.0), HOME_DEFAULT)
+    return MissionItem(command=command, frame=M.MAV_FRAME_GLOBAL_INT, param1=param1,
+                       x=degrees_to_e7(lat), y=degrees_to_e7(lon))
+
+
+def polygon(command: int, corners: list[tuple[float, float]]) -> list[MissionItem]:
+    return [item(command, x, y, len(corners)) for x, y in corners]
+
+
+CONCAVE = [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (0.0, 5.0), (-20.0, 20.0)]
+HOLE = [(-5.0, -15.0), (5.0, -15.0), (5.0, -8.0), (-5.0, -8.0)]
+
+
+def test_polygons_and_circles_agree_with_shapely():
+    shapely = pytest.importorskip("shapely.geometry")
+    fence = Geofence(FenceParams(enable=True, type_mask=4), HOME_DEFAULT)
+    assert fence.set_items([*polygon(INC, CONCAVE), *polygon(EXC, HOLE),
+                            item(CIRC_EXC, 10.0, 0.0, 4.0)]) is None
+    allowed = (shapely.Polygon(CONCAVE).difference(shapely.Polygon(HOLE))
+               .difference(shapely.Point(10.0, 0.0).buffer(4.0, 256)))
+    rng = random.Random(3)
+    outside = 0
+    for _ in range(2000):
+        x, y = rng.uniform(-25, 25), rng.uniform(-25, 25)
+        truth = allowed.contains(shapely.Point(x, y))
+        if abs(allowed.exterior.distance(shapely.Point(x, y))) < 0.05 or any(
+                hole.distance(shapely.Point(x, y)) < 0.05 for hole in allowed.interiors):
+            continue          # on an edge (the circle is a 256-gon there)
+        got = fence.breach((x, y, 5.0), None, 1000.0)
+        assert (got is None) == truth, (x, y)
+        outside += got is FenceBreach.POLYGON
+    assert 300 < outside < 1700
+
+
+def test_altitude_circle_and_the_tethers_reach():
+    fence = Geofence(FenceParams(enable=True, type_mask=3, radius_m=30.0, alt_max_m=20.0),
+                     HOME_DEFAULT)
+    home = (2.0, 0.0, 0.2)
+    assert fence.breach((2.0, 29.0, 10.0), home, 47.0) is None
+    assert fence.breach((2.0, 31.0, 10.0), home, 47.0) is FenceBreach.CIRCLE
+    assert fence.breach((2.0, 0.0, 21.0), home, 47.0) is FenceBreach.ALT_MAX
+    # the tether's reach, fence disabled or not
+    off = Geofence(FenceParams(enable=False), HOME_DEFAULT)
+    assert off.breach((40.0, 0.0, 30.0), home, 47.0) is FenceBreach.TETHER
+    assert off.breach((40.0, 0.0, 20.0), home, 47.0) is None
+    assert math.dist((40.0, 0.0, 30.0), (0, 0, 0)) > 47.0
+
+
+def test_fence_items_are_checked():
+    assert check_fence_item(0, polygon(INC, HOLE)[0]) is None
+    bad_count = item(INC, 0.0, 0.0, 2)
+    assert check_fence_item(0, bad_count)[0] == M.MAV_MISSION_INVALID_PARAM1
+    assert check_fence_item(0, item(CIRC_EXC, 0.0, 0.0, 0.0))[0] == \
+        M.MAV_MISSION_INVALID_PARAM1
+    wp = MissionItem(command=M.MAV_CMD_NAV_WAYPOINT, frame=M.MAV_FRAME_GLOBAL_INT)
+    assert check_fence_item(0, wp)[0] == M.MAV_MISSION_UNSUPPORTED
+    # a polygon cut short is refused and the previous fence kept
+    fence = Geofence(FenceParams(enable=True, type_mask=4), HOME_DEFAULT)
+    fence.set_items(polygon(INC, HOLE))
+    assert fence.set_items(polygon(INC, HOLE)[:3]) is not None
+    assert len(fence.include_polygons) == 1
+
+
+def upload_fence(m, items: list[MissionItem]):
+    m.mav.mission_count_send(1, 1, len(items), M.MAV_MISSION_TYPE_FENCE)
+    while True:
+        msg = wait_msg(m, ["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], timeout=10)
+        assert msg is not None
+        if msg.get_type() == "MISSION_ACK":
+            return msg
+        it = items[msg.seq]
+        m.mav.mission_item_int_send(1, 1, msg.seq, it.frame, it.command, 0, 1, it.param1, 0,
+                                    0, 0, it.x, it.y, 0, M.MAV_MISSION_TYPE_FENCE)
+
+
+def test_a_polygon_breach_in_flight_is_answered_by_rtl(tmp_path):
+    veh = Vehicle(tmp_path)
+    try:
+        m = veh.connect()
+        square = [(-10.0, -10.0), (10.0, -10.0), (10.0, 10.0), (-10.0, 10.0)]
+        assert upload_fence(m, polygon(INC, square)).type == M.MAV_MISSION_ACCEPTED
+        for name, value, ptype in ((b"FENCE_TYPE", 4, M.MAV_PARAM_TYPE_INT8),
+                                   (b"FENCE_ENABLE", 1, M.MAV_PARAM_TYPE_INT8)):
+            m.mav.param_set_send(1, 1, name, value, ptype)
+            assert wait_msg(m, "PARAM_VALUE",
+                            lambda p, n=name: p.param_id == n.decode()).param_value == value
+        sys_status = wait_msg(m, "SYS_STATUS")
+        assert sys_status.onboard_control_sensors_enabled & M.MAV_SYS_STATUS_GEOFENCE
+        m.set_mode("GUIDED")
+        assert arm(m).result == M.MAV_RESULT_ACCEPTED
+        command(m, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 8)
+        assert wait_msg(m, "STATUSTEXT", lambda s: "Takeoff complete" in s.text, 60)
+        m.mav.set_position_target_local_ned_send(0, 1, 1, M.MAV_FRAME_LOCAL_NED,
+                                                 0b110111111000, 0, 16, -8, 0, 0, 0, 0, 0,
+                                                 0, 0, 0)
+        seen: list = []
+        assert wait_msg(m, "STATUSTEXT", lambda s: "Fence breach: polygon" in s.text, 60,
+                        seen)
+        hb = wait_msg(m, "HEARTBEAT", lambda h: h.get_srcComponent() == 1)
+        assert hb.custom_mode == 6                                    # RTL
+        where = [g for g in seen if g.get_type() == "LOCAL_POSITION_NED"][-1]
+        assert 9.3 <= where.y < 11.0        # east: caught at the edge (5 Hz telemetry lags)
+        unhealthy = wait_msg(m, "SYS_STATUS")
+        assert not unhealthy.onboard_control_sensors_health & M.MAV_SYS_STATUS_GEOFENCE
+        assert wait_msg(m, "STATUSTEXT", lambda s: "Disarmed" in s.text, 120)
+        back = wait_msg(m, "LOCAL_POSITION_NED")
+        assert math.hypot(back.x, back.y - 2.0) < 0.5           # landed at home
+    finally:
+        veh.stop()
