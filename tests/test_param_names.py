@@ -130,7 +130,8 @@ def test_names_fit_mavlink_and_project_ones_are_prefixed():
                   "WPNAV_SPEED_DN", "WPNAV_ACCEL", "WPNAV_RADIUS", "LAND_SPEED",
                   "LAND_ALT_LOW", "RTL_ALT", "RTL_ALT_M", "RTL_LOIT_TIME", "DISARM_DELAY",
                   "GUID_TIMEOUT", "ARMING_CHECK", "FENCE_ENABLE", "FENCE_TYPE", "FENCE_RADIUS",
-                  "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN"}
+                  "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN", "FS_GCS_ENABLE",
+                  "FS_GCS_TIMEOUT"}
     assert arducopter <= set(names)
     assert all(n in arducopter or n.startswith("TUAV_") for n in names)
 
