@@ -61,6 +61,7 @@ from companion.signing import VehicleSigning
 from companion.telemetry import DUE_TOLERANCE_S, Telemetry, TelemetryStreams
 from tuavdefs import component_link as cl
 from tuavdefs import signing as sg
+from tuavdefs.mav_frames import global_to_local
 
 M = mavlink2
 
@@ -105,7 +106,7 @@ class Autopilot:
         self.fence = Geofence(FenceParams(), self.origin)
         """The geofence (its parameters set by the parameter table)."""
         self.rally: list[MissionItem] = []
-        """The rally points uploaded (stored; not yet flown to by RTL)."""
+        """The rally points uploaded (RTL ends at the nearest, or home)."""
         self._breach: FenceBreach | None = None
         self._fence_next_s = -math.inf
         self.params = ParamProtocol(params, self._send_to, self.statustext,
@@ -446,6 +447,8 @@ class Autopilot:
                 self.log(f"fence of {len(items)} items accepted")
         else:
             self.rally = items
+            self.nav.rally_m = tuple(global_to_local(i.x * 1e-7, i.y * 1e-7, i.z, i.frame,
+                                                     self.origin) for i in items)
             self.log(f"{len(items)} rally points accepted")
 
     def _check_fence(self, pos_m: tuple[float, float, float]) -> None:

@@ -305,6 +305,8 @@ class Navigator:
         self.armed = False
         self.landed = True
         self.home_m: Vec3 | None = None
+        #: Rally points [m] (uploaded as the rally mission type): RTL may end at one.
+        self.rally_m: tuple[Vec3, ...] = ()
         """Launch point [m] (set at arming on the ground, or at the first state)."""
         self.mission: list[NavCommand] = []
         self.mission_index = 0
@@ -878,12 +880,23 @@ class Navigator:
         self._vel = None
         self._queue(self._landing_legs((stop[0], stop[1]), seq))
 
+    def rtl_destination(self, stop: Vec3) -> Vec3:
+        """Where RTL goes from ``stop`` [m]: home, or the nearest rally point (as
+        ArduCopter with RALLY_INCL_HOME 1: home counts as one) that is within the reach."""
+        home = self.home_m if self.home_m is not None else (0.0, 0.0, 0.0)
+        best, best_d = home, math.hypot(home[0] - stop[0], home[1] - stop[1])
+        for r in self.rally_m:
+            d = math.hypot(r[0] - stop[0], r[1] - stop[1])
+            if d < best_d and self.check_target((r[0], r[1], max(r[2], 0.0))) is None:
+                best, best_d = r, d
+        return best
+
     def _rtl(self, seq: int | None = None) -> None:
         ref = self._current_ref()
-        home = self.home_m if self.home_m is not None else (0.0, 0.0, 0.0)
-        alt = max(ref.pos_m[2], self.gear_height_m + self.p.rtl_alt_m)
         legs: list[_Leg] = []
         stop = _stop_point(ref, self.p.acc_m_s2)
+        home = self.rtl_destination(stop)
+        alt = max(ref.pos_m[2], self.gear_height_m + self.p.rtl_alt_m)
         # the climb and the way home stay within the tether's reach, whatever RTL_ALT says
         # (a level line's farthest point from the winder is one of its ends)
         reach = self.reach_m
