@@ -455,7 +455,8 @@ class Autopilot:
         """A breach begun (in flight): said, and acted on as FENCE_ACTION says (the
         tether's reach: RTL, always)."""
         nav = self.nav
-        breach = self.fence.breach(pos_m, nav.home_m, nav.reach_m) if nav.flying else None
+        breach = (self.fence.breach(pos_m, nav.home_m, nav.tether_limit_m) if nav.flying
+                  else None)
         self.streams.fence_breached = breach is not None
         if breach is None or breach == self._breach:
             self._breach = breach

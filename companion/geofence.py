@@ -10,8 +10,9 @@ the vertex count) and circles (``NAV_FENCE_CIRCLE_*``, ``param1`` the radius [m]
 global coordinates, turned into the inertial frame once at upload (:meth:`Geofence.set_items`).
 
 :meth:`Geofence.breach` says which fence a position is outside of (an enum), the tether's
-reach first: farther from the winder than the share of the tether a target may need (the
-navigator's ``reach_m``) is a breach whatever ``FENCE_ENABLE`` says.
+reach first: farther from the winder than the tether allows less its slack margin (the
+navigator's ``tether_limit_m``: the whole tether, or what a braked drum paid out; targets
+keep ``reach_m``'s margin inside it) is a breach whatever ``FENCE_ENABLE`` says.
 """
 
 from __future__ import annotations

@@ -363,6 +363,16 @@ class Navigator:
             length = min(length, self._locked_length_m)
         return self.p.reach_fraction * length - self.p.reach_slack_m
 
+    @property
+    def tether_limit_m(self) -> float:
+        """Distance [m] from the winder beyond which the tether would be near taut (the
+        always-on fence's): the whole tether, or the length a braked drum has paid out,
+        less ``reach_slack_m``. Targets keep the margin of :attr:`reach_m` inside it."""
+        length = self.tether_length_m
+        if self._locked_length_m is not None:
+            length = min(length, self._locked_length_m)
+        return max(length - self.p.reach_slack_m, 0.0)
+
     def winch_report(self, length_m: float, tension_n: float | None,
                      braked: bool) -> None:
         """The winch's report: paid-out length [m], drum tension [N] (None: unknown),

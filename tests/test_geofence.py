@@ -133,3 +133,20 @@ def test_a_polygon_breach_in_flight_is_answered_by_rtl(tmp_path):
         assert math.hypot(back.x, back.y - 2.0) < 0.5           # landed at home
     finally:
         veh.stop()
+
+
+def test_a_braked_drum_bounds_targets_not_where_the_vehicle_holds():
+    """LOCK or HOLD at 15 m paid out, the vehicle 14 m from the winder (the tether slack):
+    a target that far is refused (the reach keeps its margin: 0.95 x 15 - 0.5 = 13.75 m),
+    but the vehicle is not in breach of the tether's fence (15 - 0.5 = 14.5 m): it holds."""
+    from companion.navigation import NavigationParams, Navigator
+
+    nav = Navigator(NavigationParams(), 0.1, 50.0)
+    nav.winch_report(15.0, 5.0, True)
+    assert nav.reach_m == pytest.approx(13.75)
+    assert nav.tether_limit_m == pytest.approx(14.5)
+    pos = (14.0, 0.0, 0.0)
+    assert nav.check_target(pos) is not None
+    assert Geofence(FenceParams(), HOME_DEFAULT).breach(pos, (2.0, 0.0, 0.0), nav.tether_limit_m) is None
+    assert Geofence(FenceParams(), HOME_DEFAULT).breach((14.6, 0.0, 0.0), (2.0, 0.0, 0.0),
+                                          nav.tether_limit_m) is FenceBreach.TETHER
