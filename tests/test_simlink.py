@@ -708,9 +708,15 @@ def test_real_time_flies_on_when_the_companion_stops_reading():
         t_stall = server.plant.t_s
         time.sleep(4.0)                 # stalled: reads nothing, answers nothing
         advanced_s = server.plant.t_s - t_stall
-        for _ in range(50):             # reading again
+        # reading again: until the plant says so (its backlog drained; on a busy machine
+        # that takes more than a few periods), at most 20 s of wall time
+        end = time.monotonic() + 20.0
+        n = 0
+        while n < 50 or (not any("reads again" in t for t in said)
+                         and time.monotonic() < end):
             s = client.receive_state(timeout_s=10)
             client.send_actuators(s.time_usec, u.rotor_commands, armed=True)
+            n += 1
         summary = _finish(out, client)
     # blocked in sendall, the plant stood still once the small window and its own
     # buffer were full (a few tenths of a second); flying on, it kept up with the clock
