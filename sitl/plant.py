@@ -53,6 +53,8 @@ from sitl.kernel import (
     W_FX,
     W_FY,
     W_FZ,
+    W_GROUNDED,
+    W_LOWEST,
     attachment_point,
     coupled_rhs_into,
     coupled_rk4_into,
@@ -202,9 +204,21 @@ def _line_forces(x: np.ndarray, line: np.ndarray, p: np.ndarray, lp: np.ndarray,
                  setpoints: np.ndarray, winder_cmd_n_m: float, winder_enabled: bool,
                  wind: np.ndarray, node_wind: np.ndarray, warm: np.ndarray,
                  scratch: np.ndarray, line_scratch: np.ndarray) -> None:
-    """The lumped line's pull at the state ``x``, ``line`` into ``warm``."""
+    """The lumped line's pull at the state ``x``, ``line`` into ``warm``, with its lowest
+    node's height and the number of nodes on the ground."""
     coupled_rhs_into(scratch[0], line_scratch[0], x, line, p, lp, setpoints, winder_cmd_n_m,
                      winder_enabled, wind, node_wind, warm)
+    n = int(line[0])
+    lowest = 0.0
+    grounded = 0
+    for k in range(n):
+        z = line[3 + 6 * k]
+        if k == 0 or z < lowest:
+            lowest = z
+        if z <= 0.0:
+            grounded += 1
+    warm[W_LOWEST] = lowest
+    warm[W_GROUNDED] = grounded
 
 
 @njit
@@ -356,6 +370,7 @@ class Plant:
         self._wind = np.zeros(6)   # at the UAV, then the part the same at every height
         self._wind[:3] = self.wind_m_s
         self._n_sub = substeps(dt_s, self.model.lp)
+        self._segment_m = float(self.model.lp[L_LS])
         self._speed_min = self.params.vehicle.rotor_speed_min_rad_s
         self._speed_max = self.params.vehicle.rotor_speed_max_rad_s
         self._setpoints = np.zeros(4)
@@ -522,11 +537,8 @@ class Plant:
 
     def _line_forces(self) -> TetherForces:
         w = self.model.warm.tolist()
-        line, lp = self.model.line, self.model.lp
-        n = int(line[0])
-        z = line[3:1 + 6 * n:6]
-        lowest = float(z.min()) if n else 0.0
-        on_ground = float(np.count_nonzero(z <= 0.0)) * lp[L_LS]
+        lowest = w[W_LOWEST]
+        on_ground = w[W_GROUNDED] * self._segment_m
         top = (w[W_FX], w[W_FY], w[W_FZ])
         exit_ = (w[W_EX], w[W_EY], w[W_EZ])
         regime = CatenaryRegime.TOUCHDOWN if on_ground > 0.0 else CatenaryRegime.SUSPENDED
