@@ -156,7 +156,7 @@ def line_rhs(ls: np.ndarray, dls: np.ndarray, lp: np.ndarray, bx: float, by: flo
     g, rho, ea, ba, ls_m = lp[L_G], lp[L_RHO], lp[L_EA], lp[L_BA], lp[L_LS]
     inv_ls, inv_m, cn, ct = lp[L_INV_LS], lp[L_INV_M], lp[L_CN], lp[L_CT]
     exit_len = length - n * ls_m
-    inv_exit = 1.0 / exit_len
+    inv_exit = 1.0 / (exit_len - ls[ls.shape[0] - 1])   # the allowance: manage_nodes
     # the upper end of the current segment and the point above it
     ux, uy, uz, uvx, uvy, uvz = bx, by, bz, bvx, bvy, bvz
     ax, ay, az = bx, by, bz
@@ -189,7 +189,7 @@ def line_rhs(ls: np.ndarray, dls: np.ndarray, lp: np.ndarray, bx: float, by: flo
         if j == 0:
             # the top: the segment's pull, its upper half's weight and drag
             top_t = t
-            half = 0.5 / inv_l0
+            half = 0.5 * (ls_m if n > 0 else exit_len)
             top_fx, top_fy, top_fz = -tx, -ty, -tz - rho * half * g
             if d > 0.0:
                 inv_d = 1.0 / d
@@ -275,23 +275,42 @@ def line_wind(ls: np.ndarray, wp: np.ndarray, wind: np.ndarray, out: np.ndarray)
         out[k, 2] = f * sz + uniform[2]
 
 
+def line_state_size(max_nodes: int) -> int:
+    """Floats of a line state holding up to ``max_nodes`` free nodes: the count, the nodes,
+    and last the exit segment's allowance (``ls[-1]``, :func:`manage_nodes`)."""
+    return 2 + 6 * max_nodes
+
+
 @njit
-def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float) -> int:
+def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float, decay: float) -> int:
     """Adds or removes the node at the exit so that the exit segment stays between
     ``MERGE`` and ``SPLIT`` nominal lengths, conserving mass and momentum (a new node on the
-    exit segment's chord, at the velocity the line had there, interpolated towards the
-    exit at rest; a removed node's momentum given to its neighbour). The free nodes'
-    momentum is the same before and after. Returns the change in the number of nodes."""
+    exit segment's chord where the two parts keep its strain, at the velocity the line had
+    there, interpolated towards the exit at rest: the free nodes' momentum is the same
+    after; a removed node and its neighbour become one node at their mean velocity, the
+    half segment of line that joins the exit's share taking its momentum at that velocity
+    into the exit).
+
+    A removed node leaves the exit segment's chord shorter than the path it replaces (the
+    line bent there), by up to millimetres: as much as the segment's whole stretch at
+    working tension. So that this does not drop the tension to nothing for the moment the
+    line takes to straighten, the exit segment keeps its strain: its elastic length is
+    ``l_e - a``, the allowance ``a`` (``ls[-1]``, [m]) that difference, which then fades by
+    ``decay`` (< 1) per call (once a plant step). Returns the change in the number of
+    nodes."""
     ls_m = lp[L_LS]
     maxn = int(lp[L_MAXN])
+    last = ls.shape[0] - 1
+    ls[last] *= decay
     n0 = int(ls[0])
     n = n0
     while True:
         exit_len = length - n * ls_m
+        allowance = ls[last]
         if exit_len > SPLIT * ls_m and n < maxn:
-            # the node above the exit keeps its place and velocity; the new one sits at
-            # (exit_len - ls_m)/exit_len of the way from the exit
-            f = (exit_len - ls_m) / exit_len
+            # the node above the exit keeps its place and velocity; the new one divides
+            # the chord as the elastic lengths ls_m and exit_len - ls_m - allowance
+            f = (exit_len - ls_m - allowance) / (exit_len - allowance)
             if n > 0:
                 o = 1 + 6 * (n - 1)
                 for i in range(6):
@@ -301,15 +320,32 @@ def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float) -> int:
                     ls[1 + i] = 0.0
             n += 1
         elif exit_len < MERGE * ls_m and n > 0:
-            # node n-1 goes; node n-2 (if any), whose share becomes ls_m + exit_len/2 (the
-            # exit's share takes the other ls_m/2), takes the momentum of both
+            # node n-1 goes; node n-2 (if any), whose share becomes ls_m + exit_len/2,
+            # moves at the two nodes' mean velocity; the exit's share takes the other
+            # ls_m/2 of line and the momentum it carries at that velocity (line reeled in
+            # arrives at the exit moving with it)
+            o = 1 + 6 * (n - 1)
+            x, y, z = ls[o], ls[o + 1], ls[o + 2]
+            strain = math.sqrt(x * x + y * y + z * z) / (exit_len - allowance) - 1.0
             if n > 1:
                 o = 1 + 6 * (n - 2)
                 m_keep = ls_m
                 m_gone = 0.5 * (ls_m + exit_len)
-                m_new = ls_m + 0.5 * exit_len
+                m_both = m_keep + m_gone
                 for i in range(3, 6):
-                    ls[o + i] = (m_keep * ls[o + i] + m_gone * ls[o + 6 + i]) / m_new
+                    ls[o + i] = (m_keep * ls[o + i] + m_gone * ls[o + 6 + i]) / m_both
+                x, y, z = ls[o], ls[o + 1], ls[o + 2]
+                chord = math.sqrt(x * x + y * y + z * z)
+            else:
+                chord = 0.0
+            allowance = 0.0
+            if strain > 0.0 and n > 1:
+                allowance = exit_len + ls_m - chord / (1.0 + strain)
+                if allowance < 0.0:
+                    allowance = 0.0
+                elif allowance > 0.5 * (exit_len + ls_m):
+                    allowance = 0.5 * (exit_len + ls_m)
+            ls[last] = allowance
             n -= 1
         else:
             break
@@ -334,12 +370,12 @@ def line_energy_j(ls: np.ndarray, lp: np.ndarray, bx: float, by: float, bz: floa
             l0 = ls_m
         else:
             x = y = z = 0.0
-            l0 = exit_len
+            l0 = exit_len - ls[ls.shape[0] - 1]
         d = math.sqrt((ux - x) ** 2 + (uy - y) ** 2 + (uz - z) ** 2)
         if d > l0:
             e += 0.5 * ea * (d - l0) ** 2 / l0
         if j == 0:
-            e += rho * 0.5 * l0 * g * bz
+            e += rho * 0.5 * (ls_m if n > 0 else exit_len) * g * bz
         if j < n:
             share = 0.5 * (ls_m + (ls_m if j < n - 1 else exit_len))
             m = rho * share
@@ -409,7 +445,7 @@ def lay_line(ls: np.ndarray, lp: np.ndarray, points: np.ndarray, length: float) 
     node at its arc length (linear interpolation)."""
     ls_m = lp[L_LS]
     n = node_count(length, ls_m)
-    if 1 + 6 * n > ls.size:
+    if line_state_size(n) > ls.size:
         raise ValueError(f"length {length!r} m needs {n} nodes, more than the line holds")
     m = points.shape[0]
     s = np.linspace(0.0, length, m)

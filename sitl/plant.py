@@ -71,6 +71,7 @@ from sitl.lumped import (
     L_LS,
     lay_line,
     line_energy_j,
+    line_state_size,
     line_wind,
     manage_nodes,
     relax,
@@ -85,6 +86,9 @@ from tuavdefs.jit import entry_point
 from tuavdefs.params import SystemParams, TetherModel
 
 N_STATES = 19
+#: Time constant with which the lumped line's exit allowance fades
+#: (:func:`sitl.lumped.manage_nodes`) [s].
+ALLOWANCE_TAU_S = 0.1
 POS, VEL, QUAT, RATES, ROTORS, DRUM_ANGLE, DRUM_RATE = (
     slice(0, 3), slice(3, 6), slice(6, 10), slice(10, 13), slice(13, 17), 17, 18)
 
@@ -195,7 +199,7 @@ def _lumped_step(x: np.ndarray, line: np.ndarray, scratch: np.ndarray,
         if s < n_sub - 1:
             x[DRUM_ANGLE], x[DRUM_RATE] = drum_projection(p, x[DRUM_ANGLE], x[DRUM_RATE],
                                                           omega_before, braked)
-    manage_nodes(line, lp, p[P_RW] * x[DRUM_ANGLE])
+    manage_nodes(line, lp, p[P_RW] * x[DRUM_ANGLE], math.exp(-dt / ALLOWANCE_TAU_S))
     return omega_before
 
 
@@ -297,8 +301,8 @@ class PlantModel:
         self.lumped = params.tether.kind == TetherModel.LUMPED
         self.lp = pack_line_params(params)
         n_max = max_line_nodes(params)
-        self.line = np.zeros(1 + 6 * n_max)
-        self.line_scratch = np.zeros((5, 1 + 6 * n_max))
+        self.line = np.zeros(line_state_size(n_max))
+        self.line_scratch = np.zeros((5, line_state_size(n_max)))
         self.node_wind = np.zeros((n_max, 3))
 
     def rotor_setpoints(self, u: PlantInputs) -> tuple[float, ...]:

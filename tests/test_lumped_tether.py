@@ -13,10 +13,12 @@ import pytest
 
 from sitl.kernel import max_line_nodes, pack_line_params
 from sitl.lumped import (
+    MERGE,
     lay_line,
     line_energy_j,
     line_rhs,
     line_rk4_prescribed,
+    line_state_size,
     manage_nodes,
     relax,
 )
@@ -37,7 +39,7 @@ class Line:
         self.tp = self.params.tether
         self.lp = pack_line_params(self.params)
         n = max_line_nodes(self.params)
-        self.ls = np.zeros(1 + 6 * n)
+        self.ls = np.zeros(line_state_size(n))
         self.scratch = np.zeros((5, self.ls.size))
         self.node_wind = np.zeros((n, 3))
         self.top_wind = np.zeros(6)
@@ -163,7 +165,7 @@ def test_transverse_frequency_of_a_taut_line_is_the_strings():
     lp = pack_line_params(params)
     tp = params.tether
     n_max = max_line_nodes(params)
-    ls = np.zeros(1 + 6 * n_max)
+    ls = np.zeros(line_state_size(n_max))
     top = (0.0, 0.0, length * stretch)
     points = np.column_stack((np.zeros(101), np.zeros(101), np.linspace(0, top[2], 101)))
     lay_line(ls, lp, points, length)
@@ -214,19 +216,53 @@ def test_paying_out_and_in_conserves_mass_and_momentum():
         mass = rho * (sum(masses) + 0.5 * ls_m + 0.5 * exit_len)
         return mass, mom
 
-    mass0, mom0 = totals(20.0)
     seen = set()
+    rho, ls_m = line.tp.linear_density_kg_m, line.tp.segment_length_m
     for length in np.concatenate((np.linspace(20.0, 26.0, 300), np.linspace(26.0, 20.0, 300))):
         before = totals(length)[1]
-        change = manage_nodes(line.ls, line.lp, length)
+        change = manage_nodes(line.ls, line.lp, length, 1.0)
         seen.add(change)
         mass, mom = totals(length)
-        assert mass == pytest.approx(line.tp.linear_density_kg_m * length)
-        if change:
+        assert mass == pytest.approx(rho * length)
+        if change > 0:
+            # a split: the free nodes' momentum is the same
             np.testing.assert_allclose(mom, before, rtol=1e-12, atol=1e-14)
+        elif change < 0:
+            # a merge: the survivor moves at the two nodes' mean velocity, and the half
+            # segment that joins the exit's share carries that velocity into the exit
+            v = line.node(line.n - 1)[3:]
+            np.testing.assert_allclose(mom + rho * 0.5 * ls_m * v, before, rtol=1e-12,
+                                       atol=1e-14)
     assert {1, -1} <= seen
     assert line.n == int(line.ls[0])
-    del mass0, mom0
+
+
+def test_a_merge_keeps_the_exit_segment_s_tension():
+    # reeling in past a merge on a bent line: the chord that replaces the two segments at
+    # the exit is shorter than their path; the exit segment keeps its strain (the
+    # allowance), so the drum's tension does not drop
+    ls_m = 2.0
+    line = Line(7 * ls_m + MERGE * ls_m + 1e-9, total_length_m=50.0, segments=25,
+                ground_friction_coeff=0.0)
+    top = (10.0, 0.0, 11.0)
+    line.lay(top)
+    line.settle(top, seconds=4.0, h=2e-4)
+    assert line.n == 7
+    def exit_tension():   # the exit segment's tension: its pull with its half weight back
+        f = line.forces(top)
+        exit_len = line.length - line.n * ls_m
+        return math.hypot(f[5], f[6], f[7] + 0.5 * exit_len * line.tp.linear_density_kg_m * G)
+
+    before = exit_tension()
+    line.length -= 2e-9                    # now just short of MERGE nominal lengths
+    assert manage_nodes(line.ls, line.lp, line.length, 1.0) == -1
+    allowance = line.ls[-1]
+    assert 1e-4 < allowance < 0.1          # the bend's shortfall, held as allowance
+    assert before > 1.0
+    assert exit_tension() == pytest.approx(before, rel=0.01)
+    # without the allowance the shorter chord leaves the exit segment slack
+    line.ls[-1] = 0.0
+    assert exit_tension() < 0.5 * before
 
 
 # --- MoorDyn ---------------------------------------------------------------------------
