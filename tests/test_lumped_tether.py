@@ -145,6 +145,65 @@ def test_energy_is_conserved_without_drag_and_damping():
         drift < 1e-3 * abs(e0)
 
 
+# --- drag: the steady shape in a uniform wind ------------------------------------------
+
+def _cable_in_wind(top, length, ea, w, cn, wind):
+    """The elastic cable's static shape from the exit (the origin) to ``top`` under its
+    weight ``w`` [N/m] and the normal drag ``cn |v_n| v_n`` [N/m] of a uniform ``wind``
+    (3) [m/s], as the continuous equations give it (tension vector T along the line:
+    dT/ds = -f, dr/ds = (1 + |T|/EA) T/|T|), solved by shooting on the exit's tension:
+    (the exit's tension vector, the dense solution over unstretched arc length)."""
+    from scipy.integrate import solve_ivp
+    from scipy.optimize import fsolve
+
+    u = np.asarray(wind, float)
+
+    def rhs(_s, y):
+        t = y[3:]
+        tn = math.sqrt(t @ t)
+        c = t / tn
+        vn = u - (u @ c) * c
+        f = cn * math.sqrt(vn @ vn) * vn - np.array([0.0, 0.0, w])
+        return np.concatenate(((1.0 + tn / ea) * c, -f))
+
+    def solve(t0):
+        return solve_ivp(rhs, (0.0, length), [0.0, 0.0, 0.0, *t0], rtol=1e-11,
+                         atol=1e-11, dense_output=True)
+
+    t0 = fsolve(lambda t0: solve(t0).y[:3, -1] - np.asarray(top), [4.0, 0.0, 2.0],
+                xtol=1e-12)
+    return t0, solve(t0)
+
+
+@pytest.mark.parametrize("wind", [(5.0, 0.0, 0.0), (10.0, 0.0, 0.0), (0.0, 8.0, 0.0)])
+def test_steady_shape_in_uniform_wind_matches_the_loaded_cable(wind):
+    # suspended all along, normal drag only (C_dt 0): the nodes on the continuous cable's
+    # shape and the end forces within 1 % of its tensions
+    pytest.importorskip("scipy")
+    length, top = 30.0, (20.0, 0.0, 20.0)
+    line = Line(length, tangential_drag_coeff=0.0, ground_friction_coeff=0.0)
+    tp = line.tp
+    cn = 0.5 * EnvironmentParams().air_density_kg_m3 * tp.diameter_m * tp.normal_drag_coeff
+    t_exit, sol = _cable_in_wind(top, length, tp.axial_stiffness_n,
+                                 tp.linear_density_kg_m * G, cn, wind)
+    line.node_wind[:] = wind
+    line.top_wind[:3] = wind
+    line.lay(top)
+    fx, fy, fz, _, _, ex, ey, ez = line.settle(top, seconds=30.0)   # the sideways swing is slow
+    t_top = sol.y[3:, -1]
+    scale = math.sqrt(t_top @ t_top)
+    drag = cn * float(np.dot(wind, wind)) * length
+    assert drag > 0.3 * tp.linear_density_kg_m * G * length   # the wind shapes the line
+    np.testing.assert_allclose((fx, fy, fz), -t_top, atol=0.01 * scale)
+    np.testing.assert_allclose((ex, ey, ez), t_exit, atol=0.01 * scale)
+    for k in range(line.n):
+        s = length - (k + 1) * tp.segment_length_m      # the node's arc length from the exit
+        assert np.linalg.norm(line.node(k)[:3] - sol.sol(s)[:3]) < 0.01
+        assert line.node(k)[2] > 0.0
+    if wind[1]:
+        assert max(line.node(k)[1] for k in range(line.n)) > 1.0   # blown sideways
+
+
 # --- the taut string's transverse frequency ------------------------------------------
 
 def _zero_crossing_frequency(t: np.ndarray, y: np.ndarray) -> float:
