@@ -199,7 +199,8 @@ def _lumped_step(x: np.ndarray, line: np.ndarray, scratch: np.ndarray,
         if s < n_sub - 1:
             x[DRUM_ANGLE], x[DRUM_RATE] = drum_projection(p, x[DRUM_ANGLE], x[DRUM_RATE],
                                                           omega_before, braked)
-    manage_nodes(line, lp, p[P_RW] * x[DRUM_ANGLE], math.exp(-dt / ALLOWANCE_TAU_S))
+    manage_nodes(line, lp, p[P_RW] * x[DRUM_ANGLE], p[P_RW] * x[DRUM_RATE],
+                 math.exp(-dt / ALLOWANCE_TAU_S))
     return omega_before
 
 

@@ -279,7 +279,7 @@ def test_paying_out_and_in_conserves_mass_and_momentum():
     rho, ls_m = line.tp.linear_density_kg_m, line.tp.segment_length_m
     for length in np.concatenate((np.linspace(20.0, 26.0, 300), np.linspace(26.0, 20.0, 300))):
         before = totals(length)[1]
-        change = manage_nodes(line.ls, line.lp, length, 1.0)
+        change = manage_nodes(line.ls, line.lp, length, 0.0, 1.0)
         seen.add(change)
         mass, mom = totals(length)
         assert mass == pytest.approx(rho * length)
@@ -314,7 +314,7 @@ def test_a_merge_keeps_the_exit_segment_s_tension():
 
     before = exit_tension()
     line.length -= 2e-9                    # now just short of MERGE nominal lengths
-    assert manage_nodes(line.ls, line.lp, line.length, 1.0) == -1
+    assert manage_nodes(line.ls, line.lp, line.length, 0.0, 1.0) == -1
     allowance = line.ls[-1]
     assert 1e-4 < allowance < 0.1          # the bend's shortfall, held as allowance
     assert before > 1.0
