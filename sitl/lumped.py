@@ -283,7 +283,7 @@ def line_state_size(max_nodes: int) -> int:
 
 @njit
 def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float, length_rate: float,
-                 decay: float) -> int:
+                 decay: float, top: np.ndarray) -> int:
     """Adds or removes the node at the exit so that the exit segment stays between
     ``MERGE`` and ``SPLIT`` nominal lengths, conserving mass and momentum (a new node on the
     exit segment's chord where the two parts keep its strain, at the velocity the line had
@@ -300,8 +300,9 @@ def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float, length_rate: flo
     ``decay`` (< 1) per call (once a plant step); and its strain rate, the survivor's
     velocity along the new chord set for it (``length_rate`` [m/s] the drum's): else the
     drum, reeling in at the line's speed along the old segment, stretches the new one at
-    once (a bend of 20 degrees took the tension from 5 to 44 N in 25 ms). Returns the change
-    in the number of nodes."""
+    once (a bend of 20 degrees took the tension from 5 to 44 N in 25 ms). ``top`` is the
+    top B's position and velocity (6 floats), the upper end of a line without free nodes.
+    Returns the change in the number of nodes."""
     ls_m = lp[L_LS]
     maxn = int(lp[L_MAXN])
     last = ls.shape[0] - 1
@@ -319,9 +320,9 @@ def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float, length_rate: flo
                 o = 1 + 6 * (n - 1)
                 for i in range(6):
                     ls[o + 6 + i] = f * ls[o + i]
-            else:
+            else:       # the first free node, on the chord to the top
                 for i in range(6):
-                    ls[1 + i] = 0.0
+                    ls[1 + i] = f * top[i]
             n += 1
         elif exit_len < MERGE * ls_m and n > 0:
             # node n-1 goes; node n-2 (if any), whose share becomes ls_m + exit_len/2,

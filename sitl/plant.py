@@ -199,8 +199,10 @@ def _lumped_step(x: np.ndarray, line: np.ndarray, scratch: np.ndarray,
         if s < n_sub - 1:
             x[DRUM_ANGLE], x[DRUM_RATE] = drum_projection(p, x[DRUM_ANGLE], x[DRUM_RATE],
                                                           omega_before, braked)
+    top = scratch[0, :6]
+    top[0], top[1], top[2], top[3], top[4], top[5] = attachment_point(x, p)
     manage_nodes(line, lp, p[P_RW] * x[DRUM_ANGLE], p[P_RW] * x[DRUM_RATE],
-                 math.exp(-dt / ALLOWANCE_TAU_S))
+                 math.exp(-dt / ALLOWANCE_TAU_S), top)
     return omega_before
 
 

@@ -279,7 +279,7 @@ def test_paying_out_and_in_conserves_mass_and_momentum():
     rho, ls_m = line.tp.linear_density_kg_m, line.tp.segment_length_m
     for length in np.concatenate((np.linspace(20.0, 26.0, 300), np.linspace(26.0, 20.0, 300))):
         before = totals(length)[1]
-        change = manage_nodes(line.ls, line.lp, length, 0.0, 1.0)
+        change = manage_nodes(line.ls, line.lp, length, 0.0, 1.0, np.array([*top, 0, 0, 0.0]))
         seen.add(change)
         mass, mom = totals(length)
         assert mass == pytest.approx(rho * length)
@@ -314,7 +314,7 @@ def test_a_merge_keeps_the_exit_segment_s_tension():
 
     before = exit_tension()
     line.length -= 2e-9                    # now just short of MERGE nominal lengths
-    assert manage_nodes(line.ls, line.lp, line.length, 0.0, 1.0) == -1
+    assert manage_nodes(line.ls, line.lp, line.length, 0.0, 1.0, np.array([*top, 0, 0, 0.0])) == -1
     allowance = line.ls[-1]
     assert 1e-4 < allowance < 0.1          # the bend's shortfall, held as allowance
     assert before > 1.0
@@ -548,3 +548,18 @@ def test_plant_lumped_energy_with_no_losses():
         es.append(total())
     assert plant.position_m[2] > 1.0
     assert max(abs(e - e0) for e in es) < 1e-3 * abs(e0)
+
+
+def test_the_first_node_is_laid_on_the_chord_to_the_top():
+    # a line without free nodes (a take-off: the UAV 3 m up) paid out past SPLIT nominal
+    # lengths gains its first node on the straight line to the top, moving with it there
+    line = Line(3.0, total_length_m=50.0, segments=25)
+    assert line.n == 0
+    top = np.array([1.0, 0.5, 3.5, 0.2, 0.0, 1.0])
+    assert manage_nodes(line.ls, line.lp, 4.01, 0.5, 1.0, top) == 1
+    f = (4.01 - line.tp.segment_length_m) / 4.01
+    np.testing.assert_allclose(line.node(0), f * top)
+    # its segments share the chord as their unstretched lengths: neither is stretched
+    fx, fy, fz, *_ = line_rhs(line.ls, line.scratch[0], line.lp, *top, 4.01, 0.5,
+                              line.node_wind, line.top_wind)
+    assert math.hypot(fx, fy, fz) < 1.0
