@@ -286,11 +286,12 @@ def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float, length_rate: flo
                  decay: float, top: np.ndarray) -> int:
     """Adds or removes the node at the exit so that the exit segment stays between
     ``MERGE`` and ``SPLIT`` nominal lengths, conserving mass and momentum (a new node on the
-    exit segment's chord where the two parts keep its strain, at the velocity the line had
-    there, interpolated towards the exit at rest: the free nodes' momentum is the same
-    after; a removed node and its neighbour become one node at their mean velocity, the
-    half segment of line that joins the exit's share taking its momentum at that velocity
-    into the exit).
+    exit segment's chord where the two parts keep its strain, moving across the chord as
+    the line there, interpolated towards the exit at rest, and along it so that both parts
+    keep the segment's strain rate, the line at the exit leaving at the drum's speed: with
+    the drum still the free nodes' momentum is the same after; a removed node and its
+    neighbour become one node at their mean velocity, the half segment of line that joins
+    the exit's share taking its momentum at that velocity into the exit).
 
     A removed node leaves the exit segment's chord shorter than the path it replaces (the
     line bent there), by up to millimetres: as much as the segment's whole stretch at
@@ -315,14 +316,31 @@ def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float, length_rate: flo
         if exit_len > SPLIT * ls_m and n < maxn:
             # the node above the exit keeps its place and velocity; the new one divides
             # the chord as the elastic lengths ls_m and exit_len - ls_m - allowance
-            f = (exit_len - ls_m - allowance) / (exit_len - allowance)
-            if n > 0:
+            l0 = exit_len - allowance
+            f = (l0 - ls_m) / l0
+            if n > 0:       # the node above: node n-1, else (the first free node) the top
                 o = 1 + 6 * (n - 1)
-                for i in range(6):
-                    ls[o + 6 + i] = f * ls[o + i]
-            else:       # the first free node, on the chord to the top
-                for i in range(6):
-                    ls[1 + i] = f * top[i]
+                px, py, pz, vx, vy, vz = (ls[o], ls[o + 1], ls[o + 2], ls[o + 3],
+                                          ls[o + 4], ls[o + 5])
+            else:
+                px, py, pz, vx, vy, vz = top[0], top[1], top[2], top[3], top[4], top[5]
+            o = 1 + 6 * n
+            ls[o], ls[o + 1], ls[o + 2] = f * px, f * py, f * pz
+            d = math.sqrt(px * px + py * py + pz * pz)
+            if d > 0.0:
+                # across the chord: interpolated towards the exit at rest; along it: what
+                # keeps both parts at the segment's strain rate (line paid out leaves the
+                # exit at the drum's speed)
+                ux, uy, uz = px / d, py / d, pz / d
+                along = ux * vx + uy * vy + uz * vz
+                strain = d / l0 - 1.0
+                strain_rate = along / l0 - d * length_rate / (l0 * l0)
+                rate = (l0 - ls_m) * strain_rate + (1.0 + strain) * length_rate
+                ls[o + 3] = f * (vx - along * ux) + rate * ux
+                ls[o + 4] = f * (vy - along * uy) + rate * uy
+                ls[o + 5] = f * (vz - along * uz) + rate * uz
+            else:
+                ls[o + 3], ls[o + 4], ls[o + 5] = f * vx, f * vy, f * vz
             n += 1
         elif exit_len < MERGE * ls_m and n > 0:
             # node n-1 goes; node n-2 (if any), whose share becomes ls_m + exit_len/2,

@@ -556,10 +556,30 @@ def test_the_first_node_is_laid_on_the_chord_to_the_top():
     line = Line(3.0, total_length_m=50.0, segments=25)
     assert line.n == 0
     top = np.array([1.0, 0.5, 3.5, 0.2, 0.0, 1.0])
-    assert manage_nodes(line.ls, line.lp, 4.01, 0.5, 1.0, top) == 1
+    assert manage_nodes(line.ls, line.lp, 4.01, 0.0, 1.0, top) == 1
     f = (4.01 - line.tp.segment_length_m) / 4.01
     np.testing.assert_allclose(line.node(0), f * top)
     # its segments share the chord as their unstretched lengths: neither is stretched
     fx, fy, fz, *_ = line_rhs(line.ls, line.scratch[0], line.lp, *top, 4.01, 0.5,
                               line.node_wind, line.top_wind)
     assert math.hypot(fx, fy, fz) < 1.0
+
+
+def test_a_split_while_paying_out_keeps_the_segment_s_strain_rate():
+    # paying out at 1.5 m/s: the new node moves along the chord so that both parts stretch
+    # (or slacken) at the old segment's rate; interpolating towards the exit at rest would
+    # have stretched the upper part at once (a 31 N snap at take-off)
+    line = Line(3.0, total_length_m=50.0, segments=25)
+    top = np.array([1.0, 0.5, 3.9, 0.2, 0.0, 1.0])          # the chord 4.04 m: stretched
+    length, rate, ls_m = 4.01, 1.5, line.tp.segment_length_m
+    p, v = top[:3], top[3:]
+    d = np.linalg.norm(p)
+    before = (p @ v) / (d * length) - d * rate / length ** 2
+    assert manage_nodes(line.ls, line.lp, length, rate, 1.0, top) == 1
+    q, w = line.node(0)[:3], line.node(0)[3:]
+    lower = (q @ w) / (np.linalg.norm(q) * (length - ls_m)) - (np.linalg.norm(q) * rate
+                                                              / (length - ls_m) ** 2)
+    u = p - q
+    upper = (u @ (v - w)) / (np.linalg.norm(u) * ls_m)
+    assert lower == pytest.approx(before, rel=1e-9)
+    assert upper == pytest.approx(before, rel=1e-9)
