@@ -18,13 +18,16 @@ gains the mass paid out, with the momentum it brings.
 
 Nodes are added and removed at the exit between steps (``manage_nodes``): a new node when
 ``l_e > SPLIT l_s``, one merged into its neighbour when ``l_e < MERGE l_s``, both conserving
-the line's mass and momentum. The equations, the integrator (classical RK4 on the coupled
-UAV and line, sub-stepped within the plant's step to the line's stability limit) and what is
-neglected are in docs/model.md.
+the line's mass and momentum and keeping the exit segment's strain and strain rate. The
+equations, the integrator (classical RK4 on the coupled UAV and line, sub-stepped within the
+plant's step only where the line's stability limit, :func:`stable_step_s`, asks for it) and
+what is neglected are in docs/model.md.
 
-The line's state is a float array: ``ls[0]`` the number of free nodes ``n``, then for node k
-its position (x, y, z) [m] and velocity [m/s] at ``ls[1 + 6k : 7 + 6k]`` (inertial, z up,
-origin at the exit). The parameters are the plant's packed array (``sitl.kernel``).
+The line's state is a float array (:func:`line_state_size`): ``ls[0]`` the number of free
+nodes ``n``, then for node k its position (x, y, z) [m] and velocity [m/s] at
+``ls[1 + 6k : 7 + 6k]`` (inertial, z up, origin at the exit), and last (``ls[-1]``) the exit
+segment's allowance [m] (:func:`manage_nodes`). The parameters are the plant's packed
+array (``sitl.kernel``).
 """
 
 from __future__ import annotations
