@@ -153,21 +153,35 @@ def bench_plant_step(quick: bool) -> list[Row]:
     x, u = hover_trim(params, (10.0, 4.0, 20.0), 24.0)
     cells = [(p, c) for p in PHYSICS_RATES_HZ for c in CONTROL_RATES_HZ]
     plants = {p: Plant(params, dt_s=1.0 / p, state=x) for p in PHYSICS_RATES_HZ}
+    # the lumped tether at the project's rates, interleaved with the catenary's cells: the
+    # circle's far point (31 m out, 14 nodes), its line laid once and restored every round
+    lumped = params.replace(tether=params.tether.replace(model="lumped"))
+    x_l, u_l = hover_trim(lumped, (22.0, 0.0, 20.0), 31.0)
+    plant_l = Plant(lumped, dt_s=1.0 / REFERENCE_RATES_HZ[0], state=x_l)
+    line0, warm0 = plant_l.model.line.copy(), plant_l.model.warm.copy()
     sim_s = 0.02 if quick else 0.4           # simulated per cell and round [s]
     rounds = 1 if quick else 7
     samples: dict[tuple[float, float], list[float]] = {cell: [] for cell in cells}
+    lumped_samples: list[float] = []
     for _ in range(rounds):
-        for p, c in cells:
-            plant = plants[p]
-            n = round(p / c)
-            periods = max(1, round(sim_s * c))
-            plant.x = x.copy()
+        for p, c in [*cells, (None, None)]:
+            if p is None:     # the lumped row
+                plant, n, uu = plant_l, round(REFERENCE_RATES_HZ[0] / REFERENCE_RATES_HZ[1]), u_l
+                periods = max(1, round(sim_s * REFERENCE_RATES_HZ[1]))
+                plant.x = x_l.copy()
+                plant.model.line[:] = line0
+                plant.model.warm[:] = warm0
+            else:
+                plant, n, uu = plants[p], round(p / c), u
+                periods = max(1, round(sim_s * c))
+                plant.x = x.copy()
             plant.t_s = 0.0
-            plant.advance(u, n)   # the wind model's first block of draws, outside the timing
+            plant.advance(uu, n)  # the wind model's first block of draws, outside the timing
             t0 = time.perf_counter()
             for _ in range(periods):
-                plant.advance(u, n)
-            samples[(p, c)].append((time.perf_counter() - t0) / (periods * n) * 1e6)
+                plant.advance(uu, n)
+            us = (time.perf_counter() - t0) / (periods * n) * 1e6
+            (lumped_samples if p is None else samples[(p, c)]).append(us)
     ref = statistics.median(samples[REFERENCE_RATES_HZ])
     ref_cost = ref * REFERENCE_RATES_HZ[0]      # us of wall per simulated second
     rows = []
@@ -181,6 +195,15 @@ def bench_plant_step(quick: bool) -> list[Row]:
             row.ratio_text = (f"{us * p / ref_cost:.2f}x the cost per simulated second of "
                               f"{REFERENCE_RATES_HZ[0]:.0f}/{REFERENCE_RATES_HZ[1]:.0f} Hz")
         rows.append(row)
+        if (p, c) == REFERENCE_RATES_HZ:
+            us_l = statistics.median(lumped_samples)
+            nodes = int(plant_l.model.line[0])
+            rows.append(Row(
+                f"plant step, lumped tether, physics {p:.0f} Hz, control {c:.0f} Hz", us_l,
+                "us", reference=us, ratio_text=f"{us_l / us:.2f}x the catenary's",
+                note=f"{1e6 / (us_l * p):.0f}x real time for the plant alone; {nodes} nodes "
+                     f"(31 m paid out), {plant_l._n_sub} RK4 sub-step(s) a step",
+                goal=f"<= 10 us: {'met' if us_l <= 10.0 else 'NOT met'}"))
     return rows
 
 
@@ -246,18 +269,21 @@ def bench_offline(quick: bool) -> list[Row]:
 
     duration = 1.0 if quick else 20.0
     sc = load_scenario("circle").replace(duration_s=duration, metrics_after_s=0.0)
-    runner = OfflineRunner(sc)
-    c0 = time.thread_time()
-    t0 = time.perf_counter()
-    runner.run()
-    wall = time.perf_counter() - t0
-    cpu = time.thread_time() - c0
-    rtf = duration / wall
-    rows = [Row("offline closed loop (circle)", rtf, "sim s / wall s",
-                note=f"{duration:.0f} s simulated in {wall:.2f} s ({duration / cpu:.0f}x per "
-                     "second of the loop's CPU time); physics 1 kHz, control 250 Hz, "
-                     "winder 100 Hz",
-                goal=f">= 100x: {'met' if rtf >= 100.0 else 'NOT met'}")]
+    rows = []
+    for label, scenario in (("", sc), (", lumped tether", sc.replace(
+            tether=sc.tether.replace(model="lumped")))):
+        runner = OfflineRunner(scenario)
+        c0 = time.thread_time()
+        t0 = time.perf_counter()
+        runner.run()
+        wall = time.perf_counter() - t0
+        cpu = time.thread_time() - c0
+        rtf = duration / wall
+        rows.append(Row(f"offline closed loop (circle{label})", rtf, "sim s / wall s",
+                        note=f"{duration:.0f} s simulated in {wall:.2f} s ({duration / cpu:.0f}x "
+                             "per second of the loop's CPU time); physics 1 kHz, control "
+                             "250 Hz, winder 100 Hz",
+                        goal=f">= 100x: {'met' if rtf >= 100.0 else 'NOT met'}"))
     prof = cProfile.Profile()
     runner = OfflineRunner(sc.replace(duration_s=min(duration, 5.0)))
     prof.enable()

@@ -29,20 +29,33 @@ class TetherEstimate(NamedTuple):
     regime: str  # "suspended", "touchdown", "slack", "vertical", "taut"
 
 
+#: Time constant of the low-pass on the reported tension [s]: the feed-forward is for the
+#: tether's quasi-static pull; a dynamic tether's axial waves and snaps (0 to 20 N at
+#: 20-25 Hz at the drum) fed forward as they come saturate the rotors.
+TENSION_FILTER_S = 0.1
+
+
 class WinchReport:
     """The latest report of the winch (length, line speed, tension), extrapolated to the
     control loop's time: reports arrive slower than the loop runs, and a stale length
-    beside a fresh position makes the catenary estimate jump at every report."""
+    beside a fresh position makes the catenary estimate jump at every report. The tension
+    is low-passed (``filter_s`` [s], over the time between reports)."""
 
-    def __init__(self) -> None:
+    def __init__(self, filter_s: float = TENSION_FILTER_S) -> None:
         self.t_s: float | None = None
         self.length_m = 0.0
         self.speed_m_s = 0.0
         self.tension_n: float | None = None
+        self.filter_s = filter_s
 
     def update(self, t_s: float, length_m: float, speed_m_s: float,
                tension_n: float | None) -> None:
         """A new report at ``t_s`` [s]: length [m], speed [m/s, + paying out], tension [N]."""
+        last_t, last = self.t_s, self.tension_n
+        if (tension_n is not None and last is not None and last_t is not None
+                and t_s > last_t and self.filter_s > 0.0):
+            tension_n = last + (1.0 - math.exp((last_t - t_s) / self.filter_s)) * (
+                tension_n - last)
         self.t_s, self.length_m, self.speed_m_s, self.tension_n = (
             t_s, length_m, speed_m_s, tension_n)
 

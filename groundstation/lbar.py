@@ -60,6 +60,10 @@ class LBarParams(Params):
     tension_trim_band: float = quantity(
         0.1, "1", "tension trim: dead band of ln(measured / expected tension) within which "
         "the offset holds", ge=0)
+    tension_trim_filter_s: float = quantity(
+        0.5, "s", "tension trim: time constant of the low-pass on the measured drum tension "
+        "it compares (0: none): the trim corrects a slow position error, not the tether's "
+        "axial waves and snaps", ge=0)
 
 
 #: Width of the smooth maxima [m]: over this range the larger argument takes over.
@@ -250,9 +254,18 @@ def tension_trim(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, a_m: float
     grows at ``rate (e - band)`` (the tether is tighter than the model says: the UAV is
     farther than reported), and below ``-band`` shrinks at ``rate (e + band)``, never
     below 0 (never less tether than L-bar), at most ``offset_max``, at most ``rate_max``
-    fast; held where the catenary is degenerate or the tension unknown. ``trim_p`` = (rate
-    [m/s], rate_max [m/s], offset_max [m], band)."""
+    fast; held where the catenary is degenerate or the tension unknown. T is the measured
+    tension low-passed (time constant ``filter`` [s], its state ``trim_s[2]`` [N], NaN
+    before the first sample). ``trim_p`` = (rate [m/s], rate_max [m/s], offset_max [m],
+    band, filter [s])."""
     gain, rate_max, offset_max, band = trim_p[0], trim_p[1], trim_p[2], trim_p[3]
+    if tension_n >= 0.0:          # (not NaN)
+        tau = trim_p[4]
+        if tau > 0.0 and trim_s[2] == trim_s[2]:
+            trim_s[2] += (1.0 - math.exp(-dt_s / tau)) * (tension_n - trim_s[2])
+        else:
+            trim_s[2] = tension_n
+    tension_n = trim_s[2]
     expected = expected_drum_tension_n(a_m, math.hypot(px, py), max(pz, 0.0), w_n_m)
     rate = 0.0
     if gain > 0.0 and expected > 0.0 and tension_n > 0.0:
@@ -283,8 +296,9 @@ class LBarEstimator:
         #: the tension trim's parameters and state (:func:`tension_trim`)
         self.trim_params = np.array([params.tension_trim_rate_m_s,
                                      params.tension_trim_max_rate_m_s,
-                                     params.tension_trim_max_m, params.tension_trim_band])
-        self.trim_state = np.zeros(2)
+                                     params.tension_trim_max_m, params.tension_trim_band,
+                                     params.tension_trim_filter_s])
+        self.trim_state = np.array([0.0, 0.0, math.nan])
 
     def length(self, pos_m: tuple[float, float, float]) -> tuple[float, float]:
         """(L-bar [m], a [m]) for the UAV at ``pos_m``."""

@@ -51,7 +51,7 @@ class WinderHost:
         self._step = entry_point(winder_step, 1.0, 0.0, 10.0, 0.0, 0.0, 0.0, lb.a_target,
                                  lb._tan_min, lb.p.min_slack_m, math.nan, ctl.params(),
                                  ctl.state, self.dt_s, 10.0, 0.0, 1.0, lb.w, lb.trim_params,
-                                 np.zeros(2))
+                                 np.array([0.0, 0.0, math.nan]))
 
     def update(self, length_m: float, omega_rad_s: float, drum_tension_n: float,
                uav_pos_m: tuple[float, float, float],

@@ -27,10 +27,11 @@ from tuavdefs.params import SystemParams, TetherModel
 N_PARAMS = 38
 
 # the tether's auxiliary array ("warm"): the catenary's warm start (H, V), and the lumped
-# line's pull on the UAV (x, y, z) [N], drum tension [N] and top tension [N] at the current
-# state, which the read-outs (the state derivative for the sensors) use
-W_H, W_V, W_FX, W_FY, W_FZ, W_DRUM, W_TOP, W_EX, W_EY, W_EZ = range(10)
-N_WARM = 10
+# line's pull on the UAV (x, y, z) [N], drum tension [N], top tension [N] and pull on the
+# exit (x, y, z) [N] at the current state, which the read-outs (the state derivative for
+# the sensors) use, with its lowest node's height [m] and the nodes on the ground
+W_H, W_V, W_FX, W_FY, W_FZ, W_DRUM, W_TOP, W_EX, W_EY, W_EZ, W_LOWEST, W_GROUNDED = range(12)
+N_WARM = 12
 
 #: Heights within this of the gear height count as touching the ground [m].
 GROUND_EPS_M = 1e-6

@@ -54,6 +54,8 @@ from sitl.kernel import (
     W_FX,
     W_FY,
     W_FZ,
+    W_GROUNDED,
+    W_LOWEST,
     attachment_point,
     coupled_rhs_into,
     coupled_rk4_into,
@@ -70,6 +72,7 @@ from sitl.lumped import (
     L_LS,
     lay_line,
     line_energy_j,
+    line_state_size,
     line_wind,
     manage_nodes,
     relax,
@@ -84,6 +87,9 @@ from tuavdefs.jit import entry_point
 from tuavdefs.params import SystemParams, TetherModel, WindParams
 
 N_STATES = 19
+#: Time constant with which the lumped line's exit allowance fades
+#: (:func:`sitl.lumped.manage_nodes`) [s].
+ALLOWANCE_TAU_S = 0.1
 POS, VEL, QUAT, RATES, ROTORS, DRUM_ANGLE, DRUM_RATE = (
     slice(0, 3), slice(3, 6), slice(6, 10), slice(10, 13), slice(13, 17), 17, 18)
 
@@ -194,7 +200,10 @@ def _lumped_step(x: np.ndarray, line: np.ndarray, scratch: np.ndarray,
         if s < n_sub - 1:
             x[DRUM_ANGLE], x[DRUM_RATE] = drum_projection(p, x[DRUM_ANGLE], x[DRUM_RATE],
                                                           omega_before, braked)
-    manage_nodes(line, lp, p[P_RW] * x[DRUM_ANGLE])
+    top = scratch[0, :6]
+    top[0], top[1], top[2], top[3], top[4], top[5] = attachment_point(x, p)
+    manage_nodes(line, lp, p[P_RW] * x[DRUM_ANGLE], p[P_RW] * x[DRUM_RATE],
+                 math.exp(-dt / ALLOWANCE_TAU_S), top)
     return omega_before
 
 
@@ -203,9 +212,21 @@ def _line_forces(x: np.ndarray, line: np.ndarray, p: np.ndarray, lp: np.ndarray,
                  setpoints: np.ndarray, winder_cmd_n_m: float, winder_enabled: bool,
                  wind: np.ndarray, node_wind: np.ndarray, warm: np.ndarray,
                  scratch: np.ndarray, line_scratch: np.ndarray) -> None:
-    """The lumped line's pull at the state ``x``, ``line`` into ``warm``."""
+    """The lumped line's pull at the state ``x``, ``line`` into ``warm``, with its lowest
+    node's height and the number of nodes on the ground."""
     coupled_rhs_into(scratch[0], line_scratch[0], x, line, p, lp, setpoints, winder_cmd_n_m,
                      winder_enabled, wind, node_wind, warm)
+    n = int(line[0])
+    lowest = 0.0
+    grounded = 0
+    for k in range(n):
+        z = line[3 + 6 * k]
+        if k == 0 or z < lowest:
+            lowest = z
+        if z <= 0.0:
+            grounded += 1
+    warm[W_LOWEST] = lowest
+    warm[W_GROUNDED] = grounded
 
 
 @njit
@@ -284,8 +305,8 @@ class PlantModel:
         self.lumped = params.tether.kind == TetherModel.LUMPED
         self.lp = pack_line_params(params)
         n_max = max_line_nodes(params)
-        self.line = np.zeros(1 + 6 * n_max)
-        self.line_scratch = np.zeros((5, 1 + 6 * n_max))
+        self.line = np.zeros(line_state_size(n_max))
+        self.line_scratch = np.zeros((5, line_state_size(n_max)))
         self.node_wind = np.zeros((n_max, 3))
 
     def rotor_setpoints(self, u: PlantInputs) -> tuple[float, ...]:
@@ -357,6 +378,7 @@ class Plant:
         self._wind = np.zeros(6)   # at the UAV, then the part the same at every height
         self._wind[:3] = self.wind_m_s
         self._n_sub = substeps(dt_s, self.model.lp)
+        self._segment_m = float(self.model.lp[L_LS])
         self._speed_min = self.params.vehicle.rotor_speed_min_rad_s
         self._speed_max = self.params.vehicle.rotor_speed_max_rad_s
         self._setpoints = np.zeros(4)
@@ -536,11 +558,8 @@ class Plant:
 
     def _line_forces(self) -> TetherForces:
         w = self.model.warm.tolist()
-        line, lp = self.model.line, self.model.lp
-        n = int(line[0])
-        z = line[3:1 + 6 * n:6]
-        lowest = float(z.min()) if n else 0.0
-        on_ground = float(np.count_nonzero(z <= 0.0)) * lp[L_LS]
+        lowest = w[W_LOWEST]
+        on_ground = w[W_GROUNDED] * self._segment_m
         top = (w[W_FX], w[W_FY], w[W_FZ])
         exit_ = (w[W_EX], w[W_EY], w[W_EZ])
         regime = CatenaryRegime.TOUCHDOWN if on_ground > 0.0 else CatenaryRegime.SUSPENDED

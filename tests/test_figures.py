@@ -23,6 +23,7 @@ from tuav_sitl import animation as anim
 from tuav_sitl.figures import (
     FIGURE_CAPTIONS,
     FIGURE_NAMES,
+    TetherDrawer,
     build_figures,
     length_error,
     load_run,
@@ -340,3 +341,39 @@ def test_ground_contact_is_shaded(setpoint_run):
     assert "tether on the ground" in labels
     plain = build_figures(run.series, run.scenario, ["tension_and_winder"])
     assert len(plain["tension_and_winder"].axes[0].patches) == 0
+
+
+@pytest.fixture(scope="module")
+def lumped_run(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("runs") / "gust-lumped"
+    sc = load_scenario("gust-lumped").replace(duration_s=6.5)   # through the gust's peak
+    run_scenario(sc, out, progress=None)
+    return out
+
+
+def test_a_lumped_run_draws_the_recorded_nodes(lumped_run):
+    # the run records the truth's nodes at the animation's frame rate; the 3-D path, the
+    # snapshots and the animation draw them (from the exit to the attachment point), not
+    # the catenary
+    run = load_run(lumped_run)
+    s = run.series
+    from tuav_sitl.offline import LINE_NODES_RATE_HZ
+    assert np.diff(s["line_t"]) == pytest.approx(1.0 / LINE_NODES_RATE_HZ, abs=0.005)
+    assert s["line_nodes"].dtype == np.float32
+    drawer = TetherDrawer(run.scenario, series=s)
+    assert drawer.lumped
+    k = int(np.searchsorted(s["t"], 6.0))
+    pts = drawer.points(s["pos"][k], float(s["length"][k]), float(s["t"][k]))
+    assert len(pts) > 10
+    np.testing.assert_allclose(pts[0], 0.0, atol=1e-6)
+    assert np.linalg.norm(pts[-1] - s["pos"][k]) < 0.05       # attached at the UAV
+    # the gust (north, 5 to 7 s) blows the line sideways: the nodes leave the vertical
+    # plane through the winder and the UAV, which the catenary never does
+    assert np.max(np.abs(pts[:, 1])) > 0.05
+    figs = build_figures(s, run.scenario, names=("path_3d", "snapshots"))
+    for fig in figs.values():
+        lines = [ln for ax in fig.axes for ln in ax.get_lines()
+                 if ln.get_color() == "#8c564b"]
+        assert lines and all(ln.get_marker() == "o" for ln in lines)
+    paths = anim.make_animation(lumped_run, fps=10, max_frames=6)
+    assert any(p.suffix == ".gif" and p.stat().st_size > 0 for p in paths)

@@ -147,6 +147,7 @@ def test_a_braked_drum_bounds_targets_not_where_the_vehicle_holds():
     assert nav.tether_limit_m == pytest.approx(14.5)
     pos = (14.0, 0.0, 0.0)
     assert nav.check_target(pos) is not None
-    assert Geofence(FenceParams(), HOME_DEFAULT).breach(pos, (2.0, 0.0, 0.0), nav.tether_limit_m) is None
-    assert Geofence(FenceParams(), HOME_DEFAULT).breach((14.6, 0.0, 0.0), (2.0, 0.0, 0.0),
-                                          nav.tether_limit_m) is FenceBreach.TETHER
+    fence = Geofence(FenceParams(), HOME_DEFAULT)
+    assert fence.breach(pos, (2.0, 0.0, 0.0), nav.tether_limit_m) is None
+    assert fence.breach((14.6, 0.0, 0.0), (2.0, 0.0, 0.0),
+                        nav.tether_limit_m) is FenceBreach.TETHER

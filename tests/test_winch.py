@@ -797,6 +797,28 @@ def test_the_client_reads_the_same_with_and_without_the_fast_path(order, data):
     assert clients[0] == clients[1]
 
 
+def test_tension_trim_rides_out_a_snapping_load_cell():
+    """A dynamic tether snapping at 25 Hz between slack and twice the model's tension (its
+    mean the model's): the trim compares the low-passed tension and pays nothing out; on
+    the raw samples it would have paid out at its full rate at every snap."""
+    from groundstation.lbar import expected_drum_tension_n
+
+    pos, vel = UAV
+    paid = {}
+    for tau in (LBarParams().tension_trim_filter_s, 0.0):
+        lp = LBarParams(tension_trim_filter_s=tau)
+        host = WinderHost(WinderControlParams(), lp, PARAMS.winder, PARAMS.tether, G)
+        lbar, a = host.lbar.length(pos)
+        expected = expected_drum_tension_n(a, math.hypot(pos[0], pos[1]), pos[2], host.lbar.w)
+        for _ in range(100):
+            host.update(lbar, 0.0, expected, pos, vel)
+        for k in range(300):      # 3 s at the winder's 100 Hz: 2 periods slack, 2 at 2x
+            host.update(lbar, 0.0, 2.0 * expected if k % 4 >= 2 else 0.0, pos, vel)
+        paid[tau] = host.lbar.trim_state[0]
+    assert tau == 0.0 and paid[0.0] > 0.3
+    assert paid[LBarParams().tension_trim_filter_s] < 0.01
+
+
 def test_tension_trim_pays_out_when_the_tether_is_tighter_than_its_model_says():
     """L-bar's tension trim: a drum tension matching the model catenary's for the reported
     position leaves L-bar alone; three times that (the UAV is farther than reported) pays
@@ -804,7 +826,7 @@ def test_tension_trim_pays_out_when_the_tether_is_tighter_than_its_model_says():
     is kept; well below it the extra is taken back, never below L-bar."""
     from groundstation.lbar import expected_drum_tension_n
 
-    lp = LBarParams()
+    lp = LBarParams(tension_trim_filter_s=0.0)    # the law on the tension as it comes
     host = WinderHost(WinderControlParams(), lp, PARAMS.winder, PARAMS.tether, G)
     lb = host.lbar
     pos, vel = UAV

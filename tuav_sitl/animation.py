@@ -1,10 +1,11 @@
-"""Animation of an offline run: the quadrotor, its catenary tether, the goals and the trail.
+"""Animation of an offline run: the quadrotor, its tether, the goals and the trail.
 
 :func:`make_animation` reads a run folder written by :mod:`tuav_sitl.offline` and writes
 ``animation.gif`` (with Pillow, always) and ``animation.mp4`` (when an ``ffmpeg`` executable
 is on the PATH) into it. Each frame is drawn once with Agg and fed to both files; the
-tether is recomputed per frame from the UAV's position and the paid-out length with the
-plant's own model (:class:`sitl.tether.Tether`).
+tether is the lumped tether's nodes the run recorded (the truth, when it was the plant's
+model), else recomputed per frame from the UAV's position and the paid-out length with the
+plant's catenary (:class:`sitl.tether.Tether`).
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ class _Scene:
         self.geo = reference_geometry(sc)
         lo, hi = scene_bounds(s, self.geo)
         self.arm = drawn_arm_m(sc, lo, hi)
-        self.tether = TetherDrawer(sc, n_points=50)
+        self.tether = TetherDrawer(sc, n_points=50, series=s)
         w, h = ANIMATION_SIZE_PX
         self.fig = Figure(figsize=(w / _DPI, h / _DPI), dpi=_DPI)
         self.canvas = FigureCanvasAgg(self.fig)
@@ -121,7 +122,10 @@ class _Scene:
         step = max(1, len(s["t"]) // _TRAIL_POINTS)
         self.trail_idx = np.arange(0, len(s["t"]), step)
         (self.trail,) = ax.plot([], [], [], color="C0", lw=1.6, label="trail")
-        (self.cable,) = ax.plot([], [], [], color="#8c564b", lw=1.8, label="tether")
+        (self.cable,) = ax.plot([], [], [], color="#8c564b", lw=1.8,
+                                marker="o" if self.tether.lumped else None, markersize=2.5,
+                                label="tether (lumped nodes)" if self.tether.lumped
+                                else "tether")
         (self.rest,) = ax.plot([], [], [], color="k", lw=1.2)
         (self.front,) = ax.plot([], [], [], color="#d62728", lw=2.2, label="UAV (front red)")
         set_scene(ax, lo, hi, zoom=0.92)
@@ -146,7 +150,7 @@ class _Scene:
         tr = self.trail_idx[self.trail_idx < k]
         path = np.vstack((pos[tr], pos[k : k + 1]))
         self.trail.set_data_3d(path[:, 0], path[:, 1], path[:, 2])
-        pts = self.tether.points(pos[k], float(s["length"][k]))
+        pts = self.tether.points(pos[k], float(s["length"][k]), float(s["t"][k]))
         self.cable.set_data_3d(pts[:, 0], pts[:, 1], pts[:, 2])
         front, rest = quad_outline(pos[k], s["euler"][k], self.arm)
         self.front.set_data_3d(front[:, 0], front[:, 1], front[:, 2])

@@ -333,15 +333,34 @@ def drawn_arm_m(sc: ScenarioParams, lo: np.ndarray, hi: np.ndarray,
 
 
 class TetherDrawer:
-    """The plant's catenary tether (:class:`sitl.tether.Tether`) as points to draw."""
+    """The tether as points to draw: the lumped tether's recorded nodes when the run has
+    them (series ``line_t``, ``line_nodes``: the truth, a sample at the animation's frame
+    rate), else the plant's catenary (:class:`sitl.tether.Tether`) solved for the UAV's
+    position and the paid-out length."""
 
-    def __init__(self, sc: ScenarioParams, n_points: int = 60) -> None:
+    def __init__(self, sc: ScenarioParams, n_points: int = 60,
+                 series: Mapping[str, np.ndarray] | None = None) -> None:
         self.tether = Tether(sc.tether, sc.environment.gravity_m_s2)
         self.n_points = n_points
+        self.line_t = self.line_nodes = None
+        if series is not None and "line_nodes" in series and len(series["line_t"]):
+            self.line_t = np.asarray(series["line_t"])
+            self.line_nodes = np.asarray(series["line_nodes"])
 
-    def points(self, pos: np.ndarray, length_m: float) -> np.ndarray:
-        """(n, 3) points [m] from the winder exit (origin) to the UAV at ``pos`` with
-        ``length_m`` paid out; a straight line if the catenary cannot be solved."""
+    @property
+    def lumped(self) -> bool:
+        """Whether the points are the lumped tether's nodes."""
+        return self.line_t is not None
+
+    def points(self, pos: np.ndarray, length_m: float, t_s: float | None = None
+               ) -> np.ndarray:
+        """(n, 3) points [m] from the winder exit (origin) to the UAV: the lumped tether's
+        nodes last recorded at or before ``t_s`` [s], or the catenary to the UAV at
+        ``pos`` with ``length_m`` paid out (a straight line if it cannot be solved)."""
+        if self.line_t is not None and t_s is not None:
+            i = max(0, int(np.searchsorted(self.line_t, t_s + 1e-9)) - 1)
+            nodes = self.line_nodes[i]
+            return np.asarray(nodes[np.isfinite(nodes[:, 0])], dtype=float)
         x, y, z = (float(v) for v in pos)
         z = max(z, 0.0)
         try:
@@ -597,12 +616,14 @@ def fig_path_3d(s: Mapping[str, np.ndarray], sc: ScenarioParams,
         ax.plot(ref[:, 0], ref[:, 1], ref[:, 2], "--", color=_REF_COLOUR, lw=0.9,
                 label="reference path")
     draw_goals(ax, geo, label=True, circle=False)
-    drawer = TetherDrawer(sc)
+    drawer = TetherDrawer(sc, series=s)
     instants = spread_instants(pos, 5)
     for j, k in enumerate(instants):
-        pts = drawer.points(pos[k], float(s["length"][k]))
+        pts = drawer.points(pos[k], float(s["length"][k]), float(s["t"][k]))
         ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=_TETHER_COLOUR, lw=1.3,
-                label="tether" if j == 0 else None)
+                marker="o" if drawer.lumped else None, markersize=2.5,
+                label=("tether (lumped nodes)" if drawer.lumped else "tether")
+                if j == 0 else None)
         ax.scatter([pos[k, 0]], [pos[k, 1]], [pos[k, 2]], color=_UAV_COLOUR, s=25,
                    depthshade=False, label="UAV at tether instants" if j == 0 else None)
         ax.text(pos[k, 0], pos[k, 1], pos[k, 2], f"t = {s['t'][k]:.0f} s   ", fontsize=8,
@@ -649,7 +670,7 @@ def fig_snapshots(s: Mapping[str, np.ndarray], sc: ScenarioParams,
                         wspace=0.0, hspace=0.08)
     _title(fig, sc, "snapshots of the flight")
     arm = drawn_arm_m(sc, lo, hi)
-    drawer = TetherDrawer(sc)
+    drawer = TetherDrawer(sc, series=s)
     idx = snapshot_indices(s, sc, count, metrics)
     waypoints = sc.trajectory.kind == "waypoints"
     reached = reached_indices(s, geo, metrics) if waypoints else []
@@ -664,8 +685,9 @@ def fig_snapshots(s: Mapping[str, np.ndarray], sc: ScenarioParams,
         draw_goals(ax, geo, reached=n_reached)
         ax.plot(pos[: k + 1, 0], pos[: k + 1, 1], pos[: k + 1, 2], color=_PATH_COLOUR,
                 lw=1.6, label="trail")
-        pts = drawer.points(pos[k], float(s["length"][k]))
-        ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=_TETHER_COLOUR, lw=1.6, label="tether")
+        pts = drawer.points(pos[k], float(s["length"][k]), float(s["t"][k]))
+        ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=_TETHER_COLOUR, lw=1.6,
+                marker="o" if drawer.lumped else None, markersize=2.5, label="tether")
         front, rest = quad_outline(pos[k], s["euler"][k], arm)
         ax.plot(rest[:, 0], rest[:, 1], rest[:, 2], color="k", lw=1.2)
         ax.plot(front[:, 0], front[:, 1], front[:, 2], color=_UAV_COLOUR, lw=2.0,

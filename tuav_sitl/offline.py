@@ -33,6 +33,7 @@ from groundstation.winch import CommandRequest, Winch, WinchStatusReport
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
 from sitl.faults import FaultSchedule
+from sitl.lumped import L_MAXN
 from sitl.plant import (
     DRUM_ANGLE,
     DRUM_RATE,
@@ -53,6 +54,9 @@ from tuavdefs import component_link as cl
 from tuavdefs.frames import quat_to_euler, wrap_pi
 from tuavdefs.paramspec import ParameterError, to_dict
 
+#: How often a run with the lumped tether records its nodes (``line_t``, ``line_nodes``):
+#: the animation's default frame rate [Hz].
+LINE_NODES_RATE_HZ = 15.0
 #: Tether regimes in which part of the tether lies on the ground.
 GROUND_REGIMES = (int(CatenaryRegime.TOUCHDOWN), int(CatenaryRegime.SLACK),
                   int(CatenaryRegime.FLAT))
@@ -416,6 +420,13 @@ class OfflineRunner:
         was_armed = False
         advance, tether_forces = plant.advance, plant.tether_forces
         step, add_row = companion.step, log.add
+        # the lumped tether's nodes (exit to attachment point) at LINE_NODES_RATE_HZ, float32,
+        # padded with NaN to the most points the line can have
+        lumped = plant.model.lumped
+        line_t: list[float] = []
+        line_nodes: list[np.ndarray] = []
+        line_points = int(plant.model.lp[L_MAXN]) + 2
+        next_nodes_t = 0.0
         wall0 = time.perf_counter()
         k = 0
         while True:
@@ -497,6 +508,13 @@ class OfflineRunner:
                         winder_torque, forces.drum_tension_n, forces.top_tension_n,
                         int(info.regime), info.lowest_point_height_m, *plant.wind_m_s,
                         *forces.on_uav_n, *est, *estimate)
+                if lumped and t >= next_nodes_t - 1e-9:
+                    next_nodes_t += 1.0 / LINE_NODES_RATE_HZ
+                    nodes = plant.line_nodes_m()
+                    row = np.full((line_points, 3), np.nan, dtype=np.float32)
+                    row[:nodes.shape[0]] = nodes
+                    line_t.append(t)
+                    line_nodes.append(row)
                 bar.update(t)
                 if on_sample is not None:
                     on_sample(t)
@@ -520,6 +538,9 @@ class OfflineRunner:
         metrics = compute_metrics(sc, series, self.reference, wall)
         if sc.faults:
             metrics["faults"] = self.fault_log
+        if line_t:
+            series["line_t"] = np.array(line_t)
+            series["line_nodes"] = np.stack(line_nodes)
         reached = [(int(v), ts) for kind, v, ts in self.nav_events if kind is NavEvent.REACHED]
         if self._waypoints:
             metrics["waypoints_reached"] = [{"index": seq - 1, "t_s": round(ts, 3)}
