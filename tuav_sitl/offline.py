@@ -192,7 +192,6 @@ class GroundStation:
 
     def __init__(self, winch: Winch) -> None:
         self.winch = winch
-        self._r_w = winch.r_w
         self._encoder_id = cp.frame_id(winch.node, cp.Cmd.GET_ENCODER_ESTIMATES)
         self._tension_id = cp.frame_id(winch.sensor_node, cp.SensorCmd.WINCH_TENSION)
         self._torque_id = cp.frame_id(winch.node, cp.Cmd.SET_INPUT_TORQUE)
@@ -204,17 +203,19 @@ class GroundStation:
         self.notices: list[tuple[float, str]] = []
         """What the winch said (time [s], text)."""
 
-    def period(self, t_s: float, length_m: float, drum_rate_rad_s: float,
+    def period(self, t_s: float, drum_angle_rad: float, drum_rate_rad_s: float,
                drum_tension_n: float, uav_pos_m: tuple[float, float, float],
                uav_vel_m_s: tuple[float, float, float]) -> WinchStatusReport | None:
-        """One winder period at ``t_s`` [s]; returns the WINCH_STATUS it sends, if any."""
+        """One winder period at ``t_s`` [s] with the encoder's drum angle [rad] and rate
+        [rad/s] (the winch turns them into length with its own drum radius); returns the
+        WINCH_STATUS it sends, if any."""
         w = self.winch
         w.set_uav((uav_pos_m, uav_vel_m_s))
         w.handle_frame(t_s, self._tension_id,
                        cp.encode_winch_tension(drum_tension_n, not self.axis_enabled))
         rev = 1.0 / (2.0 * math.pi)
         out = w.handle_frame(t_s, self._encoder_id, cp.encode_encoder_estimates(
-            length_m / self._r_w * rev, drum_rate_rad_s * rev))
+            drum_angle_rad * rev, drum_rate_rad_s * rev))
         if out is None:
             return None
         for frame in out.frames:
@@ -254,14 +255,18 @@ class OfflineRunner:
 
     def __init__(self, scenario: ScenarioParams) -> None:
         sc = self.sc = scenario
+        # the plant integrates the truth; the controllers are built from their own model
+        # (the scenario's [vehicle], [tether], [winder], [environment]), which [plant] may
+        # set the truth apart from
         params = self.params = sc.system()
-        g = params.environment.gravity_m_s2
+        model = self.model = sc.model()
+        g = model.environment.gravity_m_s2
         self.dt = 1.0 / sc.physics_rate_hz
         self.n_ctrl = round(sc.physics_rate_hz / sc.control.rate_hz)
         self.n_wind = round(sc.physics_rate_hz / sc.winder_control.rate_hz)
-        self.winder_host = WinderHost(sc.winder_control, sc.lbar, params.winder,
-                                      params.tether, g)
-        self.ground = GroundStation(Winch(self.winder_host, params.winder, params.tether, g,
+        self.winder_host = WinderHost(sc.winder_control, sc.lbar, model.winder,
+                                      model.tether, g)
+        self.ground = GroundStation(Winch(self.winder_host, model.winder, model.tether, g,
                                           sc.winch))
         start = tuple(sc.initial.position_m)
         gear = params.vehicle.gear_height_m
@@ -286,7 +291,7 @@ class OfflineRunner:
             nav_params = nav_params.replace(speed_m_s=tr.max_speed_m_s,
                                             acc_m_s2=tr.max_acc_m_s2,
                                             acceptance_radius_m=tr.acceptance_radius_m)
-        self.companion = Companion(params, sc.control, nav_params, sc.estimator,
+        self.companion = Companion(model, sc.control, nav_params, sc.estimator,
                                    on_event=self._on_nav_event)
         self.companion.on_start = self._on_start
         self._t = 0.0
@@ -394,7 +399,7 @@ class OfflineRunner:
         inputs = PlantInputs()
         winder_torque, winder_lyap, lbar_m, lbar_rate = 0.0, 0.0, 0.0, 0.0
         winder_enabled = True
-        g = self.params.environment.gravity_m_s2
+        g = self.model.environment.gravity_m_s2   # the companion's: WINCH_STATUS is in kg
         mission = sc.flies_mission
         sensors = self.sensors
         filt = companion.filter
@@ -410,9 +415,8 @@ class OfflineRunner:
                 # ground station: encoder, load cell and the UAV's telemetry
                 drum_tension = tether_forces().drum_tension_n
                 x = plant.x.tolist()
-                length, drum_rate = r_w * x[DRUM_ANGLE], x[DRUM_RATE]
-                status = ground.period(t, length, drum_rate, drum_tension, tuple(x[POS]),
-                                       tuple(x[VEL]))
+                status = ground.period(t, x[DRUM_ANGLE], x[DRUM_RATE], drum_tension,
+                                       tuple(x[POS]), tuple(x[VEL]))
                 winder_torque, winder_enabled = ground.torque_n_m, ground.axis_enabled
                 cmd = winch.last_command
                 winder_lyap = cmd.lyapunov if cmd is not None else math.nan
