@@ -712,10 +712,29 @@ def lyapunov_increases(t: np.ndarray, v: np.ndarray, from_s: float, floor: float
     return int(np.sum((d > 0.0) & (vv[:-1] > floor)))
 
 
+def above_floor_s(t: np.ndarray, v: np.ndarray, from_s: float, floor: float) -> float:
+    """How long after ``from_s`` [s] ``v`` stays above ``floor`` before it first reaches
+    it: the span a count of rises above the floor covers (0 if it starts at the floor)."""
+    sel = t >= from_s
+    tt, vv = t[sel], v[sel]
+    if not len(vv) or not vv[0] > floor:
+        return 0.0
+    below = np.nonzero(~(vv > floor))[0]
+    end = tt[below[0]] if len(below) else tt[-1]
+    return float(end - tt[0])
+
+
+#: The Lyapunov functions of the raw (uncompensated) errors, beside the compensated ones.
+RAW_LYAPUNOV = {"v_pos": "v_pos_raw", "v_att": "v_att_raw"}
+
+
 def lyapunov_report(s: dict[str, np.ndarray], position_ref_still_s: float
-                    ) -> dict[str, dict[str, float | int | None]]:
-    """For each subsystem: from when its reference is constant, its Lyapunov function's
-    value then, and how often it rose (above its floor) after that (docs/control.md §5).
+                    ) -> dict[str, dict[str, Any]]:
+    """For each subsystem, from when its reference is constant (docs/control.md §5): its
+    Lyapunov function's value then and its floor (:data:`LYAPUNOV_FLOORS`), how long it
+    stays above the floor (``above_floor_s``: what the count covers; 0 means the count is
+    no evidence), how often it rose above the floor and at all; for the position and
+    attitude loops the same of the raw errors' function (``raw_*``).
 
     Position: the position reference is constant. Attitude: the filtered attitude command
     is still. Winder: L-bar is still.
@@ -726,16 +745,29 @@ def lyapunov_report(s: dict[str, np.ndarray], position_ref_still_s: float
         "v_att": still_from(t, s["att_cmd"], ATTITUDE_REF_STILL_RAD_S),
         "v_win": still_from(t, s["lbar"], LENGTH_REF_STILL_M_S),
     }
-    out: dict[str, dict[str, float | int | None]] = {}
+    out: dict[str, dict[str, Any]] = {}
     for name, t0 in starts.items():
+        floor = LYAPUNOV_FLOORS[name]
         if t0 is not None and t0 >= t[-1]:
             t0 = None   # the run ended before the reference settled
         if t0 is None:
-            out[name] = {"from_s": None, "value_then": None, "increases": None}
+            out[name] = {"from_s": None, "value_then": None, "floor": floor,
+                         "above_floor_s": None, "increases": None, "increases_any": None}
             continue
         i0 = int(np.searchsorted(t, t0))
-        out[name] = {"from_s": round(t0, 3), "value_then": float(s[name][i0]),
-                     "increases": lyapunov_increases(t, s[name], t0, LYAPUNOV_FLOORS[name])}
+        v = s[name]
+        r: dict[str, Any] = {
+            "from_s": round(t0, 3), "value_then": float(v[i0]), "floor": floor,
+            "above_floor_s": round(above_floor_s(t, v, t0, floor), 3),
+            "increases": lyapunov_increases(t, v, t0, floor),
+            "increases_any": lyapunov_increases(t, v, t0, 0.0)}
+        raw = RAW_LYAPUNOV.get(name)
+        if raw is not None:
+            vr = s[raw]
+            r |= {"raw_value_then": float(vr[i0]),
+                  "raw_above_floor_s": round(above_floor_s(t, vr, t0, floor), 3),
+                  "raw_increases": lyapunov_increases(t, vr, t0, floor)}
+        out[name] = r
     return out
 
 
