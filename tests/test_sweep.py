@@ -175,3 +175,13 @@ def test_a_bad_sweep_file_fails_naming_the_field(tmp_path, capsys, patch, field)
     assert exc.value.field == field
     assert main(["sweep", str(path), "--out", str(tmp_path / "o")]) == 2
     assert field in capsys.readouterr().err
+
+
+def test_the_sweep_figures_are_drawn(small_sweep, tmp_path):
+    from tuav_sitl.sweep_figures import make_sweep_figures
+
+    sweep, _, rows, _, _ = small_sweep
+    written = make_sweep_figures(sweep, rows, tmp_path)
+    assert [p.name for p in written] == ["cdfs.png", "failures.png"]
+    for p in written:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

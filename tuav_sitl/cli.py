@@ -115,11 +115,16 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("sweeps") / sweep.name
     where = args.scheduler or f"a LocalCluster of {args.workers or 'one worker per core'}"
     print(f"tuav-sitl sweep {sweep.name}: {sweep.runs} runs of {scenario.name} on {where}")
-    _, summary = run_sweep(sweep, scenario, out, scheduler=args.scheduler,
+    rows, summary = run_sweep(sweep, scenario, out, scheduler=args.scheduler,
                            workers=args.workers,
                            progress=None if args.quiet else sys.stderr)
     print(summary_text(summary))
     print(f"wrote {out}/runs.csv, runs.json, summary.json, summary.md")
+    if not args.no_figures:
+        from tuav_sitl.sweep_figures import make_sweep_figures
+
+        figs = make_sweep_figures(sweep, rows, out)
+        print("wrote " + ", ".join(str(f) for f in figs))
     return 0
 
 
@@ -217,6 +222,8 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--runs", type=int, default=None, help="override the run count")
     sweep.add_argument("--out", default=None, help="output folder (default sweeps/NAME)")
     sweep.add_argument("--quiet", action="store_true", help="no progress bar")
+    sweep.add_argument("--no-figures", action="store_true",
+                       help="skip the figures (CDFs, failures against the drawn parameters)")
     sweep.set_defaults(func=_cmd_sweep)
 
     from tuav_sitl.up import add_arguments
