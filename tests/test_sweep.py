@@ -185,3 +185,46 @@ def test_the_sweep_figures_are_drawn(small_sweep, tmp_path):
     assert [p.name for p in written] == ["cdfs.png", "failures.png"]
     for p in written:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_killed_sweep_resumes_and_loses_nothing(tmp_path):
+    """``tuav-sitl sweep`` killed (SIGKILL, the whole process group: the command and its
+    Dask workers) part-way: started again, it runs only the runs its table lacks."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = _write(tmp_path, SMALL)
+    out = tmp_path / "out"
+    table = out / "runs.csv"
+    runs = 40
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tuav_sitl", "sweep", str(path), "--runs", str(runs),
+         "--workers", "1", "--out", str(out), "--quiet", "--no-figures"],
+        start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        while proc.poll() is None:
+            if table.is_file() and table.read_text().count("\n") >= 3:   # header + 2 rows
+                break
+            time.sleep(0.02)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    sweep, sc = sw.load_sweep(path)
+    sweep = sweep.replace(runs=runs)
+    before = sw.read_table(table, sweep)
+    if len(before) >= runs:
+        pytest.skip("the sweep finished before it could be killed")
+    assert len(before) >= 2
+    ran: list[int] = []
+    rows, _ = sw.run_sweep(sweep, sc, out, workers=1, progress=None,
+                           on_row=lambda r: ran.append(r["index"]))
+    done = {r["index"] for r in before}
+    assert sorted(ran) == sorted(set(range(runs)) - done)
+    assert [r["index"] for r in rows] == list(range(runs))
+    by_index = {r["index"]: r for r in rows}
+    for r in before:   # what was stored before the kill is kept as it was
+        assert by_index[r["index"]] == r
