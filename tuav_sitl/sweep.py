@@ -582,27 +582,46 @@ def run_sweep(sweep: SweepParams, sc: ScenarioParams, out_dir: Path, *,
     return ordered, summary
 
 
-def _on_dask(sweep: SweepParams, sc: ScenarioParams, todo: list[int],
-             scheduler: str | None, workers: int | None) -> Iterable[dict[str, Any]]:
-    """The rows of runs ``todo``, as they finish on the Dask cluster."""
+def local_client(workers: int | None = None) -> Any:
+    """A Dask client of a new LocalCluster of ``workers`` single-threaded worker
+    processes (default one per core); closing the client closes the cluster."""
     import os
 
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, LocalCluster
 
-    cluster = None
-    if scheduler is None:
-        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
-                               threads_per_worker=1, processes=True,
-                               dashboard_address=None)
-        client = Client(cluster)
-    else:
-        client = Client(scheduler)
+    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                           processes=True, dashboard_address=None)
+    client = Client(cluster)
+    client.cluster_owned = cluster   # closed with the client (see close_client)
+    return client
+
+
+def close_client(client: Any) -> None:
+    """Close ``client`` and the LocalCluster :func:`local_client` made for it."""
+    cluster = getattr(client, "cluster_owned", None)
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+def rows_on(client: Any, sweep: SweepParams, sc: ScenarioParams, todo: list[int]
+            ) -> Iterable[dict[str, Any]]:
+    """The rows of runs ``todo`` run on ``client``'s cluster, as they finish."""
+    from dask.distributed import as_completed
+
+    futures = client.map(run_one, [sweep] * len(todo), [sc] * len(todo), todo, pure=False)
+    for fut in as_completed(futures):
+        yield fut.result()
+
+
+def _on_dask(sweep: SweepParams, sc: ScenarioParams, todo: list[int],
+             scheduler: str | None, workers: int | None) -> Iterable[dict[str, Any]]:
+    """The rows of runs ``todo``, as they finish on the Dask cluster (at ``scheduler``,
+    else a new LocalCluster)."""
+    from dask.distributed import Client
+
+    client = local_client(workers) if scheduler is None else Client(scheduler)
     try:
-        futures = client.map(run_one, [sweep] * len(todo), [sc] * len(todo), todo,
-                             pure=False)
-        for fut in as_completed(futures):
-            yield fut.result()
+        yield from rows_on(client, sweep, sc, todo)
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        close_client(client)
