@@ -20,6 +20,7 @@ from __future__ import annotations
 import csv
 import enum
 import json
+import logging
 import math
 import sys
 import time
@@ -589,8 +590,10 @@ def local_client(workers: int | None = None) -> Any:
 
     from dask.distributed import Client, LocalCluster
 
+    logging.getLogger("distributed").setLevel(logging.WARNING)   # its INFO lines on stderr
     cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                           processes=True, dashboard_address=None)
+                           processes=True, dashboard_address=":0",
+                           silence_logs=logging.WARNING)
     client = Client(cluster)
     client.cluster_owned = cluster   # closed with the client (see close_client)
     return client
