@@ -78,9 +78,60 @@ def _check(value: Any, op: str, limit: float) -> bool:
     return value is not None and (value <= limit if op == "<=" else value >= limit)
 
 
+def shipped_sweeps() -> dict[str, Path]:
+    """Name -> path of the sweep files shipped with the package."""
+    from importlib import resources
+
+    folder = resources.files("tuav_sitl") / "sweeps"
+    return {Path(str(p)).stem: Path(str(p)) for p in folder.iterdir()
+            if str(p).endswith(".toml")}
+
+
+def run_sweeps(runs_dir: Path, workers: int | None = None) -> None:
+    """Run every shipped sweep into ``runs_dir/sweeps/NAME`` (resuming what is there)."""
+    import sys
+
+    from tuav_sitl.sweep import load_sweep, run_sweep
+
+    for name, path in sorted(shipped_sweeps().items()):
+        sweep, sc = load_sweep(path)
+        print(f"tuav-sitl results: sweep {name}, {sweep.runs} runs", file=sys.stderr)
+        run_sweep(sweep, sc, runs_dir / "sweeps" / name, workers=workers)
+
+
+def sweep_section(runs_dir: Path, metrics: dict[str, dict[str, Any]]) -> list[str]:
+    """The shipped sweeps' summaries found in ``runs_dir/sweeps/NAME`` (a sweep not run
+    there: the command and about how long it takes, from the scenario's wall time)."""
+    import json
+
+    from tuav_sitl.sweep import load_sweep, summary_text
+
+    lines = ["", "## Sweeps", "",
+             "Monte Carlo sweeps (`tuav-sitl sweep`, docs/usage.md): each run draws the "
+             "plant's truth, the wind and the seeds; the controllers keep their nominal "
+             "model. `tuav-sitl results --sweeps` runs them into `RUNS/sweeps/`."]
+    for name, path in sorted(shipped_sweeps().items()):
+        summary = runs_dir / "sweeps" / name / "summary.json"
+        sweep, sc = load_sweep(path)
+        if summary.is_file():
+            text = summary_text(json.loads(summary.read_text()))
+            lines += ["", *("#" + ln if ln.startswith("# ") else ln
+                            for ln in text.rstrip("\n").split("\n"))]
+            continue
+        wall = metrics.get(sc.name, {}).get("wall_time_s")
+        cores = os.cpu_count() or 1
+        took = (f", about {sweep.runs * wall / cores / 60:.0f} min on {cores} cores (a "
+                f"nominal run's {wall:.1f} s; failing runs take longer)" if wall else "")
+        lines += ["", f"### sweep {name}: not run", "",
+                  f"`tuav-sitl sweep {path.name} --out {runs_dir}/sweeps/{name}`: "
+                  f"{sweep.runs} runs of {sc.name}{took}."]
+    return lines
+
+
 def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
                   processes: int | None = None) -> dict[str, dict[str, Any]]:
-    """Run all shipped scenarios and write ``out_md``; returns the metrics by scenario."""
+    """Run all shipped scenarios and write ``out_md``; returns the metrics by scenario
+    (with the shipped sweeps' summaries found under ``runs_dir/sweeps``)."""
     names = sorted(shipped_scenarios())
     wall = time.perf_counter()
     with get_context("fork").Pool(processes or min(len(names), os.cpu_count() or 1)) as pool:
@@ -196,6 +247,7 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
                                 zip(m["items_reached"], m["items_reached_t_s"], strict=True))
             end = "landed and disarmed" if m["landed_disarmed"] else "NOT landed and disarmed"
             lines.append(f"- {n}: items reached {reached}; {end}")
+    lines += sweep_section(runs_dir, metrics)
     if figures:
         lines += ["", "## Figures", ""]
         from tuav_sitl.figures import FIGURE_CAPTIONS
