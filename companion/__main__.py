@@ -61,6 +61,8 @@ GAIN_NAMES = {
     "disturbance_gain_1_s2": "PSC_DIST_GAIN",
     "disturbance_limit_m_s2": "PSC_DIST_LIM", "max_tilt_rad": "PSC_TILT_MAX",
     "max_thrust_fraction": "PSC_THR_MAX", "att_k3_1_s": "ATC_K3", "att_k4_n_m_s": "ATC_K4",
+    "att_disturbance_gain_n_m_rad": "ATC_DIST_GAIN",
+    "att_disturbance_limit_n_m": "ATC_DIST_LIM",
     "command_filter_hz": "ATC_FILT_HZ", "command_filter_damping": "ATC_FILT_ZETA",
     "use_tether_model": "TETH_MODEL", "use_measured_tension": "TETH_TENSION",
 }
