@@ -254,9 +254,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser(
         "bench", help="run every benchmark and print one table (python -m benchmarks)",
         description="Run every benchmark (tether solve vs MoorPy, plant step, offline closed "
-                    "loop, the three processes in lockstep and in real time, latencies) and "
-                    "print one table of medians and same-run ratios, each goal beside its "
-                    "measurement (docs/performance.md).")
+                    "loop, sweep throughput on Dask, the three processes in lockstep and in "
+                    "real time, latencies) and print one table of medians and same-run "
+                    "ratios, each goal beside its measurement (docs/performance.md).")
     bench.add_argument("--quick", action="store_true",
                        help="each benchmark once in a tiny configuration")
     bench.add_argument("--no-processes", action="store_true",
