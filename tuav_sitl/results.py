@@ -99,9 +99,11 @@ def run_sweeps(runs_dir: Path, workers: int | None = None) -> None:
         run_sweep(sweep, sc, runs_dir / "sweeps" / name, workers=workers)
 
 
-def sweep_section(runs_dir: Path, metrics: dict[str, dict[str, Any]]) -> list[str]:
+def sweep_section(runs_dir: Path, metrics: dict[str, dict[str, Any]],
+                  fig_dir: Path | None = None) -> list[str]:
     """The shipped sweeps' summaries found in ``runs_dir/sweeps/NAME`` (a sweep not run
-    there: the command and about how long it takes, from the scenario's wall time)."""
+    there: the command and about how long it takes, from the scenario's wall time); with
+    ``fig_dir``, each sweep's failures figure copied there and shown."""
     import json
 
     from tuav_sitl.sweep import load_sweep, summary_text
@@ -117,6 +119,12 @@ def sweep_section(runs_dir: Path, metrics: dict[str, dict[str, Any]]) -> list[st
             text = summary_text(json.loads(summary.read_text()))
             lines += ["", *("#" + ln if ln.startswith("# ") else ln
                             for ln in text.rstrip("\n").split("\n"))]
+            fig = summary.parent / "figures" / "failures.png"
+            if fig_dir is not None and fig.is_file():
+                fig_dir.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(fig, fig_dir / f"sweep-{name}-failures.png")
+                lines += ["", f"![sweep {name}: failures against the drawn parameters]"
+                          f"(figures/sweep-{name}-failures.png)"]
             continue
         wall = metrics.get(sc.name, {}).get("wall_time_s")
         cores = os.cpu_count() or 1
@@ -247,7 +255,7 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
                                 zip(m["items_reached"], m["items_reached_t_s"], strict=True))
             end = "landed and disarmed" if m["landed_disarmed"] else "NOT landed and disarmed"
             lines.append(f"- {n}: items reached {reached}; {end}")
-    lines += sweep_section(runs_dir, metrics)
+    lines += sweep_section(runs_dir, metrics, fig_dir if figures else None)
     if figures:
         lines += ["", "## Figures", ""]
         from tuav_sitl.figures import FIGURE_CAPTIONS
