@@ -228,3 +228,24 @@ def test_a_killed_sweep_resumes_and_loses_nothing(tmp_path):
     by_index = {r["index"]: r for r in rows}
     for r in before:   # what was stored before the kill is kept as it was
         assert by_index[r["index"]] == r
+
+
+def test_results_show_a_shipped_sweeps_summary_or_how_to_run_it(small_sweep, tmp_path):
+    from tuav_sitl.results import shipped_sweeps, sweep_section
+
+    _, _, _, summary, out = small_sweep
+    names = sorted(shipped_sweeps())
+    assert {"robustness", "wind-envelope-hover", "wind-envelope-circle"} <= set(names)
+    for name in names:   # every shipped sweep file loads
+        sw.load_sweep(shipped_sweeps()[name])
+    text = "\n".join(sweep_section(tmp_path, {"circle-rtk": {"wall_time_s": 1.5}}))
+    assert "### sweep robustness: not run" in text
+    import os
+
+    assert f"about {200 * 1.5 / (os.cpu_count() or 1) / 60:.0f} min" in text
+    # a sweep run there: its summary, headings one level down
+    import shutil
+
+    shutil.copytree(out, tmp_path / "sweeps" / "robustness")
+    text = "\n".join(sweep_section(tmp_path, {}))
+    assert f"## sweep small over circle: {summary['runs']} runs" in text
