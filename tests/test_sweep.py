@@ -248,4 +248,4 @@ def test_results_show_a_shipped_sweeps_summary_or_how_to_run_it(small_sweep, tmp
 
     shutil.copytree(out, tmp_path / "sweeps" / "robustness")
     text = "\n".join(sweep_section(tmp_path, {}))
-    assert f"## sweep small over circle: {summary['runs']} runs" in text
+    assert f"### sweep small over circle: {summary['runs']} runs" in text

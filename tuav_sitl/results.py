@@ -117,7 +117,7 @@ def sweep_section(runs_dir: Path, metrics: dict[str, dict[str, Any]],
         sweep, sc = load_sweep(path)
         if summary.is_file():
             text = summary_text(json.loads(summary.read_text()))
-            lines += ["", *("#" + ln if ln.startswith("# ") else ln
+            lines += ["", *("##" + ln if ln.startswith("# ") else ln
                             for ln in text.rstrip("\n").split("\n"))]
             fig = summary.parent / "figures" / "failures.png"
             if fig_dir is not None and fig.is_file():
