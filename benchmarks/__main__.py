@@ -301,6 +301,51 @@ def bench_offline(quick: bool) -> list[Row]:
     return rows
 
 
+def _warm_worker(sc: object) -> bool:
+    """On a Dask worker: one short run, so the compiled kernels are loaded before timing."""
+    from tuav_sitl.offline import run_scenario
+
+    run_scenario(sc.replace(duration_s=1.0, metrics_after_s=0.0), progress=None)
+    return True
+
+
+def bench_sweep(quick: bool) -> list[Row]:
+    """``tuav-sitl sweep``: circle runs per hour on a Dask LocalCluster of one worker and of
+    two, the same draws, interleaved (the clusters started and warmed before timing)."""
+    from tuav_sitl.scenario import load_scenario
+    from tuav_sitl.sweep import SweepParams, VaryParams, close_client, local_client, rows_on
+
+    runs, duration = (2, 2.0) if quick else (8, 75.0)
+    sc = load_scenario("circle").replace(duration_s=duration, metrics_after_s=0.0)
+    sweep = SweepParams(runs=runs, vary=(VaryParams(parameter="mass_factor", low=0.8,
+                                                    high=1.2),))
+    rates: dict[int, list[float]] = {1: [], 2: []}
+    clients = {n: local_client(n) for n in (1, 2)}
+    try:
+        for client in clients.values():
+            client.run(_warm_worker, sc)
+        for rep in range(1 if quick else 2):
+            for n, client in clients.items():
+                todo = list(range(rep * runs, (rep + 1) * runs))
+                t0 = time.perf_counter()
+                for _ in rows_on(client, sweep, sc, todo):
+                    pass
+                rates[n].append(runs / (time.perf_counter() - t0) * 3600.0)
+    finally:
+        for client in clients.values():
+            close_client(client)
+    one, two = statistics.median(rates[1]), statistics.median(rates[2])
+    ratio = two / one
+    return [
+        Row("sweep: circle runs, 1 Dask worker", one, "runs / hour",
+            note=f"{runs} runs of {duration:.0f} s simulated"),
+        Row("sweep: circle runs, 2 Dask workers", two, "runs / hour", reference=one,
+            ratio_text=f"{ratio:.2f}x one worker",
+            goal=f">= 1.7x one worker: {'met' if ratio >= 1.7 else 'NOT met'}; >= 1000 "
+                 f"runs/hour: {'met' if two >= 1000 else 'NOT met'}"),
+    ]
+
+
 def bench_command_latency(quick: bool) -> list[Row]:
     """COMMAND_LONG -> COMMAND_ACK over the companion's MAVLink TCP endpoint, p50 and p99
     [ms]: in real time at 250 Hz, then in lockstep as fast as the two processes go."""
@@ -436,7 +481,7 @@ def main(argv: list[str] | None = None) -> int:
                          "time, the torque and command latencies)")
     args = ap.parse_args(argv)
     rows: list[Row] = []
-    benches = [bench_tether, bench_plant_step, bench_estimator, bench_offline]
+    benches = [bench_tether, bench_plant_step, bench_estimator, bench_offline, bench_sweep]
     if not args.no_processes:
         benches += [bench_processes, bench_command_latency]
     loads: list[tuple[str, Load]] = []

@@ -14,9 +14,14 @@ reference derivatives come from the filter, not from differentiating the positio
     compensation, tau_a the torque achieved:
         d(xi_eta)/dt = -K3 xi_eta + T(eta) xi_w,   J d(xi_w)/dt = -K4 xi_w + (tau_a - tau)
     e_eta_bar = e_eta - xi_eta,  e_w_bar = e_w - xi_w
-    tau   = omega x J omega + c omega + J d(alpha)/dt - T(eta)' e_eta_bar - K4 e_w
-    V     = 1/2 e_eta_bar' e_eta_bar + 1/2 e_w_bar' J e_w_bar,
+    tau   = omega x J omega + c omega + J d(alpha)/dt - T(eta)' e_eta_bar - K4 e_w - tau_hat
+    d(tau_hat)/dt = Gamma_tau e_w_bar   (projected onto |tau_hat| <= tau_max)
+    V     = 1/2 e_eta_bar' e_eta_bar + 1/2 e_w_bar' J e_w_bar
+            + 1/2 tau_tilde' Gamma_tau^-1 tau_tilde,
     dV/dt = -e_eta_bar' K3 e_eta_bar - e_w_bar' K4 e_w_bar
+for a constant disturbance torque tau_d (J d(omega)/dt = tau + tau_d - ...; a tether
+attached off the centre of mass), tau_tilde = tau_d - tau_hat: integral action that
+leaves no steady attitude error (docs/control.md §2).
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ class AttitudeOutput(NamedTuple):
     e_omega_rad_s: Vec3
     lyapunov: float              # 1/2 |e_eta_bar|^2 + 1/2 e_w_bar' J e_w_bar
     lyapunov_raw: float          # the same with the uncompensated errors
+    disturbance_n_m: Vec3        # the disturbance-torque estimate tau_hat
 
 
 class CommandFilter:
@@ -147,23 +153,30 @@ class AttitudeController:
         self.filter = CommandFilter(gains.command_filter_hz, gains.command_filter_damping, dt_s)
         self.xi_eta = np.zeros(3)
         self.xi_w = np.zeros(3)
+        self.tau_hat = np.zeros(3)
+        """The disturbance-torque estimate [N m] (body axes)."""
         self._decay_w = np.exp(-self.k4 / self.j * dt_s)
         self._pack()
 
     def _pack(self) -> None:
-        """J, c, K3, K4 and the decays of xi_w and xi_eta over a step, packed for the
-        compiled law (:func:`attitude_law`)."""
+        """J, c, K3, K4, the decays of xi_w and xi_eta over a step, the step, Gamma_tau and
+        the estimate's bound, packed for the compiled law (:func:`attitude_law`)."""
         decay_eta = np.exp(-self.k3 * self.dt_s)
+        gn = self.gains
         self._p = np.concatenate([self.j, [float(self.c)], self.k3, self.k4, self._decay_w,
-                                  decay_eta]).astype(float)
-        self._packed_from = (self.j, self.c, self.k3, self.k4, self._decay_w, self.dt_s)
+                                  decay_eta, [self.dt_s],
+                                  gn.att_disturbance_gain_n_m_rad,
+                                  [gn.att_disturbance_limit_n_m]]).astype(float)
+        self._packed_from = (self.j, self.c, self.k3, self.k4, self._decay_w, self.dt_s,
+                             self.gains)
 
     def params(self) -> np.ndarray:
         """The packed parameters, packed again if an attribute they come from was
         replaced."""
         f = self._packed_from
         if (self.j is not f[0] or self.c is not f[1] or self.k3 is not f[2]
-                or self.k4 is not f[3] or self._decay_w is not f[4] or self.dt_s is not f[5]):
+                or self.k4 is not f[3] or self._decay_w is not f[4] or self.dt_s is not f[5]
+                or self.gains is not f[6]):
             self._pack()
         return self._p
 
@@ -183,10 +196,12 @@ class AttitudeController:
         self._pack()
 
     def reset(self, attitude_rad: Vec3) -> None:
-        """Start the command filter at rest at ``attitude_rad``; clear the compensation."""
+        """Start the command filter at rest at ``attitude_rad``; clear the compensation and
+        the disturbance-torque estimate."""
         self.filter.reset(np.array(attitude_rad))
         self.xi_eta = np.zeros(3)
         self.xi_w = np.zeros(3)
+        self.tau_hat = np.zeros(3)
 
     def update(self, attitude_rad: Vec3, body_rates_rad_s: Vec3, desired_rad: Vec3,
                achieved_torque_n_m: Vec3 | None = None) -> AttitudeOutput:
@@ -198,7 +213,8 @@ class AttitudeController:
         """
         f = self.filter
         achieved = achieved_torque_n_m is not None
-        r = attitude_law(self.params(), f.coeffs, f.state, self.xi_eta, self.xi_w, *attitude_rad,
+        r = attitude_law(self.params(), f.coeffs, f.state, self.xi_eta, self.xi_w,
+                         self.tau_hat, *attitude_rad,
                           *body_rates_rad_s, *desired_rad, f.initialised, achieved,
                           *(achieved_torque_n_m if achieved else (0.0, 0.0, 0.0)))
         f.initialised = True
@@ -212,15 +228,17 @@ def attitude_output(r: tuple[Any, ...]) -> AttitudeOutput:
 
 @njit
 def attitude_law(p: np.ndarray, fc: np.ndarray, fs: np.ndarray, xi_eta: np.ndarray,
-                 xi_w: np.ndarray, eta0: float, eta1: float, eta2: float, om0: float,
-                 om1: float, om2: float, des0: float, des1: float, des2: float,
+                 xi_w: np.ndarray, tau_hat: np.ndarray, eta0: float, eta1: float,
+                 eta2: float, om0: float, om1: float, om2: float, des0: float,
+                 des1: float, des2: float,
                  initialised: bool, achieved: bool, ta0: float, ta1: float, ta2: float
                  ) -> tuple[Any, ...]:
     """One step of :class:`AttitudeController` (the law of the module docstring), in
     scalars: advances the command filter ``fs`` (started at rest at the desired attitude
-    unless ``initialised``) and the compensation ``xi_eta``, ``xi_w`` in place; returns the
-    fields of an :class:`AttitudeOutput`.
-    ``p`` = (J, c, K3, K4, decay of xi_w, decay of xi_eta) over one step."""
+    unless ``initialised``), the compensation ``xi_eta``, ``xi_w`` and the disturbance-
+    torque estimate ``tau_hat`` in place; returns the fields of an :class:`AttitudeOutput`.
+    ``p`` = (J, c, K3, K4, decay of xi_w, decay of xi_eta over one step, the step [s],
+    Gamma_tau, the bound on tau_hat)."""
     j0, j1, j2, c = p[0], p[1], p[2], p[3]
     k30, k31, k32, k40, k41, k42 = p[4], p[5], p[6], p[7], p[8], p[9]
     if initialised:
@@ -247,9 +265,18 @@ def attitude_law(p: np.ndarray, fc: np.ndarray, fs: np.ndarray, xi_eta: np.ndarr
     wb0, wb1, wb2 = ew0 - xi_w[0], ew1 - xi_w[1], ew2 - xi_w[2]
     jw0, jw1, jw2 = j0 * om0, j1 * om1, j2 * om2
     g0, g1, g2 = _mtv(t, eb0, eb1, eb2)               # T' e_eta_bar
-    tau0 = (om1 * jw2 - om2 * jw1) + c * om0 + j0 * ad0 - g0 - k40 * ew0
-    tau1 = (om2 * jw0 - om0 * jw2) + c * om1 + j1 * ad1 - g1 - k41 * ew1
-    tau2 = (om0 * jw1 - om1 * jw0) + c * om2 + j2 * ad2 - g2 - k42 * ew2
+    th0, th1, th2 = tau_hat[0], tau_hat[1], tau_hat[2]
+    tau0 = (om1 * jw2 - om2 * jw1) + c * om0 + j0 * ad0 - g0 - k40 * ew0 - th0
+    tau1 = (om2 * jw0 - om0 * jw2) + c * om1 + j1 * ad1 - g1 - k41 * ew1 - th1
+    tau2 = (om0 * jw1 - om1 * jw0) + c * om2 + j2 * ad2 - g2 - k42 * ew2 - th2
+    # the disturbance torque's adaptation on the compensated rate error, projected onto
+    # its bound (the projection only removes the outward part: V still falls)
+    dt = p[16]
+    n0, n1, n2 = th0 + dt * p[17] * wb0, th1 + dt * p[18] * wb1, th2 + dt * p[19] * wb2
+    norm = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    if norm > p[20]:
+        n0, n1, n2 = n0 * p[20] / norm, n1 * p[20] / norm, n2 * p[20] / norm
+    tau_hat[0], tau_hat[1], tau_hat[2] = n0, n1, n2
     lyap = (0.5 * (eb0 * eb0 + eb1 * eb1 + eb2 * eb2)
             + 0.5 * (wb0 * (j0 * wb0) + wb1 * (j1 * wb1) + wb2 * (j2 * wb2)))
     lyap_raw = (0.5 * (e0 * e0 + e1 * e1 + e2 * e2)
@@ -268,7 +295,7 @@ def attitude_law(p: np.ndarray, fc: np.ndarray, fs: np.ndarray, xi_eta: np.ndarr
         xi_eta[2] = u2 / k32 + (xi_eta[2] - u2 / k32) * p[15]
         xi_w[0], xi_w[1], xi_w[2] = n0, n1, n2
     return ((tau0, tau1, tau2), (c0, c1, c2), (a0, a1, a2), (eb0, eb1, eb2), (wb0, wb1, wb2),
-            lyap, lyap_raw)
+            lyap, lyap_raw, (th0, th1, th2))
 
 
 @njit

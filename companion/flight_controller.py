@@ -138,7 +138,8 @@ class FlightController:
         f, v = ac.filter, act.vehicle
         return (tm.w, tm.taut_stiffness_n, v.rotor_thrust_coeff, act._decay,
                 v.rotor_speed_min_rad_s, v.rotor_speed_max_rad_s, pc.params(), pc._state,
-                ac.params(), f.coeffs, f.state, ac.xi_eta, ac.xi_w, mx._inv, mx.params(),
+                ac.params(), f.coeffs, f.state, ac.xi_eta, ac.xi_w, ac.tau_hat, mx._inv,
+                mx.params(),
                 act._a, act.speeds, act._setpoints)
 
 
@@ -152,7 +153,7 @@ def flight_step(dt_s: float, px: float, py: float, pz: float, vx: float, vy: flo
                 kf: float, decay: float, speed_min: float, speed_max: float,
                 pos_p: np.ndarray, pos_s: np.ndarray, att_p: np.ndarray,
                 filt_c: np.ndarray, filt_s: np.ndarray, xi_eta: np.ndarray,
-                xi_w: np.ndarray, mix_inv: np.ndarray, mix_p: np.ndarray,
+                xi_w: np.ndarray, tau_hat: np.ndarray, mix_inv: np.ndarray, mix_p: np.ndarray,
                 alloc: np.ndarray, speeds: np.ndarray, setpoints: np.ndarray
                 ) -> tuple[Any, ...]:
     """:meth:`FlightController.update` in scalars, on the components' packed parameters
@@ -171,8 +172,8 @@ def flight_step(dt_s: float, px: float, py: float, pz: float, vx: float, vy: flo
                       r22, ftx, fty, ftz, True, u_ach)
     roll, pitch, yaw = quat_to_euler_kernel(q)
     des_roll, des_pitch, des_yaw = po[1]
-    ao = attitude_law(att_p, filt_c, filt_s, xi_eta, xi_w, roll, pitch, yaw, wx, wy, wz,
-                      des_roll, des_pitch, des_yaw, initialised, True, ta0, ta1, ta2)
+    ao = attitude_law(att_p, filt_c, filt_s, xi_eta, xi_w, tau_hat, roll, pitch, yaw, wx,
+                      wy, wz, des_roll, des_pitch, des_yaw, initialised, True, ta0, ta1, ta2)
     tx, ty, tz = ao[0]
     c0, c1, c2, c3, saturated = mix_kernel(mix_inv, mix_p, po[0], tx, ty, tz)
     rotor_speed_setpoints(setpoints, c0, c1, c2, c3, armed, speed_min, speed_max)

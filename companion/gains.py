@@ -37,6 +37,13 @@ class FlightControlParams(Params):
         (7.0, 7.0, 3.0), "1/s", "attitude error gain K3 (roll, pitch, yaw)", gt=0, length=3)
     att_k4_n_m_s: tuple[float, ...] = quantity(
         (7.0, 7.0, 0.6), "N*m*s/rad", "body-rate error gain K4 (x, y, z)", gt=0, length=3)
+    att_disturbance_gain_n_m_rad: tuple[float, ...] = quantity(
+        (5.0, 5.0, 0.5), "N*m/rad", "adaptation gain Gamma_tau of the disturbance-torque "
+        "estimate (x, y, z): d(tau_hat)/dt = Gamma_tau e_w_bar (integral action); 0 turns "
+        "it off", ge=0, length=3)
+    att_disturbance_limit_n_m: float = quantity(
+        2.0, "N*m", "bound on the disturbance-torque estimate (projection, anti-windup)",
+        gt=0)
     command_filter_hz: float = quantity(
         6.0, "Hz", "natural frequency of the attitude command filter", gt=0)
     command_filter_damping: float = quantity(

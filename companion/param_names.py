@@ -41,6 +41,8 @@ GAIN_NAMES: dict[str, str | WireName | tuple[WireName, ...]] = {
                              unit="cdeg"),
     "max_thrust_fraction": "TUAV_PSC_THRMAX",
     "att_k3_1_s": "TUAV_ATC_K3", "att_k4_n_m_s": "TUAV_ATC_K4",
+    "att_disturbance_gain_n_m_rad": "TUAV_ATC_DGAIN",
+    "att_disturbance_limit_n_m": "TUAV_ATC_DLIM",
     "command_filter_hz": "TUAV_ATC_FLT_HZ", "command_filter_damping": "TUAV_ATC_FLT_Z",
     "use_tether_model": "TUAV_TETH_MODEL", "use_measured_tension": "TUAV_TETH_TENS",
 }

@@ -173,7 +173,7 @@ def _states(fc: FlightController) -> list:
     """Every internal state of a flight controller, as plain lists."""
     a = fc.attitude
     return [fc.position._state.tolist(), a.filter.state.tolist(), a.filter.initialised,
-            a.xi_eta.tolist(), a.xi_w.tolist(), fc.actuators.speeds.tolist(),
+            a.xi_eta.tolist(), a.xi_w.tolist(), a.tau_hat.tolist(), fc.actuators.speeds.tolist(),
             fc.actuators._setpoints.tolist()]
 
 
@@ -196,6 +196,7 @@ def test_set_gains_keeps_the_states_and_takes_effect():
     c.attitude.filter.state[:] = a.attitude.filter.state
     c.attitude.filter.initialised = a.attitude.filter.initialised
     c.attitude.xi_eta[:], c.attitude.xi_w[:] = a.attitude.xi_eta, a.attitude.xi_w
+    c.attitude.tau_hat[:] = a.attitude.tau_hat
     c.actuators.speeds[:], c.actuators._setpoints[:] = a.actuators.speeds, a.actuators._setpoints
     c.winch_report(0.0, 14.0, 0.1, 2.0)
     before = _states(a)

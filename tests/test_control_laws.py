@@ -165,15 +165,21 @@ def test_attitude_from_thrust_vector_points_body_z_along_it(yaw):
 
 
 # ---------------------------------------------------------------- attitude loop
-def test_attitude_lyapunov_decreases_on_the_rigid_body():
+@pytest.mark.parametrize("tau_d", [(0.0, 0.0, 0.0), (0.3, -0.2, 0.05)])
+def test_attitude_lyapunov_decreases_on_the_rigid_body(tau_d):
     """Euler's equations integrated by RK4, the state starting far from a smoothly moving
-    command: dV/dt follows the derivation's -e_eta'K3e_eta - e_w'K4e_w (the filtered
-    command's derivatives are exact), and V never increases."""
+    command, with a constant disturbance torque ``tau_d`` (a tether attached off the centre
+    of mass): the proof's V (the logged one plus the adaptation term
+    1/2 (tau_d - tau_hat)' Gamma^-1 (tau_d - tau_hat)) follows the derivation's
+    dV/dt = -e_eta'K3e_eta - e_w'K4e_w (the filtered command's derivatives are exact) and
+    never increases, and the estimate converges to ``tau_d``."""
     gains = FlightControlParams()
     j = np.array([0.5192, 0.4929, 0.0947])
     c = 0.01
     dt = 1e-3
     ac = AttitudeController(gains, tuple(j), c, dt)
+    gam = np.array(gains.att_disturbance_gain_n_m_rad)
+    disturbance = np.array(tau_d)
 
     def desired(t):
         return (0.2 * math.sin(0.8 * t), -0.15 * math.cos(0.6 * t), 0.5 * math.sin(0.3 * t))
@@ -185,14 +191,16 @@ def test_attitude_lyapunov_decreases_on_the_rigid_body():
     def f(state, tau):
         e, w = state[:3], state[3:]
         _, t = euler_rate_matrices(e[0], e[1])
-        return np.concatenate([t @ w, (tau - c * w - np.cross(w, j * w)) / j])
+        return np.concatenate([t @ w, (tau + disturbance - c * w - np.cross(w, j * w)) / j])
 
     state = np.concatenate([eta, om])
     g3, g4 = np.array(gains.att_k3_1_s), np.array(gains.att_k4_n_m_s)
-    values, rates = [], []
+    values, logged, rates = [], [], []
     for k in range(6000):
         out = ac.update(tuple(state[:3]), tuple(state[3:]), desired(k * dt))
-        values.append(out.lyapunov)
+        tilde = disturbance - np.array(out.disturbance_n_m)
+        logged.append(out.lyapunov)
+        values.append(out.lyapunov + 0.5 * float(tilde @ (tilde / gam)))
         ee, ew = np.array(out.e_eta_rad), np.array(out.e_omega_rad_s)
         rates.append(-float(ee @ (g3 * ee)) - float(ew @ (g4 * ew)))
         tau = np.array(out.torque_n_m)
@@ -201,16 +209,24 @@ def test_attitude_lyapunov_decreases_on_the_rigid_body():
         s3 = f(state + 0.5 * dt * s2, tau)
         s4 = f(state + dt * s3, tau)
         state = state + dt / 6 * (s1 + 2 * s2 + 2 * s3 + s4)
-    values, rates = np.array(values), np.array(rates)
+    values, logged, rates = np.array(values), np.array(logged), np.array(rates)
     num = np.diff(values) / dt
     mid = 0.5 * (rates[1:] + rates[:-1])
-    # above the floor that sampling a moving command at 1 kHz leaves (V ~ dt^2 ~ 1e-5;
-    # it shrinks 16x at a quarter of the step, and is zero for a constant command)
-    sig = values[:-1] > 1e-2
+    # within 5 % of the derivation's rate, above the floor that sampling a moving command
+    # at 1 kHz leaves (V ~ dt^2 ~ 1e-5, its rate ~1e-2 here: measured 0.011 at most with
+    # and without the adaptation; it shrinks 16x at a quarter of the step, and is zero
+    # for a constant command)
+    sig = logged[:-1] > 1e-2
     assert sig.sum() > 500
-    assert np.all(np.abs(num[sig] - mid[sig]) <= 0.05 * np.abs(mid[sig]))
-    assert np.all(np.diff(values)[sig] < 0.0)
-    assert values[-1] < 1e-6 * values[0]
+    assert np.all(np.abs(num[sig] - mid[sig]) <= 0.05 * np.abs(mid[sig]) + 0.02)
+    # the proof's V falls wherever its rate is clear of that floor
+    falling = np.abs(mid) > 0.05
+    assert falling.sum() > 500
+    assert np.all(np.diff(values)[falling] < 0.0)
+    assert values[-1] < 1e-3 * values[0]
+    # the estimate finds the disturbance (to the torque the sampled moving command itself
+    # leaves: measured 0.014 N m)
+    assert np.allclose(ac.tau_hat, disturbance, atol=0.03)
 
 
 # ---------------------------------------------------------------- winder loop

@@ -10,6 +10,7 @@ import pytest
 from companion.navigation import NavEvent
 from tuav_sitl.offline import RunResult, run_scenario, write_outputs
 from tuav_sitl.scenario import ScenarioParams, load_scenario, shipped_scenarios
+from tuavdefs.params import GustParams
 from tuavdefs.paramspec import ParameterError, load_toml
 
 NAMES = sorted(shipped_scenarios())
@@ -114,14 +115,37 @@ def test_bad_scenario_names_the_field(tmp_path):
         load_scenario("no-such-scenario")
 
 
-@pytest.mark.parametrize("name", ["setpoint", "single-position", "tether-length"])
-def test_lyapunov_functions_never_rise_once_the_reference_is_constant(results, name):
-    report = results[name].metrics["lyapunov"]
-    for subsystem in ("v_pos", "v_att", "v_win"):
-        r = report[subsystem]
-        assert r["from_s"] is not None, subsystem          # the reference did settle
-        assert r["from_s"] < results[name].metrics["sim_time_s"] - 2.0
-        assert r["increases"] == 0, (subsystem, r)
+@pytest.mark.parametrize("name", ["regulation", "setpoint", "single-position",
+                                  "tether-length"])
+def test_position_lyapunov_function_falls_from_far_above_its_floor(results, name):
+    """Once the position reference is constant, the position loop's Lyapunov function
+    (compensated errors) never rises, and the count covers a real decay: it starts well
+    above its floor and stays above it for seconds (docs/results.md)."""
+    r = results[name].metrics["lyapunov"]["v_pos"]
+    assert r["from_s"] is not None and r["floor"] > 0.0
+    assert r["value_then"] > 1e3 * r["floor"], r
+    assert r["above_floor_s"] > 5.0, r
+    assert r["increases_any"] == 0, r   # not even below the floor
+    assert r["increases"] == 0, r
+
+
+def test_regulation_lyapunov_count_starts_at_the_initial_error(results):
+    """The regulation run's reference is constant from t = 0, so its count starts at the
+    whole initial error: compensated and raw alike fall from there without a rise."""
+    r = results["regulation"].metrics["lyapunov"]["v_pos"]
+    assert r["from_s"] == 0.0 and r["value_then"] > 1.0
+    assert r["raw_value_then"] > 1.0 and r["raw_increases"] == 0
+
+
+def test_the_rise_counter_sees_a_disturbance():
+    """The counter can fail: a gust while the reference is constant makes the position
+    loop's Lyapunov function rise above its floor."""
+    base = load_scenario("regulation")
+    gust = GustParams(start_s=12.0, duration_s=2.0, amplitude_m_s=(4.0, 0.0, 0.0))
+    sc = base.replace(wind=base.wind.replace(gusts=(gust,)), duration_s=16.0)
+    r = run_scenario(sc, None, progress=None).metrics["lyapunov"]["v_pos"]
+    assert r["value_then"] > 1.0
+    assert r["increases"] > 0
 
 
 def _regulation(start, goal, duration=12.0) -> RunResult:

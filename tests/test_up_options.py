@@ -18,6 +18,7 @@ from tuav_sitl.up import (
     _system_params,
     _wind,
     add_arguments,
+    plant_params,
     ports_for,
     sim_address,
 )
@@ -112,6 +113,26 @@ def test_vehicle_tether_winder_files_replace_their_groups(tmp_path):
     with pytest.raises(ParameterError) as exc:
         _system_params(parse("--winder", str(bad)))
     assert exc.value.field == "winder.drum_radius_m"
+
+
+def test_plant_params_set_the_truth_apart_field_by_field(tmp_path):
+    veh = tmp_path / "veh.toml"
+    veh.write_text("mass_kg = 3.2\n")
+    truth_file = tmp_path / "truth.toml"
+    truth_file.write_text("[vehicle]\nrotor_thrust_coeff = 1.8e-5\n[tether]\n"
+                          "linear_density_kg_m = 0.068\n")
+    args = parse("--vehicle", str(veh), "--plant-params", str(truth_file))
+    model = _system_params(args)
+    truth = plant_params(args, model)
+    assert model.vehicle.mass_kg == 3.2 and model.vehicle.rotor_thrust_coeff == 2.0e-5
+    # the truth: the model's fields, with the file's replacing theirs
+    assert truth.vehicle.mass_kg == 3.2 and truth.vehicle.rotor_thrust_coeff == 1.8e-5
+    assert truth.tether.linear_density_kg_m == 0.068 and truth.winder == model.winder
+    assert plant_params(parse(), model) is model
+    truth_file.write_text("[vehicle]\nmass_kg = 0.0\n")
+    with pytest.raises(ParameterError) as exc:
+        plant_params(args, model)
+    assert exc.value.field == "truth.vehicle.mass_kg"
 
 
 def test_every_port_moves_per_instance():

@@ -97,8 +97,38 @@ def _cmd_results(args: argparse.Namespace) -> int:
     from tuav_sitl.results import write_results
 
     out = Path(args.out)
+    if args.sweeps:
+        from tuav_sitl.results import run_sweeps
+
+        run_sweeps(Path(args.runs))
     metrics = write_results(out, Path(args.runs), figures=not args.no_figures)
     print(f"wrote {out} from {len(metrics)} runs in {args.runs}")
+    return 0
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from tuav_sitl.sweep import load_sweep, run_sweep, summary_text
+
+    sweep, scenario = load_sweep(args.sweep)
+    if args.runs is not None:
+        if args.runs < 1:
+            raise ParameterError("--runs", f"must be >= 1, got {args.runs}")
+        sweep = sweep.replace(runs=args.runs)
+    if args.workers is not None and args.workers < 1:
+        raise ParameterError("--workers", f"must be >= 1, got {args.workers}")
+    out = Path(args.out) if args.out else Path("sweeps") / sweep.name
+    where = args.scheduler or f"a LocalCluster of {args.workers or 'one worker per core'}"
+    print(f"tuav-sitl sweep {sweep.name}: {sweep.runs} runs of {scenario.name} on {where}")
+    rows, summary = run_sweep(sweep, scenario, out, scheduler=args.scheduler,
+                           workers=args.workers,
+                           progress=None if args.quiet else sys.stderr)
+    print(summary_text(summary))
+    print(f"wrote {out}/runs.csv, runs.json, summary.json, summary.md")
+    if not args.no_figures:
+        from tuav_sitl.sweep_figures import make_sweep_figures
+
+        figs = make_sweep_figures(sweep, rows, out)
+        print("wrote " + ", ".join(str(f) for f in figs))
     return 0
 
 
@@ -178,7 +208,30 @@ def build_parser() -> argparse.ArgumentParser:
     res.add_argument("--out", default="docs/results.md", help="the Markdown file to write")
     res.add_argument("--runs", default="runs", help="folder for the run folders")
     res.add_argument("--no-figures", action="store_true", help="metrics only")
+    res.add_argument("--sweeps", action="store_true",
+                     help="also run the shipped sweeps (tuav-sitl sweep; long) into "
+                          "RUNS/sweeps; without, the summaries found there are included")
     res.set_defaults(func=_cmd_results)
+
+    sweep = sub.add_parser(
+        "sweep", help="Monte Carlo over a scenario on Dask (drawn truth, wind, sensors)",
+        description="Run a sweep file's runs (each an offline run of its scenario with drawn "
+                    "plant parameters, wind, sensors and seeds) on Dask distributed; write "
+                    "the table of drawn values and metrics (runs.csv as runs finish, "
+                    "runs.json) and the summary (failure rate against the targets, "
+                    "percentiles, what the failures correlate with). An interrupted sweep "
+                    "resumes where it stopped (docs/usage.md#tuav-sitl-sweep).")
+    sweep.add_argument("sweep", help="a sweep TOML file")
+    sweep.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
+                       help="an existing Dask cluster's scheduler (default: a LocalCluster)")
+    sweep.add_argument("--workers", type=int, default=None,
+                       help="the LocalCluster's worker processes (default: one per core)")
+    sweep.add_argument("--runs", type=int, default=None, help="override the run count")
+    sweep.add_argument("--out", default=None, help="output folder (default sweeps/NAME)")
+    sweep.add_argument("--quiet", action="store_true", help="no progress bar")
+    sweep.add_argument("--no-figures", action="store_true",
+                       help="skip the figures (CDFs, failures against the drawn parameters)")
+    sweep.set_defaults(func=_cmd_sweep)
 
     from tuav_sitl.up import add_arguments
 
@@ -201,9 +254,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser(
         "bench", help="run every benchmark and print one table (python -m benchmarks)",
         description="Run every benchmark (tether solve vs MoorPy, plant step, offline closed "
-                    "loop, the three processes in lockstep and in real time, latencies) and "
-                    "print one table of medians and same-run ratios, each goal beside its "
-                    "measurement (docs/performance.md).")
+                    "loop, sweep throughput on Dask, the three processes in lockstep and in "
+                    "real time, latencies) and print one table of medians and same-run "
+                    "ratios, each goal beside its measurement (docs/performance.md).")
     bench.add_argument("--quick", action="store_true",
                        help="each benchmark once in a tiny configuration")
     bench.add_argument("--no-processes", action="store_true",

@@ -198,7 +198,6 @@ class GroundStation:
 
     def __init__(self, winch: Winch) -> None:
         self.winch = winch
-        self._r_w = winch.r_w
         self._encoder_id = cp.frame_id(winch.node, cp.Cmd.GET_ENCODER_ESTIMATES)
         self._tension_id = cp.frame_id(winch.sensor_node, cp.SensorCmd.WINCH_TENSION)
         self._torque_id = cp.frame_id(winch.node, cp.Cmd.SET_INPUT_TORQUE)
@@ -210,17 +209,19 @@ class GroundStation:
         self.notices: list[tuple[float, str]] = []
         """What the winch said (time [s], text)."""
 
-    def period(self, t_s: float, length_m: float, drum_rate_rad_s: float,
+    def period(self, t_s: float, drum_angle_rad: float, drum_rate_rad_s: float,
                drum_tension_n: float, uav_pos_m: tuple[float, float, float],
                uav_vel_m_s: tuple[float, float, float]) -> WinchStatusReport | None:
-        """One winder period at ``t_s`` [s]; returns the WINCH_STATUS it sends, if any."""
+        """One winder period at ``t_s`` [s] with the encoder's drum angle [rad] and rate
+        [rad/s] (the winch turns them into length with its own drum radius); returns the
+        WINCH_STATUS it sends, if any."""
         w = self.winch
         w.set_uav((uav_pos_m, uav_vel_m_s))
         w.handle_frame(t_s, self._tension_id,
                        cp.encode_winch_tension(drum_tension_n, not self.axis_enabled))
         rev = 1.0 / (2.0 * math.pi)
         out = w.handle_frame(t_s, self._encoder_id, cp.encode_encoder_estimates(
-            length_m / self._r_w * rev, drum_rate_rad_s * rev))
+            drum_angle_rad * rev, drum_rate_rad_s * rev))
         if out is None:
             return None
         for frame in out.frames:
@@ -260,14 +261,18 @@ class OfflineRunner:
 
     def __init__(self, scenario: ScenarioParams) -> None:
         sc = self.sc = scenario
+        # the plant integrates the truth; the controllers are built from their own model
+        # (the scenario's [vehicle], [tether], [winder], [environment]), which [plant] may
+        # set the truth apart from
         params = self.params = sc.system()
-        g = params.environment.gravity_m_s2
+        model = self.model = sc.model()
+        g = model.environment.gravity_m_s2
         self.dt = 1.0 / sc.physics_rate_hz
         self.n_ctrl = round(sc.physics_rate_hz / sc.control.rate_hz)
         self.n_wind = round(sc.physics_rate_hz / sc.winder_control.rate_hz)
-        self.winder_host = WinderHost(sc.winder_control, sc.lbar, params.winder,
-                                      params.tether, g)
-        self.ground = GroundStation(Winch(self.winder_host, params.winder, params.tether, g,
+        self.winder_host = WinderHost(sc.winder_control, sc.lbar, model.winder,
+                                      model.tether, g)
+        self.ground = GroundStation(Winch(self.winder_host, model.winder, model.tether, g,
                                           sc.winch))
         start = tuple(sc.initial.position_m)
         gear = params.vehicle.gear_height_m
@@ -297,9 +302,9 @@ class OfflineRunner:
             # the user calibrated the accelerometer before the flight (on these sensors)
             estimator = estimator.replace(
                 accel_offsets_m_s2=accel_calibration(sc.sensors.noise_model(), tuple(sc.home),
-                                                     params.environment.gravity_m_s2),
+                                                     model.environment.gravity_m_s2),
                 accel_bias_sigma_m_s2=CALIBRATED_ACCEL_BIAS_SIGMA_M_S2)
-        self.companion = Companion(params, sc.control, nav_params, estimator,
+        self.companion = Companion(model, sc.control, nav_params, estimator,
                                    on_event=self._on_nav_event)
         self.companion.on_start = self._on_start
         self._t = 0.0
@@ -412,7 +417,7 @@ class OfflineRunner:
         inputs = PlantInputs()
         winder_torque, winder_lyap, lbar_m, lbar_rate = 0.0, 0.0, 0.0, 0.0
         winder_enabled = True
-        g = self.params.environment.gravity_m_s2
+        g = self.model.environment.gravity_m_s2   # the companion's: WINCH_STATUS is in kg
         mission = sc.flies_mission
         sensors = self.sensors
         faults = bool(sc.faults)
@@ -438,14 +443,13 @@ class OfflineRunner:
                 # ground station: encoder, load cell and the UAV's telemetry
                 drum_tension = tether_forces().drum_tension_n
                 x = plant.x.tolist()
-                length, drum_rate = r_w * x[DRUM_ANGLE], x[DRUM_RATE]
                 if faults and self.faults.can_down:
                     # no frame either way: the axis's watchdog disarms it (the drum
                     # brakes), the winch hears nothing and says nothing
                     status = None
                     winder_torque, winder_enabled = 0.0, False
                 else:
-                    status = ground.period(t, length, drum_rate, drum_tension,
+                    status = ground.period(t, x[DRUM_ANGLE], x[DRUM_RATE], drum_tension,
                                            tuple(x[POS]), tuple(x[VEL]))
                     winder_torque, winder_enabled = ground.torque_n_m, ground.axis_enabled
                 if faults and self.faults.winder_motor_failed:
@@ -757,10 +761,29 @@ def lyapunov_increases(t: np.ndarray, v: np.ndarray, from_s: float, floor: float
     return int(np.sum((d > 0.0) & (vv[:-1] > floor)))
 
 
+def above_floor_s(t: np.ndarray, v: np.ndarray, from_s: float, floor: float) -> float:
+    """How long after ``from_s`` [s] ``v`` stays above ``floor`` before it first reaches
+    it: the span a count of rises above the floor covers (0 if it starts at the floor)."""
+    sel = t >= from_s
+    tt, vv = t[sel], v[sel]
+    if not len(vv) or not vv[0] > floor:
+        return 0.0
+    below = np.nonzero(~(vv > floor))[0]
+    end = tt[below[0]] if len(below) else tt[-1]
+    return float(end - tt[0])
+
+
+#: The Lyapunov functions of the raw (uncompensated) errors, beside the compensated ones.
+RAW_LYAPUNOV = {"v_pos": "v_pos_raw", "v_att": "v_att_raw"}
+
+
 def lyapunov_report(s: dict[str, np.ndarray], position_ref_still_s: float
-                    ) -> dict[str, dict[str, float | int | None]]:
-    """For each subsystem: from when its reference is constant, its Lyapunov function's
-    value then, and how often it rose (above its floor) after that (docs/control.md §5).
+                    ) -> dict[str, dict[str, Any]]:
+    """For each subsystem, from when its reference is constant (docs/control.md §5): its
+    Lyapunov function's value then and its floor (:data:`LYAPUNOV_FLOORS`), how long it
+    stays above the floor (``above_floor_s``: what the count covers; 0 means the count is
+    no evidence), how often it rose above the floor and at all; for the position and
+    attitude loops the same of the raw errors' function (``raw_*``).
 
     Position: the position reference is constant. Attitude: the filtered attitude command
     is still. Winder: L-bar is still.
@@ -771,16 +794,29 @@ def lyapunov_report(s: dict[str, np.ndarray], position_ref_still_s: float
         "v_att": still_from(t, s["att_cmd"], ATTITUDE_REF_STILL_RAD_S),
         "v_win": still_from(t, s["lbar"], LENGTH_REF_STILL_M_S),
     }
-    out: dict[str, dict[str, float | int | None]] = {}
+    out: dict[str, dict[str, Any]] = {}
     for name, t0 in starts.items():
+        floor = LYAPUNOV_FLOORS[name]
         if t0 is not None and t0 >= t[-1]:
             t0 = None   # the run ended before the reference settled
         if t0 is None:
-            out[name] = {"from_s": None, "value_then": None, "increases": None}
+            out[name] = {"from_s": None, "value_then": None, "floor": floor,
+                         "above_floor_s": None, "increases": None, "increases_any": None}
             continue
         i0 = int(np.searchsorted(t, t0))
-        out[name] = {"from_s": round(t0, 3), "value_then": float(s[name][i0]),
-                     "increases": lyapunov_increases(t, s[name], t0, LYAPUNOV_FLOORS[name])}
+        v = s[name]
+        r: dict[str, Any] = {
+            "from_s": round(t0, 3), "value_then": float(v[i0]), "floor": floor,
+            "above_floor_s": round(above_floor_s(t, v, t0, floor), 3),
+            "increases": lyapunov_increases(t, v, t0, floor),
+            "increases_any": lyapunov_increases(t, v, t0, 0.0)}
+        raw = RAW_LYAPUNOV.get(name)
+        if raw is not None:
+            vr = s[raw]
+            r |= {"raw_value_then": float(vr[i0]),
+                  "raw_above_floor_s": round(above_floor_s(t, vr, t0, floor), 3),
+                  "raw_increases": lyapunov_increases(t, vr, t0, floor)}
+        out[name] = r
     return out
 
 

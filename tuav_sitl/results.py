@@ -78,9 +78,68 @@ def _check(value: Any, op: str, limit: float) -> bool:
     return value is not None and (value <= limit if op == "<=" else value >= limit)
 
 
+def shipped_sweeps() -> dict[str, Path]:
+    """Name -> path of the sweep files shipped with the package."""
+    from importlib import resources
+
+    folder = resources.files("tuav_sitl") / "sweeps"
+    return {Path(str(p)).stem: Path(str(p)) for p in folder.iterdir()
+            if str(p).endswith(".toml")}
+
+
+def run_sweeps(runs_dir: Path, workers: int | None = None) -> None:
+    """Run every shipped sweep into ``runs_dir/sweeps/NAME`` (resuming what is there)."""
+    import sys
+
+    from tuav_sitl.sweep import load_sweep, run_sweep
+
+    for name, path in sorted(shipped_sweeps().items()):
+        sweep, sc = load_sweep(path)
+        print(f"tuav-sitl results: sweep {name}, {sweep.runs} runs", file=sys.stderr)
+        run_sweep(sweep, sc, runs_dir / "sweeps" / name, workers=workers)
+
+
+def sweep_section(runs_dir: Path, metrics: dict[str, dict[str, Any]],
+                  fig_dir: Path | None = None) -> list[str]:
+    """The shipped sweeps' summaries found in ``runs_dir/sweeps/NAME`` (a sweep not run
+    there: the command and about how long it takes, from the scenario's wall time); with
+    ``fig_dir``, each sweep's failures figure copied there and shown."""
+    import json
+
+    from tuav_sitl.sweep import load_sweep, summary_text
+
+    lines = ["", "## Sweeps", "",
+             "Monte Carlo sweeps (`tuav-sitl sweep`, docs/usage.md): each run draws the "
+             "plant's truth, the wind and the seeds; the controllers keep their nominal "
+             "model. `tuav-sitl results --sweeps` runs them into `RUNS/sweeps/`."]
+    for name, path in sorted(shipped_sweeps().items()):
+        summary = runs_dir / "sweeps" / name / "summary.json"
+        sweep, sc = load_sweep(path)
+        if summary.is_file():
+            text = summary_text(json.loads(summary.read_text()))
+            lines += ["", *("##" + ln if ln.startswith("# ") else ln
+                            for ln in text.rstrip("\n").split("\n"))]
+            fig = summary.parent / "figures" / "failures.png"
+            if fig_dir is not None and fig.is_file():
+                fig_dir.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(fig, fig_dir / f"sweep-{name}-failures.png")
+                lines += ["", f"![sweep {name}: failures against the drawn parameters]"
+                          f"(figures/sweep-{name}-failures.png)"]
+            continue
+        wall = metrics.get(sc.name, {}).get("wall_time_s")
+        cores = os.cpu_count() or 1
+        took = (f", about {sweep.runs * wall / cores / 60:.0f} min on {cores} cores (a "
+                f"nominal run's {wall:.1f} s; failing runs take longer)" if wall else "")
+        lines += ["", f"### sweep {name}: not run", "",
+                  f"`tuav-sitl sweep {path.name} --out {runs_dir}/sweeps/{name}`: "
+                  f"{sweep.runs} runs of {sc.name}{took}."]
+    return lines
+
+
 def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
                   processes: int | None = None) -> dict[str, dict[str, Any]]:
-    """Run all shipped scenarios and write ``out_md``; returns the metrics by scenario."""
+    """Run all shipped scenarios and write ``out_md``; returns the metrics by scenario
+    (with the shipped sweeps' summaries found under ``runs_dir/sweeps``)."""
     names = sorted(shipped_scenarios())
     wall = time.perf_counter()
     with get_context("fork").Pool(processes or min(len(names), os.cpu_count() or 1)) as pool:
@@ -134,17 +193,25 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
             _fmt(m["settling_time_s"]), _fmt(m["overshoot_percent"]),
             _fmt(m["sim_time_s"]), _fmt(m["wall_time_s"])]) + " |")
     lines += ["", "## Lyapunov functions once the reference is constant", "",
-              "From docs/control.md §5: times each function rose (above its resolution "
-              "floor) after its subsystem's reference became constant.", "",
-              "| scenario | position (from, rises) | attitude (from, rises) | "
-              "winder (from, rises) |", "|---|---|---|---|"]
+              "From docs/control.md §5, for each subsystem from when its reference is "
+              "constant: the function's value then, its resolution floor, how long it "
+              "stays above the floor (the span the count covers: a count over 0 s is no "
+              "evidence), how often it rose above the floor and at all; beside it the "
+              "same for the raw (uncompensated) errors' function.", "",
+              "| scenario | loop | from [s] | V then | floor | above floor [s] | rises "
+              "above floor | rises at all | raw V then | raw above floor [s] | raw rises "
+              "above floor |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    loops = {"v_pos": "position", "v_att": "attitude", "v_win": "winder"}
     for n in names:
         ly = metrics[n].get("lyapunov")
         if not ly:
             continue
-        cells = [f"{_fmt(ly[k]['from_s'])} s, {_fmt(ly[k]['increases'])}"
-                 for k in ("v_pos", "v_att", "v_win")]
-        lines.append(f"| {n} | " + " | ".join(cells) + " |")
+        for k, loop in loops.items():
+            r = ly[k]
+            lines.append(f"| {n} | {loop} | " + " | ".join(_fmt(r.get(c)) for c in (
+                "from_s", "value_then", "floor", "above_floor_s", "increases",
+                "increases_any", "raw_value_then", "raw_above_floor_s", "raw_increases"))
+                + " |")
     wp = {n: metrics[n].get("waypoints_reached") for n in names
           if metrics[n].get("waypoints_reached")}
     if wp:
@@ -188,6 +255,7 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
                                 zip(m["items_reached"], m["items_reached_t_s"], strict=True))
             end = "landed and disarmed" if m["landed_disarmed"] else "NOT landed and disarmed"
             lines.append(f"- {n}: items reached {reached}; {end}")
+    lines += sweep_section(runs_dir, metrics, fig_dir if figures else None)
     if figures:
         lines += ["", "## Figures", ""]
         from tuav_sitl.figures import FIGURE_CAPTIONS

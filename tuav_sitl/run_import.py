@@ -181,7 +181,7 @@ def _scenario(run_dir: Path, s: dict[str, np.ndarray], params: SystemParams,
     elif goals:
         trajectory = trajectory.replace(kind="waypoints", waypoints=tuple(
             WaypointParams(position_m=g.pos_m) for g in goals))
-    return ScenarioParams(
+    return ScenarioParams.nominal(
         name=run_dir.name,
         description=("a 'tuav-sitl up' run imported by tuav_sitl.run_import (truth.csv, "
                      "flight.tlog, can.log); the trajectory holds the goals the vehicle was "

@@ -10,6 +10,12 @@ MAVProxy's ``wp save`` writes it; home is its item 0 and the winder's position).
 ``[tether]``, ``[winder]``, ``[environment]``, ``[wind]``, ``[control]``,
 ``[winder_control]``, ``[lbar]`` override the defaults. Every field is checked at load time
 and an error names it (``circle.trajectory.radius_m: must be > 0 m, got -1.0``).
+
+``[vehicle]``, ``[tether]``, ``[winder]`` and ``[environment]`` are the system as its
+designers believe it: the controllers' model (the companion's and the ground station's).
+``[plant.vehicle]``, ``[plant.tether]``, ``[plant.winder]``, ``[plant.environment]`` set the
+truth apart from it, field by field (a field not given there is the model's); ``[wind]`` is
+the plant's alone.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ import math
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import Any, Self
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -44,6 +51,20 @@ from tuavdefs.paramspec import ParameterError, Params, load_toml, quantity
 from tuavdefs.simlink import HOME_DEFAULT
 
 TRAJECTORY_KINDS = ("hold", "step", "setpoint", "line", "circle", "waypoints")
+#: The tables the plant's truth may set apart from the controllers' model.
+PLANT_TABLES = ("environment", "vehicle", "tether", "winder")
+
+
+@dataclass(frozen=True)
+class PlantParams(Params):
+    """The plant's truth where the controllers' model may be wrong. Loaded from a scenario,
+    each table starts from the scenario's model table of that name
+    (:meth:`ScenarioParams.from_dict`)."""
+
+    environment: EnvironmentParams = quantity(EnvironmentParams(), "", "gravity and air")
+    vehicle: VehicleParams = quantity(VehicleParams(), "", "the quadrotor")
+    tether: TetherParams = quantity(TetherParams(), "", "the tether")
+    winder: WinderParams = quantity(WinderParams(), "", "the winder")
 
 
 @dataclass(frozen=True)
@@ -189,10 +210,16 @@ class ScenarioParams(Params):
                                  "relative to the scenario file)")
     navigation: NavigationParams = quantity(NavigationParams(), "", "the flight logic: "
                                             "speeds, acceptance radius, landing")
-    environment: EnvironmentParams = quantity(EnvironmentParams(), "", "gravity and air")
-    vehicle: VehicleParams = quantity(VehicleParams(), "", "the quadrotor")
-    tether: TetherParams = quantity(TetherParams(), "", "the tether")
-    winder: WinderParams = quantity(WinderParams(), "", "the winder")
+    environment: EnvironmentParams = quantity(EnvironmentParams(), "", "gravity and air, "
+                                              "as the controllers believe them")
+    vehicle: VehicleParams = quantity(VehicleParams(), "", "the quadrotor, as the "
+                                      "controllers believe it")
+    tether: TetherParams = quantity(TetherParams(), "", "the tether, as the controllers "
+                                    "believe it")
+    winder: WinderParams = quantity(WinderParams(), "", "the winder, as the controllers "
+                                    "believe it")
+    plant: PlantParams = quantity(PlantParams(), "", "the truth the plant integrates: "
+                                  "each table the model's, with the fields given here")
     wind: WindParams = quantity(WindParams(), "", "the wind")
     control: FlightControlParams = quantity(FlightControlParams(), "", "onboard control")
     winder_control: WinderControlParams = quantity(
@@ -207,6 +234,27 @@ class ScenarioParams(Params):
     faults: tuple[FaultParams, ...] = quantity(
         (), "", "faults the plant injects (sitl/faults.py: gnss_loss, wind, motor, "
         "winder_motor over start_s..end_s)")
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], prefix: str | None = None) -> Self:
+        """Build from a scenario's tables; each ``[plant.X]`` table starts from ``[X]``."""
+        data = dict(data)
+        plant = data.get("plant", {})
+        if isinstance(plant, dict):
+            merged = dict(plant)
+            for name in PLANT_TABLES:
+                model, truth = data.get(name, {}), plant.get(name, {})
+                if isinstance(model, dict) and isinstance(truth, dict):
+                    merged[name] = {**model, **truth}
+            data["plant"] = merged
+        return super().from_dict(data, prefix)
+
+    @classmethod
+    def nominal(cls, **fields: Any) -> ScenarioParams:
+        """A scenario built in code whose plant is its model (``fields`` as for the
+        constructor; a ``plant`` given wins)."""
+        plant = PlantParams(**{n: fields[n] for n in PLANT_TABLES if n in fields})
+        return cls(**{"plant": plant, **fields})
 
     def check(self) -> None:
         if self.mission and self.mission_file:
@@ -240,9 +288,16 @@ class ScenarioParams(Params):
         return home, [home_item(*home), *(m.to_item(home) for m in self.mission)]
 
     def system(self) -> SystemParams:
-        """The plant's parameters."""
+        """The plant's parameters: the truth (``[plant]``) and the wind."""
+        p = self.plant
+        return SystemParams(environment=p.environment, vehicle=p.vehicle, tether=p.tether,
+                            winder=p.winder, wind=self.wind)
+
+    def model(self) -> SystemParams:
+        """The controllers' model: the system as its designers believe it (no wind: they
+        do not know it)."""
         return SystemParams(environment=self.environment, vehicle=self.vehicle,
-                            tether=self.tether, winder=self.winder, wind=self.wind)
+                            tether=self.tether, winder=self.winder)
 
 
 def shipped_scenarios() -> dict[str, Path]:

@@ -20,6 +20,7 @@ import socket
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
@@ -263,6 +264,10 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     "[vehicle] at top level) replacing the default paper vehicle")
     ap.add_argument("--tether", default=None, metavar="FILE", help="tether TOML")
     ap.add_argument("--winder", default=None, metavar="FILE", help="winder TOML")
+    ap.add_argument("--plant-params", default=None, metavar="FILE",
+                    help="the plant's truth where it differs from the controllers' model "
+                         "(the parameters above): a system TOML whose fields replace the "
+                         "model's, field by field, for the plant only")
     ap.add_argument("--wind", type=_wind, default=None, metavar="SPEED,FROM_DEG[,TURB]",
                     help="steady wind [m/s] blowing from FROM_DEG (compass, 0 = north) with "
                          "Dryden turbulence none|light|moderate|severe, e.g. 5,270,light")
@@ -351,6 +356,25 @@ def _system_params(args: argparse.Namespace) -> SystemParams:
     return params
 
 
+def plant_params(args: argparse.Namespace, model: SystemParams) -> SystemParams:
+    """The plant's truth: ``model`` (the controllers' parameters) with the fields of
+    ``--plant-params`` replacing its own, table by table."""
+    if args.plant_params is None:
+        return model
+    path = Path(args.plant_params)
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ParameterError("--plant-params", f"cannot read {path}: {exc}") from None
+    merged = to_dict(model)
+    for table, fields in data.items():
+        if isinstance(fields, dict) and isinstance(merged.get(table), dict):
+            merged[table] = {**merged[table], **fields}
+        else:
+            merged[table] = fields
+    return SystemParams.from_dict(merged, prefix=path.stem)
+
+
 def signing_key(args: argparse.Namespace) -> bytes | None:
     """The signing key ``--signing-passphrase`` or ``--signing-key-file`` gives (None:
     signing off until a ground station sets a key)."""
@@ -408,6 +432,7 @@ def run_up(args: argparse.Namespace) -> int:
         return 1
     try:
         params = _system_params(args)
+        truth = plant_params(args, params)
     except ParameterError as exc:
         print(f"tuav-sitl up: bad parameter: {exc}", file=sys.stderr)
         return 2
@@ -421,7 +446,9 @@ def run_up(args: argparse.Namespace) -> int:
     run_dir.mkdir(parents=True, exist_ok=True)
     from tuav_sitl.offline import _to_toml  # the same writer as the offline runner's
 
-    (run_dir / "params.toml").write_text(_to_toml(to_dict(params)))
+    # the plant's truth (params.toml, what `plot` imports) and the controllers' model
+    (run_dir / "params.toml").write_text(_to_toml(to_dict(truth)))
+    (run_dir / "model.toml").write_text(_to_toml(to_dict(params)))
     if args.parm is not None:
         try:
             (run_dir / "companion.parm").write_text(Path(args.parm).read_text())
@@ -447,7 +474,7 @@ def run_up(args: argparse.Namespace) -> int:
     can = _can_spec(args.can, args.instance)
     h = args.home
     home = [repr(h.lat_deg), repr(h.lon_deg), repr(h.alt_m)]
-    common = ["--params", str(run_dir / "params.toml")]
+    common = ["--params", str(run_dir / "model.toml")]
     from companion.estimator import EstimatorParams
     from sitl.sensors import GNSS_MODELS, GnssPreset
 
@@ -471,7 +498,8 @@ def run_up(args: argparse.Namespace) -> int:
     plant_args = ["-m", "sitl", *plant_listen_args(sim), "--can", can, "--home", *home,
                   "--gnss", args.gnss, "--position", *map(str, args.position),
                   *(["--heading", repr(h.heading_deg)] if h.heading_deg is not None else []),
-                  "--truth-log", str(run_dir / "truth.csv"), *faults_args, *common]
+                  "--truth-log", str(run_dir / "truth.csv"), *faults_args,
+                  "--params", str(run_dir / "params.toml")]
     if math.isfinite(speedup):
         plant_args += ["--speedup", repr(speedup)]
     if args.duration is not None:

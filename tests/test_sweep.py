@@ -1,0 +1,251 @@
+"""``tuav-sitl sweep``: a small sweep on a Dask LocalCluster of two workers against the same
+runs made directly, resuming an interrupted sweep, reproducibility, the summary's counts
+and interval against scipy, and bad sweep files refused by field."""
+
+from __future__ import annotations
+
+import math
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.stats import binomtest
+
+from tuav_sitl import sweep as sw
+from tuav_sitl.cli import main
+from tuav_sitl.offline import run_scenario
+from tuav_sitl.scenario import load_scenario
+from tuavdefs.paramspec import ParameterError
+
+SMALL = """\
+name = "small"
+scenario = "circle"
+runs = 4
+seed = 7
+duration_s = 7.0
+
+[targets]
+position_rmse_m = 0.04
+
+[[vary]]
+parameter = "mass_factor"
+distribution = "uniform"
+low = 0.8
+high = 1.2
+
+[[vary]]
+parameter = "tether_density_factor"
+distribution = "normal"
+mean = 1.0
+std = 0.5
+
+[[vary]]
+parameter = "wind_speed_m_s"
+distribution = "choice"
+values = [0.0, 6.0]
+
+[[vary]]
+parameter = "turbulence"
+distribution = "choice"
+labels = ["none", "light"]
+"""
+
+
+def _write(tmp_path: Path, text: str, name: str = "small.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(text))
+    return p
+
+
+@pytest.fixture(scope="module")
+def small_sweep(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("sweep")
+    sweep, sc = sw.load_sweep(_write(tmp, SMALL))
+    rows, summary = sw.run_sweep(sweep, sc, tmp / "out", workers=2, progress=None)
+    return sweep, sc, rows, summary, tmp / "out"
+
+
+def test_the_table_holds_what_single_runs_give(small_sweep):
+    sweep, sc, rows, _, _ = small_sweep
+    assert [r["index"] for r in rows] == list(range(sweep.runs))
+    for row in rows:
+        seed, drawn = sw.draw(sweep, row["index"])
+        assert row["seed"] == seed
+        for name, value in drawn.items():
+            assert row[name] == value
+        # the run made here, directly, from the drawn parameters
+        direct = sw.apply(sc, seed, drawn)
+        assert direct.plant.vehicle.mass_kg == pytest.approx(
+            sc.plant.vehicle.mass_kg * drawn["mass_factor"])
+        assert direct.vehicle == sc.vehicle   # the controllers' model stays nominal
+        assert direct.sensors.seed == seed and direct.wind.seed == seed
+        m = run_scenario(direct, progress=None).metrics
+        for c in sw.METRIC_COLUMNS:
+            if c in ("wall_time_s", "min_height_flying_m"):
+                continue
+            v = m.get(c)
+            if v is None or (isinstance(v, float) and math.isnan(v)):
+                assert row[c] is None or math.isnan(row[c]), c
+            else:
+                assert row[c] == v, c
+    # the draws differ between runs (the table is not one run repeated)
+    assert len({r["mass_factor"] for r in rows}) == sweep.runs
+
+
+def test_the_summary_counts_the_table(small_sweep):
+    sweep, _, rows, summary, out = small_sweep
+    assert summary["runs"] == len(rows) == sweep.runs
+    k = sum(r["failed"] for r in rows)
+    assert summary["failed"] == k
+    for kind in sw.FailureKind:
+        assert summary["failures_by_kind"][kind.value] == sum(
+            kind.value in r["failures"].split(";") for r in rows)
+    # a tracking failure is exactly an RMSE above the sweep's target
+    for r in rows:
+        assert ("tracking" in r["failures"]) == (r["position_rmse_m"] > 0.04)
+    lo, hi = summary["failure_rate_95ci"]
+    ci = binomtest(k, len(rows)).proportion_ci(0.95, method="exact")
+    assert (lo, hi) == pytest.approx((ci.low, ci.high), abs=1e-9)
+    p95 = np.percentile([r["position_rmse_m"] for r in rows], 95)
+    assert summary["percentiles"]["position_rmse_m"]["p95"] == pytest.approx(p95)
+    assert (out / "runs.json").is_file() and (out / "summary.md").is_file()
+    assert sorted(sw.read_table(out / "runs.csv", sweep), key=lambda r: r["index"]) == rows
+
+
+def test_an_interrupted_sweep_resumes_where_it_stopped(small_sweep, tmp_path):
+    sweep, sc, rows, _, out = small_sweep
+    # the table as a sweep killed after two runs, in the middle of its third row, left it
+    lines = (out / "runs.csv").read_text().splitlines(keepends=True)
+    (tmp_path / "runs.csv").write_text("".join(lines[:3]) + lines[3][:17])
+    ran: list[int] = []
+    again, _ = sw.run_sweep(sweep, sc, tmp_path, workers=1, progress=None,
+                            on_row=lambda r: ran.append(r["index"]))
+    kept = {int(line.split(",")[0]) for line in lines[1:3]}
+    # the two finished runs are not run again, the torn one is
+    assert sorted(ran) == sorted(set(range(sweep.runs)) - kept)
+    strip = [{k: v for k, v in r.items() if k != "wall_time_s"} for r in again]
+    assert strip == [{k: v for k, v in r.items() if k != "wall_time_s"} for r in rows]
+    # nothing left to do: nothing runs
+    ran.clear()
+    sw.run_sweep(sweep, sc, tmp_path, workers=1, progress=None,
+                 on_row=lambda r: ran.append(r["index"]))
+    assert ran == []
+
+
+def test_draws_are_reproducible_and_follow_their_distributions(tmp_path):
+    sweep, _ = sw.load_sweep(_write(tmp_path, SMALL))
+    assert sw.draw(sweep, 3) == sw.draw(sweep, 3)
+    assert sw.draw(sweep, 3) != sw.draw(sweep, 4)
+    draws = [sw.draw(sweep, i)[1] for i in range(2000)]
+    mass = np.array([d["mass_factor"] for d in draws])
+    assert mass.min() >= 0.8 and mass.max() <= 1.2
+    assert mass.mean() == pytest.approx(1.0, abs=0.01)   # 4 sigma of the mean
+    dens = np.array([d["tether_density_factor"] for d in draws])
+    assert dens.min() >= sw.Quantity.TETHER_DENSITY_FACTOR.bounds[0]
+    assert dens.std() == pytest.approx(0.5, rel=0.1)
+    assert {d["wind_speed_m_s"] for d in draws} == {0.0, 6.0}
+    assert {d["turbulence"] for d in draws} == {"none", "light"}
+
+
+def test_wind_direction_is_where_it_blows_from():
+    sc = load_scenario("circle")
+    north = sw.apply(sc, None, {"wind_speed_m_s": 4.0, "wind_direction_deg": 0.0})
+    assert north.wind.steady_m_s == pytest.approx((0.0, -4.0, 0.0), abs=1e-12)
+    west = sw.apply(sc, None, {"wind_speed_m_s": 4.0, "wind_direction_deg": 270.0})
+    assert west.wind.steady_m_s == pytest.approx((4.0, 0.0, 0.0), abs=1e-12)
+
+
+@pytest.mark.parametrize(("patch", "field"), [
+    (SMALL.replace("high = 1.2", "high = 0.5"), "bad.vary[0].high"),
+    (SMALL.replace('"mass_factor"', '"mass_fraction"'), "bad.vary[0].parameter"),
+    (SMALL.replace("std = 0.5", "std = 0.0"), "bad.vary[1].std"),
+    (SMALL.replace('labels = ["none", "light"]', 'labels = ["gale"]'),
+     "bad.vary[3].labels[0]"),
+    (SMALL.replace("runs = 4", "runs = 0"), "bad.runs"),
+    (SMALL.replace("position_rmse_m = 0.04", "position_rmse_m = -1"),
+     "bad.targets.position_rmse_m"),
+    (SMALL + '\n[[vary]]\nparameter = "mass_factor"\nlow = 0.9\nhigh = 1.0\n',
+     "bad.vary[4].parameter"),
+])
+def test_a_bad_sweep_file_fails_naming_the_field(tmp_path, capsys, patch, field):
+    path = _write(tmp_path, patch, "bad.toml")
+    with pytest.raises(ParameterError) as exc:
+        sw.load_sweep(path)
+    assert exc.value.field == field
+    assert main(["sweep", str(path), "--out", str(tmp_path / "o")]) == 2
+    assert field in capsys.readouterr().err
+
+
+def test_the_sweep_figures_are_drawn(small_sweep, tmp_path):
+    from tuav_sitl.sweep_figures import make_sweep_figures
+
+    sweep, _, rows, _, _ = small_sweep
+    written = make_sweep_figures(sweep, rows, tmp_path)
+    assert [p.name for p in written] == ["cdfs.png", "failures.png"]
+    for p in written:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_killed_sweep_resumes_and_loses_nothing(tmp_path):
+    """``tuav-sitl sweep`` killed (SIGKILL, the whole process group: the command and its
+    Dask workers) part-way: started again, it runs only the runs its table lacks."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = _write(tmp_path, SMALL)
+    out = tmp_path / "out"
+    table = out / "runs.csv"
+    runs = 40
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tuav_sitl", "sweep", str(path), "--runs", str(runs),
+         "--workers", "1", "--out", str(out), "--quiet", "--no-figures"],
+        start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        while proc.poll() is None:
+            if table.is_file() and table.read_text().count("\n") >= 3:   # header + 2 rows
+                break
+            time.sleep(0.02)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    sweep, sc = sw.load_sweep(path)
+    sweep = sweep.replace(runs=runs)
+    before = sw.read_table(table, sweep)
+    if len(before) >= runs:
+        pytest.skip("the sweep finished before it could be killed")
+    assert len(before) >= 2
+    ran: list[int] = []
+    rows, _ = sw.run_sweep(sweep, sc, out, workers=1, progress=None,
+                           on_row=lambda r: ran.append(r["index"]))
+    done = {r["index"] for r in before}
+    assert sorted(ran) == sorted(set(range(runs)) - done)
+    assert [r["index"] for r in rows] == list(range(runs))
+    by_index = {r["index"]: r for r in rows}
+    for r in before:   # what was stored before the kill is kept as it was
+        assert by_index[r["index"]] == r
+
+
+def test_results_show_a_shipped_sweeps_summary_or_how_to_run_it(small_sweep, tmp_path):
+    from tuav_sitl.results import shipped_sweeps, sweep_section
+
+    _, _, _, summary, out = small_sweep
+    names = sorted(shipped_sweeps())
+    assert {"robustness", "wind-envelope-hover", "wind-envelope-circle"} <= set(names)
+    for name in names:   # every shipped sweep file loads
+        sw.load_sweep(shipped_sweeps()[name])
+    text = "\n".join(sweep_section(tmp_path, {"circle-rtk": {"wall_time_s": 1.5}}))
+    assert "### sweep robustness: not run" in text
+    import os
+
+    assert f"about {200 * 1.5 / (os.cpu_count() or 1) / 60:.0f} min" in text
+    # a sweep run there: its summary, headings one level down
+    import shutil
+
+    shutil.copytree(out, tmp_path / "sweeps" / "robustness")
+    text = "\n".join(sweep_section(tmp_path, {}))
+    assert f"### sweep small over circle: {summary['runs']} runs" in text
