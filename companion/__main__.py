@@ -235,6 +235,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         autopilot.armed_changed()
 
     onboard.on_start = on_start
+    autopilot.on_external_position(onboard.external_position)
     autopilot.on_winch_status(lambda m: onboard.winch_report(
         last_t[0], m.line_length, m.speed, m.tension * g if math.isfinite(m.tension) else None,
         bool(m.status & CLUTCH_ENGAGED)))

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import time
 
+from sitl.exit_angle import ExitAngleSensor
 from sitl.odrive_axis import OdriveAxis, WinchSensors
 from sitl.plant import Plant
 from tuavdefs.can_protocol import (
@@ -54,6 +55,8 @@ class WinderCanNode:
                                torque_limit_nm=w.motor_torque_limit_n_m,
                                vel_limit_rev_s=w.motor_speed_limit_rad_s / _TWO_PI)
         self.sensors = WinchSensors(sensor_node_id)
+        #: the guide arm's encoders at the fairlead (Winch_Exit_Angle)
+        self.exit_sensor = ExitAngleSensor()
         self.frames_received = 0
         self.frames_sent = 0
         self._encoder_id = frame_id(axis_node_id, Cmd.GET_ENCODER_ESTIMATES)
@@ -133,6 +136,10 @@ class WinderCanNode:
                 t_s, length, omega * self._drum_radius, tf.drum_tension_n, not enabled,
                 theta <= self._theta_min, theta >= self._theta_max)
             frames = sensor_frames + frames if frames else sensor_frames
+        if self.sensors.exit_angle_due(t_s):
+            az, el, valid = self.exit_sensor.read(tf.on_exit_n)
+            exit_frame = self.sensors.exit_angle_frame(t_s, az, el, valid)
+            frames = [exit_frame, *frames] if frames else [exit_frame]
         if frames:
             # every frame of the instant built first, then sent back to back: a host
             # tends to find them together, and wakes once
