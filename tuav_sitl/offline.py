@@ -29,9 +29,11 @@ from companion.mission_items import ItemRefused, nav_commands
 from companion.navigation import FlightMode, NavCommand, NavEvent, NavKind, Refusal
 from companion.onboard import Companion, OnboardInputs
 from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
+from groundstation.tether_fix import TetherFix
 from groundstation.winch import CommandRequest, Winch, WinchStatusReport
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
+from sitl.exit_angle import ExitAngleSensor
 from sitl.faults import FaultSchedule
 from sitl.plant import (
     DRUM_ANGLE,
@@ -204,20 +206,33 @@ class GroundStation:
         """Whether the axis is in closed-loop control (False: IDLE, the drum braked)."""
         self.notices: list[tuple[float, str]] = []
         """What the winch said (time [s], text)."""
+        self._exit_id = cp.frame_id(winch.sensor_node, cp.SensorCmd.WINCH_EXIT_ANGLE)
+        self.fix: TetherFix | None = None
+        """The winch's last tether fix not yet taken (ODOMETRY to the vehicle)."""
 
     def period(self, t_s: float, length_m: float, drum_rate_rad_s: float,
                drum_tension_n: float, uav_pos_m: tuple[float, float, float],
-               uav_vel_m_s: tuple[float, float, float]) -> WinchStatusReport | None:
-        """One winder period at ``t_s`` [s]; returns the WINCH_STATUS it sends, if any."""
+               uav_vel_m_s: tuple[float, float, float],
+               exit_angle: tuple[float, float, bool] | None = None
+               ) -> WinchStatusReport | None:
+        """One winder period at ``t_s`` [s]; ``exit_angle`` the guide arm's reading
+        (azimuth, elevation [rad], valid) when one is due. Returns the WINCH_STATUS it
+        sends, if any; a tether fix it computed waits in :attr:`fix`."""
         w = self.winch
         w.set_uav((uav_pos_m, uav_vel_m_s))
+        stamp = round(t_s * 1000.0) & 0xFFFF
+        if exit_angle is not None:
+            w.handle_frame(t_s, self._exit_id, cp.encode_winch_exit_angle(
+                exit_angle[0], exit_angle[1], stamp, exit_angle[2]))
         w.handle_frame(t_s, self._tension_id,
-                       cp.encode_winch_tension(drum_tension_n, not self.axis_enabled))
+                       cp.encode_winch_tension(drum_tension_n, not self.axis_enabled, stamp))
         rev = 1.0 / (2.0 * math.pi)
         out = w.handle_frame(t_s, self._encoder_id, cp.encode_encoder_estimates(
             length_m / self._r_w * rev, drum_rate_rad_s * rev))
         if out is None:
             return None
+        if out.fix is not None:
+            self.fix = out.fix
         for frame in out.frames:
             if frame.arbitration_id == self._torque_id:
                 self.torque_n_m = cp.decode_set_input_torque(frame.data)
@@ -318,6 +333,10 @@ class OfflineRunner:
         self.sensors = (SensorFeed(self.plant, sc.sensors.noise_model(), self.home,
                                    1.0 / sc.control.rate_hz)
                         if self.companion.filter is not None else None)
+        #: the winch's guide-arm encoders (Winch_Exit_Angle every 20 ms, as the plant's
+        #: winch node sends it)
+        self.exit_sensor = ExitAngleSensor()
+        self._exit_every = max(1, round(0.02 * sc.winder_control.rate_hz))
         #: the plant's faults (scenario [[faults]])
         self.faults = FaultSchedule(sc.faults, self.plant,
                                     self.sensors.batches if self.sensors else None)
@@ -417,11 +436,21 @@ class OfflineRunner:
                 self.fault_log += self.faults.apply(t)
             if fresh:
                 # ground station: encoder, load cell and the UAV's telemetry
-                drum_tension = tether_forces().drum_tension_n
+                tf = tether_forces()
+                drum_tension = tf.drum_tension_n
                 x = plant.x.tolist()
                 length, drum_rate = r_w * x[DRUM_ANGLE], x[DRUM_RATE]
+                exit_angle = (self.exit_sensor.read(tf.on_exit_n)
+                              if (k // n_wind) % self._exit_every == 0 else None)
                 status = ground.period(t, length, drum_rate, drum_tension, tuple(x[POS]),
-                                       tuple(x[VEL]))
+                                       tuple(x[VEL]), exit_angle)
+                fix = ground.fix
+                if fix is not None:     # ODOMETRY reaches the companion
+                    ground.fix = None
+                    ext = cl.external_position(cl.odometry_message(cl.ExternalPosition(
+                        fix.sample_time_ms * 1e-3, fix.pos_m, fix.cov_m2)))
+                    if ext is not None:
+                        companion.external_position(ext)
                 winder_torque, winder_enabled = ground.torque_n_m, ground.axis_enabled
                 if faults and self.faults.winder_motor_failed:
                     winder_torque = 0.0
