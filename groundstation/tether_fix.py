@@ -14,9 +14,14 @@ with ``u = -f/|f|`` the load's "up", ``V = T0 e0 . u``, ``H e_h = T0 e0 - V u``,
          + (H e_h L + u (V L + |f| L^2 / 2)) / EA
 
 When the exit angle cannot be told from flat (``eps`` below ``ground_elevation_rad``) the
-line lies on the ground for an unknown length ``L_g`` in [0, L] (frictionless: the tension
-along it is ``T0``) and hangs from there with its lowest point at the touchdown; the fix is
-then the mean over ``L_g`` and its spread enters the covariance.
+line lies on the ground for a length ``L_g`` (frictionless: the tension along it is
+``T0``) and hangs from there with its lowest point at the touchdown, ``a = T0/w``. With the
+UAV's height ``z`` as the vehicle reports it, the hanging part is ``s = sqrt(z^2 + 2 a z)``
+long and ``a acosh(1 + z/a)`` wide, so the UAV is ``L - s + a acosh(1 + z/a)`` out along the
+azimuth; the fix then says nothing of the height (its vertical variance is
+``ground_vertical_sigma_m^2``) and the reported height's uncertainty enters its horizontal.
+Without a reported height, the fix is the mean over ``L_g`` uniform in [0, L] and its spread
+enters the covariance.
 
 The covariance is the measurement noises propagated through the model (central differences
 in ``L``, ``T0``, ``psi``, ``eps`` and the weight per metre), the wind's share (a horizontal
@@ -70,8 +75,14 @@ class TetherFixParams(Params):
     drag_coeff: float = quantity(1.2, "1", "the line's drag coefficient normal to it, on its "
                                  "diameter", ge=0)
     ground_elevation_rad: float = quantity(
-        0.01, "rad", "an exit elevation below this is taken as the line lying on the ground "
-        "at the exit", ge=0)
+        0.03, "rad", "an exit elevation below this is taken as the line lying on the ground "
+        "at the exit (or leaving it flat: the ground model covers both)", ge=0)
+    reported_height_sigma_m: float = quantity(
+        0.3, "m", "line on the ground: the uncertainty of the UAV's height as the vehicle "
+        "reports it", gt=0)
+    ground_vertical_sigma_m: float = quantity(
+        10.0, "m", "line on the ground: the fix's vertical standard deviation (it takes the "
+        "height from the vehicle: no information on it)", gt=0)
     min_sigma_m: float = quantity(0.02, "m", "floor of each axis's standard deviation",
                                   gt=0)
     max_age_s: float = quantity(
@@ -147,19 +158,31 @@ class TetherFixer:
 
     def _end(self, L: float, T: float, az: float, el: float, w: float,
              wind: tuple[float, float] = (0.0, 0.0), on_ground: bool = False,
-             ground_fraction: float = 0.0) -> Vec3:
+             ground_fraction: float = 0.0, height_m: float | None = None) -> Vec3:
         load = (wind[0], wind[1], -w)
         if not on_ground:
             return line_end(L, T, az, el, load, self.ea)
-        lg = ground_fraction * L
         c, s = math.cos(az), math.sin(az)
+        if height_m is not None:
+            z = max(height_m, 0.0)
+            a = T / w
+            hang = min(math.sqrt(z * z + 2.0 * a * z), L)
+            d = L - hang + a * math.acosh(1.0 + z / a) if a > 0.0 else L - hang
+            # the wind's drag blows the hanging part sideways by about its share of the
+            # load over its length
+            k = hang / math.hypot(w, 1e-12)
+            return (c * d + wind[0] * k, s * d + wind[1] * k, z)
+        lg = ground_fraction * L
         top = line_end(L - lg, T, az, 0.0, load, self.ea)
         k = lg * (1.0 + T / self.ea if self.ea > 0 else 1.0)
         return (c * k + top[0], s * k + top[1], top[2])
 
     def position(self, length_m: float, tension_n: float, azimuth_rad: float,
-                 elevation_rad: float) -> tuple[Vec3, Cov3, bool]:
-        """(position [m], covariance [m^2], on the ground) of the line's far end."""
+                 elevation_rad: float, uav_height_m: float | None = None
+                 ) -> tuple[Vec3, Cov3, bool]:
+        """(position [m], covariance [m^2], on the ground) of the line's far end;
+        ``uav_height_m`` [m] the UAV's height as the vehicle reports it (None: unknown),
+        used only when the line lies on the ground."""
         p = self.p
         L = max(length_m, 0.0)
         T = max(tension_n, 1e-3)
@@ -168,7 +191,18 @@ class TetherFixer:
         if ground:
             el = 0.0
         acc = [[0.0] * 3 for _ in range(3)]
-        if ground:
+        z_known = ground and uav_height_m is not None and math.isfinite(uav_height_m)
+        zh = uav_height_m if z_known else None
+        if z_known:
+            mean = self._end(L, T, az, el, self.w, on_ground=True, height_m=zh)
+            hi = self._end(L, T, az, el, self.w, on_ground=True,
+                           height_m=zh + p.reported_height_sigma_m)
+            lo = self._end(L, T, az, el, self.w, on_ground=True,
+                           height_m=zh - p.reported_height_sigma_m)
+            d = (0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1]), 0.0)
+            _outer(d, d, 1.0, acc)
+            acc[2][2] += p.ground_vertical_sigma_m ** 2
+        elif ground:
             ends = [self._end(L, T, az, el, self.w, on_ground=True, ground_fraction=f)
                     for f in _GROUND_NODES]
             n = len(ends)
@@ -183,7 +217,7 @@ class TetherFixer:
                dw: float = 0.0, wind: tuple[float, float] = (0.0, 0.0)) -> Vec3:
             e = max(el + delv, 0.0) if ground else el + delv
             return self._end(max(L + dL, 0.0), max(T + dT, 1e-3), az + daz, e,
-                             self.w + dw, wind, ground, 0.5)
+                             self.w + dw, wind, ground, 0.5, zh)
 
         sigma_angle = math.hypot(p.angle_noise_rad, p.angle_bias_rad)
         sigma_t = math.hypot(p.tension_noise_n, p.tension_noise_fraction * T)

@@ -505,7 +505,8 @@ class Winch:
             gap_ms -= 0x10000
         if abs(gap_ms) * 1e-3 > fixer.p.max_age_s:
             return None
-        pos, cov, ground = fixer.position(self.length_m, self.tension_n, az, el)
+        height = self.uav[0][2] if self.uav is not None else None
+        pos, cov, ground = fixer.position(self.length_m, self.tension_n, az, el, height)
         self.fixes += 1
         return TetherFix(pos, cov, self._unwrap_ms(stamp), ground)
 

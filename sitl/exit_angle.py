@@ -36,7 +36,7 @@ class ExitAngleSensorParams(Params):
         2.0e-3, "rad", "standard deviation of each axis's turn-on bias (mounting, zero "
         "offset), drawn once", ge=0)
     min_tension_n: float = quantity(
-        0.2, "N", "below this pull the arm does not follow the line: the reading is "
+        0.01, "N", "below this pull the arm does not follow the line: the reading is "
         "invalid", ge=0)
     seed: int = quantity(7, "", "seed of the bias and the noise", ge=0)
 
