@@ -637,6 +637,20 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray],
         m["estimate_velocity_rmse_m_s"] = _rms(np.linalg.norm(
             s["est_vel"][est] - s["vel"][est], axis=1))
         m["estimate_attitude_rmse_rad"] = _rms(np.linalg.norm(e_att_est, axis=1))
+    loss = np.zeros(len(t), dtype=bool)
+    for f in sc.faults:
+        if f.kind == "gnss_loss":
+            loss |= (t >= f.start_s) & (t < f.end_s)
+    if (loss & flying).any():
+        # while the GNSS is lost (in flight): the truth off its reference and the estimate
+        # off the truth, horizontally
+        lf = loss & flying
+        m["gnss_loss_horizontal_error_max_m"] = float(np.hypot(
+            *(s["pos"][lf, :2] - s["ref_pos"][lf, :2]).T).max())
+        lfe = lf & np.isfinite(s["est_pos"]).all(axis=1)
+        if lfe.any():
+            m["gnss_loss_estimate_horizontal_error_max_m"] = float(np.hypot(
+                *(s["est_pos"][lfe, :2] - s["pos"][lfe, :2]).T).max())
     if (reference is not None and sc.trajectory.kind in ("setpoint", "step")
             and reference.goal is not None):
         goal = np.array(reference.goal)
