@@ -476,6 +476,11 @@ class Winch:
 
     def _winch_exit_angle_frame(self, wall_s: float, data: bytes) -> None:
         az, el, stamp, valid = cp.decode_winch_exit_angle(data)
+        # a direction no guide arm can read (below the ground, beyond the vertical, an
+        # azimuth off the circle) is a bad frame: no fix from it
+        if not (-math.pi <= az <= math.pi and -0.1 <= el <= 0.5 * math.pi):
+            self.bad_frames += 1
+            valid = False
         self.exit_angle = (az, el, stamp, valid)
 
     def _unwrap_ms(self, stamp_ms: int) -> int:
