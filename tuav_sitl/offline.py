@@ -629,7 +629,9 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray],
     m["estimator"] = sc.estimator.kind
     est = np.isfinite(s["est_pos"]).all(axis=1) & (t >= sc.metrics_after_s)
     if est.any():
-        m["gnss"] = sc.sensors.gnss
+        denied = any(f.kind == "gnss_loss" and f.start_s <= 0.0 and f.end_s >= sc.duration_s
+                     for f in sc.faults)
+        m["gnss"] = "none" if denied else sc.sensors.gnss
         e_att_est = s["est_euler"][est] - s["euler"][est]
         e_att_est[:, 2] = (e_att_est[:, 2] + np.pi) % (2 * np.pi) - np.pi
         m["estimate_position_rmse_m"] = _rms(np.linalg.norm(
