@@ -1176,24 +1176,30 @@ class NavFilter:
         p = self.params
         if not p.tether_aid:
             return False
-        pos = _vec3(pos_m)
-        c = np.array(cov_m2, dtype=float).reshape(3, 3)
-        c = 0.5 * (c + c.T) + np.eye(3) * p.tether_noise_min_m ** 2
+        px, py, pz = pos = _vec3(pos_m)
+        (a, b, c), (_, d, e), (_, _, f) = cov_m2
+        floor = p.tether_noise_min_m ** 2
+        a, d, f = float(a) + floor, float(d) + floor, float(f) + floor
+        b = 0.5 * (float(b) + float(cov_m2[1][0]))
+        c = 0.5 * (float(c) + float(cov_m2[2][0]))
+        e = 0.5 * (float(e) + float(cov_m2[2][1]))
         age = t_s - t_meas_s
-        if (not (all(map(math.isfinite, pos)) and np.all(np.isfinite(c))
-                 and math.isfinite(age)) or age > p.tether_max_delay_s
-                or np.linalg.eigvalsh(c)[0] <= 0.0):
+        # finite (NaN fails every comparison), fresh, positive definite (leading minors)
+        if not (age <= p.tether_max_delay_s and abs(px) + abs(py) + abs(pz) < math.inf
+                and abs(b) + abs(c) + abs(e) < math.inf and a > 0.0 and d < math.inf
+                and f < math.inf and a * d - b * b > 0.0
+                and a * (d * f - e * e) - b * (b * f - e * c) + c * (b * e - d * c) > 0.0):
             self.tether_refused += 1
             return False
         t_meas = min(t_meas_s, t_s)       # a stamp from the future is taken as now
         if not self._aligned:
-            self._tether_fix = (t_meas, pos, c)
+            self._tether_fix = (t_meas, pos, np.array(((a, b, c), (b, d, e), (c, e, f))))
             self._try_align(t_s)
             return False
         before = self._x[0:6].copy()
         res = self._tether_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
-                             self._delayed_pv, self._var_min, t_meas, *pos, c[0, 0], c[0, 1],
-                             c[0, 2], c[1, 1], c[1, 2], c[2, 2], p.tether_gate_sigma)
+                             self._delayed_pv, self._var_min, t_meas, px, py, pz, a, b, c, d,
+                             e, f, p.tether_gate_sigma)
         self._lag_correction(before)
         if res & _NUMERIC:
             self._numeric_refusals += 1
