@@ -17,11 +17,14 @@ When the exit angle cannot be told from flat (``eps`` below ``ground_elevation_r
 line lies on the ground for a length ``L_g`` (frictionless: the tension along it is
 ``T0``) and hangs from there with its lowest point at the touchdown, ``a = T0/w``. With the
 UAV's height ``z`` as the vehicle reports it, the hanging part is ``s = sqrt(z^2 + 2 a z)``
-long and ``a acosh(1 + z/a)`` wide, so the UAV is ``L - s + a acosh(1 + z/a)`` out along the
-azimuth; the fix then says nothing of the height (its vertical variance is
-``ground_vertical_sigma_m^2``) and the reported height's uncertainty enters its horizontal.
-Without a reported height, the fix is the mean over ``L_g`` uniform in [0, L] and its spread
-enters the covariance.
+long and ``a acosh(1 + z/a)`` wide, so the UAV is at most ``L - s + a acosh(1 + z/a)`` out
+along the azimuth (the line straight on the ground; lying in curves it ends nearer): the fix
+is the reported distance kept below that bound, on the azimuth. It says nothing of the
+height (its vertical variance is ``ground_vertical_sigma_m^2``) and the reported height's
+uncertainty enters its horizontal.
+Without a reported height, the fix is the end of the line all on the ground (a vehicle on
+the ground), and the spread of the other touchdowns (``L_g`` uniform in [0, L]) about it
+is its covariance.
 
 The covariance is the measurement noises propagated through the model (central differences
 in ``L``, ``T0``, ``psi``, ``eps`` and the weight per metre), the wind's share (a horizontal
@@ -78,7 +81,7 @@ class TetherFixParams(Params):
         0.03, "rad", "an exit elevation below this is taken as the line lying on the ground "
         "at the exit (or leaving it flat: the ground model covers both)", ge=0)
     reported_height_sigma_m: float = quantity(
-        0.3, "m", "line on the ground: the uncertainty of the UAV's height as the vehicle "
+        1.0, "m", "line on the ground: the uncertainty of the UAV's height as the vehicle "
         "reports it", gt=0)
     ground_vertical_sigma_m: float = quantity(
         10.0, "m", "line on the ground: the fix's vertical standard deviation (it takes the "
@@ -178,11 +181,12 @@ class TetherFixer:
         return (c * k + top[0], s * k + top[1], top[2])
 
     def position(self, length_m: float, tension_n: float, azimuth_rad: float,
-                 elevation_rad: float, uav_height_m: float | None = None
+                 elevation_rad: float, reported_m: Vec3 | None = None
                  ) -> tuple[Vec3, Cov3, bool]:
         """(position [m], covariance [m^2], on the ground) of the line's far end;
-        ``uav_height_m`` [m] the UAV's height as the vehicle reports it (None: unknown),
+        ``reported_m`` [m] the UAV's position as the vehicle reports it (None: unknown),
         used only when the line lies on the ground."""
+        uav_height_m = reported_m[2] if reported_m is not None else None
         p = self.p
         L = max(length_m, 0.0)
         T = max(tension_n, 1e-3)
@@ -202,11 +206,22 @@ class TetherFixer:
             d = (0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1]), 0.0)
             _outer(d, d, 1.0, acc)
             acc[2][2] += p.ground_vertical_sigma_m ** 2
+            # the line straight along the ground is the farthest the UAV can be; a line
+            # lying in curves ends nearer: the reported distance is kept below that bound
+            # (the fix must not follow the winch's own pay-out outward)
+            out = math.hypot(mean[0], mean[1])
+            rep = math.hypot(reported_m[0], reported_m[1])
+            if rep < out and out > 0.0:
+                k = rep / out
+                mean = (mean[0] * k, mean[1] * k, mean[2])
         elif ground:
+            # the line all on the ground to a vehicle on the ground at its end (where a
+            # line lying out ends at take-off and landing), the spread of the other
+            # touchdowns about it as the covariance
             ends = [self._end(L, T, az, el, self.w, on_ground=True, ground_fraction=f)
                     for f in _GROUND_NODES]
             n = len(ends)
-            mean = tuple(sum(e[i] for e in ends) / n for i in range(3))
+            mean = ends[-1]
             for e in ends:
                 d = _sub(e, mean)
                 _outer(d, d, 1.0 / n, acc)

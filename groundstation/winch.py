@@ -510,8 +510,8 @@ class Winch:
             gap_ms -= 0x10000
         if abs(gap_ms) * 1e-3 > fixer.p.max_age_s:
             return None
-        height = self.uav[0][2] if self.uav is not None else None
-        pos, cov, ground = fixer.position(self.length_m, self.tension_n, az, el, height)
+        reported = self.uav[0] if self.uav is not None else None
+        pos, cov, ground = fixer.position(self.length_m, self.tension_n, az, el, reported)
         self.fixes += 1
         return TetherFix(pos, cov, self._unwrap_ms(stamp), ground)
 

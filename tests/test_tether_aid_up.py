@@ -34,3 +34,4 @@ def test_the_stack_holds_position_through_a_gnss_loss(session):
         assert length > math.dist((x, y, z), (0.0, 0.0, 0.0))
         if t >= 10.0:
             assert math.hypot(x - 8.0, y - 4.0) <= 0.5, t
+

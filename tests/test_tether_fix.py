@@ -146,8 +146,9 @@ def test_covariance_grows_where_the_fix_is_weak():
 
 
 def test_line_on_the_ground_with_the_reported_height():
-    """Touchdown (part of the line on the ground): with the UAV's height the horizontal fix
-    is the plant's truth within its covariance, and it says nothing of the height."""
+    """Touchdown (part of the line on the ground): with the UAV's reported position the
+    fix is the plant's truth horizontally (the line's reach bounds it), and says nothing of
+    the height."""
     f = _fixer()
     for pos, slack in (((3.0, 0.0, 0.2), 0.1), ((6.0, -8.0, 1.0), 0.3),
                        ((0.0, 5.0, 4.0), 1.0)):
@@ -155,10 +156,20 @@ def test_line_on_the_ground_with_the_reported_height():
         tf = Tether(TP, G).forces(*pos, L)
         assert tf.info.regime == CatenaryRegime.TOUCHDOWN
         az, el = _exit(tf)
-        p, cov, ground = f.position(L, tf.drum_tension_n, az, el, uav_height_m=pos[2])
+        # reported where it is: the line's bound holds it there
+        p, cov, ground = f.position(L, tf.drum_tension_n, az, el, reported_m=pos)
         assert ground
         assert p[:2] == pytest.approx(pos[:2], abs=0.02)
         assert math.sqrt(cov[2][2]) >= f.p.ground_vertical_sigma_m
+        # reported beyond the line's reach: brought back to it (the straight line on the
+        # ground, the plant's truth); reported nearer: the azimuth only
+        far = (pos[0] * 1.5 + 0.5, pos[1] * 1.5 + 0.5, pos[2])
+        p, _, _ = f.position(L, tf.drum_tension_n, az, el, reported_m=far)
+        assert p[:2] == pytest.approx(pos[:2], abs=0.02)
+        near = (pos[0] * 0.5, pos[1] * 0.5, pos[2])
+        p, _, _ = f.position(L, tf.drum_tension_n, az, el, reported_m=near)
+        assert math.hypot(*p[:2]) == pytest.approx(math.hypot(*near[:2]), abs=1e-9)
+        assert math.atan2(p[1], p[0]) == pytest.approx(az, abs=1e-9)
         # without the height: the spread over the unknown length on the ground
         p0, cov0, _ = f.position(L, tf.drum_tension_n, az, el)
         e = np.subtract(p0, pos)
