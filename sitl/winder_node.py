@@ -127,6 +127,7 @@ class WinderCanNode:
         # solved every period, not only when the sensors send: each solve starts from the
         # last one's solution, and the tensions sent must not depend on when it last ran
         tf = p.tether_forces()
+        sensor_frames: list = []
         if self.sensors.due(t_s):
             # the winch's sensor frames of this instant go first: a host answering the
             # encoder frame at once then knows the tension and the sample time that go
@@ -135,11 +136,11 @@ class WinderCanNode:
             sensor_frames = self.sensors.tick(
                 t_s, length, omega * self._drum_radius, tf.drum_tension_n, not enabled,
                 theta <= self._theta_min, theta >= self._theta_max)
-            frames = sensor_frames + frames if frames else sensor_frames
         if self.sensors.exit_angle_due(t_s):
             az, el, valid = self.exit_sensor.read(tf.on_exit_n)
-            exit_frame = self.sensors.exit_angle_frame(t_s, az, el, valid)
-            frames = [exit_frame, *frames] if frames else [exit_frame]
+            sensor_frames.append(self.sensors.exit_angle_frame(t_s, az, el, valid))
+        if sensor_frames:
+            frames = sensor_frames + frames if frames else sensor_frames
         if frames:
             # every frame of the instant built first, then sent back to back: a host
             # tends to find them together, and wakes once
