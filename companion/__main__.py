@@ -229,6 +229,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     onboard.on_start = on_start
     autopilot.on_gcs_heartbeat(lambda: onboard.gcs_heard(last_t[0]))
+    autopilot.on_external_position(onboard.external_position)
     autopilot.streams.wind_source = onboard.wind_estimate
 
     def reboot() -> None:

@@ -26,7 +26,8 @@ each ground-station message to the piece that handles it and composes them:
 - The winch (component 169, the ground-station process, on the component link) is routed:
   what ground stations send it goes there, and everything it sends (its HEARTBEAT with
   autopilot INVALID, WINCH_STATUS, COMMAND_ACK, STATUSTEXT) reaches every ground station
-  as it was sent. MAV_CMD_DO_WINCH addressed to the autopilot is forwarded to it too, and
+  as it was sent, except its tether fix (ODOMETRY), which goes to the navigation filter
+  alone. MAV_CMD_DO_WINCH addressed to the autopilot is forwarded to it too, and
   acknowledged from component 1 when the winch has answered.
 
 Frames at this boundary: MAVLink's local NED has its origin at the winder (ArduPilot's EKF
@@ -130,6 +131,7 @@ class Autopilot:
         self._mission_winch: list[int] = []
         self._winch_sink: Callable[[Any], None] | None = None
         self._gcs_sink: Callable[[], None] | None = None
+        self._external_sink: Callable[[Any], None] | None = None
         self._watch: list[Any] = []
         self._watch_gen = -1
         self._watch_comp: Any = None
@@ -311,6 +313,11 @@ class Autopilot:
         for msg in msgs:
             if msg.get_srcComponent() != cl.WINCH_COMPONENT_ID:
                 continue
+            if msg.get_type() == "ODOMETRY":    # the tether fix: for the filter alone
+                fix = cl.external_position(msg)
+                if fix is not None and self._external_sink is not None:
+                    self._external_sink(fix)
+                continue
             if msg.get_type() == "COMMAND_ACK" and msg.command == M.MAV_CMD_DO_WINCH:
                 if self._mission_winch and msg.target_component == cl.AUTOPILOT_COMPONENT_ID:
                     seq = self._mission_winch.pop(0)
@@ -340,6 +347,11 @@ class Autopilot:
             else:
                 keep.append(entry)
         self._winch_pending = keep
+
+    def on_external_position(self, sink: Callable[[Any], None]) -> None:
+        """Call ``sink(fix)`` with every tether fix (``ODOMETRY``) the winch sends, as a
+        :class:`tuavdefs.component_link.ExternalPosition`; malformed ones are dropped."""
+        self._external_sink = sink
 
     def on_winch_status(self, sink: Callable[[Any], None]) -> None:
         """Call ``sink(msg)`` with every WINCH_STATUS the winch sends."""

@@ -58,8 +58,8 @@ _N_PRM = 12
 
 # diagnostics written by the fusion kernels (diag)
 (_D_POS_INNOV, _D_VEL_INNOV, _D_POS_TR, _D_VEL_TR, _D_BARO_INNOV, _D_BARO_TR,
- _D_MAG_INNOV, _D_MAG_TR) = (0, 3, 6, 9, 12, 13, 14, 15)
-_N_DIAG = 16
+ _D_MAG_INNOV, _D_MAG_TR, _D_TETHER_INNOV, _D_TETHER_TR) = (0, 3, 6, 9, 12, 13, 14, 15, 16, 19)
+_N_DIAG = 20
 
 #: Time constant of the magnetometer's low-pass for the alignment [s].
 _MAG_ALIGN_TAU_S = 0.1
@@ -227,6 +227,27 @@ class EstimatorParams(Params):
         0.02, "rad", "healthy needs roll and pitch standard deviations below this", gt=0)
     converged_yaw_sigma_rad: float = quantity(
         0.1, "rad", "healthy needs a yaw standard deviation below this", gt=0)
+    tether_aid: bool = quantity(
+        True, "", "fuse the winch's tether fix (ODOMETRY from the ground station) as a "
+        "position source beside the GNSS (ArduPilot's ExternalNav, EK3_SRC1_POSXY 6)")
+    tether_noise_min_m: float = quantity(
+        0.05, "m", "floor on each axis's standard deviation of a tether fix (added to its "
+        "covariance)", gt=0)
+    tether_gate_sigma: float = quantity(
+        5.0, "1", "tether fix gate: its innovation's Mahalanobis distance [standard "
+        "deviations]", gt=0)
+    tether_max_delay_s: float = quantity(
+        0.3, "s", "tether fixes older than this on arrival are not used (the delay buffer "
+        "covers it)", gt=0, le=1.0)
+    tether_timeout_s: float = quantity(
+        1.0, "s", "no tether fix fused for this long: it no longer counts as a position "
+        "source", gt=0)
+    tether_reset_s: float = quantity(
+        5.0, "s", "tether fixes rejected for this long without GNSS: the position is reset "
+        "to the fix", gt=0)
+    tether_align_vel_sigma_m_s: float = quantity(
+        0.5, "m/s", "velocity standard deviation when the filter aligns on a tether fix "
+        "(no GNSS velocity): the vehicle is taken to be near rest", gt=0)
 
 
 # ----- health and status
@@ -260,6 +281,9 @@ class HealthReason(IntFlag):
     """A variance is negative or above ``pos_variance_limit_m2``."""
     NAN = 32
     """The state or the covariance is not finite (the filter must be reset)."""
+    TETHER_REJECTED = 64
+    """Without GNSS, the tether fix's innovation test has failed for
+    ``innovation_fail_s``."""
 
 
 class EstimatorFlags(IntFlag):
@@ -277,6 +301,18 @@ class EstimatorFlags(IntFlag):
     PRED_POS_HORIZ_ABS = 512
     GPS_GLITCH = 1024
     ACCEL_ERROR = 2048
+
+
+class AidSource(IntFlag):
+    """The measurements the filter fuses (within their timeouts)."""
+
+    NONE = 0
+    GNSS = 1
+    """GNSS position."""
+    TETHER = 2
+    """The winch's tether fix."""
+    BARO = 4
+    MAG = 8
 
 
 @dataclass(frozen=True)
@@ -309,6 +345,12 @@ class FilterStatus:
     """Standard deviations of the attitude error about the inertial axes [rad]."""
     time_since_gnss_s: float
     """Since the last GNSS position fused [s] (inf: never)."""
+    sources: AidSource = AidSource.NONE
+    """What is fused now."""
+    tether_variance: float = 0.0
+    """sqrt of the latest tether fix's test ratio (1.0 at its gate)."""
+    tether_innovation_m: Vec3 = (0.0, 0.0, 0.0)
+    """Latest tether fix innovation (fix - delayed state) [m]."""
 
     @property
     def healthy(self) -> bool:
@@ -801,6 +843,77 @@ def fuse_position_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np
     return ok
 
 
+@njit
+def fuse_tether_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
+                       dx: np.ndarray, diag: np.ndarray, delayed: np.ndarray,
+                       var_min: float, t_meas_s: float, px: float, py: float, pz: float,
+                       c00: float, c01: float, c02: float, c11: float, c12: float,
+                       c22: float, gate: float) -> int:
+    """A tether fix of the time ``t_meas_s`` [s]: position ``p*`` [m] with the covariance
+    ``c`` [m^2] (its upper triangle), against the state at that time (``delayed``). Gated
+    as one on the innovation's Mahalanobis distance (``diag``: the innovation and the test
+    ratio d^2 / gate^2); fused as three whitened scalar measurements (``L^-1 z`` with ``C =
+    L L'``: unit, independent noises), the correction injected into the current state.
+    Returns 1 if fused, 0 if rejected by the gate, 8 if refused (numerically, or the
+    covariance not positive definite)."""
+    _delayed(buf, meta, x, t_meas_s, delayed)
+    y0, y1, y2 = px - delayed[0], py - delayed[1], pz - delayed[2]
+    diag[_D_TETHER_INNOV], diag[_D_TETHER_INNOV + 1], diag[_D_TETHER_INNOV + 2] = y0, y1, y2
+    # S = P_pp + C, its Cholesky factor, and d^2 = y' S^-1 y
+    s00, s01, s02 = P[0, 0] + c00, P[0, 1] + c01, P[0, 2] + c02
+    s11, s12, s22 = P[1, 1] + c11, P[1, 2] + c12, P[2, 2] + c22
+    if not s00 > 0.0:
+        return _NUMERIC
+    a00 = math.sqrt(s00)
+    a10, a20 = s01 / a00, s02 / a00
+    d11 = s11 - a10 * a10
+    if not d11 > 0.0:
+        return _NUMERIC
+    a11 = math.sqrt(d11)
+    a21 = (s12 - a20 * a10) / a11
+    d22 = s22 - a20 * a20 - a21 * a21
+    if not d22 > 0.0:
+        return _NUMERIC
+    a22 = math.sqrt(d22)
+    w0 = y0 / a00
+    w1 = (y1 - a10 * w0) / a11
+    w2 = (y2 - a20 * w0 - a21 * w1) / a22
+    diag[_D_TETHER_TR] = (w0 * w0 + w1 * w1 + w2 * w2) / (gate * gate)
+    if diag[_D_TETHER_TR] > 1.0:
+        return 0
+    # the measurement's own factor C = L L'
+    if not c00 > 0.0:
+        return _NUMERIC
+    l00 = math.sqrt(c00)
+    l10, l20 = c01 / l00, c02 / l00
+    e11 = c11 - l10 * l10
+    if not e11 > 0.0:
+        return _NUMERIC
+    l11 = math.sqrt(e11)
+    l21 = (c12 - l20 * l10) / l11
+    e22 = c22 - l20 * l20 - l21 * l21
+    if not e22 > 0.0:
+        return _NUMERIC
+    l22 = math.sqrt(e22)
+    # rows of L^-1 (lower triangular): z' = L^-1 z has the noise I
+    m00 = 1.0 / l00
+    m10 = -l10 / (l00 * l11)
+    m11 = 1.0 / l11
+    m20 = (l10 * l21 - l11 * l20) / (l00 * l11 * l22)
+    m21 = -l21 / (l11 * l22)
+    m22 = 1.0 / l22
+    res = 1
+    if not scalar_update(P, dx, var_min, m00 * y0, 1.0, 0, m00, -1, 0.0, -1, 0.0):
+        res = _NUMERIC
+    if not scalar_update(P, dx, var_min, m10 * y0 + m11 * y1, 1.0, 0, m10, 1, m11, -1, 0.0):
+        res = _NUMERIC
+    if not scalar_update(P, dx, var_min, m20 * y0 + m21 * y1 + m22 * y2, 1.0, 0, m20, 1,
+                         m21, 2, m22):
+        res = _NUMERIC
+    inject(x, dx, buf, meta)
+    return res
+
+
 # ----- the filter
 def _vec3(v: Sequence[float]) -> tuple[float, float, float]:
     return (float(v[0]), float(v[1]), float(v[2]))
@@ -835,7 +948,9 @@ class NavFilter:
         #: bias-corrected rates [rad/s], low-passed inertial acceleration [m/s^2] and yaw
         #: rate [rad/s] (predict_kernel)
         self._rates = np.zeros(7)
-        n_buf = int(math.ceil(max(p.gnss_delay_s, p.baro_delay_s) * p.imu_rate_hz)) + 8
+        longest = max(p.gnss_delay_s, p.baro_delay_s,
+                      p.tether_max_delay_s if p.tether_aid else 0.0)
+        n_buf = int(math.ceil(longest * p.imu_rate_hz)) + 8
         self._buf = np.zeros((n_buf, _BUF_COLS))
         self._meta = np.zeros(2, dtype=np.int64)
         self._prm = np.zeros(_N_PRM)
@@ -893,6 +1008,14 @@ class NavFilter:
         self._t_const_fuse = -math.inf
         #: Times the position and velocity were reset to the GNSS.
         self.gnss_resets = 0
+        # the tether fix
+        self._t_tether: float = -math.inf       # last fused (arrival time) [s]
+        self._tether_fix: tuple[float, Vec3, np.ndarray] | None = None   # for alignment
+        #: Times the position was reset to a tether fix.
+        self.tether_resets = 0
+        #: Tether fixes refused as too old, not finite or not positive definite.
+        self.tether_refused = 0
+        self._fail_since["tether"] = math.inf
 
 
     def _compile(self) -> None:
@@ -913,6 +1036,9 @@ class NavFilter:
                                     0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         self._pos_k = entry_point(fuse_position_kernel, x, P, buf, meta, dx, 0.0, 0.0, 0.0,
                                   0.0)
+        self._tether_k = (entry_point(fuse_tether_kernel, x, P, buf, meta, dx, diag, dl, 0.0,
+                                      0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                                      0.0) if self.params.tether_aid else None)
 
     # ----- properties
     @property
@@ -992,7 +1118,7 @@ class NavFilter:
                         self._const_pos[0], self._const_pos[1],
                         self.params.const_pos_noise_m ** 2)
         elif (self._const_pos is None
-              and t_s - self._t_gnss_pos > self.params.const_pos_after_s):
+              and t_s - max(self._t_gnss_pos, self._t_tether) > self.params.const_pos_after_s):
             self._const_pos = (float(self._x[0]), float(self._x[1]))
 
     def fuse_gnss(self, t_s: float, pos_enu_m: Sequence[float],
@@ -1046,6 +1172,72 @@ class NavFilter:
                 self._glitch = False
                 accepted = True
         return accepted
+
+    def fuse_tether(self, t_s: float, t_meas_s: float, pos_m: Sequence[float],
+                    cov_m2: Sequence[Sequence[float]]) -> bool:
+        """A tether fix arriving at ``t_s`` [s], taken at ``t_meas_s`` [s] (its timestamp,
+        the companion's clock): position [m] and covariance [m^2] (inertial, z up), with
+        ``tether_noise_min_m`` added on each axis. Before alignment it is kept for it (the
+        position source when there is no GNSS). Returns whether it was fused."""
+        p = self.params
+        if not p.tether_aid:
+            return False
+        px, py, pz = pos = _vec3(pos_m)
+        (a, b, c), (_, d, e), (_, _, f) = cov_m2
+        floor = p.tether_noise_min_m ** 2
+        a, d, f = float(a) + floor, float(d) + floor, float(f) + floor
+        b = 0.5 * (float(b) + float(cov_m2[1][0]))
+        c = 0.5 * (float(c) + float(cov_m2[2][0]))
+        e = 0.5 * (float(e) + float(cov_m2[2][1]))
+        age = t_s - t_meas_s
+        # finite (NaN fails every comparison), fresh, positive definite (leading minors)
+        if not (age <= p.tether_max_delay_s and abs(px) + abs(py) + abs(pz) < math.inf
+                and abs(b) + abs(c) + abs(e) < math.inf and a > 0.0 and d < math.inf
+                and f < math.inf and a * d - b * b > 0.0
+                and a * (d * f - e * e) - b * (b * f - e * c) + c * (b * e - d * c) > 0.0):
+            self.tether_refused += 1
+            return False
+        t_meas = min(t_meas_s, t_s)       # a stamp from the future is taken as now
+        if not self._aligned:
+            self._tether_fix = (t_meas, pos, np.array(((a, b, c), (b, d, e), (c, e, f))))
+            self._try_align(t_s)
+            return False
+        before = self._x[0:6].copy()
+        res = self._tether_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
+                             self._delayed_pv, self._var_min, t_meas, px, py, pz, a, b, c, d,
+                             e, f, p.tether_gate_sigma)
+        self._lag_correction(before)
+        if res & _NUMERIC:
+            self._numeric_refusals += 1
+        if res == 1:
+            self._t_tether = t_s
+            self._fail_since["tether"] = math.inf
+            self._const_pos = None
+            return True
+        if res == 0:
+            self._fail_since["tether"] = min(self._fail_since["tether"], t_s)
+            if (t_s - self._fail_since["tether"] >= p.tether_reset_s
+                    and t_s - self._t_gnss_pos > p.gnss_timeout_s):
+                self._reset_to_tether(pos, c)
+                self._t_tether = t_s
+                self._fail_since["tether"] = math.inf
+                self._const_pos = None
+                return True
+        return False
+
+    def _reset_to_tether(self, pos: Vec3, c: np.ndarray) -> None:
+        """Position set to the fix, its covariance to the fix's (uncorrelated with the
+        rest); the velocity kept."""
+        delta = np.array(pos) - self._x[0:3]
+        self._x[0:3] = pos
+        n = int(self._meta[1])
+        self._buf[:n, 1:4] += delta
+        P = self._P
+        P[0:3, :] = 0.0
+        P[:, 0:3] = 0.0
+        P[0:3, 0:3] = c
+        self.tether_resets += 1
+        self._out_lag[0:3] = 0.0
 
     def _gnss_white_var(self, eph_m: float, epv_m: float) -> tuple[float, float]:
         """The white part of a fix's position variance [m^2] (horizontal, vertical) from
@@ -1189,7 +1381,9 @@ class NavFilter:
         if std > p.align_max_accel_std_m_s2:
             self._restart_alignment(t_s)
             return
-        if self._mag_n == 0 or self._fix is None or t_s - self._fix[0] > 1.0:
+        gnss = self._fix is not None and t_s - self._fix[0] <= 1.0
+        tether = self._tether_fix is not None and t_s - self._tether_fix[0] <= 1.0
+        if self._mag_n == 0 or not (gnss or tether):
             return
         fx, fy, fz = self._acc_sum / n
         roll = math.atan2(fy, fz)
@@ -1201,18 +1395,27 @@ class NavFilter:
         x_tilt = np.array(_rot_py(q_tilt)).reshape(3, 3) @ m
         yaw = self._heading_earth_rad - math.atan2(x_tilt[1], x_tilt[0])
         q = euler_to_quat(roll, pitch, yaw)
-        t_fix, pos, vel, eph, epv = self._fix
-        age = t_s - t_fix + p.gnss_delay_s
-        x[:] = 0.0
-        x[0:3] = [pos[i] + vel[i] * age for i in range(3)]
-        x[3:6] = vel
-        x[_X_Q:_X_Q + 4] = q
         P = self._P
         P[:] = 0.0
-        self._gnss_position_prior(eph, epv)
-        var_v = max(epv, p.gnss_pos_noise_min_m) ** 2
+        x[:] = 0.0
+        if gnss:
+            t_fix, pos, vel, eph, epv = self._fix
+            age = t_s - t_fix + p.gnss_delay_s
+            x[0:3] = [pos[i] + vel[i] * age for i in range(3)]
+            x[3:6] = vel
+            self._gnss_position_prior(eph, epv)
+            var_v = max(epv, p.gnss_pos_noise_min_m) ** 2
+            var_vel = p.gnss_vel_noise_m_s ** 2
+        else:
+            # no GNSS: the tether fix is the position (the vehicle taken to be near rest)
+            _, pos, c = self._tether_fix
+            x[0:3] = pos
+            P[0:3, 0:3] = c
+            var_v = float(c[2, 2])
+            var_vel = p.tether_align_vel_sigma_m_s ** 2
+        x[_X_Q:_X_Q + 4] = q
         for i in range(3):
-            P[IDX_V + i, IDX_V + i] = p.gnss_vel_noise_m_s ** 2
+            P[IDX_V + i, IDX_V + i] = var_vel
             P[IDX_BG + i, IDX_BG + i] = p.gyro_bias_sigma_rad_s ** 2
             P[IDX_BA + i, IDX_BA + i] = p.accel_bias_sigma_m_s2 ** 2
             P[IDX_BM + i, IDX_BM + i] = p.mag_bias_sigma_gauss ** 2
@@ -1221,6 +1424,8 @@ class NavFilter:
         # the baro offset is referenced to the GNSS height: their errors are opposed
         P[IDX_BH, IDX_BH] = var_v + p.baro_offset_sigma_m ** 2
         P[IDX_P + 2, IDX_BH] = P[IDX_BH, IDX_P + 2] = -var_v
+        if not gnss:    # the fix's height error is correlated with its horizontal one
+            P[0:3, IDX_BH] = P[IDX_BH, 0:3] = -P[0:3, 2]
         # ... and the fix's height held the receiver's wander, which the offset took too
         P[IDX_BP + 2, IDX_BH] = P[IDX_BH, IDX_BP + 2] = P[IDX_BP + 2, IDX_BP + 2]
         # the baro's reference: its mean altitude then minus the GNSS height then
@@ -1229,7 +1434,10 @@ class NavFilter:
         self._meta[:] = 0
         self._aligned = True
         self._t_last = t_s
-        self._t_gnss_pos = self._t_gnss_vel = self._t_gnss_hgt = t_s
+        if gnss:
+            self._t_gnss_pos = self._t_gnss_vel = self._t_gnss_hgt = t_s
+        else:
+            self._t_tether = t_s
         self._t_baro = t_s
 
     def _gnss_position_prior(self, eph_m: float, epv_m: float) -> None:
@@ -1293,6 +1501,7 @@ class NavFilter:
         finite = bool(np.all(np.isfinite(x)) and np.all(np.isfinite(P)))
         reasons = HealthReason.NONE
         flags = EstimatorFlags(0)
+        sources = AidSource.NONE
         health = FilterHealth.INITIALISING
         since_pos = t - self._t_gnss_pos
         if self._aligned:
@@ -1303,22 +1512,34 @@ class NavFilter:
                 reasons |= HealthReason.COVARIANCE
             gnss_pos = since_pos <= p.gnss_timeout_s
             gnss_vel = t - self._t_gnss_vel <= p.gnss_timeout_s
-            if not (gnss_pos or gnss_vel):
+            tether = t - self._t_tether <= p.tether_timeout_s
+            if not (gnss_pos or gnss_vel or tether):
                 reasons |= HealthReason.NO_GNSS
             for name, reason in (("gnss", HealthReason.GNSS_REJECTED),
                                  ("baro", HealthReason.BARO_REJECTED),
                                  ("mag", HealthReason.MAG_REJECTED)):
                 if t - self._fail_since[name] >= p.innovation_fail_s:
                     reasons |= reason
+            if (not gnss_pos and t - self._fail_since["tether"] >= p.innovation_fail_s):
+                reasons |= HealthReason.TETHER_REJECTED
+            if gnss_pos:
+                sources |= AidSource.GNSS
+            if tether:
+                sources |= AidSource.TETHER
+            if t - self._t_baro <= p.gnss_timeout_s:
+                sources |= AidSource.BARO
+            if t - self._t_mag <= p.gnss_timeout_s:
+                sources |= AidSource.MAG
             vert = (t - self._t_baro <= p.gnss_timeout_s
                     or t - self._t_gnss_hgt <= p.gnss_timeout_s)
             if finite:
                 flags |= EstimatorFlags.ATTITUDE
-                if gnss_vel:
+                if gnss_vel or tether:   # a position source makes velocity observable
                     flags |= EstimatorFlags.VELOCITY_HORIZ | EstimatorFlags.VELOCITY_VERT
                 elif vert:
                     flags |= EstimatorFlags.VELOCITY_VERT
-                if gnss_pos:
+                if gnss_pos or tether:
+                    # the fix is relative to the winder, whose global position is home
                     flags |= EstimatorFlags.POS_HORIZ_REL | EstimatorFlags.POS_HORIZ_ABS
                 if vert:
                     flags |= EstimatorFlags.POS_VERT_ABS
@@ -1330,7 +1551,8 @@ class NavFilter:
                 flags |= EstimatorFlags.GPS_GLITCH
             if reasons:
                 health = FilterHealth.UNHEALTHY
-            elif (gnss_pos and max(var[6], var[7]) < p.converged_tilt_sigma_rad ** 2
+            elif ((gnss_pos or tether)
+                  and max(var[6], var[7]) < p.converged_tilt_sigma_rad ** 2
                   and var[8] < p.converged_yaw_sigma_rad ** 2):
                 health = FilterHealth.HEALTHY
             else:
@@ -1339,7 +1561,9 @@ class NavFilter:
         return FilterStatus(
             health, reasons, flags,
             velocity_variance=math.sqrt(max(d[_D_VEL_TR], 0.0)),
-            pos_horiz_variance=math.sqrt(max(d[_D_POS_TR], 0.0)),
+            pos_horiz_variance=math.sqrt(max(
+                d[_D_POS_TR] if AidSource.GNSS in sources or AidSource.TETHER not in sources
+                else d[_D_TETHER_TR], 0.0)),
             pos_vert_variance=math.sqrt(max(d[_D_BARO_TR], 0.0)),
             compass_variance=math.sqrt(max(d[_D_MAG_TR], 0.0)),
             terrain_alt_variance=0.0,
@@ -1349,7 +1573,10 @@ class NavFilter:
             mag_innovation_rad=float(d[_D_MAG_INNOV]),
             pos_sigma_m=_vec3(sd[0:3]), vel_sigma_m_s=_vec3(sd[3:6]),
             attitude_sigma_rad=_vec3(sd[6:9]),
-            time_since_gnss_s=since_pos if self._aligned else math.inf)
+            time_since_gnss_s=since_pos if self._aligned else math.inf,
+            sources=sources,
+            tether_variance=math.sqrt(max(d[_D_TETHER_TR], 0.0)),
+            tether_innovation_m=_vec3(d[_D_TETHER_INNOV:_D_TETHER_INNOV + 3]))
 
 
 def _rot_py(q: Quat) -> tuple[float, ...]:
@@ -1358,5 +1585,5 @@ def _rot_py(q: Quat) -> tuple[float, ...]:
 
 
 __all__ = ["EstimatorParams", "NavFilter", "FilterStatus", "FilterHealth", "HealthReason",
-           "EstimatorFlags", "N_ERR"]
+           "EstimatorFlags", "AidSource", "N_ERR"]
 

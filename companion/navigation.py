@@ -441,6 +441,11 @@ class Navigator:
         out, self._events = self._events, []
         return out
 
+    def notice(self, text: str) -> None:
+        """A message of the onboard software for ground stations (a STATUSTEXT warning:
+        the event WARNING)."""
+        self._emit(NavEvent.WARNING, text)
+
     def _emit(self, kind: NavEvent, value: object = None) -> None:
         self._events.append((kind, value))
         if self.on_event is not None:

@@ -22,7 +22,7 @@ import math
 from collections.abc import Callable
 from typing import NamedTuple
 
-from companion.estimator import EstimatorParams, FilterStatus, NavFilter
+from companion.estimator import AidSource, EstimatorParams, FilterStatus, NavFilter
 from companion.failsafes import FailsafeParams, Failsafes
 from companion.flight_controller import FlightController, FlightStep, VehicleState
 from companion.gains import FlightControlParams
@@ -38,7 +38,8 @@ from companion.navigation import (
 from companion.reference import RefSample
 from companion.simlink_client import GpsFix, ImuSample
 from tuavdefs.airframe import rotor_speed_to_command
-from tuavdefs.frames import ned_to_enu
+from tuavdefs.component_link import ExternalPosition
+from tuavdefs.frames import ned_to_enu, quat_rotate
 from tuavdefs.params import SystemParams
 
 _STOPPED = (0.0, 0.0, 0.0, 0.0)
@@ -130,6 +131,10 @@ class Companion:
         self.arming_check = 1
         self._was_flying = False
         self.steps = 0
+        #: tether fixes received since the last step (ODOMETRY from the winch)
+        self._external: list[ExternalPosition] = []
+        self._sources: AidSource | None = None
+        self._attach_m = tuple(veh.tether_attachment_m)
 
     @property
     def gains(self) -> FlightControlParams:
@@ -194,6 +199,47 @@ class Companion:
         """A ground station's HEARTBEAT at ``t_s`` [s] (the ground-station failsafe)."""
         self.failsafes.gcs_heard(t_s)
 
+    def external_position(self, fix: ExternalPosition) -> None:
+        """A tether fix from the winch (its time on the vehicle's clock, the tether's
+        attachment point [m], covariance [m^2]): fused with the next step's sensors."""
+        if len(self._external) < 16:      # bounded: a flood waits for the next step
+            self._external.append(fix)
+
+    def _fuse_external(self, t_s: float) -> None:
+        f = self.filter
+        fixes, self._external = self._external, []
+        if f is None:
+            return
+        for fix in fixes:
+            pos = fix.pos_m
+            if f.aligned and any(self._attach_m):
+                # the fix is of the attachment point: the vehicle's origin is R r_a below
+                # it (the attitude's error is small beside the fix's)
+                off = quat_rotate(f.state().quat, self._attach_m)
+                pos = (pos[0] - off[0], pos[1] - off[1], pos[2] - off[2])
+            f.fuse_tether(t_s, fix.t_s, pos, fix.cov_m2)
+
+    def _announce_sources(self, sources: AidSource) -> None:
+        """A STATUSTEXT (through the navigator's events) when the position sources change."""
+        old, self._sources = self._sources, sources
+        gnss, tether = AidSource.GNSS in sources, AidSource.TETHER in sources
+        if old is None:
+            if tether and not gnss:
+                self.nav.notice("EKF: tether fix in use, no GNSS")
+            elif tether:
+                self.nav.notice("EKF: GNSS and tether fix in use")
+            return
+        was_gnss, was_tether = AidSource.GNSS in old, AidSource.TETHER in old
+        if was_gnss and not gnss:
+            self.nav.notice("EKF: GNSS lost, tether fix in use" if tether
+                            else "EKF: GNSS lost")
+        elif gnss and not was_gnss:
+            self.nav.notice("EKF: GNSS in use" + (" with tether fix" if tether else ""))
+        elif tether and not was_tether:
+            self.nav.notice("EKF: tether fix in use")
+        elif was_tether and not tether:
+            self.nav.notice("EKF: tether fix lost")
+
     @property
     def last_status(self) -> FilterStatus | None:
         """The navigation filter's status as last checked (:data:`HEALTH_CHECK_S`; None
@@ -215,6 +261,8 @@ class Companion:
         self._health_t_s = t_s
         self._status = st = f.status(t_s)
         self._healthy = f.aligned and st.healthy
+        if f.aligned:
+            self._announce_sources(st.sources)
 
     def _prearm(self) -> Refusal | None:
         """ArduCopter's pre-arm check of the estimator (skipped with ARMING_CHECK 0)."""
@@ -238,6 +286,8 @@ class Companion:
             f.predict(t, imu.gyro_flu_rad_s, imu.accel_flu_m_s2)
             f.fuse_baro(t, imu.pressure_alt_m)
             f.fuse_mag(t, imu.mag_flu_gauss)
+        if self._external:
+            self._fuse_external(t)
         self._check_health(t)
         if gps is not None:
             if self._airborne_at_boot is None:

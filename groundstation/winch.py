@@ -67,6 +67,7 @@ from typing import NamedTuple
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from groundstation.tether_fix import TetherFix, TetherFixer, TetherFixParams
 from groundstation.winder_control import WinderCommand
 from groundstation.winder_host import WinderHost
 from tuavdefs import can_protocol as cp
@@ -213,13 +214,18 @@ class WinchOutput:
     frames: list[cp.Frame] = field(default_factory=list)
     notices: list[Notice] = field(default_factory=list)
     status: WinchStatusReport | None = None
+    fix: TetherFix | None = None
+    """A tether fix of the UAV's position to send to the vehicle (ODOMETRY)."""
 
     def extend(self, other: WinchOutput) -> None:
-        """Append ``other``'s frames and notices; its status, if any, replaces ours."""
+        """Append ``other``'s frames and notices; its status and fix, if any, replace
+        ours."""
         self.frames.extend(other.frames)
         self.notices.extend(other.notices)
         if other.status is not None:
             self.status = other.status
+        if other.fix is not None:
+            self.fix = other.fix
 
 
 def _notice(severity: int, text: str) -> Notice:
@@ -253,9 +259,23 @@ class Winch:
     def __init__(self, host: WinderHost, winder: WinderParams, tether: TetherParams,
                  gravity_m_s2: float, params: WinchParams | None = None,
                  axis_node_id: int = cp.AXIS_NODE_ID_DEFAULT,
-                 sensor_node_id: int = cp.WINCH_SENSOR_NODE_ID_DEFAULT) -> None:
+                 sensor_node_id: int = cp.WINCH_SENSOR_NODE_ID_DEFAULT,
+                 fix_params: TetherFixParams | None = None) -> None:
         self.host = host
         self.p = params or WinchParams()
+        fp = fix_params or TetherFixParams()
+        #: the tether fix (groundstation.tether_fix), on this station's own tether beliefs
+        self.fixer = (TetherFixer(fp, tether.linear_density_kg_m * gravity_m_s2,
+                                  tether.youngs_modulus_pa * tether.section_area_m2,
+                                  tether.diameter_m) if fp.enabled else None)
+        self.fix_every = max(1, round(1.0 / (fp.rate_hz * host.dt_s)))
+        self._frames_since_fix = 0
+        #: the last Winch_Exit_Angle: (azimuth [rad], elevation [rad], sample time [ms]
+        #: modulo 65536, valid), or None
+        self.exit_angle: tuple[float, float, int, bool] | None = None
+        self._clock_ms: int | None = None     # the winch's clock, unwrapped [ms]
+        self.fixes = 0
+        """Tether fixes computed."""
         self.g = gravity_m_s2
         self.node = axis_node_id
         self.sensor_node = sensor_node_id
@@ -338,6 +358,8 @@ class Winch:
                 self._winch_tension_frame)
             handlers[cp.frame_id(self.sensor_node, cp.SensorCmd.WINCH_HEARTBEAT)] = (
                 self._winch_heartbeat_frame)
+            handlers[cp.frame_id(self.sensor_node, cp.SensorCmd.WINCH_EXIT_ANGLE)] = (
+                self._winch_exit_angle_frame)
         self._handlers = handlers
         # the answers' ids, worked out once (None for a node id no frame can carry: then no
         # encoder frame is ever handled, and nothing is sent to it)
@@ -452,6 +474,47 @@ class Winch:
         if math.isfinite(tension_n):
             self.tension_n = tension_n
 
+    def _winch_exit_angle_frame(self, wall_s: float, data: bytes) -> None:
+        az, el, stamp, valid = cp.decode_winch_exit_angle(data)
+        # a direction no guide arm can read (below the ground, beyond the vertical, an
+        # azimuth off the circle) is a bad frame: no fix from it
+        if not (-math.pi <= az <= math.pi and -0.1 <= el <= 0.5 * math.pi):
+            self.bad_frames += 1
+            valid = False
+        self.exit_angle = (az, el, stamp, valid)
+
+    def _unwrap_ms(self, stamp_ms: int) -> int:
+        """The winch's 16-bit clock [ms] as a full time: the nearest to the vehicle's
+        time of its last position (the same clock in the simulator), else carried on from
+        the last one unwrapped."""
+        ref = self.uav_time_ms if self.uav_time_ms is not None else self._clock_ms
+        if ref is None:
+            full = stamp_ms
+        else:
+            d = (stamp_ms - ref) & 0xFFFF
+            full = ref + (d - 0x10000 if d >= 0x8000 else d)
+        self._clock_ms = full
+        return full
+
+    def tether_fix(self) -> TetherFix | None:
+        """The UAV's position from length, tension and exit angles now, or None when one
+        is missing, invalid or older than ``max_age_s`` against the tension's sample."""
+        fixer, ea = self.fixer, self.exit_angle
+        if (fixer is None or ea is None or not ea[3] or self.sample_time_ms is None
+                or not (math.isfinite(self.length_m) and math.isfinite(self.tension_n))
+                or self.load_cell_healthy is False):
+            return None
+        az, el, stamp, _ = ea
+        gap_ms = (self.sample_time_ms - stamp) & 0xFFFF
+        if gap_ms >= 0x8000:
+            gap_ms -= 0x10000
+        if abs(gap_ms) * 1e-3 > fixer.p.max_age_s:
+            return None
+        reported = self.uav[0] if self.uav is not None else None
+        pos, cov, ground = fixer.position(self.length_m, self.tension_n, az, el, reported)
+        self.fixes += 1
+        return TetherFix(pos, cov, self._unwrap_ms(stamp), ground)
+
     def _winch_heartbeat_frame(self, wall_s: float, data: bytes) -> None:
         hb = cp.decode_winch_heartbeat(data)
         self.load_cell_healthy = hb.load_cell_healthy
@@ -527,6 +590,10 @@ class Winch:
             torque = self._control(out)
             out.frames.append(cp.Frame(self._torque_id, cp.encode_set_input_torque(torque)))
             self.torque_commands += 1
+        self._frames_since_fix += 1
+        if self._frames_since_fix >= self.fix_every and self.fixer is not None:
+            self._frames_since_fix = 0
+            out.fix = self.tether_fix()
         self._frames_since_status += 1
         if self._frames_since_status >= self.status_every:
             out.status = self._status(wall_s)

@@ -3,7 +3,8 @@
 In: the UAV's ``LOCAL_POSITION_NED``, and ``COMMAND_LONG``/``COMMAND_INT`` (the companion
 forwards ground stations' commands as they were sent, so their sender ids are the ground
 station's). Out, as system 1 component 169: ``HEARTBEAT`` (1 Hz of wall time, from
-:meth:`WinchLinkClient.poll`), ``WINCH_STATUS``, ``COMMAND_ACK`` and ``STATUSTEXT``. The
+:meth:`WinchLinkClient.poll`), ``WINCH_STATUS``, the tether fix as ``ODOMETRY``,
+``COMMAND_ACK`` and ``STATUSTEXT``. The
 client connects, and reconnects after a drop, on its own; sends while unconnected are lost.
 With a signing key (given at start, or by the vehicle's ``SETUP_SIGNING`` from component 1)
 everything sent is signed and only correctly signed frames are taken (``tuavdefs.signing``).
@@ -186,6 +187,12 @@ class WinchLinkClient:
         self._send(self.mav.winch_status_encode(
             int(time.monotonic() * 1e6), length_m, speed_m_s, tension_kg,
             voltage_v, current_a, temperature_c, flags))
+
+    def tether_fix(self, t_s: float, pos_m: Vec3,
+                   cov_m2: tuple[tuple[float, float, float], ...]) -> None:
+        """Send the tether fix as ODOMETRY: its time on the vehicle's clock [s], position
+        [m] and covariance [m^2] (z-up frame, origin at the winder)."""
+        self._send(cl.odometry_message(cl.ExternalPosition(t_s, pos_m, cov_m2)))
 
     def command_ack(self, command: int, result: int, target_system: int,
                     target_component: int) -> None:

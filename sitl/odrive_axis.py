@@ -85,6 +85,7 @@ from tuavdefs.can_protocol import (
     encode_heartbeat,
     encode_iq,
     encode_torques,
+    encode_winch_exit_angle,
     encode_winch_heartbeat,
     encode_winch_length,
     encode_winch_tension,
@@ -427,7 +428,7 @@ class WinchSensors:
     """
 
     def __init__(self, node_id: int = WINCH_SENSOR_NODE_ID_DEFAULT, period_s: float = 0.01,
-                 heartbeat_period_s: float = 0.1) -> None:
+                 heartbeat_period_s: float = 0.1, exit_angle_period_s: float = 0.02) -> None:
         frame_id(node_id, 0)
         self.node_id = int(node_id)
         self.load_cell_healthy = True
@@ -437,6 +438,19 @@ class WinchSensors:
         self._length_id = frame_id(self.node_id, SensorCmd.WINCH_LENGTH)
         self._tension_id = frame_id(self.node_id, SensorCmd.WINCH_TENSION)
         self._heartbeat_id = frame_id(self.node_id, SensorCmd.WINCH_HEARTBEAT)
+        self._exit_schedule = CyclicSchedule(exit_angle_period_s)
+        self._exit_id = frame_id(self.node_id, SensorCmd.WINCH_EXIT_ANGLE)
+
+    def exit_angle_frame(self, t_s: float, azimuth_rad: float, elevation_rad: float,
+                         valid: bool) -> Frame:
+        """The ``Winch_Exit_Angle`` frame of a reading [rad] sampled at ``t_s`` [s] (sent
+        when :meth:`exit_angle_due`)."""
+        return Frame(self._exit_id, encode_winch_exit_angle(
+            azimuth_rad, elevation_rad, round(t_s * 1000.0) & 0xFFFF, valid), False)
+
+    def exit_angle_due(self, t_s: float) -> bool:
+        """True (once per slot) when a ``Winch_Exit_Angle`` is due at ``t_s`` [s]."""
+        return self._exit_schedule.due(t_s)
 
     def due(self, t_s: float) -> bool:
         """Whether :meth:`tick` at ``t_s`` [s] has frames to send (it changes nothing: the

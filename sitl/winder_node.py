@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import time
 
+from sitl.exit_angle import ExitAngleSensor
 from sitl.odrive_axis import OdriveAxis, WinchSensors
 from sitl.plant import Plant
 from tuavdefs.can_protocol import (
@@ -54,6 +55,8 @@ class WinderCanNode:
                                torque_limit_nm=w.motor_torque_limit_n_m,
                                vel_limit_rev_s=w.motor_speed_limit_rad_s / _TWO_PI)
         self.sensors = WinchSensors(sensor_node_id)
+        #: the guide arm's encoders at the fairlead (Winch_Exit_Angle)
+        self.exit_sensor = ExitAngleSensor()
         self.frames_received = 0
         self.frames_sent = 0
         #: A CAN-loss fault (sitl.faults): no frame reaches the node or leaves it.
@@ -134,6 +137,7 @@ class WinderCanNode:
         # solved every period, not only when the sensors send: each solve starts from the
         # last one's solution, and the tensions sent must not depend on when it last ran
         tf = p.tether_forces()
+        sensor_frames: list = []
         if self.sensors.due(t_s):
             # the winch's sensor frames of this instant go first: a host answering the
             # encoder frame at once then knows the tension and the sample time that go
@@ -142,6 +146,10 @@ class WinderCanNode:
             sensor_frames = self.sensors.tick(
                 t_s, length, omega * self._drum_radius, tf.drum_tension_n, not enabled,
                 theta <= self._theta_min, theta >= self._theta_max)
+        if self.sensors.exit_angle_due(t_s):
+            az, el, valid = self.exit_sensor.read(tf.on_exit_n)
+            sensor_frames.append(self.sensors.exit_angle_frame(t_s, az, el, valid))
+        if sensor_frames:
             frames = sensor_frames + frames if frames else sensor_frames
         if frames:
             # every frame of the instant built first, then sent back to back: a host

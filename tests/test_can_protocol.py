@@ -180,7 +180,7 @@ def test_frame_ids():
 
 def test_sensor_node_never_collides_with_an_axis_node():
     sensor_ids = {m.frame_id() for m in MESSAGES if m.node == "sensor"}
-    assert sensor_ids == {0x601, 0x602, 0x603}
+    assert sensor_ids == {0x601, 0x602, 0x603, 0x604}
     whole_sensor_node = {frame_id(WINCH_SENSOR_NODE_ID_DEFAULT, c) for c in range(0x20)}
     for node in range(0x30):
         axis_ids = {frame_id(node, c) for c in range(0x20)}

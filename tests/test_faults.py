@@ -103,7 +103,8 @@ def test_bad_faults_name_the_field(tmp_path):
 
 
 def test_a_hover_on_the_ekf_lives_through_a_gnss_loss(tmp_path):
-    """Hovering on the consumer receiver, GNSS lost for 15 s: the filter's position
+    """Hovering on the consumer receiver without tether aid, GNSS lost for 15 s: the
+    filter's position
     uncertainty grows while it is gone and the estimate comes back within 3 sigma of the
     truth once it returns; the covariance stays positive throughout (a flaw in the
     receiver-wander prior once made it indefinite, and the estimate diverged here)."""
@@ -137,6 +138,7 @@ goal_m = [8.0, 4.0, 15.0]
 kind = "ekf"
 gnss_delay_s = 0.1
 gnss_pos_tau_s = 8.0
+tether_aid = false
 [sensors]
 gnss = "gnss"
 [[faults]]

@@ -494,7 +494,8 @@ def test_winder_node_sends_each_instants_sensor_frames_before_its_encoder_frame(
     assert len(with_encoder) == 100                            # 100 Hz of simulated time
     for b in with_encoder:
         assert b[:2] == [(sensor, cp.SensorCmd.WINCH_LENGTH), (sensor, cp.SensorCmd.WINCH_TENSION)]
-    assert sum(len(b) for b in bursts) == node.frames_sent == 100 * 3 + 10 * 2
+    # 100 Hz length, tension, encoder; 10 Hz two heartbeats; 50 Hz the exit angle
+    assert sum(len(b) for b in bursts) == node.frames_sent == 100 * 3 + 10 * 2 + 50
 
 
 def test_winder_node_ignores_29_bit_frames_of_other_protocols():

@@ -29,9 +29,11 @@ from companion.mission_items import ItemRefused, nav_commands
 from companion.navigation import FlightMode, NavCommand, NavEvent, NavKind, Refusal
 from companion.onboard import Companion, OnboardInputs
 from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
+from groundstation.tether_fix import TetherFix
 from groundstation.winch import CommandRequest, Winch, WinchStatusReport
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
+from sitl.exit_angle import ExitAngleSensor
 from sitl.faults import FaultSchedule
 from sitl.lumped import L_MAXN
 from sitl.plant import (
@@ -208,22 +210,34 @@ class GroundStation:
         """Whether the axis is in closed-loop control (False: IDLE, the drum braked)."""
         self.notices: list[tuple[float, str]] = []
         """What the winch said (time [s], text)."""
+        self._exit_id = cp.frame_id(winch.sensor_node, cp.SensorCmd.WINCH_EXIT_ANGLE)
+        self.fix: TetherFix | None = None
+        """The winch's last tether fix not yet taken (ODOMETRY to the vehicle)."""
 
     def period(self, t_s: float, drum_angle_rad: float, drum_rate_rad_s: float,
                drum_tension_n: float, uav_pos_m: tuple[float, float, float],
-               uav_vel_m_s: tuple[float, float, float]) -> WinchStatusReport | None:
+               uav_vel_m_s: tuple[float, float, float],
+               exit_angle: tuple[float, float, bool] | None = None
+               ) -> WinchStatusReport | None:
         """One winder period at ``t_s`` [s] with the encoder's drum angle [rad] and rate
-        [rad/s] (the winch turns them into length with its own drum radius); returns the
-        WINCH_STATUS it sends, if any."""
+        [rad/s] (the winch turns them into length with its own drum radius); ``exit_angle``
+        the guide arm's reading (azimuth, elevation [rad], valid) when one is due. Returns
+        the WINCH_STATUS it sends, if any; a tether fix it computed waits in :attr:`fix`."""
         w = self.winch
         w.set_uav((uav_pos_m, uav_vel_m_s))
+        stamp = round(t_s * 1000.0) & 0xFFFF
+        if exit_angle is not None:
+            w.handle_frame(t_s, self._exit_id, cp.encode_winch_exit_angle(
+                exit_angle[0], exit_angle[1], stamp, exit_angle[2]))
         w.handle_frame(t_s, self._tension_id,
-                       cp.encode_winch_tension(drum_tension_n, not self.axis_enabled))
+                       cp.encode_winch_tension(drum_tension_n, not self.axis_enabled, stamp))
         rev = 1.0 / (2.0 * math.pi)
         out = w.handle_frame(t_s, self._encoder_id, cp.encode_encoder_estimates(
             drum_angle_rad * rev, drum_rate_rad_s * rev))
         if out is None:
             return None
+        if out.fix is not None:
+            self.fix = out.fix
         for frame in out.frames:
             if frame.arbitration_id == self._torque_id:
                 self.torque_n_m = cp.decode_set_input_torque(frame.data)
@@ -335,6 +349,10 @@ class OfflineRunner:
         self.sensors = (SensorFeed(self.plant, sc.sensors.noise_model(), self.home,
                                    1.0 / sc.control.rate_hz)
                         if self.companion.filter is not None else None)
+        #: the winch's guide-arm encoders (Winch_Exit_Angle every 20 ms, as the plant's
+        #: winch node sends it)
+        self.exit_sensor = ExitAngleSensor()
+        self._exit_every = max(1, round(0.02 * sc.winder_control.rate_hz))
         #: the plant's faults (scenario [[faults]])
         self.faults = FaultSchedule(sc.faults, self.plant,
                                     self.sensors.batches if self.sensors else None)
@@ -441,7 +459,8 @@ class OfflineRunner:
                 self.fault_log += self.faults.apply(t)
             if fresh:
                 # ground station: encoder, load cell and the UAV's telemetry
-                drum_tension = tether_forces().drum_tension_n
+                tf = tether_forces()
+                drum_tension = tf.drum_tension_n
                 x = plant.x.tolist()
                 if faults and self.faults.can_down:
                     # no frame either way: the axis's watchdog disarms it (the drum
@@ -449,8 +468,17 @@ class OfflineRunner:
                     status = None
                     winder_torque, winder_enabled = 0.0, False
                 else:
+                    exit_angle = (self.exit_sensor.read(tf.on_exit_n)
+                                  if (k // n_wind) % self._exit_every == 0 else None)
                     status = ground.period(t, x[DRUM_ANGLE], x[DRUM_RATE], drum_tension,
-                                           tuple(x[POS]), tuple(x[VEL]))
+                                           tuple(x[POS]), tuple(x[VEL]), exit_angle)
+                    fix = ground.fix
+                    if fix is not None:     # ODOMETRY reaches the companion
+                        ground.fix = None
+                        ext = cl.external_position(cl.odometry_message(cl.ExternalPosition(
+                            fix.sample_time_ms * 1e-3, fix.pos_m, fix.cov_m2)))
+                        if ext is not None:
+                            companion.external_position(ext)
                     winder_torque, winder_enabled = ground.torque_n_m, ground.axis_enabled
                 if faults and self.faults.winder_motor_failed:
                     winder_torque = 0.0
@@ -640,7 +668,9 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray],
     m["estimator"] = sc.estimator.kind
     est = np.isfinite(s["est_pos"]).all(axis=1) & (t >= sc.metrics_after_s)
     if est.any():
-        m["gnss"] = sc.sensors.gnss
+        denied = any(f.kind == "gnss_loss" and f.start_s <= 0.0 and f.end_s >= sc.duration_s
+                     for f in sc.faults)
+        m["gnss"] = "none" if denied else sc.sensors.gnss
         e_att_est = s["est_euler"][est] - s["euler"][est]
         e_att_est[:, 2] = (e_att_est[:, 2] + np.pi) % (2 * np.pi) - np.pi
         m["estimate_position_rmse_m"] = _rms(np.linalg.norm(
@@ -648,6 +678,20 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray],
         m["estimate_velocity_rmse_m_s"] = _rms(np.linalg.norm(
             s["est_vel"][est] - s["vel"][est], axis=1))
         m["estimate_attitude_rmse_rad"] = _rms(np.linalg.norm(e_att_est, axis=1))
+    loss = np.zeros(len(t), dtype=bool)
+    for f in sc.faults:
+        if f.kind == "gnss_loss":
+            loss |= (t >= f.start_s) & (t < f.end_s)
+    if (loss & flying).any():
+        # while the GNSS is lost (in flight): the truth off its reference and the estimate
+        # off the truth, horizontally
+        lf = loss & flying
+        m["gnss_loss_horizontal_error_max_m"] = float(np.hypot(
+            *(s["pos"][lf, :2] - s["ref_pos"][lf, :2]).T).max())
+        lfe = lf & np.isfinite(s["est_pos"]).all(axis=1)
+        if lfe.any():
+            m["gnss_loss_estimate_horizontal_error_max_m"] = float(np.hypot(
+                *(s["est_pos"][lfe, :2] - s["pos"][lfe, :2]).T).max())
     if (reference is not None and sc.trajectory.kind in ("setpoint", "step")
             and reference.goal is not None):
         goal = np.array(reference.goal)

@@ -35,6 +35,10 @@ TARGETS: list[tuple[str, str, str, float, str]] = [
      "GNSS: estimate - truth"),
     ("circle-windy-gnss", "position_rmse_m", "<=", 1.5, "windy circle on the EKF, consumer "
      "GNSS: position RMSE"),
+    ("hover-gnss-loss", "gnss_loss_horizontal_error_max_m", "<=", 0.5, "hover, GNSS lost "
+     "for 60 s, tether fix: horizontal truth error during the loss"),
+    ("mission-gnss-denied", "min_tether_slack_m", ">=", 1e-9, "mission without GNSS, on the "
+     "tether fix: never taut"),
     *((name, "estimate_attitude_rmse_rad", "<=", math.radians(0.5), f"{label}: attitude "
        "estimate - truth (0.5 deg)")
       for name, label in (("circle-rtk", "circle on the EKF, RTK"),
@@ -53,8 +57,18 @@ FIGURES_FOR_DOCS = {
 }
 
 
+#: Runs beside the shipped scenarios: (label, scenario, its [estimator] tether_aid).
+TETHER_AID_VARIANTS = (("hover-gnss-loss, tether_aid = false", "hover-gnss-loss", False),
+                       ("circle-gnss, tether_aid = false", "circle-gnss", False))
+
+
 def _one(args: tuple[str, str, bool]) -> tuple[str, dict[str, Any]]:
     name, runs, figures = args
+    variant = {label: (sc, aid) for label, sc, aid in TETHER_AID_VARIANTS}.get(name)
+    if variant is not None:      # a variant: metrics only
+        sc = load_scenario(variant[0])
+        sc = sc.replace(estimator=sc.estimator.replace(tether_aid=variant[1]))
+        return name, run_scenario(sc, None, progress=None).metrics
     out = Path(runs) / name
     result = run_scenario(load_scenario(name), out, progress=None)
     if figures:
@@ -136,6 +150,34 @@ def sweep_section(runs_dir: Path, metrics: dict[str, dict[str, Any]],
     return lines
 
 
+def _tether_aid_section(metrics: dict[str, dict[str, Any]]) -> list[str]:
+    """The tether-aided navigation runs beside the same without tether aid."""
+    lines = ["", "## Tether-aided navigation", "",
+             "The winch's tether fix fused by the onboard filter (docs/estimation.md §10), "
+             "beside the same runs with `[estimator] tether_aid = false`. During the GNSS "
+             "loss: the truth's horizontal distance from its reference (max) and the "
+             "estimate's from the truth (max); a failsafe is the EKF failsafe landing.", "",
+             "| run | position RMSE [m] | estimate position RMSE [m] | loss: truth off "
+             "reference, max [m] | loss: estimate off truth, max [m] | min slack [m] | "
+             "items reached | landed and disarmed |", "|---|---|---|---|---|---|---|---|"]
+    runs = ["hover-gnss-loss", "hover-gnss-loss, tether_aid = false", "mission-gnss-denied",
+            "circle-gnss", "circle-gnss, tether_aid = false"]
+    for n in runs:
+        m = metrics.get(n)
+        if m is None:
+            continue
+        items = m.get("items_reached")
+        landed = m.get("landed_disarmed")
+        lines.append("| " + " | ".join([
+            n, _fmt(m["position_rmse_m"]), _fmt(m.get("estimate_position_rmse_m")),
+            _fmt(m.get("gnss_loss_horizontal_error_max_m")),
+            _fmt(m.get("gnss_loss_estimate_horizontal_error_max_m")),
+            _fmt(m["min_tether_slack_m"]),
+            "–" if items is None else ", ".join(f"#{i}" for i in items),
+            "–" if landed is None else ("yes" if landed else "**no**")]) + " |")
+    return lines
+
+
 def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
                   processes: int | None = None) -> dict[str, dict[str, Any]]:
     """Run all shipped scenarios and write ``out_md``; returns the metrics by scenario
@@ -143,7 +185,8 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
     names = sorted(shipped_scenarios())
     wall = time.perf_counter()
     with get_context("fork").Pool(processes or min(len(names), os.cpu_count() or 1)) as pool:
-        metrics = dict(pool.map(_one, [(n, str(runs_dir), figures) for n in names]))
+        jobs = [*names, *(label for label, _, _ in TETHER_AID_VARIANTS)]
+        metrics = dict(pool.map(_one, [(n, str(runs_dir), figures) for n in jobs]))
     wall = time.perf_counter() - wall
     fig_dir = out_md.parent / "figures"
     if figures:
@@ -245,6 +288,7 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
                          f"{_fmt(m['estimate_attitude_rmse_rad'])} | "
                          f"{_fmt(m['motor_saturation_fraction'])} | "
                          f"{_fmt(m['min_tether_slack_m'])} |")
+    lines += _tether_aid_section(metrics)
     missions = {n: metrics[n] for n in names if "items_reached" in metrics[n]}
     if missions:
         lines += ["", "## Missions", "",

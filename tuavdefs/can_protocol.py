@@ -82,6 +82,8 @@ __all__ = [
     "WinchHeartbeat",
     "WinchLength",
     "WinchTension",
+    "WinchExitAngle",
+    "EXIT_ANGLE_LSB_RAD",
     # encoders / decoders
     "encode_heartbeat",
     "decode_heartbeat",
@@ -113,6 +115,8 @@ __all__ = [
     "decode_winch_length",
     "encode_winch_tension",
     "decode_winch_tension",
+    "encode_winch_exit_angle",
+    "decode_winch_exit_angle",
 ]
 
 # ---------------------------------------------------------------------------------------------
@@ -157,6 +161,7 @@ class SensorCmd(enum.IntEnum):
     WINCH_HEARTBEAT = 0x01
     WINCH_LENGTH = 0x02
     WINCH_TENSION = 0x03
+    WINCH_EXIT_ANGLE = 0x04
 
 
 class AxisState(enum.IntEnum):
@@ -323,6 +328,8 @@ _S_F4X = struct.Struct("<f4x")
 _S_FBH = struct.Struct("<fBH")
 _S_FBHX = struct.Struct("<fBHx")
 _S_FF = struct.Struct("<ff")
+_S_HHHB = struct.Struct("<hhHB")
+_S_HHHBX = struct.Struct("<hhHBx")
 
 
 def _pack(name: str, layout: struct.Struct, *values: Any) -> bytes:
@@ -433,6 +440,23 @@ class WinchTension(NamedTuple):
     brake_engaged: bool
     sample_time_ms: int = 0
     """The winch's clock when it sampled [ms], modulo 65536 (the simulator's time)."""
+
+
+class WinchExitAngle(NamedTuple):
+    """``Winch_Exit_Angle`` (sensor node, 0x04): the direction in which the tether leaves
+    the fairlead, from the two encoders of its guide arm: azimuth [rad] (counter-clockwise
+    from the winder frame's x axis, east, in -pi..pi), elevation [rad] (above the
+    horizontal), the winch's clock when they were sampled [ms] modulo 65536, and whether
+    the reading is valid (both encoders healthy)."""
+
+    azimuth_rad: float
+    elevation_rad: float
+    sample_time_ms: int
+    valid: bool
+
+
+#: One count of ``Winch_Exit_Angle``'s angles [rad] (signed 16 bits: +-3.2767 rad).
+EXIT_ANGLE_LSB_RAD = 1.0e-4
 
 
 # ---------------------------------------------------------------------------------------------
@@ -625,6 +649,34 @@ def decode_winch_tension(data: bytes) -> WinchTension:
     return WinchTension(tension, bool(brake), stamp)
 
 
+def _angle_counts(name: str, angle_rad: float) -> int:
+    """An angle [rad] as ``Winch_Exit_Angle`` counts (rounded; ValueError outside the
+    signed 16 bits or not finite)."""
+    if not math.isfinite(angle_rad):
+        raise ValueError(f"{name}: cannot encode {angle_rad!r}")
+    return round(float(angle_rad) / EXIT_ANGLE_LSB_RAD)
+
+
+def encode_winch_exit_angle(azimuth_rad: float, elevation_rad: float,
+                            sample_time_ms: int = 0, valid: bool = True) -> bytes:
+    """Winch_Exit_Angle payload (8 bytes): i16 Azimuth and i16 Elevation in counts of
+    :data:`EXIT_ANGLE_LSB_RAD`, u16 Sample_Time [ms] (the winch's clock modulo 65536), u8
+    Valid, 1 zero pad byte. The azimuth is wrapped to -pi..pi first."""
+    az = math.remainder(float(azimuth_rad), 2.0 * math.pi) if math.isfinite(
+        azimuth_rad) else azimuth_rad
+    return _pack("Winch_Exit_Angle", _S_HHHBX, _angle_counts("Winch_Exit_Angle", az),
+                 _angle_counts("Winch_Exit_Angle", elevation_rad),
+                 int(sample_time_ms) & 0xFFFF, 1 if valid else 0)
+
+
+def decode_winch_exit_angle(data: bytes) -> WinchExitAngle:
+    """Decode Winch_Exit_Angle (7..8 bytes) to radians."""
+    data = _check_len("Winch_Exit_Angle", data, 7)
+    az, el, stamp, valid = _S_HHHB.unpack_from(data)
+    return WinchExitAngle(az * EXIT_ANGLE_LSB_RAD, el * EXIT_ANGLE_LSB_RAD, stamp,
+                          bool(valid & 0x01))
+
+
 # ---------------------------------------------------------------------------------------------
 # Message table
 # ---------------------------------------------------------------------------------------------
@@ -707,6 +759,9 @@ MESSAGES: tuple[MessageSpec, ...] = (
     _spec("Winch_Tension", SensorCmd.WINCH_TENSION, "sensor", "sensor->host", 8, 0.01, False,
           ("Tension", "Brake_Engaged", "Sample_Time"), 7, encode_winch_tension,
           decode_winch_tension),
+    _spec("Winch_Exit_Angle", SensorCmd.WINCH_EXIT_ANGLE, "sensor", "sensor->host", 8, 0.02,
+          False, ("Azimuth", "Elevation", "Sample_Time", "Valid"), 7,
+          encode_winch_exit_angle, decode_winch_exit_angle),
 )
 """Every frame on the winder bus. Axis frames are ``frame_id(axis_node, cmd_id)``, sensor
 frames ``frame_id(sensor_node, cmd_id)``."""

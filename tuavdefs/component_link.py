@@ -7,9 +7,14 @@ component 169 ``MAV_COMP_ID_WINCH``) sends ``WINCH_STATUS`` and a ``HEARTBEAT`` 
 autopilot ``MAV_AUTOPILOT_INVALID`` and type ``MAV_TYPE_WINCH`` so that ground stations do
 not take it for a second vehicle. MAVLink 2, signed with the vehicle's key when it has
 one (the companion hands the winch a new key with ``SETUP_SIGNING`` from component 1).
+The winch also sends its tether fix of the UAV's position as ``ODOMETRY``
+(:func:`odometry_message`, :func:`external_position`) at :data:`TETHER_FIX_RATE_HZ`.
 """
 
 from __future__ import annotations
+
+import math
+from typing import NamedTuple
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -52,3 +57,70 @@ def winch_status_flag(name: str) -> int:
     define it (pymavlink 2.4.x knows HEALTHY, FULLY_RETRACTED, MOVING, CLUTCH_ENGAGED; newer
     common.xml adds LOCKED, RETRACTING, ...)."""
     return int(getattr(mavlink2, f"MAV_WINCH_STATUS_{name}", 0))
+
+
+#: How often the winch sends its tether fix (groundstation.tether_fix) [Hz, simulated].
+TETHER_FIX_RATE_HZ = 10.0
+#: ``pose_covariance`` indices (row-major upper triangle of the 6x6 x, y, z, roll, pitch,
+#: yaw matrix, as ODOMETRY defines it) of the position block (i, j) for i <= j < 3.
+_POSE_COV_INDEX = {(0, 0): 0, (0, 1): 1, (0, 2): 2, (1, 1): 6, (1, 2): 7, (2, 2): 11}
+#: ENU <-> NED axis permutation and signs: NED_i = sign_i * ENU_perm_i.
+_NED_FROM_ENU = ((1, 1.0), (0, 1.0), (2, -1.0))
+
+
+class ExternalPosition(NamedTuple):
+    """A position of the UAV from outside its own sensors (the winch's tether fix), as the
+    component link carries it: its time on the vehicle's clock [s] (time_boot), position
+    [m] and covariance [m^2], inertial z-up frame with the origin at the winder."""
+
+    t_s: float
+    pos_m: tuple[float, float, float]
+    cov_m2: tuple[tuple[float, float, float], ...]
+
+
+def odometry_message(fix: ExternalPosition) -> mavlink2.MAVLink_odometry_message:
+    """``ODOMETRY`` (331) as ArduPilot (ExternalNav) and PX4 (EKF2 external vision) take an
+    external position: ``time_usec`` the sample's time, local NED (frame_id
+    MAV_FRAME_LOCAL_NED) position, the position block of ``pose_covariance`` [m^2] (the
+    orientation's entries and the velocity NaN: unknown), ``estimator_type`` NAIVE (a
+    geometric fix, no filter behind it)."""
+    n = tuple(sgn * fix.pos_m[k] for k, sgn in _NED_FROM_ENU)
+    cov = [math.nan] * 21
+    for (i, j), idx in _POSE_COV_INDEX.items():
+        (ki, si), (kj, sj) = _NED_FROM_ENU[i], _NED_FROM_ENU[j]
+        cov[idx] = si * sj * fix.cov_m2[ki][kj]
+    nan = math.nan
+    return mavlink2.MAVLink_odometry_message(
+        max(int(round(fix.t_s * 1e6)), 0), mavlink2.MAV_FRAME_LOCAL_NED,
+        mavlink2.MAV_FRAME_BODY_FRD, n[0], n[1], n[2], [nan, nan, nan, nan], nan, nan, nan,
+        nan, nan, nan, cov, [nan] * 21, 0, mavlink2.MAV_ESTIMATOR_TYPE_NAIVE, 0)
+
+
+def external_position(msg: mavlink2.MAVLink_odometry_message) -> ExternalPosition | None:
+    """The position in an ``ODOMETRY`` message (local NED, its position covariance), or
+    None when it is not one this vehicle can fuse (another frame, a position or its
+    covariance not finite, the covariance not positive definite)."""
+    if msg.frame_id != mavlink2.MAV_FRAME_LOCAL_NED:
+        return None
+    ned = (msg.x, msg.y, msg.z)
+    cov_ned = [[0.0] * 3 for _ in range(3)]
+    for (i, j), idx in _POSE_COV_INDEX.items():
+        cov_ned[i][j] = cov_ned[j][i] = float(msg.pose_covariance[idx])
+    values = [*ned, *(v for row in cov_ned for v in row)]
+    if not all(math.isfinite(v) for v in values):
+        return None
+    # ENU_k = sign * NED_i where (k, sign) = _NED_FROM_ENU[i]
+    pos = [0.0, 0.0, 0.0]
+    cov = [[0.0] * 3 for _ in range(3)]
+    for i, (k, si) in enumerate(_NED_FROM_ENU):
+        pos[k] = si * ned[i]
+        for j, (kk, sj) in enumerate(_NED_FROM_ENU):
+            cov[k][kk] = si * sj * cov_ned[i][j]
+    a, b, c = cov[0][0], cov[1][1], cov[2][2]
+    det2 = a * b - cov[0][1] ** 2
+    det3 = (a * (b * c - cov[1][2] ** 2) - cov[0][1] * (cov[0][1] * c - cov[1][2] * cov[0][2])
+            + cov[0][2] * (cov[0][1] * cov[1][2] - b * cov[0][2]))
+    if not (a > 0.0 and det2 > 0.0 and det3 > 0.0):
+        return None
+    return ExternalPosition(msg.time_usec * 1e-6, (pos[0], pos[1], pos[2]),
+                            tuple(tuple(r) for r in cov))

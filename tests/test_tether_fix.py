@@ -1,0 +1,176 @@
+"""The ground station's tether fix (groundstation/tether_fix.py) against independent truths:
+the plant's own catenary solver (sitl.tether, MoorPy-compatible) for the UAV's position, a
+numerical integration of the loaded line for the closed form, the plant's exit-angle sensor
+for the noise, and the fix's covariance against its actual errors (NEES)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from groundstation.tether_fix import TetherFixer, TetherFixParams, line_end
+from sitl.catenary import CatenaryRegime
+from sitl.exit_angle import ExitAngleSensor, ExitAngleSensorParams
+from sitl.tether import Tether
+from tuavdefs.params import TetherParams
+
+G = 9.81
+TP = TetherParams()
+W = TP.linear_density_kg_m * G
+EA = TP.youngs_modulus_pa * TP.section_area_m2
+
+
+def _fixer(**kw) -> TetherFixer:
+    return TetherFixer(TetherFixParams(**kw), W, EA, TP.diameter_m)
+
+
+def _exit(forces) -> tuple[float, float]:
+    fx, fy, fz = forces.on_exit_n
+    return math.atan2(fy, fx), math.atan2(fz, math.hypot(fx, fy))
+
+
+#: (UAV position [m], slack over the straight line [m]) across lengths, heights, sags
+GEOMETRIES = [((8.0, 4.0, 15.0), 0.3), ((8.0, 4.0, 15.0), 1.0), ((2.0, 0.0, 1.0), 0.05),
+              ((-12.0, 9.0, 20.0), 0.5), ((2.0, 0.5, 20.0), 0.05), ((25.0, -5.0, 10.0), 0.4),
+              ((1.0, -1.0, 3.0), 0.1), ((30.0, 10.0, 30.0), 2.0)]
+
+
+@pytest.mark.parametrize(("pos", "slack"), GEOMETRIES)
+def test_exact_angles_give_the_plant_catenary_position(pos, slack):
+    """Noise-free measurements: the fix is the plant's truth (its elastic catenary solved
+    by Newton's method from the two ends) to the millimetre."""
+    tf = Tether(TP, G).forces(*pos, math.dist(pos, (0, 0, 0)) + slack)
+    assert tf.info.regime == CatenaryRegime.SUSPENDED
+    az, el = _exit(tf)
+    p, cov, ground = _fixer().position(math.dist(pos, (0, 0, 0)) + slack, tf.drum_tension_n,
+                                       az, el)
+    assert not ground
+    assert p == pytest.approx(pos, abs=1e-3)
+    assert np.all(np.linalg.eigvalsh(np.array(cov)) > 0.0)
+
+
+def test_closed_form_against_an_integrated_line_under_any_load():
+    """line_end against solve_ivp of dp/ds = T/|T| (1 + |T|/EA), T(s) = T0 e0 - f s, with
+    a load tilted by wind and a soft line."""
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        L = rng.uniform(1.0, 40.0)
+        T0 = rng.uniform(0.2, 20.0)
+        az, el = rng.uniform(-math.pi, math.pi), rng.uniform(0.0, 1.4)
+        f = np.array((rng.normal(0.0, 0.1), rng.normal(0.0, 0.1), -W))
+        ea = rng.choice([EA, 200.0])
+        e0 = np.array((math.cos(el) * math.cos(az), math.cos(el) * math.sin(az),
+                       math.sin(el)))
+
+        def rhs(s, p, e0=e0, T0=T0, f=f, ea=ea):
+            T = T0 * e0 - f * s
+            n = np.linalg.norm(T)
+            return T / n * (1.0 + n / ea)
+
+        sol = solve_ivp(rhs, (0.0, L), np.zeros(3), rtol=1e-10, atol=1e-12)
+        assert line_end(L, T0, az, el, tuple(f), ea) == pytest.approx(sol.y[:, -1],
+                                                                     abs=1e-6)
+
+
+def _noisy_fix(rng, fixer, sensor, pos, slack):
+    L = math.dist(pos, (0, 0, 0)) + slack
+    tf = Tether(TP, G).forces(*pos, L)
+    az, el, valid = sensor.read(tf.on_exit_n)
+    assert valid
+    p = fixer.p
+    tension = (tf.drum_tension_n * (1.0 + rng.normal(0.0, p.tension_noise_fraction))
+               + rng.normal(0.0, p.tension_noise_n))
+    length = L + rng.normal(0.0, p.length_noise_m)
+    return fixer.position(length, tension, az, el)
+
+
+def test_covariance_is_consistent_with_the_actual_error():
+    """NEES of noisy fixes (the plant's exit-angle sensor with its bias and quantisation,
+    noisy tension and length) over the geometries: no worse than chi-square(3) says (mean
+    at most 3: the covariance may be cautious, it allows for wind the plant's catenary does
+    not put on the line), and never grossly optimistic."""
+    rng = np.random.default_rng(11)
+    fixer = _fixer()
+    nees = []
+    for seed in range(12):
+        sensor = ExitAngleSensor(ExitAngleSensorParams(seed=seed))
+        for pos, slack in GEOMETRIES:
+            p, cov, _ = _noisy_fix(rng, fixer, sensor, pos, slack)
+            e = np.subtract(p, pos)
+            nees.append(float(e @ np.linalg.solve(np.array(cov), e)))
+    nees = np.array(nees)
+    assert nees.mean() <= 3.0
+    assert np.quantile(nees, 0.99) <= 11.34      # chi-square(3) at 0.99
+
+
+def test_covariance_without_wind_allowance_is_not_far_too_cautious():
+    """With no wind allowed for, the NEES is of chi-square(3)'s order: the covariance is the
+    noise, not a blanket."""
+    rng = np.random.default_rng(5)
+    fixer = _fixer(design_wind_m_s=0.0, weight_uncertainty_fraction=0.0)
+    nees = []
+    for seed in range(12):
+        sensor = ExitAngleSensor(ExitAngleSensorParams(seed=seed))
+        for pos, slack in GEOMETRIES:
+            p, cov, _ = _noisy_fix(rng, fixer, sensor, pos, slack)
+            e = np.subtract(p, pos)
+            nees.append(float(e @ np.linalg.solve(np.array(cov), e)))
+    assert 0.3 <= float(np.mean(nees)) <= 3.0
+
+
+def _sigma(fixer, pos, slack):
+    L = math.dist(pos, (0, 0, 0)) + slack
+    tf = Tether(TP, G).forces(*pos, L)
+    az, el = _exit(tf)
+    _, cov, ground = fixer.position(L, tf.drum_tension_n, az, el)
+    return math.sqrt(np.trace(np.array(cov))), ground
+
+
+def test_covariance_grows_where_the_fix_is_weak():
+    f = _fixer()
+    taut, _ = _sigma(f, (8.0, 4.0, 15.0), 0.1)
+    slack, _ = _sigma(f, (8.0, 4.0, 15.0), 1.5)
+    assert slack > 1.5 * taut                        # a slack line: its shape is soft
+    short, _ = _sigma(f, (2.0, 1.0, 4.0), 0.1)
+    long_, _ = _sigma(f, (24.0, 12.0, 30.0), 0.4)
+    assert long_ > 3.0 * short                       # a long line
+    calm, _ = _sigma(_fixer(design_wind_m_s=0.0), (8.0, 4.0, 15.0), 0.3)
+    windy, _ = _sigma(_fixer(design_wind_m_s=10.0), (8.0, 4.0, 15.0), 0.3)
+    assert windy > 3.0 * calm                        # strong wind
+    ground, on = _sigma(f, (12.0, 0.0, 0.5), 2.0)    # the line lying on the ground
+    assert on
+    assert ground > 5.0 * short
+
+
+def test_line_on_the_ground_with_the_reported_height():
+    """Touchdown (part of the line on the ground): with the UAV's reported position the
+    fix is the plant's truth horizontally (the line's reach bounds it), and says nothing of
+    the height."""
+    f = _fixer()
+    for pos, slack in (((3.0, 0.0, 0.2), 0.1), ((6.0, -8.0, 1.0), 0.3),
+                       ((0.0, 5.0, 4.0), 1.0)):
+        L = math.dist(pos, (0, 0, 0)) + slack
+        tf = Tether(TP, G).forces(*pos, L)
+        assert tf.info.regime == CatenaryRegime.TOUCHDOWN
+        az, el = _exit(tf)
+        # reported where it is: the line's bound holds it there
+        p, cov, ground = f.position(L, tf.drum_tension_n, az, el, reported_m=pos)
+        assert ground
+        assert p[:2] == pytest.approx(pos[:2], abs=0.02)
+        assert math.sqrt(cov[2][2]) >= f.p.ground_vertical_sigma_m
+        # reported beyond the line's reach: brought back to it (the straight line on the
+        # ground, the plant's truth); reported nearer: the azimuth only
+        far = (pos[0] * 1.5 + 0.5, pos[1] * 1.5 + 0.5, pos[2])
+        p, _, _ = f.position(L, tf.drum_tension_n, az, el, reported_m=far)
+        assert p[:2] == pytest.approx(pos[:2], abs=0.02)
+        near = (pos[0] * 0.5, pos[1] * 0.5, pos[2])
+        p, _, _ = f.position(L, tf.drum_tension_n, az, el, reported_m=near)
+        assert math.hypot(*p[:2]) == pytest.approx(math.hypot(*near[:2]), abs=1e-9)
+        assert math.atan2(p[1], p[0]) == pytest.approx(az, abs=1e-9)
+        # without the height: the spread over the unknown length on the ground
+        p0, cov0, _ = f.position(L, tf.drum_tension_n, az, el)
+        e = np.subtract(p0, pos)
+        assert float(e @ np.linalg.solve(np.array(cov0), e)) <= 11.34
