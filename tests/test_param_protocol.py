@@ -593,7 +593,9 @@ def test_mavutil_param_fetch_all_gets_every_parameter_over_udp():
     vehicle.thread.start()
     client = mavutil.mavlink_connection(f"udpout:127.0.0.1:{vehicle.port}",
                                         source_system=255, source_component=190,
-                                        dialect="common")
+                                        dialect="ardupilotmega")   # (mavutil's dialect is
+    # process-wide: "common" here left every later connection of the suite unable to
+    # decode ArduPilot's own messages, EKF_STATUS_REPORT among them)
     try:
         client.target_system, client.target_component = 1, 1
         client.param_fetch_all()
