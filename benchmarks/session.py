@@ -46,12 +46,17 @@ LOCKSTEP_RUNS = 3
 
 
 def lockstep(work: Path, quick: bool) -> dict:
-    """The stack in lockstep flying the scripted mission :data:`LOCKSTEP_RUNS` times: speed
+    """The stack in lockstep flying the scripted mission :data:`LOCKSTEP_RUNS` times (after a
+    warm-up flight): speed
     and CPU of the median flight (by speed; every flight's speed listed), one flight with
     the simulator link on TCP when up's default is a Unix-domain socket (not with
     ``quick``), then where the time goes (one more flight, every process under cProfile
     from the flight's start to its end)."""
     flight = stack.mission_flight(short=quick)
+    # a first flight whose outcome is not kept: the processes' compiled kernels are cached
+    # by it (on a fresh clone, compiling them in the companion outlasted the mission
+    # client's waits); the flights measured are a user's second and later runs
+    stack.run_stack(work / "warm-up", flight=flight)
     runs = []
     for i in range(1 if quick else LOCKSTEP_RUNS):
         run = stack.run_stack(work / f"lockstep-{i}", flight=flight)
