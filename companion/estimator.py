@@ -844,6 +844,27 @@ def fuse_position_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np
 
 
 @njit
+def _cholesky3(s00: float, s01: float, s02: float, s11: float, s12: float, s22: float
+               ) -> tuple[bool, float, float, float, float, float, float]:
+    """The lower Cholesky factor of the symmetric 3 x 3 matrix of upper triangle ``s``:
+    (positive definite, l00, l10, l20, l11, l21, l22); False (and zeros) as soon as a
+    leading minor is not positive."""
+    if not s00 > 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    l00 = math.sqrt(s00)
+    l10, l20 = s01 / l00, s02 / l00
+    d11 = s11 - l10 * l10
+    if not d11 > 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    l11 = math.sqrt(d11)
+    l21 = (s12 - l20 * l10) / l11
+    d22 = s22 - l20 * l20 - l21 * l21
+    if not d22 > 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    return True, l00, l10, l20, l11, l21, math.sqrt(d22)
+
+
+@njit
 def fuse_tether_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
                        dx: np.ndarray, diag: np.ndarray, delayed: np.ndarray,
                        var_min: float, t_meas_s: float, px: float, py: float, pz: float,
@@ -862,19 +883,9 @@ def fuse_tether_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.n
     # S = P_pp + C, its Cholesky factor, and d^2 = y' S^-1 y
     s00, s01, s02 = P[0, 0] + c00, P[0, 1] + c01, P[0, 2] + c02
     s11, s12, s22 = P[1, 1] + c11, P[1, 2] + c12, P[2, 2] + c22
-    if not s00 > 0.0:
+    ok, a00, a10, a20, a11, a21, a22 = _cholesky3(s00, s01, s02, s11, s12, s22)
+    if not ok:
         return _NUMERIC
-    a00 = math.sqrt(s00)
-    a10, a20 = s01 / a00, s02 / a00
-    d11 = s11 - a10 * a10
-    if not d11 > 0.0:
-        return _NUMERIC
-    a11 = math.sqrt(d11)
-    a21 = (s12 - a20 * a10) / a11
-    d22 = s22 - a20 * a20 - a21 * a21
-    if not d22 > 0.0:
-        return _NUMERIC
-    a22 = math.sqrt(d22)
     w0 = y0 / a00
     w1 = (y1 - a10 * w0) / a11
     w2 = (y2 - a20 * w0 - a21 * w1) / a22
@@ -882,19 +893,9 @@ def fuse_tether_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.n
     if diag[_D_TETHER_TR] > 1.0:
         return 0
     # the measurement's own factor C = L L'
-    if not c00 > 0.0:
+    ok, l00, l10, l20, l11, l21, l22 = _cholesky3(c00, c01, c02, c11, c12, c22)
+    if not ok:
         return _NUMERIC
-    l00 = math.sqrt(c00)
-    l10, l20 = c01 / l00, c02 / l00
-    e11 = c11 - l10 * l10
-    if not e11 > 0.0:
-        return _NUMERIC
-    l11 = math.sqrt(e11)
-    l21 = (c12 - l20 * l10) / l11
-    e22 = c22 - l20 * l20 - l21 * l21
-    if not e22 > 0.0:
-        return _NUMERIC
-    l22 = math.sqrt(e22)
     # rows of L^-1 (lower triangular): z' = L^-1 z has the noise I
     m00 = 1.0 / l00
     m10 = -l10 / (l00 * l11)
