@@ -54,29 +54,42 @@ class AttitudeOutput(NamedTuple):
 
 
 class CommandFilter:
-    """Second-order low-pass per axis, x'' = wn^2 (u - x) - 2 zeta wn x', discretised exactly
-    for a fixed step; returns the filtered value and its first two derivatives."""
+    """Third-order low-pass per axis: the second-order x'' = wn^2 (u_f - x) - 2 zeta wn x'
+    behind a first-order lag u_f' = wp (u - u_f), in the phase variables (x, x', x''):
+    x''' = wn^2 wp (u - x) - (wn^2 + 2 zeta wn wp) x' - (2 zeta wn + wp) x'', discretised
+    exactly for a fixed step; returns the filtered value and its first two derivatives.
+    x'' is a state, not a gain on the input: a noisy command reaches it integrated once
+    (docs/control.md §2.2), where the second-order filter alone passes the command's noise
+    into x'' with the gain wn^2 (``pole_hz`` = 0 gives that filter)."""
 
-    def __init__(self, natural_hz: float, damping: float, dt_s: float, n: int = 3) -> None:
+    def __init__(self, natural_hz: float, damping: float, dt_s: float, n: int = 3,
+                 pole_hz: float = 0.0) -> None:
         wn = 2.0 * math.pi * natural_hz
-        a = np.array([[0.0, 1.0], [-wn * wn, -2.0 * damping * wn]])
-        b = np.array([[0.0], [wn * wn]])
-        m = np.zeros((3, 3))
-        m[:2, :2], m[:2, 2:] = a, b
+        wp = 2.0 * math.pi * pole_hz
+        second = wp <= 0.0
+        if second:   # x'' from the input, the third column unused
+            a = np.array([[0.0, 1.0, 0.0], [-wn * wn, -2.0 * damping * wn, 0.0],
+                          [0.0, 0.0, 0.0]])
+            b = np.array([[0.0], [wn * wn], [0.0]])
+        else:
+            a = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0],
+                          [-wn * wn * wp, -(wn * wn + 2.0 * damping * wn * wp),
+                           -(2.0 * damping * wn + wp)]])
+            b = np.array([[0.0], [0.0], [wn * wn * wp]])
+        m = np.zeros((4, 4))
+        m[:3, :3], m[:3, 3:] = a, b
         e = expm(m * dt_s)
-        self._ad, self._bd = e[:2, :2], e[:2, 2]
-        self._wn2, self._2zw = wn * wn, 2.0 * damping * wn
-        # the same numbers packed for the compiled step (_filter_step)
-        self.coeffs = np.array([self._ad[0, 0], self._ad[0, 1], self._ad[1, 0],
-                                self._ad[1, 1], self._bd[0], self._bd[1], self._wn2,
-                                self._2zw])
-        self.state = np.zeros((n, 2))
+        # the same numbers packed for the compiled step (_filter_step): Ad row-major, Bd,
+        # wn^2, 2 zeta wn and whether x'' comes from the input (the second-order form)
+        self.coeffs = np.concatenate([e[:3, :3].ravel(), e[:3, 3],
+                                      [wn * wn, 2.0 * damping * wn, float(second)]])
+        self.state = np.zeros((n, 3))
         self.initialised = False
 
     def reset(self, value: np.ndarray | Vec3) -> None:
         """Start at rest at ``value``."""
         self.state[:, 0] = value
-        self.state[:, 1] = 0.0
+        self.state[:, 1:] = 0.0
         self.initialised = True
 
     def update(self, u: np.ndarray | Vec3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -97,12 +110,14 @@ class CommandFilter:
 def _filter_step(c: np.ndarray, s: np.ndarray, i: int, u: float
                  ) -> tuple[float, float, float]:
     """One axis of :class:`CommandFilter`: (x, x', x'') of row ``i`` of the state ``s``,
-    then the row advanced in place by the exact discretisation ``c`` (ad row-major, bd,
-    wn^2, 2 zeta wn) for ``u`` held over the step."""
-    x, xd = s[i, 0], s[i, 1]
-    xdd = c[6] * (u - x) - c[7] * xd
-    s[i, 0] = x * c[0] + xd * c[1] + u * c[4]
-    s[i, 1] = x * c[2] + xd * c[3] + u * c[5]
+    then the row advanced in place by the exact discretisation ``c`` (Ad row-major, Bd,
+    wn^2, 2 zeta wn, the second-order flag) for ``u`` held over the step."""
+    x, xd, xdd = s[i, 0], s[i, 1], s[i, 2]
+    if c[14] != 0.0:
+        xdd = c[12] * (u - x) - c[13] * xd
+    s[i, 0] = c[0] * x + c[1] * xd + c[2] * xdd + c[9] * u
+    s[i, 1] = c[3] * x + c[4] * xd + c[5] * xdd + c[10] * u
+    s[i, 2] = c[6] * x + c[7] * xd + c[8] * xdd + c[11] * u
     return x, xd, xdd
 
 
@@ -150,7 +165,8 @@ class AttitudeController:
         self.dt_s = dt_s
         self.k3 = np.array(gains.att_k3_1_s)
         self.k4 = np.array(gains.att_k4_n_m_s)
-        self.filter = CommandFilter(gains.command_filter_hz, gains.command_filter_damping, dt_s)
+        self.filter = CommandFilter(gains.command_filter_hz, gains.command_filter_damping, dt_s,
+                                    pole_hz=gains.command_filter_pole_hz)
         self.xi_eta = np.zeros(3)
         self.xi_w = np.zeros(3)
         self.tau_hat = np.zeros(3)
@@ -189,7 +205,7 @@ class AttitudeController:
         self._decay_w = np.exp(-self.k4 / self.j * self.dt_s)
         old = self.filter
         new = CommandFilter(gains.command_filter_hz, gains.command_filter_damping, self.dt_s,
-                            old.state.shape[0])
+                            old.state.shape[0], gains.command_filter_pole_hz)
         new.state = old.state
         new.initialised = old.initialised
         self.filter = new
@@ -247,6 +263,7 @@ def attitude_law(p: np.ndarray, fc: np.ndarray, fs: np.ndarray, xi_eta: np.ndarr
     else:
         fs[0, 0], fs[1, 0], fs[2, 0] = des0, des1, des2
         fs[0, 1] = fs[1, 1] = fs[2, 1] = 0.0
+        fs[0, 2] = fs[1, 2] = fs[2, 2] = 0.0
     c0, cd0, cdd0 = _filter_step(fc, fs, 0, des0)     # eta_c and its derivatives
     c1, cd1, cdd1 = _filter_step(fc, fs, 1, des1)
     c2, cd2, cdd2 = _filter_step(fc, fs, 2, des2)

@@ -113,15 +113,16 @@ class Failsafes:
         p, nav = self.params, self.nav
         if not (nav.armed and nav.flying):
             return
-        if (p.gcs != GcsAction.DISABLED and not self.gcs_lost and self._gcs_t is not None
-                and t_s - self._gcs_t >= p.gcs_timeout_s):
+        # the timing first: the actions are enums built from the parameters
+        if (not self.gcs_lost and self._gcs_t is not None
+                and t_s - self._gcs_t >= p.gcs_timeout_s and p.gcs != GcsAction.DISABLED):
             self.gcs_lost = True
             land = p.gcs in (GcsAction.SMART_RTL_OR_LAND, GcsAction.LAND)
             self._act(FlightMode.LAND if land else FlightMode.RTL,
                       f"GCS Failsafe: {'landing' if land else 'RTL'}")
         since = self._winch_t if self._winch_t is not None else self._winch_seen_t
-        if (p.winch != WinchAction.DISABLED and not self.winch_lost and since is not None
-                and t_s - since >= p.winch_timeout_s):
+        if (not self.winch_lost and since is not None
+                and t_s - since >= p.winch_timeout_s and p.winch != WinchAction.DISABLED):
             self.winch_lost = True
             if math.isfinite(self._winch_length_m):   # the drum holds what it paid out
                 nav.winch_report(self._winch_length_m, None, True)

@@ -48,6 +48,10 @@ class FlightControlParams(Params):
         6.0, "Hz", "natural frequency of the attitude command filter", gt=0)
     command_filter_damping: float = quantity(
         1.0, "1", "damping ratio of the attitude command filter", gt=0)
+    command_filter_pole_hz: float = quantity(
+        12.0, "Hz", "the attitude command filter's first-order pole ahead of its second-"
+        "order part: the command's second derivative becomes a state, not a gain of wn^2 "
+        "on a noisy command (0: the second-order filter alone)", ge=0)
     use_tether_model: bool = quantity(
         True, "", "compensate the tether's pull with the onboard catenary model")
     use_measured_tension: bool = quantity(

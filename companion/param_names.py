@@ -44,6 +44,7 @@ GAIN_NAMES: dict[str, str | WireName | tuple[WireName, ...]] = {
     "att_disturbance_gain_n_m_rad": "TUAV_ATC_DGAIN",
     "att_disturbance_limit_n_m": "TUAV_ATC_DLIM",
     "command_filter_hz": "TUAV_ATC_FLT_HZ", "command_filter_damping": "TUAV_ATC_FLT_Z",
+    "command_filter_pole_hz": "TUAV_ATC_FLT_P",
     "use_tether_model": "TUAV_TETH_MODEL", "use_measured_tension": "TUAV_TETH_TENS",
 }
 

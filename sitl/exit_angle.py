@@ -21,6 +21,8 @@ from tuavdefs.frames import Vec3
 from tuavdefs.paramspec import Params, quantity
 
 _TWO_PI = 2.0 * math.pi
+#: Readings whose noise is drawn at once.
+_BLOCK = 256
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,9 @@ class ExitAngleSensor:
         self._rng = np.random.default_rng(p.seed)
         self.azimuth_bias_rad = float(self._rng.normal(0.0, p.bias_sigma_rad))
         self.elevation_bias_rad = float(self._rng.normal(0.0, p.bias_sigma_rad))
+        # the white noise drawn in blocks (the same stream as a pair a reading)
+        self._noise: list[float] = []
+        self._next = 0
 
     def read(self, on_exit_n: Vec3) -> tuple[float, float, bool]:
         """(azimuth [rad] in -pi..pi, elevation [rad], valid) for the tether's pull on the
@@ -57,7 +62,15 @@ class ExitAngleSensor:
         horizontal = math.hypot(fx, fy)
         tension = math.hypot(horizontal, fz)
         p = self.p
-        n_az, n_el = self._rng.normal(0.0, p.noise_rad, 2) if p.noise_rad > 0 else (0.0, 0.0)
+        if p.noise_rad > 0:
+            i = self._next
+            if i >= len(self._noise):
+                self._noise = self._rng.normal(0.0, p.noise_rad, 2 * _BLOCK).tolist()
+                i = 0
+            n_az, n_el = self._noise[i], self._noise[i + 1]
+            self._next = i + 2
+        else:
+            n_az = n_el = 0.0
         if not (math.isfinite(tension) and tension >= max(p.min_tension_n, 1e-12)):
             return 0.0, 0.0, False
         elevation = math.atan2(fz, horizontal) + self.elevation_bias_rad + n_el

@@ -367,6 +367,10 @@ def coupled_rk4_into(x: np.ndarray, ls: np.ndarray, scratch: np.ndarray,
     m1, m2, m3, m4, lt = lscratch[0], lscratch[1], lscratch[2], lscratch[3], lscratch[4]
     size = 1 + 6 * int(ls[0])
     lt[0] = ls[0]
+    # the exit segment's allowance (and its last change) hold over the step: every stage
+    # reads it (sitl.lumped.line_rhs), not the stale value the scratch array held
+    last = ls.shape[0] - 1
+    lt[last], lt[last - 1] = ls[last], ls[last - 1]
     h2 = 0.5 * dt
     coupled_rhs_into(k1, m1, x, ls, p, lp, setpoints, winder_cmd_n_m, winder_enabled, wind,
                      node_wind, warm)

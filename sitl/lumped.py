@@ -280,8 +280,9 @@ def line_wind(ls: np.ndarray, wp: np.ndarray, wind: np.ndarray, out: np.ndarray)
 
 def line_state_size(max_nodes: int) -> int:
     """Floats of a line state holding up to ``max_nodes`` free nodes: the count, the nodes,
-    and last the exit segment's allowance (``ls[-1]``, :func:`manage_nodes`)."""
-    return 2 + 6 * max_nodes
+    then the exit segment's allowance's change over the last plant step (``ls[-2]``) and
+    last the allowance (``ls[-1]``, :func:`manage_nodes`)."""
+    return 3 + 6 * max_nodes
 
 
 @njit
@@ -300,8 +301,12 @@ def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float, length_rate: flo
     line bent there), by up to millimetres: as much as the segment's whole stretch at
     working tension. So that this does not drop the tension to nothing for the moment the
     line takes to straighten, the exit segment keeps its strain: its elastic length is
-    ``l_e - a``, the allowance ``a`` (``ls[-1]``, [m]) that difference, which then fades by
-    ``decay`` (< 1) per call (once a plant step); and its strain rate, the survivor's
+    ``l_e - a``, the allowance ``a`` (``ls[-1]``, [m]) that difference, which then fades as
+    a critically damped second-order decay, from rest, with ``decay`` (< 1) = exp(-dt/tau)
+    for the call's step dt (once a plant step; ``ls[-2]`` its last change): the fade lets
+    out line at the exit at a rate that starts from zero, where a first-order fade (tension
+    down by EA a / (l_e tau) per second at once: 1.6 N/ms) made a step that set the drum
+    and the line ringing; and its strain rate, the survivor's
     velocity along the new chord set for it (``length_rate`` [m/s] the drum's): else the
     drum, reeling in at the line's speed along the old segment, stretches the new one at
     once (a bend of 20 degrees took the tension from 5 to 44 N in 25 ms). ``top`` is the
@@ -310,7 +315,13 @@ def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float, length_rate: flo
     ls_m = lp[L_LS]
     maxn = int(lp[L_MAXN])
     last = ls.shape[0] - 1
-    ls[last] *= decay
+    a, b = ls[last], ls[last - 1]
+    if a != 0.0 or b != 0.0:
+        # a'' = -2 a'/tau - a/tau^2, exactly over the step, in b = a' dt and w = dt/tau
+        w = -math.log(decay) if decay > 0.0 else 0.0
+        c = b + w * a
+        ls[last] = decay * (a + c)
+        ls[last - 1] = decay * (b - w * c)
     n0 = int(ls[0])
     n = n0
     while True:
@@ -385,6 +396,7 @@ def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float, length_rate: flo
                 ls[o + 4] += (rate - along) * uy
                 ls[o + 5] += (rate - along) * uz
             ls[last] = allowance
+            ls[last - 1] = 0.0
             n -= 1
         else:
             break
@@ -438,6 +450,8 @@ def line_rk4_prescribed(ls: np.ndarray, scratch: np.ndarray, lp: np.ndarray, h: 
     size = 1 + 6 * n
     k1, k2, k3, k4, xt = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
     xt[0] = ls[0]
+    last = ls.shape[0] - 1
+    xt[last], xt[last - 1] = ls[last], ls[last - 1]   # the allowance, for every stage
     out = line_rhs(ls, k1, lp, b0[0], b0[1], b0[2], b0[3], b0[4], b0[5], length, 0.0,
                    node_wind, top_wind)
     for i in range(1, size):

@@ -87,7 +87,7 @@ from tuavdefs.jit import entry_point
 from tuavdefs.params import SystemParams, TetherModel, WindParams
 
 N_STATES = 19
-#: Time constant with which the lumped line's exit allowance fades
+#: Time constant of the critically damped fade of the lumped line's exit allowance
 #: (:func:`sitl.lumped.manage_nodes`) [s].
 ALLOWANCE_TAU_S = 0.1
 POS, VEL, QUAT, RATES, ROTORS, DRUM_ANGLE, DRUM_RATE = (

@@ -324,6 +324,63 @@ def test_a_merge_keeps_the_exit_segment_s_tension():
     assert exit_tension() < 0.5 * before
 
 
+def test_every_rk4_stage_reads_the_allowance_of_the_state():
+    # the allowance is part of the line's state: the stages of a step must carry it, not
+    # whatever the scratch array held (they read a stale 0, the exit segment went slack in
+    # three of four stages after each merge, and the drum lurched: 45-160 N snaps)
+    line = Line(20.0, total_length_m=50.0, segments=25)
+    top = (12.0, 0.0, 12.0)
+    line.lay(top)
+    line.settle(top, seconds=2.0, h=2e-4)
+    line.ls[-1] = 4e-3
+    b = np.array([*top, 0.0, 0.0, 0.0])
+    results = []
+    for stale in (0.0, 0.05):
+        ls = line.ls.copy()
+        scratch = np.zeros_like(line.scratch)
+        scratch[4, -1] = stale
+        line_rk4_prescribed(ls, scratch, line.lp, 1e-3, b, b, b, line.length,
+                            line.node_wind, line.top_wind)
+        results.append(ls)
+    assert np.array_equal(results[0], results[1])
+
+
+def test_coupled_step_reads_the_allowance_of_the_state():
+    params = SystemParams().replace(tether=TetherParams(model="lumped"))
+    x0, _ = hover_trim(params, (14.0, 0.0, 14.0), 21.0)
+    out = []
+    for stale in (0.0, 0.05):
+        plant = Plant(params, dt_s=1e-3)
+        plant.x[:] = x0
+        plant.lay_line()
+        plant.model.line[-1] = 4e-3
+        plant.model.line_scratch[4, -1] = stale
+        plant.advance(PlantInputs(), 1)
+        out.append(plant.model.line.copy())
+    assert np.array_equal(out[0], out[1])
+
+
+def test_the_allowance_fades_from_rest_as_the_critically_damped_decay():
+    # after a merge the allowance a fades as a(t) = a0 (1 + t/tau) exp(-t/tau): line let
+    # out at the exit at a rate that starts from zero
+    line = Line(20.0, total_length_m=50.0, segments=25)
+    top = (12.0, 0.0, 12.0)
+    line.lay(top)
+    a0, tau, dt = 5e-3, 0.1, 1e-3
+    line.ls[-1], line.ls[-2] = a0, 0.0
+    top6 = np.array([*top, 0.0, 0.0, 0.0])
+    for k in range(1, 301):
+        assert manage_nodes(line.ls, line.lp, line.length, 0.0, math.exp(-dt / tau),
+                            top6) == 0
+        t = k * dt
+        assert line.ls[-1] == pytest.approx(a0 * (1 + t / tau) * math.exp(-t / tau),
+                                            rel=1e-9)
+    # the first step's change is second order in dt/tau
+    line.ls[-1], line.ls[-2] = a0, 0.0
+    manage_nodes(line.ls, line.lp, line.length, 0.0, math.exp(-dt / tau), top6)
+    assert a0 - line.ls[-1] < a0 * (dt / tau) ** 2
+
+
 # --- MoorDyn ---------------------------------------------------------------------------
 
 moordyn = pytest.importorskip("moordyn")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from companion.navigation import NavEvent
-from tuav_sitl.offline import RunResult, run_scenario, write_outputs
+from tuav_sitl.offline import OfflineRunner, RunResult, run_scenario, write_outputs
 from tuav_sitl.scenario import ScenarioParams, load_scenario, shipped_scenarios
 from tuavdefs.params import GustParams
 from tuavdefs.paramspec import ParameterError, load_toml
@@ -324,3 +324,13 @@ def test_an_unhealthy_filter_in_flight_lands_the_vehicle():
     s = res.series
     assert s["pos"][-1, 2] < s["pos"][np.searchsorted(s["t"], t_fs), 2] - 2.0   # descending
     assert res.metrics["min_tether_slack_m"] > 0.0
+
+
+def test_a_run_that_never_flies_has_metrics():
+    # a mission cut off before its take-off (or a vehicle that never arms, as a sweep's
+    # draw can leave it): nothing tracked, the maxima NaN, nothing saturated
+    sc = load_scenario("mission").replace(duration_s=1.0, metrics_after_s=0.5)
+    m = OfflineRunner(sc).run().metrics
+    assert m["items_reached"] == []
+    assert math.isnan(m["position_max_error_m"]) and math.isnan(m["position_rmse_m"])
+    assert m["motor_saturation_fraction"] == 0.0

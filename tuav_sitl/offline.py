@@ -648,16 +648,18 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray],
     m: dict[str, Any] = {
         "scenario": sc.name,
         "position_rmse_m": _rms(pos_err[win]),
-        "position_max_error_m": float(pos_err[win].max()),
+        "position_max_error_m": _max(pos_err[win]),
         "attitude_rmse_rad": _rms(att_err[win]),
         "tether_length_rmse_m": _rms(len_err[len_win]),
-        "tether_length_max_error_m": float(np.abs(len_err[len_win]).max()),
+        "tether_length_max_error_m": _max(np.abs(len_err[len_win])),
         "min_tether_slack_m": float(slack.min()),
         "max_tension_n": float(s["top_tension"].max()),
         "max_drum_tension_n": float(s["drum_tension"].max()),
         "tether_ground_contact_fraction": float(np.isin(s["regime"], GROUND_REGIMES).mean()),
-        "motor_saturation_fraction": float(motor_sat[flying].mean()),
-        "position_loop_saturation_fraction": float(s["pos_sat"].astype(bool)[flying].mean()),
+        "motor_saturation_fraction": (float(motor_sat[flying].mean()) if flying.any()
+                                      else 0.0),
+        "position_loop_saturation_fraction": (float(s["pos_sat"].astype(bool)[flying].mean())
+                                              if flying.any() else 0.0),
         "settling_time_s": None,
         "overshoot_percent": None,
         "metrics_after_s": sc.metrics_after_s,
@@ -713,6 +715,11 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray],
 
 def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x)))) if len(x) else float("nan")
+
+
+def _max(x: np.ndarray) -> float:
+    """The largest of ``x``; NaN for none (a run that never flew a reference)."""
+    return float(x.max()) if len(x) else float("nan")
 
 
 def write_outputs(result: RunResult, out_dir: Path) -> list[Path]:
