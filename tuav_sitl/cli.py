@@ -36,9 +36,22 @@ def _cmd_run(args: argparse.Namespace) -> int:
         scenario = scenario.replace(duration_s=args.duration)
     from tuav_sitl.offline import run_scenario
 
+    from tuav_sitl.warmup import needs_warm_up, report_compiles, warm_up
+
     out = Path(args.out) if args.out else Path("runs") / scenario.name
     print(f"tuav-sitl run {scenario.name}: {scenario.description}")
-    result = run_scenario(scenario, out, progress=None if args.quiet else sys.stderr)
+    progress = None if args.quiet else sys.stderr
+    if needs_warm_up():
+        if progress is not None:
+            print("compiling the numba kernels (the first run after an install or a change "
+                  "to a kernel; cached for the next runs), the plant's and the controllers' "
+                  "at once", file=progress)
+        warm_up(scenario, progress)
+    stop_reports = report_compiles(progress)
+    try:
+        result = run_scenario(scenario, out, progress=progress)
+    finally:
+        stop_reports()
     m = result.metrics
     print(f"wrote {out}/timeseries.npz, metrics.json, scenario.toml")
     if not args.no_figures:
