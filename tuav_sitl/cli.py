@@ -35,7 +35,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.duration is not None:
         scenario = scenario.replace(duration_s=args.duration)
     from tuav_sitl.offline import run_scenario
-
     from tuav_sitl.warmup import needs_warm_up, report_compiles, warm_up
 
     out = Path(args.out) if args.out else Path("runs") / scenario.name
