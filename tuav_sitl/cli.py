@@ -110,7 +110,8 @@ def _cmd_results(args: argparse.Namespace) -> int:
         from tuav_sitl.results import run_sweeps
 
         run_sweeps(Path(args.runs))
-    metrics = write_results(out, Path(args.runs), figures=not args.no_figures)
+    metrics = write_results(out, Path(args.runs), figures=not args.no_figures,
+                            progress=None if args.quiet else sys.stderr)
     print(f"wrote {out} from {len(metrics)} runs in {args.runs}")
     return 0
 
@@ -219,6 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
     res.add_argument("--out", default="docs/results.md", help="the Markdown file to write")
     res.add_argument("--runs", default="runs", help="folder for the run folders")
     res.add_argument("--no-figures", action="store_true", help="metrics only")
+    res.add_argument("--quiet", action="store_true", help="no progress")
     res.add_argument("--sweeps", action="store_true",
                      help="also run the shipped sweeps (tuav-sitl sweep; long) into "
                           "RUNS/sweeps; without, the summaries found there are included")
