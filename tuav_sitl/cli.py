@@ -35,17 +35,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.duration is not None:
         scenario = scenario.replace(duration_s=args.duration)
     from tuav_sitl.offline import run_scenario
-    from tuav_sitl.warmup import needs_warm_up, report_compiles, warm_up
+    from tuav_sitl.warmup import compile_if_cold, report_compiles
 
     out = Path(args.out) if args.out else Path("runs") / scenario.name
     print(f"tuav-sitl run {scenario.name}: {scenario.description}")
     progress = None if args.quiet else sys.stderr
-    if needs_warm_up():
-        if progress is not None:
-            print("compiling the numba kernels (the first run after an install or a change "
-                  "to a kernel; cached for the next runs), the plant's and the controllers' "
-                  "at once", file=progress)
-        warm_up(scenario, progress)
+    compile_if_cold(scenario, progress)
     stop_reports = report_compiles(progress)
     try:
         result = run_scenario(scenario, out, progress=progress)
@@ -92,8 +87,14 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         print(f"tuav-sitl plot: {run_dir} has no timeseries.npz (a 'tuav-sitl run' folder) "
               "nor truth.csv (a 'tuav-sitl up' folder)", file=sys.stderr)
         return 2
-    drawn = draw_run(run_dir, animation=not args.no_animation,
-                     progress=None if args.quiet else sys.stderr)
+    from tuav_sitl.warmup import report_compiles
+
+    stop_reports = report_compiles(None if args.quiet else sys.stderr)
+    try:
+        drawn = draw_run(run_dir, animation=not args.no_animation,
+                         progress=None if args.quiet else sys.stderr)
+    finally:
+        stop_reports()
     print(f"wrote {len(drawn.figures)} figures in {run_dir}/figures")
     for note in drawn.skipped:
         print(f"  skipped {note}")
@@ -110,8 +111,13 @@ def _cmd_results(args: argparse.Namespace) -> int:
         from tuav_sitl.results import run_sweeps
 
         run_sweeps(Path(args.runs))
+    from tuav_sitl.scenario import load_scenario
+    from tuav_sitl.warmup import compile_if_cold
+
+    progress = None if args.quiet else sys.stderr
+    compile_if_cold(load_scenario("circle"), progress)   # here, not in each pool process
     metrics = write_results(out, Path(args.runs), figures=not args.no_figures,
-                            progress=None if args.quiet else sys.stderr)
+                            progress=progress)
     print(f"wrote {out} from {len(metrics)} runs in {args.runs}")
     return 0
 

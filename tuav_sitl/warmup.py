@@ -27,7 +27,7 @@ from typing import TextIO
 
 from tuav_sitl.scenario import ScenarioParams
 
-__all__ = ["HALVES", "needs_warm_up", "report_compiles", "warm_up"]
+__all__ = ["HALVES", "compile_if_cold", "needs_warm_up", "report_compiles", "warm_up"]
 
 #: The two warm-up processes: the packages each leaves interpreted (so compiles the rest).
 HALVES: tuple[tuple[str, str], ...] = (
@@ -151,3 +151,17 @@ def warm_up(scenario: ScenarioParams, stream: TextIO | None) -> float:
         stream.write("\n" + "".join(notes))
         stream.flush()
     return wall
+
+
+def compile_if_cold(scenario: ScenarioParams, stream: TextIO | None) -> bool:
+    """If :func:`needs_warm_up`: say so on ``stream`` and :func:`warm_up` for ``scenario``.
+    Returns whether it did."""
+    if not needs_warm_up():
+        return False
+    if stream is not None:
+        stream.write("compiling the numba kernels (the first run after an install or a "
+                     "change to a kernel; cached for the next runs), the plant's and the "
+                     "controllers' at once\n")
+        stream.flush()
+    warm_up(scenario, stream)
+    return True
