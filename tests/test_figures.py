@@ -438,7 +438,8 @@ def test_draw_run_writes_the_same_figures_in_parallel_with_progress(setpoint_run
     assert drawn.animation[0].read_bytes() == ref_gif
     assert drawn.skipped == ["estimate: the run has no est_pos, est_pos_sigma"]
     text = stream.getvalue()
-    frames = len(anim.frame_plan(load_run(both).series["t"], 15, 300, None)[0])
+    frames = len(anim.frame_plan(load_run(both).series["t"], anim.FPS, anim.MAX_FRAMES,
+                                 None)[0])
     assert f"figures {len(expected)}/{len(expected)}" in text
     assert f"animation frames {frames}/{frames}" in text and text.endswith("\n")
     quiet = draw_run(both, animation=False, progress=None, workers=0)

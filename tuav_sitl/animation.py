@@ -26,6 +26,7 @@ from matplotlib.ticker import MaxNLocator
 from PIL import Image, ImageDraw, ImageFont
 
 from tuav_sitl.figures import (
+    RunData,
     TetherDrawer,
     draw_goals,
     draw_ground,
@@ -39,11 +40,15 @@ from tuav_sitl.figures import (
     set_scene,
 )
 
-__all__ = ["ANIMATION_SIZE_PX", "frame_plan", "make_animation"]
+__all__ = ["ANIMATION_SIZE_PX", "FPS", "MAX_FRAMES", "frame_plan", "make_animation"]
 
 #: Width and height of the animation [pixels] (even, as H.264 wants).
 ANIMATION_SIZE_PX = (760, 600)
 _DPI = 100
+#: Playback frame rate [frames per second] and the most frames an animation has: a run up
+#: to 15 s plays in real time, a longer one faster (the 75 s circle at 5x).
+FPS = 15
+MAX_FRAMES = 225
 #: How long the last frame stays on screen in the GIF [s].
 _END_HOLD_S = 1.5
 #: At most this many points of the trail are drawn (the path is thinned to it).
@@ -198,19 +203,22 @@ class _Scene:
         return img.quantize(palette=self.palette, dither=Image.Dither.NONE)
 
 
-def make_animation(run_dir: Path, fps: int = 15, max_frames: int = 300,
+def make_animation(run_dir: Path, fps: int = FPS, max_frames: int = MAX_FRAMES,
                    speed: float | None = None,
-                   on_frame: Callable[[int, int], None] | None = None) -> list[Path]:
+                   on_frame: Callable[[int, int], None] | None = None,
+                   run: RunData | None = None) -> list[Path]:
     """Animate the run in ``run_dir``: write ``animation.gif`` there, and ``animation.mp4``
     if ffmpeg is available; returns the paths written.
 
     ``fps`` is the playback frame rate, ``max_frames`` caps the number of frames (spread
     evenly over the run), ``speed`` the playback speed in simulated seconds per second
     (None: real time, or faster if needed to stay within ``max_frames``; see
-    :func:`frame_plan`). ``on_frame(done, total)`` is called after each frame is drawn.
+    :func:`frame_plan`). ``on_frame(done, total)`` is called after each frame is drawn;
+    ``run`` is the folder's contents if already loaded (:func:`load_run`).
     """
     run_dir = Path(run_dir)
-    run = load_run(run_dir)
+    if run is None:
+        run = load_run(run_dir)
     idx, real_speed = frame_plan(run.series["t"], fps, max_frames, speed)
     scene = _Scene(run)
     gif = run_dir / "animation.gif"
@@ -280,8 +288,8 @@ def main(argv: list[str] | None = None) -> int:
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("run_dir", type=Path)
-    p.add_argument("--fps", type=int, default=15)
-    p.add_argument("--max-frames", type=int, default=300)
+    p.add_argument("--fps", type=int, default=FPS)
+    p.add_argument("--max-frames", type=int, default=MAX_FRAMES)
     p.add_argument("--speed", type=float, default=None)
     a = p.parse_args(argv)
     t0 = time.perf_counter()

@@ -18,7 +18,10 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from multiprocessing import current_process, get_context
 from pathlib import Path
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
+
+if TYPE_CHECKING:
+    from tuav_sitl.figures import RunData
 
 __all__ = ["DrawProgress", "DrawResult", "draw_run"]
 
@@ -102,10 +105,16 @@ class DrawResult:
     """A note for each figure the run lacks the data of."""
 
 
-def _figure(run_dir: str, name: str) -> list[Path]:
-    from tuav_sitl.figures import make_figures
+#: The run folder being drawn, loaded once before the workers fork (they inherit it).
+_RUN: tuple[str, RunData] | None = None
 
-    return make_figures(Path(run_dir), [name])
+
+def _figure(run_dir: str, name: str) -> list[Path]:
+    from tuav_sitl.figures import build_figures, load_run, save_figures
+
+    run = _RUN[1] if _RUN is not None and _RUN[0] == run_dir else load_run(Path(run_dir))
+    return save_figures(build_figures(run.series, run.scenario, [name], run.metrics),
+                        Path(run_dir) / "figures")
 
 
 def _workers(requested: int | None) -> int:
@@ -127,18 +136,19 @@ def draw_run(run_dir: Path, figures: bool = True, animation: bool = True,
     """
     from tuav_sitl.figures import FIGURE_NAMES, load_run, missing_series
 
+    global _RUN
     run_dir = Path(run_dir)
     out = DrawResult()
+    run = load_run(run_dir)
+    _RUN = (str(run_dir), run)
     names: list[str] = []
     if figures:
-        series = load_run(run_dir).series
         for name in FIGURE_NAMES:
-            lacking = missing_series(series, name)
+            lacking = missing_series(run.series, name)
             if lacking:
                 out.skipped.append(f"{name}: the run has no {', '.join(lacking)}")
             else:
                 names.append(name)
-        del series
     bar = DrawProgress(progress, len(names), None if not animation else 0)
     bar.show(force=True)
     n_workers = min(_workers(workers), len(names))
@@ -155,7 +165,7 @@ def draw_run(run_dir: Path, figures: bool = True, animation: bool = True,
         if animation:
             from tuav_sitl.animation import make_animation
 
-            out.animation = make_animation(run_dir, on_frame=bar.frame_done)
+            out.animation = make_animation(run_dir, on_frame=bar.frame_done, run=run)
         # what no worker has started is drawn here, from the back of the queue (the
         # workers take from the front)
         for name in reversed(names):
@@ -170,5 +180,6 @@ def draw_run(run_dir: Path, figures: bool = True, animation: bool = True,
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
         bar.close()
+        _RUN = None
     out.figures = [p for name in names for p in done[name]]
     return out
