@@ -448,8 +448,8 @@ _ENVELOPE_BINS = 2000
 
 def envelope(x: np.ndarray, y: np.ndarray, bins: int = _ENVELOPE_BINS
              ) -> tuple[np.ndarray, np.ndarray]:
-    """``(x, y)`` thinned to the minimum and the maximum of ``y`` in each of ``bins`` runs of
-    consecutive samples, each pair in the order it occurred (``x`` ascending).
+    """``(x, y)`` thinned to the first and last samples and the minimum and the maximum of
+    ``y`` in each of ``bins`` runs of consecutive samples, in time order (``x`` ascending).
 
     A figure about 1000 pixels wide shows a run of ``len(x) / bins`` samples within one
     pixel column, which a line through its extremes covers exactly; every peak and every
@@ -467,7 +467,8 @@ def envelope(x: np.ndarray, y: np.ndarray, bins: int = _ENVELOPE_BINS
     imax = base + np.argmax(np.where(nan, -np.inf, yp), axis=1)
     gaps = nan.any(axis=1)                 # a bin holding a NaN keeps one: the gap stays
     inan = (base + np.argmax(nan, axis=1))[gaps]
-    keep = np.unique(np.minimum(np.concatenate((imin, imax, inan)), n - 1))
+    ends = np.array([0, n - 1])            # the line spans the same time
+    keep = np.unique(np.minimum(np.concatenate((ends, imin, imax, inan)), n - 1))
     return x[keep], y[keep]
 
 
