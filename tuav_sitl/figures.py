@@ -441,8 +441,8 @@ def _title(fig: Figure, sc: ScenarioParams, what: str) -> None:
     fig.suptitle(f"{sc.name}: {what}", fontsize=13, fontweight="bold")
 
 
-#: A time-series line with more samples than this is drawn as its envelope: the minimum
-#: and the maximum of each of ``_ENVELOPE_BINS`` equal runs of samples, in time order.
+#: A time-series line with more than twice this many samples is drawn as its envelope in
+#: this many runs of samples (:func:`envelope`).
 _ENVELOPE_BINS = 2000
 
 
