@@ -501,7 +501,10 @@ def main(argv: list[str] | None = None) -> int:
                          "time, the torque and command latencies)")
     args = ap.parse_args(argv)
     rows: list[Row] = []
-    benches = [bench_tether, bench_plant_step, bench_estimator, bench_offline, bench_sweep]
+    from benchmarks.first_result import bench_first_result
+
+    benches = [bench_tether, bench_plant_step, bench_estimator, bench_offline,
+               bench_first_result, bench_sweep]
     if not args.no_processes:
         benches += [bench_processes, bench_command_latency]
     loads: list[tuple[str, Load]] = []

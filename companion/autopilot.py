@@ -56,7 +56,7 @@ from companion.geofence import (
 from companion.mavlink_io import MavlinkEndpoints, Peer
 from companion.mission_items import ItemRefused, mission_home, nav_command, nav_commands
 from companion.mission_protocol import MissionItem, MissionProtocol
-from companion.navigation import FlightMode, NavEvent, Navigator, Refusal
+from companion.navigation import FlightMode, NavEvent, Navigator, Reason, Refusal
 from companion.param_protocol import ParamDef, ParamProtocol
 from companion.signing import VehicleSigning
 from companion.telemetry import DUE_TOLERANCE_S, Telemetry, TelemetryStreams
@@ -110,6 +110,11 @@ class Autopilot:
         """The rally points uploaded (RTL ends at the nearest, or home)."""
         self._breach: FenceBreach | None = None
         self._fence_next_s = -math.inf
+        self._pos_m: tuple[float, float, float] | None = None   # the last telemetry's
+        inner_prearm = nav.prearm
+        # ArduCopter's fence checks come with the other pre-arm checks, ARMING_CHECK or not
+        nav.prearm = lambda: (inner_prearm() if inner_prearm is not None else None
+                              ) or self._fence_prearm()
         self.params = ParamProtocol(params, self._send_to, self.statustext,
                                     persist_path=param_file)
         self.streams = TelemetryStreams(endpoints, nav, self.origin, self.missions)
@@ -224,6 +229,8 @@ class Autopilot:
                 self._logged_mode = nav.mode
                 fl.mode(int(nav.mode))
             fl.record(telem, nav.reference() if nav.flying else None, nav.home_m)
+        if telem is not None:
+            self._pos_m = telem.pos_m
         if telem is not None and telem.t_s >= self._fence_next_s:
             self._fence_next_s = telem.t_s + FENCE_CHECK_S
             self._check_fence(telem.pos_m)
@@ -462,6 +469,11 @@ class Autopilot:
             self.nav.rally_m = tuple(global_to_local(i.x * 1e-7, i.y * 1e-7, i.z, i.frame,
                                                      self.origin) for i in items)
             self.log(f"{len(items)} rally points accepted")
+
+    def _fence_prearm(self) -> Refusal | None:
+        """The geofence's pre-arm check (:meth:`Geofence.pre_arm`) as a refusal."""
+        why = self.fence.pre_arm(self._pos_m, self.nav.home_m)
+        return None if why is None else Refusal(Reason.PREARM, f"PreArm: Fence: {why}")
 
     def _check_fence(self, pos_m: tuple[float, float, float]) -> None:
         """A breach begun (in flight): said, and acted on as FENCE_ACTION says (the

@@ -13,6 +13,13 @@ global coordinates, turned into the inertial frame once at upload (:meth:`Geofen
 reach first: farther from the winder than the tether allows less its slack margin (the
 navigator's ``tether_limit_m``: the whole tether, or what a braked drum paid out; targets
 keep ``reach_m``'s margin inside it) is a breach whatever ``FENCE_ENABLE`` says.
+
+:meth:`Geofence.pre_arm` is ArduCopter's fence pre-arm check, in its order: an enabled fence
+with nothing to check, no position for a horizontal fence, ``FENCE_MARGIN`` against the
+fences (at most an inclusion circle's radius and ``FENCE_RADIUS``, and less than half of
+``FENCE_ALT_MAX``: the height between the ground and the ceiling), and the vehicle outside
+a fence. ``FENCE_MARGIN`` is, as in ArduCopter, the distance the vehicle should keep from a
+fence: the breach itself is at the fence.
 """
 
 from __future__ import annotations
@@ -54,8 +61,8 @@ class FenceParams(Params):
     radius_m: float = quantity(300.0, "m", "circle fence about home", ge=30, le=10000)
     alt_max_m: float = quantity(100.0, "m", "maximum altitude above home", ge=10, le=1000)
     action: int = quantity(1, "", "on a breach: 0 report, 1 RTL, 2 land", ge=0, le=2)
-    margin_m: float = quantity(2.0, "m", "ArduCopter's margin (kept for its ground "
-                               "stations; the breach checks here use the fence itself)",
+    margin_m: float = quantity(2.0, "m", "the distance to keep from a fence (checked "
+                               "against the fences before arming; a breach is at the fence)",
                                ge=1, le=10)
 
 
@@ -150,6 +157,36 @@ class Geofence:
             i += 1
         self.include_polygons, self.exclude_polygons = inc_p, exc_p
         self.include_circles, self.exclude_circles = inc_c, exc_c
+        return None
+
+    def present(self) -> bool:
+        """Whether an enabled fence type has something to check (ArduCopter: the circle or
+        the altitude, or polygons with an upload)."""
+        mask = self.p.type_mask
+        uploaded = bool(self.include_polygons or self.exclude_polygons
+                        or self.include_circles or self.exclude_circles)
+        return bool(mask & (TYPE_ALT_MAX | TYPE_CIRCLE) or (mask & TYPE_POLYGON and uploaded))
+
+    def pre_arm(self, pos_m: Vec3 | None, home_m: Vec3 | None) -> str | None:
+        """ArduCopter's fence pre-arm check: None (arming may go on) or why not, as the
+        text after ``PreArm: Fence: ``. ``pos_m`` the vehicle's position [m] (None: not
+        known yet), ``home_m`` the circle's centre (None: the winder). The tether's reach is
+        not checked here: a vehicle on the ground is always within it."""
+        p = self.p
+        if not p.enable:
+            return None
+        if not self.present():
+            return "enabled, but none selected"
+        if p.type_mask & (TYPE_CIRCLE | TYPE_POLYGON) and pos_m is None:
+            return "requires position"
+        if p.type_mask & TYPE_POLYGON and any(r < p.margin_m for _, r in self.include_circles):
+            return "an inclusion circle's radius is less than FENCE_MARGIN"
+        if p.type_mask & TYPE_CIRCLE and p.radius_m < p.margin_m:
+            return "FENCE_RADIUS is less than FENCE_MARGIN"
+        if pos_m is not None and self.breach(pos_m, home_m, math.inf) is not None:
+            return "vehicle outside fence"
+        if p.type_mask & TYPE_ALT_MAX and p.alt_max_m <= 2.0 * p.margin_m:
+            return "FENCE_MARGIN too big for FENCE_ALT_MAX"
         return None
 
     def _xy(self, item: MissionItem) -> Vec2:

@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_benchmarks_run_quick():
     res = subprocess.run([sys.executable, "-m", "tuav_sitl", "bench", "--quick"], cwd=ROOT,
-                         capture_output=True, text=True, timeout=300)
+                         capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr
     out = res.stdout
     for row in ("tether solve, cold", "tether solve, warm-started",
@@ -27,6 +27,9 @@ def test_benchmarks_run_quick():
                 "share: plant physics (Plant.advance)",
                 "share: flight controller (FlightController.update)",
                 "share: winder host (WinderHost.update)",
+                "first run, cold numba cache (circle, no figures)",
+                "first result: run with figures + animation",
+                "the same run with --no-figures",
                 "three-process lockstep stack (scripted mission)",
                 "real time 250 Hz, both cores busy", "real time 500 Hz, both cores busy",
                 "real time 250 Hz, both cores busy (normal scheduling)",

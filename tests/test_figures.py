@@ -377,3 +377,71 @@ def test_a_lumped_run_draws_the_recorded_nodes(lumped_run):
         assert lines and all(ln.get_marker() == "o" for ln in lines)
     paths = anim.make_animation(lumped_run, fps=10, max_frames=6)
     assert any(p.suffix == ".gif" and p.stat().st_size > 0 for p in paths)
+
+
+def test_envelope_keeps_every_bins_extremes_and_every_gap():
+    from tuav_sitl.figures import envelope
+
+    rng = np.random.default_rng(5)
+    n, bins = 50_001, 1000
+    x = np.arange(n) * 0.004
+    y = np.cumsum(rng.normal(size=n))
+    y[12_345] += 500.0                                   # a one-sample spike
+    y[30_000:30_010] = np.nan                            # a gap
+    ex, ey = envelope(x, y, bins)
+    assert len(ex) <= 3 * bins + 2 and np.all(np.diff(ex) > 0)
+    assert ex[0] == x[0] and ex[-1] == x[-1]
+    assert np.nanmax(ey) == np.nanmax(y) and np.nanmin(ey) == np.nanmin(y)
+    assert 12_345 * 0.004 in ex
+    assert np.isnan(ey).any() and np.all(np.isnan(ey[(ex >= x[30_000]) & (ex <= x[30_009])]))
+    # every kept sample is a real one, at its own time
+    idx = np.rint(ex / 0.004).astype(int)
+    assert np.array_equal(ey, y[idx], equal_nan=True)
+    # each run of samples keeps its extremes (runs of ceil(n / bins) samples)
+    m = -(-n // bins)
+    for s in range(0, n, m):
+        seg = y[s:s + m]
+        if np.isnan(seg).all():
+            continue
+        kept = ey[(idx >= s) & (idx < s + m)]
+        assert np.nanmax(kept) == np.nanmax(seg) and np.nanmin(kept) == np.nanmin(seg)
+    short = np.arange(10.0)
+    assert envelope(short, short, bins)[1] is short
+
+
+def test_draw_run_writes_the_same_figures_in_parallel_with_progress(setpoint_run, tmp_path,
+                                                                   monkeypatch):
+    """draw_run with a forked worker drawing the figures while this process draws the
+    animation: the same PNG bytes as make_figures alone, the same GIF frames, and a
+    progress line that counts every figure and frame."""
+    import io
+    import shutil as sh
+
+    from tuav_sitl.render import draw_run
+
+    monkeypatch.setattr(anim.shutil, "which", lambda name: None)
+    alone = tmp_path / "alone"
+    sh.copytree(setpoint_run, alone)
+    for sub in ("figures",):
+        sh.rmtree(alone / sub, ignore_errors=True)
+    expected = make_figures(alone)
+    ref_gif = anim.make_animation(alone)[0].read_bytes()
+    both = tmp_path / "both"
+    sh.copytree(alone, both)
+    sh.rmtree(both / "figures")
+    (both / "animation.gif").unlink()
+    stream = io.StringIO()
+    drawn = draw_run(both, progress=stream, workers=1)
+    assert [p.name for p in drawn.figures] == [p.name for p in expected]
+    for a, b in zip(expected, drawn.figures, strict=True):
+        assert a.read_bytes() == b.read_bytes(), a.name
+    assert drawn.animation == [both / "animation.gif"]
+    assert drawn.animation[0].read_bytes() == ref_gif
+    assert drawn.skipped == ["estimate: the run has no est_pos, est_pos_sigma"]
+    text = stream.getvalue()
+    frames = len(anim.frame_plan(load_run(both).series["t"], anim.FPS, anim.MAX_FRAMES,
+                                 None)[0])
+    assert f"figures {len(expected)}/{len(expected)}" in text
+    assert f"animation frames {frames}/{frames}" in text and text.endswith("\n")
+    quiet = draw_run(both, animation=False, progress=None, workers=0)
+    assert [p.name for p in quiet.figures] == [p.name for p in expected]

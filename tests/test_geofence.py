@@ -151,3 +151,71 @@ def test_a_braked_drum_bounds_targets_not_where_the_vehicle_holds():
     assert fence.breach(pos, (2.0, 0.0, 0.0), nav.tether_limit_m) is None
     assert fence.breach((14.6, 0.0, 0.0), (2.0, 0.0, 0.0),
                         nav.tether_limit_m) is FenceBreach.TETHER
+
+
+def test_pre_arm_checks_as_arducopter_orders_them():
+    """Each of ArduCopter's fence pre-arm failures, alone; a disabled fence always passes."""
+    on_ground = (2.0, 0.0, 0.0)
+    off = Geofence(FenceParams(enable=False, type_mask=4), HOME_DEFAULT)
+    assert off.pre_arm(None, None) is None
+    assert Geofence(FenceParams(enable=True), HOME_DEFAULT).pre_arm(on_ground, None) is None
+    # polygons only, none uploaded: nothing to check
+    empty = Geofence(FenceParams(enable=True, type_mask=4), HOME_DEFAULT)
+    assert empty.pre_arm(on_ground, None) == "enabled, but none selected"
+    # the altitude alone needs no position; the circle does
+    assert Geofence(FenceParams(enable=True, type_mask=1), HOME_DEFAULT).pre_arm(
+        None, None) is None
+    assert Geofence(FenceParams(enable=True, type_mask=2), HOME_DEFAULT).pre_arm(
+        None, None) == "requires position"
+    # FENCE_MARGIN against an inclusion circle and against the ceiling
+    small = Geofence(FenceParams(enable=True, type_mask=4, margin_m=5.0), HOME_DEFAULT)
+    assert small.set_items([item(M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, 0.0, 0.0, 4.0)]) is None
+    assert "inclusion circle" in small.pre_arm(on_ground, None)
+    low = Geofence(FenceParams(enable=True, type_mask=1, alt_max_m=10.0, margin_m=5.0),
+                   HOME_DEFAULT)
+    assert low.pre_arm(on_ground, None) == "FENCE_MARGIN too big for FENCE_ALT_MAX"
+    assert Geofence(FenceParams(enable=True, type_mask=1, alt_max_m=10.1, margin_m=5.0),
+                    HOME_DEFAULT).pre_arm(on_ground, None) is None
+    # outside: a polygon that leaves the vehicle out, a circle about home too small
+    square = Geofence(FenceParams(enable=True, type_mask=4), HOME_DEFAULT)
+    assert square.set_items(polygon(INC, [(5.0, -5.0), (15.0, -5.0), (15.0, 5.0),
+                                          (5.0, 5.0)])) is None
+    assert square.pre_arm(on_ground, None) == "vehicle outside fence"
+    assert square.pre_arm((10.0, 0.0, 0.0), None) is None
+    circle = Geofence(FenceParams(enable=True, type_mask=2, radius_m=30.0), HOME_DEFAULT)
+    assert circle.pre_arm((29.0, 0.0, 0.0), (0.0, 0.0, 0.0)) is None
+    assert circle.pre_arm((31.0, 0.0, 0.0), (0.0, 0.0, 0.0)) == "vehicle outside fence"
+    assert circle.pre_arm((31.0, 0.0, 0.0), (10.0, 0.0, 0.0)) is None   # about home
+
+
+def test_arming_outside_an_enabled_fence_is_denied(tmp_path):
+    """The real companion: an inclusion polygon that leaves the vehicle (on the ground at
+    home, 2 m east of the winder) out; enabled, arming is refused as ArduCopter refuses it
+    (COMMAND_ACK FAILED, ArduPilot's answer to a failed arming) with its 'PreArm: Fence'
+    STATUSTEXT, whatever ARMING_CHECK says; disabled, it arms."""
+    veh = Vehicle(tmp_path)
+    try:
+        m = veh.connect()
+        square = [(5.0, -5.0), (15.0, -5.0), (15.0, 5.0), (5.0, 5.0)]
+        assert upload_fence(m, polygon(INC, square)).type == M.MAV_MISSION_ACCEPTED
+
+        def set_param(name: bytes, value: float, ptype: int) -> None:
+            m.mav.param_set_send(1, 1, name, value, ptype)
+            assert wait_msg(m, "PARAM_VALUE",
+                            lambda p: p.param_id == name.decode()).param_value == value
+
+        set_param(b"FENCE_TYPE", 4, M.MAV_PARAM_TYPE_INT8)
+        m.set_mode("GUIDED")
+        assert arm(m).result == M.MAV_RESULT_ACCEPTED      # the EKF healthy: it can arm
+        assert command(m, M.MAV_CMD_COMPONENT_ARM_DISARM, 0).result == M.MAV_RESULT_ACCEPTED
+        set_param(b"FENCE_ENABLE", 1, M.MAV_PARAM_TYPE_INT8)
+        arm_once = M.MAV_CMD_COMPONENT_ARM_DISARM
+        assert command(m, arm_once, 1).result == M.MAV_RESULT_FAILED
+        text = wait_msg(m, "STATUSTEXT", lambda s: s.text.startswith("PreArm: Fence"), 10)
+        assert text.text == "PreArm: Fence: vehicle outside fence"
+        set_param(b"ARMING_CHECK", 0, M.MAV_PARAM_TYPE_INT32)
+        assert command(m, arm_once, 1).result == M.MAV_RESULT_FAILED
+        set_param(b"FENCE_ENABLE", 0, M.MAV_PARAM_TYPE_INT8)
+        assert command(m, arm_once, 1).result == M.MAV_RESULT_ACCEPTED
+    finally:
+        veh.stop()

@@ -73,3 +73,46 @@ def test_the_dependency_digest_is_the_same_in_every_process():
                              capture_output=True, text=True, timeout=300, check=True)
         outs.add(res.stdout.strip())
     assert len(outs) == 1
+
+
+REPORT = """
+import json, sys
+sys.path[:0] = [{root!r}, {here!r}]
+from tuavdefs import jit
+from callee import scaled
+before = jit.is_cached(scaled)
+names = []
+jit.on_compile(lambda name, seconds: names.append(name))
+value = scaled(2.0)
+print(json.dumps([jit.JIT, before, jit.is_cached(scaled), names, value]))
+"""
+
+
+def _report(here: Path, **env_extra: str) -> list:
+    import json
+
+    env = dict(os.environ, **env_extra)
+    env.pop("TUAV_NO_JIT", None)
+    res = subprocess.run([sys.executable, "-c", REPORT.format(root=str(ROOT), here=str(here))],
+                         capture_output=True, text=True, timeout=300, check=True, env=env)
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def test_is_cached_and_on_compile_tell_a_compile_from_a_cache_load(tmp_path):
+    """A cold kernel: not cached, its compilation reported; in the next process it loads
+    from the cache (is_cached before the call) and nothing is reported. A change to the
+    source makes it cold again."""
+    (tmp_path / "callee.py").write_text(textwrap.dedent(CALLEE.format(gain=2.0)))
+    assert _report(tmp_path) == [True, False, True, ["callee.scaled"], 4.0]
+    assert _report(tmp_path) == [True, True, True, [], 4.0]
+    (tmp_path / "callee.py").write_text(textwrap.dedent(CALLEE.format(gain=3.0)))
+    assert _report(tmp_path) == [True, False, True, ["callee.scaled"], 6.0]
+
+
+def test_an_interpreted_package_stays_python_and_jit_says_so(tmp_path):
+    """TUAV_JIT_INTERPRET=callee: the kernel is the plain function (nothing to compile,
+    nothing cached) and JIT is False, so no caller counts on machine code."""
+    (tmp_path / "callee.py").write_text(textwrap.dedent(CALLEE.format(gain=2.0)))
+    assert _report(tmp_path, TUAV_JIT_INTERPRET="callee") == [False, True, True, [], 4.0]
+    assert not (tmp_path / "__pycache__").is_dir() or not any(
+        p.suffix == ".nbi" for p in (tmp_path / "__pycache__").iterdir())

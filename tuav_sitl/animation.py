@@ -14,17 +14,19 @@ import math
 import shutil
 import subprocess
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.font_manager import FontProperties, findfont
 from matplotlib.ticker import MaxNLocator
-from PIL import Image
+from PIL import Image, ImageDraw, ImageFont
 
 from tuav_sitl.figures import (
+    RunData,
     TetherDrawer,
     draw_goals,
     draw_ground,
@@ -38,11 +40,15 @@ from tuav_sitl.figures import (
     set_scene,
 )
 
-__all__ = ["ANIMATION_SIZE_PX", "frame_plan", "make_animation"]
+__all__ = ["ANIMATION_SIZE_PX", "FPS", "MAX_FRAMES", "frame_plan", "make_animation"]
 
 #: Width and height of the animation [pixels] (even, as H.264 wants).
 ANIMATION_SIZE_PX = (760, 600)
 _DPI = 100
+#: Playback frame rate [frames per second] and the most frames an animation has: a run up
+#: to 15 s plays in real time, a longer one faster (the 75 s circle at 5x).
+FPS = 15
+MAX_FRAMES = 225
 #: How long the last frame stays on screen in the GIF [s].
 _END_HOLD_S = 1.5
 #: At most this many points of the trail are drawn (the path is thinned to it).
@@ -50,6 +56,9 @@ _TRAIL_POINTS = 1500
 #: Colours the GIF palette must hold exactly: UAV red, trail blue, tether brown, goal
 #: purple, black.
 _KEY_COLOURS = ("#d62728", "#1f77b4", "#8c564b", "#9467bd", "#000000")
+#: The title's size [pt] and its top edge [fraction of the height from the top].
+_TITLE_PT = 11.0
+_TITLE_TOP = 0.02
 
 
 def frame_plan(t: np.ndarray, fps: int, max_frames: int,
@@ -133,11 +142,15 @@ class _Scene:
         ax.yaxis.set_major_locator(MaxNLocator(5))
         ax.view_init(elev=22, azim=-60)
         ax.legend(loc="upper left", fontsize=7, framealpha=0.8)
-        self.title = self.fig.suptitle("", fontsize=11, fontweight="bold")
+        # The title changes every frame: Pillow writes it on the finished frame, in
+        # matplotlib's bold font (matplotlib's text layout would cost more than the rest of
+        # the frame).
+        self.font = ImageFont.truetype(findfont(FontProperties(weight="bold")),
+                                       round(_TITLE_PT * _DPI / 72.0))
         # Everything else is fixed: draw it once, then per frame restore it and draw only
         # the moving artists over it (a full 3-D redraw costs ~10x more, mostly text).
         self.moving = (self.trail, self.cable, self.rest, self.front, self.reached_art)
-        for a in (*self.moving, self.title):
+        for a in self.moving:
             a.set_animated(True)
         self.canvas.draw()
         self.background = self.canvas.copy_from_bbox(self.fig.bbox)
@@ -158,16 +171,17 @@ class _Scene:
         done = sum(1 for r in self.reached if r <= k)
         p = self.geo.points[:done]
         self.reached_art.set_data_3d(p[:, 0], p[:, 1], p[:, 2])
-        self.title.set_text(
-            f"{self.sc.name}:  t = {s['t'][k]:5.1f} s   L = {s['length'][k]:5.2f} m   "
-            f"(L-bar {s['lbar'][k]:5.2f} m)   {speed:.1f}x speed")
+        title = (f"{self.sc.name}:  t = {s['t'][k]:5.1f} s   L = {s['length'][k]:5.2f} m   "
+                 f"(L-bar {s['lbar'][k]:5.2f} m)   {speed:.1f}x speed")
         self.canvas.restore_region(self.background)
         for a in self.moving:
             self.ax.draw_artist(a)
-        self.fig.draw_artist(self.title)
         w, h = self.canvas.get_width_height()
         rgba = Image.frombuffer("RGBA", (w, h), self.canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
-        return rgba.convert("RGB")
+        img = rgba.convert("RGB")
+        ImageDraw.Draw(img).text((w / 2, _TITLE_TOP * h), title, fill="black",
+                                 font=self.font, anchor="ma")
+        return img
 
     def set_palette(self, *frames: Image.Image) -> None:
         """One 256-colour palette for the whole GIF, from sample frames: quantising each
@@ -189,18 +203,22 @@ class _Scene:
         return img.quantize(palette=self.palette, dither=Image.Dither.NONE)
 
 
-def make_animation(run_dir: Path, fps: int = 15, max_frames: int = 300,
-                   speed: float | None = None) -> list[Path]:
+def make_animation(run_dir: Path, fps: int = FPS, max_frames: int = MAX_FRAMES,
+                   speed: float | None = None,
+                   on_frame: Callable[[int, int], None] | None = None,
+                   run: RunData | None = None) -> list[Path]:
     """Animate the run in ``run_dir``: write ``animation.gif`` there, and ``animation.mp4``
     if ffmpeg is available; returns the paths written.
 
     ``fps`` is the playback frame rate, ``max_frames`` caps the number of frames (spread
     evenly over the run), ``speed`` the playback speed in simulated seconds per second
     (None: real time, or faster if needed to stay within ``max_frames``; see
-    :func:`frame_plan`).
+    :func:`frame_plan`). ``on_frame(done, total)`` is called after each frame is drawn;
+    ``run`` is the folder's contents if already loaded (:func:`load_run`).
     """
     run_dir = Path(run_dir)
-    run = load_run(run_dir)
+    if run is None:
+        run = load_run(run_dir)
     idx, real_speed = frame_plan(run.series["t"], fps, max_frames, speed)
     scene = _Scene(run)
     gif = run_dir / "animation.gif"
@@ -216,8 +234,10 @@ def make_animation(run_dir: Path, fps: int = 15, max_frames: int = 300,
 
     def frames() -> Iterator[Image.Image]:
         nonlocal proc
-        for k in idx:
+        for i, k in enumerate(idx):
             img = scene.draw(int(k), real_speed)
+            if on_frame is not None:
+                on_frame(i + 1, len(idx))
             if proc is not None:
                 try:
                     proc.stdin.write(img.tobytes())  # type: ignore[union-attr]
@@ -268,8 +288,8 @@ def main(argv: list[str] | None = None) -> int:
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("run_dir", type=Path)
-    p.add_argument("--fps", type=int, default=15)
-    p.add_argument("--max-frames", type=int, default=300)
+    p.add_argument("--fps", type=int, default=FPS)
+    p.add_argument("--max-frames", type=int, default=MAX_FRAMES)
     p.add_argument("--speed", type=float, default=None)
     a = p.parse_args(argv)
     t0 = time.perf_counter()

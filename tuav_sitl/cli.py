@@ -35,21 +35,27 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.duration is not None:
         scenario = scenario.replace(duration_s=args.duration)
     from tuav_sitl.offline import run_scenario
+    from tuav_sitl.warmup import compile_if_cold, report_compiles
 
     out = Path(args.out) if args.out else Path("runs") / scenario.name
     print(f"tuav-sitl run {scenario.name}: {scenario.description}")
-    result = run_scenario(scenario, out, progress=None if args.quiet else sys.stderr)
+    progress = None if args.quiet else sys.stderr
+    compile_if_cold(scenario, progress)
+    stop_reports = report_compiles(progress)
+    try:
+        result = run_scenario(scenario, out, progress=progress)
+    finally:
+        stop_reports()
     m = result.metrics
     print(f"wrote {out}/timeseries.npz, metrics.json, scenario.toml")
     if not args.no_figures:
-        from tuav_sitl.animation import make_animation
-        from tuav_sitl.figures import make_figures
+        from tuav_sitl.render import draw_run
 
-        figs = make_figures(out)
-        print(f"wrote {len(figs)} figures in {out}/figures")
-        if not args.no_animation:
-            anim = make_animation(out)
-            print("wrote " + ", ".join(str(a) for a in anim))
+        drawn = draw_run(out, animation=not args.no_animation,
+                         progress=None if args.quiet else sys.stderr)
+        print(f"wrote {len(drawn.figures)} figures in {out}/figures")
+        if drawn.animation:
+            print("wrote " + ", ".join(str(a) for a in drawn.animation))
     keys = ["position_rmse_m", "position_max_error_m", "attitude_rmse_rad",
             "tether_length_rmse_m", "min_tether_slack_m", "max_tension_n",
             "motor_saturation_fraction", "settling_time_s", "overshoot_percent",
@@ -61,8 +67,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
-    from tuav_sitl.animation import make_animation
-    from tuav_sitl.figures import make_figures
+    from tuav_sitl.render import draw_run
     from tuav_sitl.run_import import RunImportError, import_up_run, needs_import
 
     run_dir = Path(args.run_dir)
@@ -82,14 +87,19 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         print(f"tuav-sitl plot: {run_dir} has no timeseries.npz (a 'tuav-sitl run' folder) "
               "nor truth.csv (a 'tuav-sitl up' folder)", file=sys.stderr)
         return 2
-    skipped: list[str] = []
-    figs = make_figures(run_dir, skipped=skipped)
-    print(f"wrote {len(figs)} figures in {run_dir}/figures")
-    for note in skipped:
+    from tuav_sitl.warmup import report_compiles
+
+    stop_reports = report_compiles(None if args.quiet else sys.stderr)
+    try:
+        drawn = draw_run(run_dir, animation=not args.no_animation,
+                         progress=None if args.quiet else sys.stderr)
+    finally:
+        stop_reports()
+    print(f"wrote {len(drawn.figures)} figures in {run_dir}/figures")
+    for note in drawn.skipped:
         print(f"  skipped {note}")
-    if not args.no_animation:
-        for a in make_animation(run_dir):
-            print(f"wrote {a}")
+    for a in drawn.animation:
+        print(f"wrote {a}")
     return 0
 
 
@@ -101,7 +111,13 @@ def _cmd_results(args: argparse.Namespace) -> int:
         from tuav_sitl.results import run_sweeps
 
         run_sweeps(Path(args.runs))
-    metrics = write_results(out, Path(args.runs), figures=not args.no_figures)
+    from tuav_sitl.scenario import load_scenario
+    from tuav_sitl.warmup import compile_if_cold
+
+    progress = None if args.quiet else sys.stderr
+    compile_if_cold(load_scenario("circle"), progress)   # here, not in each pool process
+    metrics = write_results(out, Path(args.runs), figures=not args.no_figures,
+                            progress=progress)
     print(f"wrote {out} from {len(metrics)} runs in {args.runs}")
     return 0
 
@@ -186,7 +202,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="override the scenario's simulated time [s]")
     run.add_argument("--no-figures", action="store_true", help="skip figures and animation")
     run.add_argument("--no-animation", action="store_true", help="skip the animation")
-    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--quiet", action="store_true",
+                     help="no progress (simulation, figures, animation frames)")
     run.set_defaults(func=_cmd_run)
 
     plot = sub.add_parser(
@@ -198,6 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "skipped with a note).")
     plot.add_argument("run_dir", help="a folder written by 'tuav-sitl run' or 'tuav-sitl up'")
     plot.add_argument("--no-animation", action="store_true", help="skip the animation")
+    plot.add_argument("--quiet", action="store_true", help="no progress")
     plot.set_defaults(func=_cmd_plot)
 
     res = sub.add_parser(
@@ -208,6 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
     res.add_argument("--out", default="docs/results.md", help="the Markdown file to write")
     res.add_argument("--runs", default="runs", help="folder for the run folders")
     res.add_argument("--no-figures", action="store_true", help="metrics only")
+    res.add_argument("--quiet", action="store_true", help="no progress")
     res.add_argument("--sweeps", action="store_true",
                      help="also run the shipped sweeps (tuav-sitl sweep; long) into "
                           "RUNS/sweeps; without, the summaries found there are included")

@@ -441,12 +441,52 @@ def _title(fig: Figure, sc: ScenarioParams, what: str) -> None:
     fig.suptitle(f"{sc.name}: {what}", fontsize=13, fontweight="bold")
 
 
+#: A time-series line with more than twice this many samples is drawn as its envelope in
+#: this many runs of samples (:func:`envelope`).
+_ENVELOPE_BINS = 2000
+
+
+def envelope(x: np.ndarray, y: np.ndarray, bins: int = _ENVELOPE_BINS
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, y)`` thinned to the first and last samples and the minimum and the maximum of
+    ``y`` in each of ``bins`` runs of consecutive samples, in time order (``x`` ascending).
+
+    A figure about 1000 pixels wide shows a run of ``len(x) / bins`` samples within one
+    pixel column, which a line through its extremes covers exactly; every peak and every
+    NaN gap (a bin holding a NaN keeps one) stays. Shorter series are returned as they are.
+    """
+    n = len(x)
+    if n <= 2 * bins:
+        return x, y
+    m = -(-n // bins)                      # samples a bin
+    pad = m * (-(-n // m)) - n             # the last bin padded with its last sample
+    yp = np.concatenate((y, np.full(pad, y[-1]))).reshape(-1, m)
+    nan = np.isnan(yp)
+    base = np.arange(yp.shape[0]) * m
+    imin = base + np.argmin(np.where(nan, np.inf, yp), axis=1)
+    imax = base + np.argmax(np.where(nan, -np.inf, yp), axis=1)
+    gaps = nan.any(axis=1)                 # a bin holding a NaN keeps one: the gap stays
+    inan = (base + np.argmax(nan, axis=1))[gaps]
+    ends = np.array([0, n - 1])            # the line spans the same time
+    keep = np.unique(np.minimum(np.concatenate((ends, imin, imax, inan)), n - 1))
+    return x[keep], y[keep]
+
+
+def _thin_lines(ax: Axes) -> None:
+    """Each long line of ``ax`` replaced by its :func:`envelope`."""
+    for line in ax.get_lines():
+        x = np.asarray(line.get_xdata(), dtype=float)
+        if len(x) > 2 * _ENVELOPE_BINS and np.all(np.diff(x) >= 0):
+            line.set_data(*envelope(x, np.asarray(line.get_ydata(), dtype=float)))
+
+
 def _finish(ax: Axes, ylabel: str, legend: bool = True, xlabel: bool = False) -> None:
     lines = ax.get_lines()
     if lines:
         t = np.asarray(lines[0].get_xdata(), dtype=float)
         if len(t) > 1 and t[-1] > t[0]:
             ax.set_xlim(t[0], t[-1])
+    _thin_lines(ax)
     ax.set_ylabel(ylabel)
     ax.grid(True, alpha=0.4)
     if legend:
@@ -729,6 +769,7 @@ def fig_lyapunov(s: Mapping[str, np.ndarray], sc: ScenarioParams,
         top = float(v.max())
         bottom = max(float(np.percentile(v, 0.2)) / 3.0, top * 1e-18)
         ax.set_ylim(bottom, top * 3.0)
+    _thin_lines(ax)
     ax.set_ylabel("V (log scale) [m^2/s^2, rad^2, J]")
     ax.set_xlabel("time [s]")
     ax.grid(True, which="major", alpha=0.4)

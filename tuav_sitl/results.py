@@ -14,7 +14,7 @@ import shutil
 import time
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from tuav_sitl.offline import run_scenario
 from tuav_sitl.scenario import load_scenario, shipped_scenarios
@@ -72,11 +72,9 @@ def _one(args: tuple[str, str, bool]) -> tuple[str, dict[str, Any]]:
     out = Path(runs) / name
     result = run_scenario(load_scenario(name), out, progress=None)
     if figures:
-        from tuav_sitl.animation import make_animation
-        from tuav_sitl.figures import make_figures
+        from tuav_sitl.render import draw_run
 
-        make_figures(out)
-        make_animation(out)
+        draw_run(out, workers=0)     # the pool's processes already use the cores
     return name, result.metrics
 
 
@@ -179,14 +177,25 @@ def _tether_aid_section(metrics: dict[str, dict[str, Any]]) -> list[str]:
 
 
 def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
-                  processes: int | None = None) -> dict[str, dict[str, Any]]:
+                  processes: int | None = None,
+                  progress: TextIO | None = None) -> dict[str, dict[str, Any]]:
     """Run all shipped scenarios and write ``out_md``; returns the metrics by scenario
-    (with the shipped sweeps' summaries found under ``runs_dir/sweeps``)."""
+    (with the shipped sweeps' summaries found under ``runs_dir/sweeps``). A line on
+    ``progress`` as each run (simulation, figures and animation) is done."""
     names = sorted(shipped_scenarios())
     wall = time.perf_counter()
+    jobs = [*names, *(label for label, _, _ in TETHER_AID_VARIANTS)]
+    metrics: dict[str, dict[str, Any]] = {}
+    if progress is not None:
+        progress.write(f"tuav-sitl results: {len(jobs)} runs"
+                       f"{' with their figures and animations' if figures else ''}\n")
     with get_context("fork").Pool(processes or min(len(names), os.cpu_count() or 1)) as pool:
-        jobs = [*names, *(label for label, _, _ in TETHER_AID_VARIANTS)]
-        metrics = dict(pool.map(_one, [(n, str(runs_dir), figures) for n in jobs]))
+        for name, m in pool.imap_unordered(_one, [(n, str(runs_dir), figures) for n in jobs]):
+            metrics[name] = m
+            if progress is not None:
+                progress.write(f"  [{len(metrics):2d}/{len(jobs)}] {name} done, "
+                               f"{time.perf_counter() - wall:5.0f} s elapsed\n")
+                progress.flush()
     wall = time.perf_counter() - wall
     fig_dir = out_md.parent / "figures"
     if figures:

@@ -12,24 +12,36 @@ digest of everything a kernel takes from outside its own file: the code and cons
 the compiled functions it calls, recursively, and the values of the global constants it
 reads (:func:`dependency_digest`). Editing a law in one module therefore recompiles every
 kernel that uses it, wherever that lives.
+
+``TUAV_JIT_INTERPRET=sitl,companion`` (top-level packages, comma separated) leaves those
+packages' kernels interpreted and compiles the rest: the cold-cache warm-up
+(:mod:`tuav_sitl.warmup`) compiles the plant's kernels in one process and the controllers'
+in another at the same time. :data:`JIT` is then False (not everything is compiled, so no
+caller may count on a kernel being machine code). :func:`is_cached` says whether a kernel
+would load from the cache, :func:`on_compile` reports each compilation as it ends.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import time
 import types
 from collections.abc import Callable
 from typing import Any, TypeVar
 
 F = TypeVar("F", bound=Callable[..., Any])
 
+#: Top-level packages whose kernels stay interpreted in this process (a warm-up process).
+INTERPRETED: frozenset[str] = frozenset(
+    p.strip() for p in os.environ.get("TUAV_JIT_INTERPRET", "").split(",") if p.strip())
+
 try:
     if os.environ.get("TUAV_NO_JIT") == "1":
         raise ImportError("TUAV_NO_JIT=1")
     from numba import njit as _njit
 
-    JIT = True
+    JIT = not INTERPRETED
 except ImportError:  # numba absent or disabled: the same code, interpreted
     _njit = None
     JIT = False
@@ -123,8 +135,9 @@ if _njit is not None:
 
 
 def njit(fn: F) -> F:
-    """Compile ``fn`` in nopython mode with an on-disk cache (identity without numba)."""
-    if _njit is None:
+    """Compile ``fn`` in nopython mode with an on-disk cache (identity without numba, or
+    when its package is in :data:`INTERPRETED`)."""
+    if _njit is None or fn.__module__.partition(".")[0] in INTERPRETED:
         return fn
     dispatcher = _njit(cache=True)(fn)
     if _DependencyCache is not None and hasattr(dispatcher, "_cache"):
@@ -153,3 +166,47 @@ def entry_point(kernel: F, *example_args: Any) -> F:
         return kernel.compile(sig)  # type: ignore[attr-defined, no-any-return]
     except Exception:  # noqa: BLE001 - any failure: the plain dispatcher still works
         return kernel
+
+
+def is_cached(kernel: Callable[..., Any]) -> bool:
+    """Whether the compiled ``kernel`` has machine code in the on-disk cache for its current
+    source and dependencies (for some argument types), i.e. would load rather than compile.
+    True for a plain function (nothing to compile)."""
+    cache = getattr(kernel, "_cache", None)
+    if not _is_compiled(kernel) or cache is None:
+        return True
+    if getattr(kernel, "signatures", None):
+        return True   # already loaded (or compiled) in this process
+    try:
+        index = cache._cache_file._load_index()   # {} when the source changed since
+    except Exception:  # noqa: BLE001 - numba's internals moved: assume it must compile
+        return False
+    digest = dependency_digest(kernel)
+    return any(isinstance(k, tuple) and k and k[-1] == digest for k in index)
+
+
+def on_compile(callback: Callable[[str, float], None]) -> Callable[[], None]:
+    """Call ``callback(name, seconds)`` each time numba finishes compiling a kernel in this
+    process (``name`` is ``module.function``; a kernel loaded from the cache is not
+    reported). Returns the function that stops the reports. Without numba, nothing."""
+    if _njit is None:
+        return lambda: None
+    from numba.core import event
+
+    class _Listener(event.Listener):
+        def __init__(self) -> None:
+            self.started: list[float] = []
+
+        def on_start(self, ev: Any) -> None:
+            self.started.append(time.perf_counter())
+
+        def on_end(self, ev: Any) -> None:
+            t0 = self.started.pop() if self.started else time.perf_counter()
+            d = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
+            py = getattr(d, "py_func", None)
+            name = f"{py.__module__}.{py.__qualname__}" if py is not None else "kernel"
+            callback(name, time.perf_counter() - t0)
+
+    listener = _Listener()
+    event.register("numba:compile", listener)
+    return lambda: event.unregister("numba:compile", listener)
