@@ -134,7 +134,10 @@ class CommandHandler:
                 why = nav.disarm(force)
             else:
                 why = "Arm: param1 is not a number"
-            result = M.MAV_RESULT_ACCEPTED if why is None else M.MAV_RESULT_FAILED
+            result = (M.MAV_RESULT_ACCEPTED if why is None
+                      else M.MAV_RESULT_DENIED
+                      if isinstance(why, Refusal) and why.reason is Reason.PREARM
+                      else M.MAV_RESULT_FAILED)
             send_hb = why is None
         elif cmd == M.MAV_CMD_DO_SET_MODE:
             if not finite(p[1]):

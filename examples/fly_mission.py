@@ -149,8 +149,14 @@ def main() -> int:
     # position telemetry at 20 Hz (of the vehicle's time), as a logging script would ask
     f.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 50_000)
     f.set_mode("GUIDED")
-    if f.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) != M.MAV_RESULT_ACCEPTED:
-        raise RuntimeError("arming refused")
+    # arm as a ground-station user does: again while a pre-arm check refuses it (the EKF
+    # still settling: COMMAND_ACK DENIED and "PreArm: ..."), for up to a minute
+    end = time.monotonic() + 60.0
+    while (result := f.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)) == M.MAV_RESULT_DENIED \
+            and time.monotonic() < end:
+        time.sleep(0.5)
+    if result != M.MAV_RESULT_ACCEPTED:
+        raise RuntimeError(f"arming refused ({result})")
     print("armed; taking off")
     if f.command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, takeoff_m) \
             != M.MAV_RESULT_ACCEPTED:

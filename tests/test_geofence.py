@@ -191,7 +191,7 @@ def test_pre_arm_checks_as_arducopter_orders_them():
 def test_arming_outside_an_enabled_fence_is_denied(tmp_path):
     """The real companion: an inclusion polygon that leaves the vehicle (on the ground at
     home, 2 m east of the winder) out; enabled, arming is refused as ArduCopter refuses it
-    (COMMAND_ACK FAILED, ArduPilot's answer to a failed arming) with its 'PreArm: Fence'
+    (COMMAND_ACK DENIED, the answer to every pre-arm refusal) with its 'PreArm: Fence'
     STATUSTEXT, whatever ARMING_CHECK says; disabled, it arms."""
     veh = Vehicle(tmp_path)
     try:
@@ -210,11 +210,11 @@ def test_arming_outside_an_enabled_fence_is_denied(tmp_path):
         assert command(m, M.MAV_CMD_COMPONENT_ARM_DISARM, 0).result == M.MAV_RESULT_ACCEPTED
         set_param(b"FENCE_ENABLE", 1, M.MAV_PARAM_TYPE_INT8)
         arm_once = M.MAV_CMD_COMPONENT_ARM_DISARM
-        assert command(m, arm_once, 1).result == M.MAV_RESULT_FAILED
+        assert command(m, arm_once, 1).result == M.MAV_RESULT_DENIED
         text = wait_msg(m, "STATUSTEXT", lambda s: s.text.startswith("PreArm: Fence"), 10)
         assert text.text == "PreArm: Fence: vehicle outside fence"
         set_param(b"ARMING_CHECK", 0, M.MAV_PARAM_TYPE_INT32)
-        assert command(m, arm_once, 1).result == M.MAV_RESULT_FAILED
+        assert command(m, arm_once, 1).result == M.MAV_RESULT_DENIED
         set_param(b"FENCE_ENABLE", 0, M.MAV_PARAM_TYPE_INT8)
         assert command(m, arm_once, 1).result == M.MAV_RESULT_ACCEPTED
     finally:

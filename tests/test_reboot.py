@@ -53,7 +53,7 @@ def test_reboot_is_refused_armed_and_restarts_the_onboard_state_disarmed(vehicle
     # the filter aligns again: arming is refused until it is ready
     seen = []
     refused = command(m, M.MAV_CMD_COMPONENT_ARM_DISARM, 1, seen=seen)
-    assert refused.result == M.MAV_RESULT_FAILED
+    assert refused.result == M.MAV_RESULT_DENIED
     assert wait_msg(m, "STATUSTEXT", lambda s: "EKF" in s.text, 5, seen)
     assert wait_msg(m, "EKF_STATUS_REPORT", lambda e: e.flags & EKF_READY, 30)
     m.set_mode("GUIDED")
