@@ -157,6 +157,18 @@ class WinchParams(Params):
     max_extrapolation_s: float = quantity(
         0.1, "s", "the UAV's reported position is carried forward by its velocity to the "
         "winch's sample time over gaps up to this", ge=0)
+    ground_tension_n: float = quantity(
+        0.3, "N", "RELAXED with the UAV on the ground (or its position unknown): the drum "
+        "holds this tension on the line (a pre-tension: the line lies straight, the guide "
+        "arm follows it and the tether fix stays readable); 0: it holds its length", ge=0)
+    ground_height_m: float = quantity(
+        0.6, "m", "the UAV counts as on the ground while it reports a height below this "
+        "(at rest on its gear it reports about its gear height)", ge=0)
+    ground_tension_gain_m_s_n: float = quantity(
+        0.4, "m/(s*N)", "the pre-tension's loop: line speed of the length reference per "
+        "newton of tension off the target (paid out above it, wound in below it)", gt=0)
+    ground_tension_rate_m_s: float = quantity(
+        0.2, "m/s", "the pre-tension's loop: its fastest line speed", gt=0)
 
 
 class Notice(NamedTuple):
@@ -319,6 +331,7 @@ class Winch:
         self._hold_m = math.nan
         self._rejoin_m = math.nan           # RELAXED's reference while rejoining L-bar
         self._rejoin_rate = 0.0             # its wind-in speed [m/s]
+        self._ground = False                # RELAXED holding the ground pre-tension
         self._limit_noticed = False
         self._lock_noticed = False
         #: the torque law's last output (torque, Lyapunov function, ...), for diagnostics
@@ -630,7 +643,11 @@ class Winch:
                     self._rejoin_rate = rate
                     self._rejoin_m -= rate * dt
                     self.ref_m, self.ref_rate_m_s = self._rejoin_m, -rate
-            if uav is not None and math.isfinite(self._rejoin_m):
+            if self._on_ground(uav):
+                self._ground_reference()
+                command = self.host.controller.update(self.dt_s, length, omega, tension,
+                                                      self.ref_m, self.ref_rate_m_s)
+            elif uav is not None and math.isfinite(self._rejoin_m):
                 command = self.host.controller.update(self.dt_s, length, omega, tension,
                                                       self.ref_m, self.ref_rate_m_s)
             elif uav is not None:
@@ -649,6 +666,40 @@ class Winch:
         self.last_command = command
         torque = command.torque_n_m
         return torque if math.isfinite(torque) else 0.0
+
+    def _on_ground(self, uav: UavState | None) -> bool:
+        """Whether RELAXED holds the ground pre-tension now (module docstring): the UAV on
+        the ground by its report (or none yet), a load cell to hold it with. Leaving it, a
+        line longer than L-bar rejoins it at ``rejoin_rate_m_s``."""
+        ground = (self.p.ground_tension_n > 0.0 and math.isfinite(self.tension_n)
+                  and (uav is None or uav[0][2] < self.p.ground_height_m))
+        if ground and not self._ground:
+            self.ref_m, self.ref_rate_m_s = self.length_m, 0.0
+        elif self._ground and not ground:
+            lbar_m = self.host.lbar.length(uav[0])[0] if uav is not None else math.nan
+            self._rejoin_m = (self.length_m if math.isfinite(lbar_m)
+                              and self.length_m > lbar_m + REJOIN_MARGIN_M else math.nan)
+            self._rejoin_rate = 0.0
+            self._hold_m = self.length_m
+        self._ground = ground
+        return ground
+
+    def _ground_reference(self) -> None:
+        """One period of the pre-tension's length reference: paid out or wound in at a
+        speed proportional to the tension's error (at most ``ground_tension_rate_m_s``),
+        never below the taut floor while the UAV's position is known, nor past the drum's
+        ends."""
+        p, dt = self.p, self.dt_s
+        rate = p.ground_tension_gain_m_s_n * (self.tension_n - p.ground_tension_n)
+        rate = max(-p.ground_tension_rate_m_s, min(p.ground_tension_rate_m_s, rate))
+        ref = self.ref_m + rate * dt
+        floor, _ = self.taut_floor()
+        lower = max(floor, self.length_min_m) if math.isfinite(floor) else self.length_min_m
+        if ref < lower:
+            ref, rate = lower, 0.0
+        if ref > self.length_max_m:
+            ref, rate = self.length_max_m, 0.0
+        self.ref_m, self.ref_rate_m_s = ref, rate
 
     def _advance_reference(self, out: WinchOutput) -> None:
         """One period of the reference of modes 1, 2 and 6, then the safety limits."""
@@ -852,6 +903,7 @@ class Winch:
         start = self.length_m
         if mode == WinchMode.RELAXED:
             self._hold_m = start
+            self._ground = False
             # a line longer than L-bar (after a pay-out) is wound back in at a bounded rate
             uav = self.uav_now()
             lbar_m = self.host.lbar.length(uav[0])[0] if uav is not None else math.nan
