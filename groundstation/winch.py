@@ -25,8 +25,11 @@ Two clocks:
 Modes (the ``WINCH_ACTIONS`` value of the last accepted ``DO_WINCH``):
 
 - ``WINCH_RELAXED`` (0, the default): the drum follows L-bar through
-  :meth:`WinderHost.update` (slack, never taut). Until the UAV's position is known it holds
-  the length it had.
+  :meth:`WinderHost.update` (slack, never taut). While the UAV's position is unknown, or it
+  reports a height below ``ground_height_m`` (on the ground), the drum holds the line at
+  ``ground_tension_n`` instead (a pre-tension: the line straight to the vehicle and
+  readable by the guide arm; a rate-limited loop on the load cell's tension, never below
+  the taut floor); without a load-cell reading it holds the length it had.
 - ``WINCH_RELATIVE_LENGTH_CONTROL`` (1): from the measured length, pay out (+) or wind in
   (-) ``param3`` m at ``|param4|`` m/s (``default_rate_m_s`` if 0 or NaN), then hold: the
   backstepping law (the host's own :class:`WinderController`) tracks this ramped
@@ -322,6 +325,7 @@ class Winch:
         self.uav: UavState | None = None
         self.uav_time_ms: int | None = None
         self.sample_time_ms: int | None = None
+        self._sensor_clock_ms: int | None = None   # Sample_Time unwrapped [ms]
         # reference of modes 1, 2, 6 and of RELAXED without a UAV position
         self.ref_m = math.nan
         self.ref_rate_m_s = 0.0
@@ -411,6 +415,15 @@ class Winch:
         return ((px + vx * gap, py + vy * gap, pz + vz * gap), (vx, vy, vz))
 
     @property
+    def sensor_clock_s(self) -> float | None:
+        """The winch sensor node's clock [s]: the last ``Winch_Tension`` Sample_Time,
+        unwrapped from its 16 bits (the plant's simulated time), None before one came. A
+        process in lockstep with the plant hands the winch this as its time
+        (``python -m groundstation --clock frames``)."""
+        c = self._sensor_clock_ms
+        return None if c is None else c * 1e-3
+
+    @property
     def braked(self) -> bool:
         """The winch keeps the axis IDLE (brake engaged): LOCK, HOLD or encoder lost."""
         return self.mode in BRAKED_MODES or self.lost
@@ -484,6 +497,12 @@ class Winch:
 
     def _winch_tension_frame(self, wall_s: float, data: bytes) -> None:
         tension_n, self.sensor_brake, self.sample_time_ms = cp.decode_winch_tension(data)
+        prev = self._sensor_clock_ms
+        if prev is None:
+            self._sensor_clock_ms = self.sample_time_ms
+        else:
+            d = (self.sample_time_ms - prev) & 0xFFFF
+            self._sensor_clock_ms = prev + (d - 0x10000 if d >= 0x8000 else d)
         if math.isfinite(tension_n):
             self.tension_n = tension_n
 
