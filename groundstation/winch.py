@@ -28,8 +28,10 @@ Modes (the ``WINCH_ACTIONS`` value of the last accepted ``DO_WINCH``):
   :meth:`WinderHost.update` (slack, never taut). While the UAV's position is unknown, or it
   reports a height below ``ground_height_m`` (on the ground), the drum holds the line at
   ``ground_tension_n`` instead (a pre-tension: the line straight to the vehicle and
-  readable by the guide arm; a rate-limited loop on the load cell's tension, never below
-  the taut floor); without a load-cell reading it holds the length it had.
+  readable by the guide arm; a loop on the load cell's tension, winding in slowly, paying
+  out fast (holding instead while no position is known), never below the taut floor); a UAV reporting a speed of ``ground_speed_m_s``
+  or more is taking off, and L-bar takes over. Without a load-cell reading it holds the
+  length it had.
 - ``WINCH_RELATIVE_LENGTH_CONTROL`` (1): from the measured length, pay out (+) or wind in
   (-) ``param3`` m at ``|param4|`` m/s (``default_rate_m_s`` if 0 or NaN), then hold: the
   backstepping law (the host's own :class:`WinderController`) tracks this ramped
@@ -171,7 +173,11 @@ class WinchParams(Params):
         0.4, "m/(s*N)", "the pre-tension's loop: line speed of the length reference per "
         "newton of tension off the target (paid out above it, wound in below it)", gt=0)
     ground_tension_rate_m_s: float = quantity(
-        0.2, "m/s", "the pre-tension's loop: its fastest line speed", gt=0)
+        0.2, "m/s", "the pre-tension's loop: its fastest wind-in (it pays out as fast as "
+        "the law allows)", gt=0)
+    ground_speed_m_s: float = quantity(
+        0.3, "m/s", "the UAV counts as on the ground only while it also reports a speed "
+        "below this (a take-off ends the pre-tension at once)", gt=0)
 
 
 class Notice(NamedTuple):
@@ -690,8 +696,12 @@ class Winch:
         """Whether RELAXED holds the ground pre-tension now (module docstring): the UAV on
         the ground by its report (or none yet), a load cell to hold it with. Leaving it, a
         line longer than L-bar rejoins it at ``rejoin_rate_m_s``."""
-        ground = (self.p.ground_tension_n > 0.0 and math.isfinite(self.tension_n)
-                  and (uav is None or uav[0][2] < self.p.ground_height_m))
+        p = self.p
+        ground = p.ground_tension_n > 0.0 and math.isfinite(self.tension_n)
+        if ground and uav is not None:
+            (_, _, z), (vx, vy, vz) = uav
+            ground = (z < p.ground_height_m
+                      and vx * vx + vy * vy + vz * vz < p.ground_speed_m_s ** 2)
         if ground and not self._ground:
             self.ref_m, self.ref_rate_m_s = self.length_m, 0.0
         elif self._ground and not ground:
@@ -705,12 +715,16 @@ class Winch:
 
     def _ground_reference(self) -> None:
         """One period of the pre-tension's length reference: paid out or wound in at a
-        speed proportional to the tension's error (at most ``ground_tension_rate_m_s``),
-        never below the taut floor while the UAV's position is known, nor past the drum's
-        ends."""
+        speed proportional to the tension's error (wound in at most at
+        ``ground_tension_rate_m_s``, paid out at most at the law's speed limit, held
+        instead while no UAV position is known), never below the taut floor while one is,
+        nor past the drum's ends."""
         p, dt = self.p, self.dt_s
         rate = p.ground_tension_gain_m_s_n * (self.tension_n - p.ground_tension_n)
-        rate = max(-p.ground_tension_rate_m_s, min(p.ground_tension_rate_m_s, rate))
+        # a pull above the pre-tension with no position known yet is held, as the drum
+        # held its length before (a vehicle in the air the filter has not found)
+        high = self.max_rate_m_s if self.uav is not None else 0.0
+        rate = max(-p.ground_tension_rate_m_s, min(high, rate))
         ref = self.ref_m + rate * dt
         floor, _ = self.taut_floor()
         lower = max(floor, self.length_min_m) if math.isfinite(floor) else self.length_min_m

@@ -876,21 +876,26 @@ def test_relaxed_holds_a_ground_pre_tension_while_the_uav_is_unknown_or_on_the_g
     speed = min(p.ground_tension_gain_m_s_n * p.ground_tension_n, p.ground_tension_rate_m_s)
     assert refs[-1][1] == pytest.approx(-speed)
     assert refs[-1][0] == pytest.approx(5.0 - 101 * DT * speed, abs=1e-6)  # (+ the first)
-    tension(w, 1.0, p.ground_tension_n + 0.1)   # a little above it: paid out, in proportion
-    assert track(w, 1, 2.0)[-1][1] == pytest.approx(p.ground_tension_gain_m_s_n * 0.1)
-    tension(w, 1.0, p.ground_tension_n + 10.0)  # far above it: at the fastest rate
-    assert track(w, 1, 2.0)[-1][1] == pytest.approx(p.ground_tension_rate_m_s)
-    # the UAV on its gear 2 m out, reported: wound in down to its taut floor, no further
+    tension(w, 1.0, p.ground_tension_n + 0.1)   # above it, no position known: held
+    assert track(w, 1, 2.0)[-1][1] == 0.0
+    # the UAV on its gear 2 m out, reported: above it paid out in proportion, far above
+    # it as fast as the law goes; below it wound in down to its taut floor, no further
     gear = ((2.0, 0.0, 0.2), (0.0, 0.0, 0.0))
     w.set_uav(gear)
+    assert track(w, 1, 2.0)[-1][1] == pytest.approx(p.ground_tension_gain_m_s_n * 0.1)
+    tension(w, 1.0, p.ground_tension_n + 100.0)
+    assert track(w, 1, 2.0)[-1][1] == pytest.approx(w.max_rate_m_s)
     tension(w, 3.0, 0.0)
     floor, _ = w.taut_floor()
     last = track(w, 3000, 3.0)[-1]
     assert last[0] == pytest.approx(floor, abs=1e-9) and last[1] == 0.0
-    # in the air: L-bar's law
+    # taking off (climbing, still low), then in the air: L-bar's law
+    w.set_uav(((2.0, 0.0, 0.3), (0.0, 0.0, 0.5)))
+    encoder(w, 30.0, floor)
+    host = WinderHost(WinderControlParams(), LBarParams(), PARAMS.winder, PARAMS.tether, G)
+    assert w.reference()[0] == pytest.approx(host.lbar.length((2.0, 0.0, 0.3))[0], abs=1e-5)
     w.set_uav(UAV)
     encoder(w, 30.0, 13.5)
-    host = WinderHost(WinderControlParams(), LBarParams(), PARAMS.winder, PARAMS.tether, G)
     assert w.reference()[0] == pytest.approx(host.lbar.length(UAV[0])[0], abs=1e-5)
     # without a pre-tension (or a load cell: the earlier test) it holds its length
     w2 = Winch(w.host, PARAMS.winder, PARAMS.tether, G, w.p.replace(ground_tension_n=0.0))
