@@ -218,7 +218,7 @@ class TetherFixer:
             # below that bound (the fix must not follow the winch's own pay-out outward)
             out = math.hypot(mean[0], mean[1])
             rep = math.hypot(reported_m[0], reported_m[1])
-            if rep < out and out > 0.0 and T < p.ground_straight_tension_n:
+            if rep < out and out > 0.0 and p.ground_straight_tension_n > T:
                 k = rep / out
                 mean = (mean[0] * k, mean[1] * k, mean[2])
         elif ground:

@@ -26,12 +26,12 @@ Modes (the ``WINCH_ACTIONS`` value of the last accepted ``DO_WINCH``):
 
 - ``WINCH_RELAXED`` (0, the default): the drum follows L-bar through
   :meth:`WinderHost.update` (slack, never taut). While the UAV's position is unknown, or it
-  reports a height below ``ground_height_m`` (on the ground), the drum holds the line at
-  ``ground_tension_n`` instead (a pre-tension: the line straight to the vehicle and
-  readable by the guide arm; a loop on the load cell's tension, winding in slowly, paying
-  out fast (holding instead while no position is known), never below the taut floor); a UAV reporting a speed of ``ground_speed_m_s``
-  or more is taking off, and L-bar takes over. Without a load-cell reading it holds the
-  length it had.
+  reports a height below ``ground_height_m`` and no climb of ``ground_climb_m_s`` (on the
+  ground; a climb is a take-off), the drum holds the line at ``ground_tension_n`` instead:
+  a pre-tension, the line straight to the vehicle and readable by the guide arm; a loop on
+  the load cell's tension, winding in slowly, paying out fast (holding instead while no
+  position is known), never below the taut floor. Without a load-cell reading it holds
+  the length it had.
 - ``WINCH_RELATIVE_LENGTH_CONTROL`` (1): from the measured length, pay out (+) or wind in
   (-) ``param3`` m at ``|param4|`` m/s (``default_rate_m_s`` if 0 or NaN), then hold: the
   backstepping law (the host's own :class:`WinderController`) tracks this ramped
@@ -170,14 +170,15 @@ class WinchParams(Params):
         0.6, "m", "the UAV counts as on the ground while it reports a height below this "
         "(at rest on its gear it reports about its gear height)", ge=0)
     ground_tension_gain_m_s_n: float = quantity(
-        0.4, "m/(s*N)", "the pre-tension's loop: line speed of the length reference per "
+        1.0, "m/(s*N)", "the pre-tension's loop: line speed of the length reference per "
         "newton of tension off the target (paid out above it, wound in below it)", gt=0)
     ground_tension_rate_m_s: float = quantity(
         0.2, "m/s", "the pre-tension's loop: its fastest wind-in (it pays out as fast as "
         "the law allows)", gt=0)
-    ground_speed_m_s: float = quantity(
-        0.3, "m/s", "the UAV counts as on the ground only while it also reports a speed "
-        "below this (a take-off ends the pre-tension at once)", gt=0)
+    ground_climb_m_s: float = quantity(
+        0.3, "m/s", "the UAV counts as on the ground only while it also reports climbing "
+        "slower than this (a take-off ends the pre-tension at once; a landing's descent "
+        "does not delay it)", gt=0)
 
 
 class Notice(NamedTuple):
@@ -699,9 +700,7 @@ class Winch:
         p = self.p
         ground = p.ground_tension_n > 0.0 and math.isfinite(self.tension_n)
         if ground and uav is not None:
-            (_, _, z), (vx, vy, vz) = uav
-            ground = (z < p.ground_height_m
-                      and vx * vx + vy * vy + vz * vz < p.ground_speed_m_s ** 2)
+            ground = uav[0][2] < p.ground_height_m and uav[1][2] < p.ground_climb_m_s
         if ground and not self._ground:
             self.ref_m, self.ref_rate_m_s = self.length_m, 0.0
         elif self._ground and not ground:
