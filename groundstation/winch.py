@@ -17,10 +17,14 @@ Two clocks:
   advance by one period per frame, and ``WINCH_STATUS`` goes out every
   ``round(1 / (status_rate_hz x period))`` frames (every 5th: 20 Hz). The drum's position
   cannot serve as a clock: it does not change while the drum holds still.
-- **Wall time** decides that the encoder is lost (no frame for ``encoder_timeout_s``,
-  0.1 s) and sends ``WINCH_STATUS`` whenever ``status_wall_period_s`` (0.09 s) has passed
-  without one (lost, or frames slower than about half real time), so that with the
-  process's 10 ms loop no gap exceeds 0.1 s.
+- **The time it is handed** (``wall_s`` of every call: the process's monotonic clock, or,
+  with a plant in lockstep, the sensor node's clock :attr:`Winch.sensor_clock_s`; the
+  offline runner's simulated time) decides that the encoder is lost (no frame for
+  ``encoder_timeout_s``, 0.1 s), the notices' and re-arms' spacing, and sends
+  ``WINCH_STATUS`` whenever ``status_wall_period_s`` (0.09 s) has passed without one (lost,
+  or frames slower than about half real time), so that with the process's 10 ms loop no
+  gap exceeds 0.1 s. The winch reads no clock of its own: given the same times it does
+  the same.
 
 Modes (the ``WINCH_ACTIONS`` value of the last accepted ``DO_WINCH``):
 
