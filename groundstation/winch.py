@@ -179,6 +179,9 @@ class WinchParams(Params):
     ground_tension_rate_m_s: float = quantity(
         0.2, "m/s", "the pre-tension's loop: its fastest wind-in (it pays out as fast as "
         "the law allows)", gt=0)
+    ground_lbar_tension_ratio: float = quantity(
+        2.0, "1", "a take-off goes on holding the pre-tension while L-bar at the reported "
+        "position asks for more than this times its target horizontal tension", gt=1)
     ground_climb_m_s: float = quantity(
         0.3, "m/s", "the UAV counts as on the ground only while it also reports climbing "
         "slower than this (a take-off ends the pre-tension at once; a landing's descent "
@@ -704,7 +707,14 @@ class Winch:
         p = self.p
         ground = p.ground_tension_n > 0.0 and math.isfinite(self.tension_n)
         if ground and uav is not None:
-            ground = uav[0][2] < p.ground_height_m and uav[1][2] < p.ground_climb_m_s
+            pos = uav[0]
+            low = pos[2] < p.ground_height_m and uav[1][2] < p.ground_climb_m_s
+            # a take-off goes on holding it while L-bar would ask for a nearly straight
+            # line (the UAV low and far: L-bar's horizontal tension a w far above its
+            # target), which only an exact position keeps off taut
+            flat = (self._ground and self.host.lbar.length(pos)[1]
+                    > p.ground_lbar_tension_ratio * self.host.lbar.a_target)
+            ground = low or flat
         if ground and not self._ground:
             self.ref_m, self.ref_rate_m_s = self.length_m, 0.0
         elif self._ground and not ground:
