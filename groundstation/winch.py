@@ -350,6 +350,7 @@ class Winch:
         self._rejoin_m = math.nan           # RELAXED's reference while rejoining L-bar
         self._rejoin_rate = 0.0             # its wind-in speed [m/s]
         self._ground = False                # RELAXED holding the ground pre-tension
+        self._ground_low = False            # ... since the UAV reported itself on the ground
         self._limit_noticed = False
         self._lock_noticed = False
         #: the torque law's last output (torque, Lyapunov function, ...), for diagnostics
@@ -712,7 +713,9 @@ class Winch:
             # a take-off goes on holding it while L-bar would ask for a nearly straight
             # line (the UAV low and far: L-bar's horizontal tension a w far above its
             # target), which only an exact position keeps off taut
-            flat = (self._ground and self.host.lbar.length(pos)[1]
+            if low:
+                self._ground_low = True
+            flat = (self._ground and self._ground_low and self.host.lbar.length(pos)[1]
                     > p.ground_lbar_tension_ratio * self.host.lbar.a_target)
             ground = low or flat
         if ground and not self._ground:
@@ -724,6 +727,8 @@ class Winch:
             self._rejoin_rate = 0.0
             self._hold_m = self.length_m
         self._ground = ground
+        if not ground:
+            self._ground_low = False
         return ground
 
     def _ground_reference(self) -> None:
