@@ -889,11 +889,20 @@ def test_relaxed_holds_a_ground_pre_tension_while_the_uav_is_unknown_or_on_the_g
     floor, _ = w.taut_floor()
     last = track(w, 3000, 3.0)[-1]
     assert last[0] == pytest.approx(floor, abs=1e-9) and last[1] == 0.0
-    # taking off (climbing, still low), then in the air: L-bar's law
-    w.set_uav(((2.0, 0.0, 0.3), (0.0, 0.0, 0.5)))
-    encoder(w, 30.0, floor)
+    # taking off: climbing, still so low that L-bar would ask for more than twice its
+    # tension (a nearly straight line): the pre-tension goes on; higher up, L-bar's law
     host = WinderHost(WinderControlParams(), LBarParams(), PARAMS.winder, PARAMS.tether, G)
-    assert w.reference()[0] == pytest.approx(host.lbar.length((2.0, 0.0, 0.3))[0], abs=1e-5)
+    low = (2.0, 0.0, 0.3)
+    assert host.lbar.length(low)[1] > p.ground_lbar_tension_ratio * host.lbar.a_target
+    w.set_uav((low, (0.0, 0.0, 0.5)))
+    encoder(w, 30.0, floor)
+    assert w.reference() != (pytest.approx(host.lbar.length(low)[0], abs=1e-5), 0.0)
+    assert w.reference()[0] >= w.taut_floor()[0]
+    high = (2.0, 0.0, 3.0)
+    assert host.lbar.length(high)[1] < p.ground_lbar_tension_ratio * host.lbar.a_target
+    w.set_uav((high, (0.0, 0.0, 0.5)))
+    encoder(w, 30.0, floor)
+    assert w.reference()[0] == pytest.approx(host.lbar.length(high)[0], abs=1e-5)
     w.set_uav(UAV)
     encoder(w, 30.0, 13.5)
     assert w.reference()[0] == pytest.approx(host.lbar.length(UAV[0])[0], abs=1e-5)
