@@ -31,7 +31,9 @@ Modes (the ``WINCH_ACTIONS`` value of the last accepted ``DO_WINCH``):
 - ``WINCH_RELAXED`` (0, the default): the drum follows L-bar through
   :meth:`WinderHost.update` (slack, never taut). While the UAV's position is unknown, or it
   reports a height below ``ground_height_m`` and no climb of ``ground_climb_m_s`` (on the
-  ground; a climb is a take-off), the drum holds the line at ``ground_tension_n`` instead:
+  ground; a climb is a take-off, which keeps it only while L-bar would ask for more than
+  ``ground_lbar_tension_ratio`` times its tension), the drum holds the line at
+  ``ground_tension_n`` instead:
   a pre-tension, the line straight to the vehicle and readable by the guide arm; a loop on
   the load cell's tension, winding in slowly, paying out fast (holding instead while no
   position is known), never below the taut floor. Without a load-cell reading it holds
