@@ -245,6 +245,12 @@ class EstimatorParams(Params):
     tether_reset_s: float = quantity(
         5.0, "s", "tether fixes rejected for this long without GNSS: the position is reset "
         "to the fix", gt=0)
+    stationary_vel_noise_m_s: float = quantity(
+        0.05, "m/s", "on the ground and disarmed (at rest on its gear): a zero velocity is "
+        "fused with this noise on each axis (the stationary constraint EKF2 and EKF3 use on "
+        "the ground without GNSS: the estimate does not drift)", gt=0)
+    stationary_interval_s: float = quantity(
+        0.1, "s", "the stationary constraint's interval", gt=0)
     tether_align_vel_sigma_m_s: float = quantity(
         0.5, "m/s", "velocity standard deviation when the filter aligns on a tether fix "
         "(no GNSS velocity): the vehicle is taken to be near rest", gt=0)
@@ -844,6 +850,20 @@ def fuse_position_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np
 
 
 @njit
+def fuse_zero_velocity_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray,
+                              meta: np.ndarray, dx: np.ndarray, var_min: float,
+                              r: float) -> bool:
+    """A zero velocity of now on each axis with noise variance ``r`` [m^2/s^2], ungated
+    (the stationary constraint of a vehicle at rest on its gear)."""
+    ok = True
+    for i in range(3):
+        ok = scalar_update(P, dx, var_min, -x[3 + i], r, 3 + i, 1.0, -1, 0.0, -1,
+                           0.0) and ok
+    inject(x, dx, buf, meta)
+    return ok
+
+
+@njit
 def _cholesky3(s00: float, s01: float, s02: float, s11: float, s12: float, s22: float
                ) -> tuple[bool, float, float, float, float, float, float]:
     """The lower Cholesky factor of the symmetric 3 x 3 matrix of upper triangle ``s``:
@@ -1001,6 +1021,7 @@ class NavFilter:
         self._t_gnss_vel: float = -math.inf
         self._t_gnss_hgt: float = -math.inf
         self._t_baro: float = -math.inf
+        self._t_stationary: float = -math.inf
         self._t_fix: float = -math.inf        # last usable fix received
         self._fail_since = {"gnss": math.inf, "baro": math.inf, "mag": math.inf}
         self._glitch = False
@@ -1037,6 +1058,8 @@ class NavFilter:
                                     0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         self._pos_k = entry_point(fuse_position_kernel, x, P, buf, meta, dx, 0.0, 0.0, 0.0,
                                   0.0)
+        self._zero_vel_k = entry_point(fuse_zero_velocity_kernel, x, P, buf, meta, dx, 0.0,
+                                       0.0)
         self._tether_k = (entry_point(fuse_tether_kernel, x, P, buf, meta, dx, diag, dl, 0.0,
                                       0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
                                       0.0) if self.params.tether_aid else None)
@@ -1173,6 +1196,22 @@ class NavFilter:
                 self._glitch = False
                 accepted = True
         return accepted
+
+    def fuse_stationary(self, t_s: float) -> bool:
+        """The vehicle is at rest on its gear at ``t_s`` [s] (the caller knows: landed and
+        disarmed): a zero velocity fused, every ``stationary_interval_s``. Returns whether
+        it was fused."""
+        p = self.params
+        if not self._aligned or t_s - self._t_stationary < p.stationary_interval_s:
+            return False
+        self._t_stationary = t_s
+        before = self._x[0:6].copy()
+        ok = self._zero_vel_k(self._x, self._P, self._buf, self._meta, self._dx,
+                              self._var_min, p.stationary_vel_noise_m_s ** 2)
+        self._lag_correction(before)
+        if not ok:
+            self._numeric_refusals += 1
+        return bool(ok)
 
     def fuse_tether(self, t_s: float, t_meas_s: float, pos_m: Sequence[float],
                     cov_m2: Sequence[Sequence[float]]) -> bool:

@@ -13,7 +13,8 @@ What ArduCopter does and this follows:
 - Take-off (GUIDED ``NAV_TAKEOFF``, or the mission's take-off item) climbs straight up at
   ``speed_up_m_s`` to the altitude asked for.
 - LAND descends where it is: at ``speed_down_m_s`` to ``land_alt_low_m``, then at
-  ``land_speed_m_s``; the land detector (on the gear, still, for ``land_detect_s``)
+  ``land_speed_m_s``; the land detector (on the gear, or pushed ``land_stall_m`` below
+  its reference, still, for ``land_detect_s``)
   disarms. RTL climbs to ``rtl_alt_m`` if lower, flies back above its launch point (home),
   and lands there, while the ground winds the tether in (the winder follows L-bar).
 - LOITER, BRAKE, POSHOLD, ALT_HOLD and STABILIZE hold the position where they begin
@@ -111,6 +112,10 @@ class NavigationParams(Params):
                                      "take-off: disarm (0: never)", ge=0)
     land_detect_s: float = quantity(1.0, "s", "on the gear and still this long: landed",
                                     gt=0)
+    land_stall_m: float = quantity(
+        0.5, "m", "the land detector also takes a final descent whose reference has gone "
+        "this far below the vehicle while it stays still (ArduCopter's: pushed down, not "
+        "moving: on the ground, whatever the height estimate says)", gt=0)
     reach_fraction: float = quantity(0.95, "1", "share of the tether a target may need "
                                      "(straight-line distance + slack)", gt=0, le=1)
     reach_slack_m: float = quantity(0.5, "m", "slack added to a target's distance in the "
@@ -816,7 +821,10 @@ class Navigator:
 
     def _land_detector(self, t: float, pos: Vec3, vel: Vec3) -> None:
         leg = self._leg
-        if (leg is not None and leg.landing and pos[2] <= self.gear_height_m + 0.05
+        ref = self._ref
+        down = (pos[2] <= self.gear_height_m + 0.05
+                or (ref is not None and ref.pos_m[2] <= pos[2] - self.p.land_stall_m))
+        if (leg is not None and leg.landing and down
                 and math.sqrt(vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2]) < 0.3):
             if self._still_since is None:
                 self._still_since = t

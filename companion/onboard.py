@@ -286,6 +286,8 @@ class Companion:
             f.predict(t, imu.gyro_flu_rad_s, imu.accel_flu_m_s2)
             f.fuse_baro(t, imu.pressure_alt_m)
             f.fuse_mag(t, imu.mag_flu_gauss)
+        if self.started and self.nav.landed and not self.nav.armed:
+            f.fuse_stationary(t)     # at rest on its gear: no drift without GNSS
         if self._external:
             self._fuse_external(t)
         self._check_health(t)

@@ -65,7 +65,7 @@ NAV_NAMES: dict[str, str | WireName | tuple[WireName, ...]] = {
     "acceptance_radius_m": WireName("WPNAV_RADIUS", scale=_CM, unit="cm"),
     "takeoff_accept_m": "TUAV_TKOFF_ACC",
     "disarm_delay_s": WireName("DISARM_DELAY", param_type=_I8),
-    "land_detect_s": "TUAV_LAND_DET_T",
+    "land_detect_s": "TUAV_LAND_DET_T", "land_stall_m": "TUAV_LAND_STALL",
     "reach_fraction": "TUAV_TETH_REACH", "reach_slack_m": "TUAV_TETH_SLACK",
     "guided_velocity_timeout_s": "GUID_TIMEOUT",
     "tension_limit_n": "TUAV_TENS_MAX", "tension_step_m": "TUAV_TENS_STEP",

@@ -14,9 +14,12 @@ The UAV's position and velocity come from the companion's component link (MAVLin
 ``LOCAL_POSITION_NED`` over TCP, ``--mavlink``), with the ground stations' commands
 (``COMMAND_LONG``/``COMMAND_INT``, answered with ``COMMAND_ACK``); the winch's state goes
 back on the same link as ``WINCH_STATUS`` (20 Hz of simulated time, at least every 0.1 s of
-wall time) and ``STATUSTEXT``. Until the first position arrives the law holds the length
-the drum had. Encoder frames missing for 0.1 s of wall time brake the drum until they come
-back.
+the winch's time) and ``STATUSTEXT``. Until the first position arrives, and while the UAV
+is on the ground, the drum holds a small pre-tension on the line. Encoder frames missing
+for 0.1 s of the winch's time brake the drum until they come back. The winch's time is this
+host's monotonic clock (``--clock wall``, the default: a real winder, or a plant in real
+time) or the winch sensor node's sample times (``--clock frames``: a plant in lockstep,
+which ``tuav-sitl up`` passes whenever it is not in real time).
 """
 
 from __future__ import annotations
@@ -63,6 +66,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="MAVLink 2 signing key of the component link (64 hexadecimal "
                          "digits; a missing or empty file: unsigned until the vehicle "
                          "sets a key)")
+    ap.add_argument("--clock", choices=("wall", "frames"), default="wall",
+                    help="the winch's time: wall (this host's monotonic clock: a real winder, "
+                         "or a plant in real time) or frames (the winch sensor node's sample "
+                         "times: a plant in lockstep, whose stalls are no lost encoder)")
     ap.add_argument("--duration", type=float, default=None, help="stop after [s] of wall time")
     return ap
 
@@ -110,6 +117,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     handle = winch.handle_frame
     start = time.monotonic()
+    if args.clock == "frames":
+        # the plant's simulated time, as the frames bring it (ArduPilot's SITL runs its
+        # timers on simulated time likewise): a plant that waits is not a lost encoder
+        def now_s() -> float:
+            c = winch.sensor_clock_s
+            return 0.0 if c is None else c
+    else:
+        now_s = time.monotonic
     was_lost = False
     positions_seen = 0
     # the start-up's objects (numpy, numba, pymavlink and their modules: most of the heap)
@@ -128,10 +143,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             rx = link.recv(timeout_s=LOOP_S)
             frames = () if rx is None else [rx, *link.recv_ready()]
             for rx in frames:
-                out = handle(time.monotonic(), rx.arbitration_id, rx.data, rx.is_remote)
+                out = handle(now_s(), rx.arbitration_id, rx.data, rx.is_remote)
                 if out is not None:
                     emit(out)
-            now = time.monotonic()
+            now = now_s()
             if now >= winch.next_poll_s():
                 emit(winch.poll(now))
             if mav is not None:
@@ -141,7 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     winch.set_uav(mav.uav_state(), mav.uav_state_time_ms())
                 if mav.commands_waiting:
                     for req in mav.take_commands():
-                        reply = winch.command(req, time.monotonic())
+                        reply = winch.command(req, now_s())
                         if reply is None:
                             continue
                         mav.command_ack(reply.command, reply.result, reply.target_system,

@@ -18,8 +18,10 @@ line lies on the ground for a length ``L_g`` (frictionless: the tension along it
 ``T0``) and hangs from there with its lowest point at the touchdown, ``a = T0/w``. With the
 UAV's height ``z`` as the vehicle reports it, the hanging part is ``s = sqrt(z^2 + 2 a z)``
 long and ``a acosh(1 + z/a)`` wide, so the UAV is at most ``L - s + a acosh(1 + z/a)`` out
-along the azimuth (the line straight on the ground; lying in curves it ends nearer): the fix
-is the reported distance kept below that bound, on the azimuth. It says nothing of the
+along the azimuth (the line straight on the ground; lying in curves it ends nearer). A line
+pulling ``ground_straight_tension_n`` or more (the winch's ground pre-tension) lies
+straight: the fix is that end; a slacker one's fix is the reported distance kept below it,
+on the azimuth. It says nothing of the
 height (its vertical variance is ``ground_vertical_sigma_m^2``) and the reported height's
 uncertainty enters its horizontal.
 Without a reported height, the fix is the end of the line all on the ground (a vehicle on
@@ -80,6 +82,11 @@ class TetherFixParams(Params):
     ground_elevation_rad: float = quantity(
         0.03, "rad", "an exit elevation below this is taken as the line lying on the ground "
         "at the exit (or leaving it flat: the ground model covers both)", ge=0)
+    ground_straight_tension_n: float = quantity(
+        0.15, "N", "line on the ground: a pull at the exit of at least this (the winch's "
+        "ground pre-tension) is taken as the line lying straight along the ground, the fix "
+        "its end; a slacker line may lie in curves: the fix is then the reported distance "
+        "held below that end", ge=0)
     reported_height_sigma_m: float = quantity(
         1.0, "m", "line on the ground: the uncertainty of the UAV's height as the vehicle "
         "reports it", gt=0)
@@ -206,12 +213,12 @@ class TetherFixer:
             d = (0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1]), 0.0)
             _outer(d, d, 1.0, acc)
             acc[2][2] += p.ground_vertical_sigma_m ** 2
-            # the line straight along the ground is the farthest the UAV can be; a line
-            # lying in curves ends nearer: the reported distance is kept below that bound
-            # (the fix must not follow the winch's own pay-out outward)
+            # the line straight along the ground is the farthest the UAV can be; a slack
+            # line may lie in curves and end nearer: then the reported distance is kept
+            # below that bound (the fix must not follow the winch's own pay-out outward)
             out = math.hypot(mean[0], mean[1])
             rep = math.hypot(reported_m[0], reported_m[1])
-            if rep < out and out > 0.0:
+            if rep < out and out > 0.0 and p.ground_straight_tension_n > T:
                 k = rep / out
                 mean = (mean[0] * k, mean[1] * k, mean[2])
         elif ground:

@@ -17,15 +17,26 @@ Two clocks:
   advance by one period per frame, and ``WINCH_STATUS`` goes out every
   ``round(1 / (status_rate_hz x period))`` frames (every 5th: 20 Hz). The drum's position
   cannot serve as a clock: it does not change while the drum holds still.
-- **Wall time** decides that the encoder is lost (no frame for ``encoder_timeout_s``,
-  0.1 s) and sends ``WINCH_STATUS`` whenever ``status_wall_period_s`` (0.09 s) has passed
-  without one (lost, or frames slower than about half real time), so that with the
-  process's 10 ms loop no gap exceeds 0.1 s.
+- **The time it is handed** (``wall_s`` of every call: the process's monotonic clock, or,
+  with a plant in lockstep, the sensor node's clock :attr:`Winch.sensor_clock_s`; the
+  offline runner's simulated time) decides that the encoder is lost (no frame for
+  ``encoder_timeout_s``, 0.1 s), the notices' and re-arms' spacing, and sends
+  ``WINCH_STATUS`` whenever ``status_wall_period_s`` (0.09 s) has passed without one (lost,
+  or frames slower than about half real time), so that with the process's 10 ms loop no
+  gap exceeds 0.1 s. The winch reads no clock of its own: given the same times it does
+  the same.
 
 Modes (the ``WINCH_ACTIONS`` value of the last accepted ``DO_WINCH``):
 
 - ``WINCH_RELAXED`` (0, the default): the drum follows L-bar through
-  :meth:`WinderHost.update` (slack, never taut). Until the UAV's position is known it holds
+  :meth:`WinderHost.update` (slack, never taut). While the UAV's position is unknown, or it
+  reports a height below ``ground_height_m`` and no climb of ``ground_climb_m_s`` (on the
+  ground; a climb is a take-off, which keeps it only while L-bar would ask for more than
+  ``ground_lbar_tension_ratio`` times its tension), the drum holds the line at
+  ``ground_tension_n`` instead:
+  a pre-tension, the line straight to the vehicle and readable by the guide arm; a loop on
+  the load cell's tension, winding in slowly, paying out fast (holding instead while no
+  position is known), never below the taut floor. Without a load-cell reading it holds
   the length it had.
 - ``WINCH_RELATIVE_LENGTH_CONTROL`` (1): from the measured length, pay out (+) or wind in
   (-) ``param3`` m at ``|param4|`` m/s (``default_rate_m_s`` if 0 or NaN), then hold: the
@@ -157,6 +168,26 @@ class WinchParams(Params):
     max_extrapolation_s: float = quantity(
         0.1, "s", "the UAV's reported position is carried forward by its velocity to the "
         "winch's sample time over gaps up to this", ge=0)
+    ground_tension_n: float = quantity(
+        0.3, "N", "RELAXED with the UAV on the ground (or its position unknown): the drum "
+        "holds this tension on the line (a pre-tension: the line lies straight, the guide "
+        "arm follows it and the tether fix stays readable); 0: it holds its length", ge=0)
+    ground_height_m: float = quantity(
+        0.6, "m", "the UAV counts as on the ground while it reports a height below this "
+        "(at rest on its gear it reports about its gear height)", ge=0)
+    ground_tension_gain_m_s_n: float = quantity(
+        1.0, "m/(s*N)", "the pre-tension's loop: line speed of the length reference per "
+        "newton of tension off the target (paid out above it, wound in below it)", gt=0)
+    ground_tension_rate_m_s: float = quantity(
+        0.2, "m/s", "the pre-tension's loop: its fastest wind-in (it pays out as fast as "
+        "the law allows)", gt=0)
+    ground_lbar_tension_ratio: float = quantity(
+        2.0, "1", "a take-off goes on holding the pre-tension while L-bar at the reported "
+        "position asks for more than this times its target horizontal tension", gt=1)
+    ground_climb_m_s: float = quantity(
+        0.3, "m/s", "the UAV counts as on the ground only while it also reports climbing "
+        "slower than this (a take-off ends the pre-tension at once; a landing's descent "
+        "does not delay it)", gt=0)
 
 
 class Notice(NamedTuple):
@@ -310,6 +341,7 @@ class Winch:
         self.uav: UavState | None = None
         self.uav_time_ms: int | None = None
         self.sample_time_ms: int | None = None
+        self._sensor_clock_ms: int | None = None   # Sample_Time unwrapped [ms]
         # reference of modes 1, 2, 6 and of RELAXED without a UAV position
         self.ref_m = math.nan
         self.ref_rate_m_s = 0.0
@@ -319,6 +351,8 @@ class Winch:
         self._hold_m = math.nan
         self._rejoin_m = math.nan           # RELAXED's reference while rejoining L-bar
         self._rejoin_rate = 0.0             # its wind-in speed [m/s]
+        self._ground = False                # RELAXED holding the ground pre-tension
+        self._ground_low = False            # ... since the UAV reported itself on the ground
         self._limit_noticed = False
         self._lock_noticed = False
         #: the torque law's last output (torque, Lyapunov function, ...), for diagnostics
@@ -398,6 +432,15 @@ class Winch:
         return ((px + vx * gap, py + vy * gap, pz + vz * gap), (vx, vy, vz))
 
     @property
+    def sensor_clock_s(self) -> float | None:
+        """The winch sensor node's clock [s]: the last ``Winch_Tension`` Sample_Time,
+        unwrapped from its 16 bits (the plant's simulated time), None before one came. A
+        process in lockstep with the plant hands the winch this as its time
+        (``python -m groundstation --clock frames``)."""
+        c = self._sensor_clock_ms
+        return None if c is None else c * 1e-3
+
+    @property
     def braked(self) -> bool:
         """The winch keeps the axis IDLE (brake engaged): LOCK, HOLD or encoder lost."""
         return self.mode in BRAKED_MODES or self.lost
@@ -471,6 +514,12 @@ class Winch:
 
     def _winch_tension_frame(self, wall_s: float, data: bytes) -> None:
         tension_n, self.sensor_brake, self.sample_time_ms = cp.decode_winch_tension(data)
+        prev = self._sensor_clock_ms
+        if prev is None:
+            self._sensor_clock_ms = self.sample_time_ms
+        else:
+            d = (self.sample_time_ms - prev) & 0xFFFF
+            self._sensor_clock_ms = prev + (d - 0x10000 if d >= 0x8000 else d)
         if math.isfinite(tension_n):
             self.tension_n = tension_n
 
@@ -630,7 +679,11 @@ class Winch:
                     self._rejoin_rate = rate
                     self._rejoin_m -= rate * dt
                     self.ref_m, self.ref_rate_m_s = self._rejoin_m, -rate
-            if uav is not None and math.isfinite(self._rejoin_m):
+            if self._on_ground(uav):
+                self._ground_reference()
+                command = self.host.controller.update(self.dt_s, length, omega, tension,
+                                                      self.ref_m, self.ref_rate_m_s)
+            elif uav is not None and math.isfinite(self._rejoin_m):
                 command = self.host.controller.update(self.dt_s, length, omega, tension,
                                                       self.ref_m, self.ref_rate_m_s)
             elif uav is not None:
@@ -649,6 +702,57 @@ class Winch:
         self.last_command = command
         torque = command.torque_n_m
         return torque if math.isfinite(torque) else 0.0
+
+    def _on_ground(self, uav: UavState | None) -> bool:
+        """Whether RELAXED holds the ground pre-tension now (module docstring): the UAV on
+        the ground by its report (or none yet), a load cell to hold it with. Leaving it, a
+        line longer than L-bar rejoins it at ``rejoin_rate_m_s``."""
+        p = self.p
+        ground = p.ground_tension_n > 0.0 and math.isfinite(self.tension_n)
+        if ground and uav is not None:
+            pos = uav[0]
+            low = pos[2] < p.ground_height_m and uav[1][2] < p.ground_climb_m_s
+            # a take-off goes on holding it while L-bar would ask for a nearly straight
+            # line (the UAV low and far: L-bar's horizontal tension a w far above its
+            # target), which only an exact position keeps off taut
+            if low:
+                self._ground_low = True
+            flat = (self._ground and self._ground_low and self.host.lbar.length(pos)[1]
+                    > p.ground_lbar_tension_ratio * self.host.lbar.a_target)
+            ground = low or flat
+        if ground and not self._ground:
+            self.ref_m, self.ref_rate_m_s = self.length_m, 0.0
+        elif self._ground and not ground:
+            lbar_m = self.host.lbar.length(uav[0])[0] if uav is not None else math.nan
+            self._rejoin_m = (self.length_m if math.isfinite(lbar_m)
+                              and self.length_m > lbar_m + REJOIN_MARGIN_M else math.nan)
+            self._rejoin_rate = 0.0
+            self._hold_m = self.length_m
+        self._ground = ground
+        if not ground:
+            self._ground_low = False
+        return ground
+
+    def _ground_reference(self) -> None:
+        """One period of the pre-tension's length reference: paid out or wound in at a
+        speed proportional to the tension's error (wound in at most at
+        ``ground_tension_rate_m_s``, paid out at most at the law's speed limit, held
+        instead while no UAV position is known), never below the taut floor while one is,
+        nor past the drum's ends."""
+        p, dt = self.p, self.dt_s
+        rate = p.ground_tension_gain_m_s_n * (self.tension_n - p.ground_tension_n)
+        # a pull above the pre-tension with no position known yet is held, as the drum
+        # held its length before (a vehicle in the air the filter has not found)
+        high = self.max_rate_m_s if self.uav is not None else 0.0
+        rate = max(-p.ground_tension_rate_m_s, min(high, rate))
+        ref = self.ref_m + rate * dt
+        floor, _ = self.taut_floor()
+        lower = max(floor, self.length_min_m) if math.isfinite(floor) else self.length_min_m
+        if ref < lower:
+            ref, rate = lower, 0.0
+        if ref > self.length_max_m:
+            ref, rate = self.length_max_m, 0.0
+        self.ref_m, self.ref_rate_m_s = ref, rate
 
     def _advance_reference(self, out: WinchOutput) -> None:
         """One period of the reference of modes 1, 2 and 6, then the safety limits."""
@@ -852,6 +956,7 @@ class Winch:
         start = self.length_m
         if mode == WinchMode.RELAXED:
             self._hold_m = start
+            self._ground = False
             # a line longer than L-bar (after a pay-out) is wound back in at a bounded rate
             uav = self.uav_now()
             lbar_m = self.host.lbar.length(uav[0])[0] if uav is not None else math.nan

@@ -144,6 +144,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                 node.bus_down = schedule.can_down
             if schedule.winder_motor_failed and srv.winder_inputs.torque_n_m != 0.0:
                 srv.winder_inputs = WinderInputs(0.0, srv.winder_inputs.enabled)
+        # the faults of the start in force before the first batch goes out (a GNSS lost
+        # from 0 s: not even the first fix)
+        before_physics(server)
     loop = PlantLoop(server, node=node, truth_log=log, before_physics=before_physics)
     signal.signal(signal.SIGTERM, lambda *_: loop.stop())
     signal.signal(signal.SIGINT, lambda *_: loop.stop())

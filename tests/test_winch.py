@@ -853,3 +853,80 @@ def test_tension_trim_pays_out_when_the_tether_is_tighter_than_its_model_says():
     for _ in range(3000):   # taut for 30 s: bounded
         step = host.update(lbar, 0.0, 100.0 * expected, pos, vel)
     assert step.lbar_m - lbar == pytest.approx(lp.tension_trim_max_m)
+
+
+# ------------------------------------------------------------- on the ground, the clock
+
+TENSION_ID = cp.frame_id(cp.WINCH_SENSOR_NODE_ID_DEFAULT, cp.SensorCmd.WINCH_TENSION)
+
+
+def tension(w: Winch, wall: float, tension_n: float, stamp_ms: int = 0) -> None:
+    w.on_frame(wall, TENSION_ID, cp.encode_winch_tension(tension_n, False, stamp_ms))
+
+
+def test_relaxed_holds_a_ground_pre_tension_while_the_uav_is_unknown_or_on_the_ground():
+    """No UAV position, or one on its gear: the length reference winds in while the load
+    cell reads less than ground_tension_n and pays out while it reads more, at k (T - T_g)
+    up to ground_tension_rate_m_s; never below the taut floor; L-bar once it has flown."""
+    w = make_winch()
+    p = w.p
+    tension(w, 0.0, 0.0)
+    encoder(w, 0.0, 5.0)
+    refs = track(w, 100)              # slack line (0 N): wound in
+    speed = min(p.ground_tension_gain_m_s_n * p.ground_tension_n, p.ground_tension_rate_m_s)
+    assert refs[-1][1] == pytest.approx(-speed)
+    assert refs[-1][0] == pytest.approx(5.0 - 101 * DT * speed, abs=1e-6)  # (+ the first)
+    tension(w, 1.0, p.ground_tension_n + 0.1)   # above it, no position known: held
+    assert track(w, 1, 2.0)[-1][1] == 0.0
+    # the UAV on its gear 2 m out, reported: above it paid out in proportion, far above
+    # it as fast as the law goes; below it wound in down to its taut floor, no further
+    gear = ((2.0, 0.0, 0.2), (0.0, 0.0, 0.0))
+    w.set_uav(gear)
+    assert track(w, 1, 2.0)[-1][1] == pytest.approx(p.ground_tension_gain_m_s_n * 0.1)
+    tension(w, 1.0, p.ground_tension_n + 100.0)
+    assert track(w, 1, 2.0)[-1][1] == pytest.approx(w.max_rate_m_s)
+    tension(w, 3.0, 0.0)
+    floor, _ = w.taut_floor()
+    last = track(w, 3000, 3.0)[-1]
+    assert last[0] == pytest.approx(floor, abs=1e-9) and last[1] == 0.0
+    # taking off: climbing, still so low that L-bar would ask for more than twice its
+    # tension (a nearly straight line): the pre-tension goes on; higher up, L-bar's law
+    host = WinderHost(WinderControlParams(), LBarParams(), PARAMS.winder, PARAMS.tether, G)
+    low = (2.0, 0.0, 0.3)
+    assert host.lbar.length(low)[1] > p.ground_lbar_tension_ratio * host.lbar.a_target
+    w.set_uav((low, (0.0, 0.0, 0.5)))
+    encoder(w, 30.0, floor)
+    assert w.reference() != (pytest.approx(host.lbar.length(low)[0], abs=1e-5), 0.0)
+    assert w.reference()[0] >= w.taut_floor()[0]
+    high = (2.0, 0.0, 3.0)
+    assert host.lbar.length(high)[1] < p.ground_lbar_tension_ratio * host.lbar.a_target
+    w.set_uav((high, (0.0, 0.0, 0.5)))
+    encoder(w, 30.0, floor)
+    assert w.reference()[0] == pytest.approx(host.lbar.length(high)[0], abs=1e-5)
+    w.set_uav(UAV)
+    encoder(w, 30.0, 13.5)
+    assert w.reference()[0] == pytest.approx(host.lbar.length(UAV[0])[0], abs=1e-5)
+    # without a pre-tension (or a load cell: the earlier test) it holds its length
+    w2 = Winch(w.host, PARAMS.winder, PARAMS.tether, G, w.p.replace(ground_tension_n=0.0))
+    tension(w2, 0.0, 0.0)
+    encoder(w2, 0.0, 5.0)
+    assert track(w2, 50)[-1] == (pytest.approx(5.0, abs=1e-6), 0.0)
+
+
+def test_the_sensor_clock_unwraps_the_sample_time_and_serves_as_the_winchs_time():
+    """Winch_Tension's 16-bit Sample_Time unwrapped into the sensor node's clock; handed
+    that as its time (a lockstep plant), the winch brakes on an encoder silent for 0.1 s
+    of it while the sensors go on, however long the host took between frames."""
+    w = make_winch()
+    assert w.sensor_clock_s is None
+    for k, stamp in enumerate((65_500, 65_530, 24, 54)):      # wraps after 65.535 s
+        tension(w, 100.0 * k, 1.0, stamp)
+    assert w.sensor_clock_s == pytest.approx(65.590)
+    clock = w.sensor_clock_s
+    encoder(w, clock, 10.0)
+    for ms in range(10, 200, 10):     # the sensors on, the encoder silent
+        tension(w, clock, 1.0, (54 + ms) & 0xFFFF)
+        out = w.poll(w.sensor_clock_s)
+        assert w.lost == (ms > 100)
+        if ms == 110:
+            assert "winch: encoder lost, drum braked" in [n.text for n in out.notices]

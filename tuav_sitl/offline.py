@@ -4,8 +4,9 @@ It runs the same classes the three processes run: the plant (``sitl``), the onbo
 backstepping controllers and mission logic (``companion``), the L-bar estimator and the
 winder torque law (``groundstation``), each at its own rate and fed what it would receive in
 the field: the companion the vehicle's state and the winch's reported length and tension,
-the ground station the encoder (length, drum rate), the load cell, and the UAV's position
-and velocity from telemetry.
+the ground station the encoder (length, drum rate), the load cell, the guide arm's exit
+angles, and the UAV's position and velocity as the companion reports them (its estimate,
+``LOCAL_POSITION_NED``).
 """
 
 from __future__ import annotations
@@ -189,13 +190,16 @@ _NAN3 = (math.nan,) * 3
 #: The estimate's columns (est_pos, est_vel, est_euler, est_pos_sigma) without one.
 _NO_ESTIMATE = (math.nan,) * 12
 _ORIGIN = (0.0, 0.0, 0.0)
+#: LOCAL_POSITION_NED's six position and velocity fields (float32)
+_F32 = struct.Struct("<6f")
 
 
 class GroundStation:
     """The ground station offline: the winch component the ground-station process runs
     (:class:`groundstation.winch.Winch`: ``DO_WINCH`` modes, brake, L-bar and the torque
     law), fed the CAN frames the plant's winder node would send (the load cell's tension,
-    then the axis's encoder estimates) and the UAV's position the component link brings;
+    then the axis's encoder estimates) and the vehicle's reported position the component
+link brings (:meth:`uav_report`);
     its torque and axis-state frames are read as the plant's axis reads them."""
 
     def __init__(self, winch: Winch) -> None:
@@ -213,18 +217,38 @@ class GroundStation:
         self._exit_id = cp.frame_id(winch.sensor_node, cp.SensorCmd.WINCH_EXIT_ANGLE)
         self.fix: TetherFix | None = None
         """The winch's last tether fix not yet taken (ODOMETRY to the vehicle)."""
+        #: the vehicle's last LOCAL_POSITION_NED not yet taken: ((position [m], velocity
+        #: [m/s]), time_boot_ms), and when the next is due [s]
+        self._report: tuple[tuple[tuple[float, ...], tuple[float, ...]], int] | None = None
+        self._next_report_s = 0.0
+
+    def uav_report(self, t_s: float, pos_m: tuple[float, float, float],
+                   vel_m_s: tuple[float, float, float]) -> None:
+        """The vehicle's ``LOCAL_POSITION_NED`` of ``t_s`` [s]: its estimate of position
+        [m] and velocity [m/s] (z up), sent at ``component_link.POSITION_RATE_HZ`` of
+        simulated time as the companion process sends it; the winch takes it with its next
+        winder period (the process reads the component link after the bus), as float32
+        fields with the vehicle's time in milliseconds."""
+        if t_s < self._next_report_s:
+            return
+        self._next_report_s = max(self._next_report_s + 1.0 / cl.POSITION_RATE_HZ, t_s)
+        f32 = _F32.unpack(_F32.pack(*pos_m, *vel_m_s))
+        self._report = ((f32[0:3], f32[3:6]), int(t_s * 1000))
 
     def period(self, t_s: float, drum_angle_rad: float, drum_rate_rad_s: float,
-               drum_tension_n: float, uav_pos_m: tuple[float, float, float],
-               uav_vel_m_s: tuple[float, float, float],
+               drum_tension_n: float,
                exit_angle: tuple[float, float, bool] | None = None
                ) -> WinchStatusReport | None:
         """One winder period at ``t_s`` [s] with the encoder's drum angle [rad] and rate
         [rad/s] (the winch turns them into length with its own drum radius); ``exit_angle``
-        the guide arm's reading (azimuth, elevation [rad], valid) when one is due. Returns
-        the WINCH_STATUS it sends, if any; a tether fix it computed waits in :attr:`fix`."""
+        the guide arm's reading (azimuth, elevation [rad], valid) when one is due; the
+        vehicle's position as it last reported it (:meth:`uav_report`; none before its
+        filter has an estimate). Returns the WINCH_STATUS it sends, if any; a tether fix it
+        computed waits in :attr:`fix`."""
         w = self.winch
-        w.set_uav((uav_pos_m, uav_vel_m_s))
+        if self._report is not None:
+            w.set_uav(*self._report)
+            self._report = None
         stamp = round(t_s * 1000.0) & 0xFFFF
         if exit_angle is not None:
             w.handle_frame(t_s, self._exit_id, cp.encode_winch_exit_angle(
@@ -471,7 +495,7 @@ class OfflineRunner:
                     exit_angle = (self.exit_sensor.read(tf.on_exit_n)
                                   if (k // n_wind) % self._exit_every == 0 else None)
                     status = ground.period(t, x[DRUM_ANGLE], x[DRUM_RATE], drum_tension,
-                                           tuple(x[POS]), tuple(x[VEL]), exit_angle)
+                                           exit_angle)
                     fix = ground.fix
                     if fix is not None:     # ODOMETRY reaches the companion
                         ground.fix = None
@@ -511,6 +535,8 @@ class OfflineRunner:
                 else:
                     out = step(OnboardInputs(t, truth), diagnostics=True)
                 state, fs, ref = out.state, out.flight, out.reference
+                if state is not None:   # LOCAL_POSITION_NED on the component link
+                    ground.uav_report(t, state.pos_m, state.vel_m_s)
                 inputs = PlantInputs(out.rotor_commands, out.armed, winder_torque,
                                      winder_enabled)
                 forces = tether_forces()

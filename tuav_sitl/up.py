@@ -520,6 +520,9 @@ def run_up(args: argparse.Namespace) -> int:
         comp_args += ["--telemetry-batch", repr(TELEMETRY_BATCH_S)]
     gs_args = ["-m", "groundstation", "--can", can, "--mavlink",
                f"127.0.0.1:{ports.component}", "--signing-key-file", str(key_file), *common]
+    if speedup != 1.0:
+        # in lockstep the winch runs on the plant's time: a stall is no lost encoder
+        gs_args += ["--clock", "frames"]
     stack = Stack(run_dir, echo=args.verbose)
     stopping = {"signal": None}
 

@@ -1,0 +1,52 @@
+"""The whole stack through ``tuav-sitl up`` (plant, ground station, companion as processes,
+the winder on the CAN bus) flying the mission-gnss-denied mission with no GNSS at all,
+from the ground, driven by a pymavlink ground station (in a private network namespace, as
+root): armed once the filter is healthy on the tether fix, every item reached within 1 m
+of the truth, landed and disarmed, the tether never taut."""
+
+import bisect
+import math
+
+import pytest
+from netns_util import netns_available, run_session
+
+pytestmark = pytest.mark.skipif(not netns_available(),
+                                reason="needs root (unshare) for a private network namespace")
+
+POS_HORIZ_ABS = 16
+ACCEPTED = 0
+#: the mission's waypoints (items 3, 4, 5), x east, y north, height [m]
+WAYPOINTS = {3: (10.0, 0.0, 12.0), 4: (6.0, 8.0, 10.0), 5: (-2.0, 6.0, 8.0)}
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    return run_session("tests.netns.denied_mission_session",
+                       str(tmp_path_factory.mktemp("denied")), timeout_s=900)
+
+
+def test_the_stack_flies_a_mission_without_gnss_on_the_tether_fix(session):
+    s = session
+    assert s["rc"] == 0, s["stderr"]
+    # no GNSS fix ever reached the vehicle (not even the first: the fault is in force
+    # before the plant's first batch)
+    assert s["gps_fix_types"] and max(s["gps_fix_types"]) <= 1, s["plant_log"]
+    texts = s["texts"]
+    assert "EKF: tether fix in use, no GNSS" in texts, s["companion_log"]
+    assert not any("Failsafe" in t for t in texts), texts
+    # armed once asked while the filter had its position: accepted
+    assert s["armed"], (s["arm"], texts)
+    t_arm = s["arm"][-1][0]
+    assert any(t <= t_arm + 0.5 and f & POS_HORIZ_ABS for t, f in s["ekf"])
+    assert [seq for seq, _ in s["reached"]] == [1, 2, 3, 4, 5, 6], s["companion_log"]
+    truth = s["truth"]
+    times = [r[0] for r in truth]
+    for seq, t in s["reached"]:
+        if seq in WAYPOINTS:
+            r = truth[min(bisect.bisect_left(times, t), len(truth) - 1)]
+            assert math.dist(r[1:4], WAYPOINTS[seq]) <= 1.0, (seq, t, r)
+    assert "disarmed_s" in s
+    # landed: on its gear at the end, and the tether never taut
+    end = [r for r in truth if r[0] >= s["disarmed_s"]]
+    assert end and all(r[3] <= 0.3 for r in end)
+    assert all(r[4] > math.dist(r[1:4], (0.0, 0.0, 0.0)) for r in truth)
