@@ -65,6 +65,9 @@ GROUND_REGIMES = (int(CatenaryRegime.TOUCHDOWN), int(CatenaryRegime.SLACK),
                   int(CatenaryRegime.FLAT))
 #: Distance to the goal within which a set-point run counts as settled [m].
 SETTLE_BAND_M = 0.05
+#: Height above the gear's below which the vehicle counts as on the ground (the metrics'
+#: saturation counts in the air only) [m].
+GEAR_MARGIN_M = 0.02
 #: The time series logged at every control step, in the order of a row: (name, width),
 #: width 0 for a scalar.
 SERIES: tuple[tuple[str, int], ...] = (
@@ -671,6 +674,9 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray],
     rotor = s["rotor_cmd"]
     rotor_sat = (rotor <= 1e-9).any(axis=1) | (rotor >= 1 - 1e-9).any(axis=1)
     motor_sat = rotor_sat | s["mixer_sat"].astype(bool)
+    # saturation counts in the air: a vehicle down on its gear with the rotors at their
+    # minimum (landed, the land detector not yet done) is not short of control
+    airborne = flying & (s["pos"][:, 2] > sc.plant.vehicle.gear_height_m + GEAR_MARGIN_M)
     m: dict[str, Any] = {
         "scenario": sc.name,
         "position_rmse_m": _rms(pos_err[win]),
@@ -682,10 +688,10 @@ def compute_metrics(sc: ScenarioParams, s: dict[str, np.ndarray],
         "max_tension_n": float(s["top_tension"].max()),
         "max_drum_tension_n": float(s["drum_tension"].max()),
         "tether_ground_contact_fraction": float(np.isin(s["regime"], GROUND_REGIMES).mean()),
-        "motor_saturation_fraction": (float(motor_sat[flying].mean()) if flying.any()
+        "motor_saturation_fraction": (float(motor_sat[airborne].mean()) if airborne.any()
                                       else 0.0),
-        "position_loop_saturation_fraction": (float(s["pos_sat"].astype(bool)[flying].mean())
-                                              if flying.any() else 0.0),
+        "position_loop_saturation_fraction": (
+            float(s["pos_sat"].astype(bool)[airborne].mean()) if airborne.any() else 0.0),
         "settling_time_s": None,
         "overshoot_percent": None,
         "metrics_after_s": sc.metrics_after_s,
