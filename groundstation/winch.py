@@ -154,6 +154,14 @@ class WinchParams(Params):
     duplicate_window_s: float = quantity(
         3.0, "s", "a retransmitted COMMAND_LONG within this [wall] is acknowledged again, "
         "not executed again", ge=0)
+    tension_limit_n: float = quantity(
+        30.0, "N", "load-cell tension above which the winch pays out (the over-tension "
+        "failsafe), whatever the active mode but LOCK and HOLD", gt=0)
+    overtension_s: float = quantity(
+        0.1, "s", "the tension above its limit this long (simulated time) starts the "
+        "pay-out; it ends below 90 % of the limit", ge=0)
+    overtension_rate_m_s: float = quantity(
+        0.5, "m/s", "line speed of the over-tension pay-out", gt=0)
     max_extrapolation_s: float = quantity(
         0.1, "s", "the UAV's reported position is carried forward by its velocity to the "
         "winch's sample time over gaps up to this", ge=0)
@@ -321,6 +329,9 @@ class Winch:
         self._rejoin_rate = 0.0             # its wind-in speed [m/s]
         self._limit_noticed = False
         self._lock_noticed = False
+        self._over_frames = 0               # encoder frames in a row above the limit
+        #: Whether the over-tension pay-out is on.
+        self.over_tension = False
         #: the torque law's last output (torque, Lyapunov function, ...), for diagnostics
         self.last_command: WinderCommand | None = None
         # axis
@@ -610,11 +621,55 @@ class Winch:
 
     # ------------------------------------------------------------------------- control
 
+    def _check_tension(self, out: WinchOutput) -> bool:
+        """Whether the over-tension pay-out acts for this encoder frame (said as it begins
+        and ends)."""
+        limit = self.p.tension_limit_n
+        tension = self.tension_n
+        if not self.over_tension:
+            self._over_frames = self._over_frames + 1 if tension > limit else 0
+            if self._over_frames * self.dt_s > self.p.overtension_s - 1e-9:
+                self.over_tension = True
+                out.notices.append(_notice(
+                    mavlink2.MAV_SEVERITY_WARNING,
+                    f"winch: over-tension {tension:.0f} N > {limit:.0f} N, paying out"))
+        elif not tension >= 0.9 * limit:       # (NaN: the load cell silent ends it too)
+            self.over_tension = False
+            self._over_frames = 0
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE,
+                                       f"winch: tension back below {limit:.0f} N"))
+        return self.over_tension
+
+    def _pay_out(self, length: float) -> None:
+        """One period of the over-tension pay-out: the reference moves out from where it
+        stands (at least the measured length) at ``overtension_rate_m_s``, and the active
+        mode takes it from there afterwards (RELAXED winds back to L-bar as after any
+        pay-out, the others hold it)."""
+        rate = self.p.overtension_rate_m_s
+        base = self.ref_m if math.isfinite(self.ref_m) else length
+        if math.isfinite(length):
+            base = max(base, length)
+        self.ref_m = min(base + rate * self.dt_s, self.length_max_m)
+        self.ref_rate_m_s = rate if self.ref_m < self.length_max_m else 0.0
+        if self.mode == WinchMode.RELAXED:
+            self._rejoin_m, self._rejoin_rate = self.ref_m, 0.0
+            self._hold_m = self.ref_m
+        else:
+            self._target_m = self.ref_m
+            if self.mode == WinchMode.RATE:
+                self._speed_m_s = max(self._speed_m_s, 0.0)
+            elif self.mode == WinchMode.RETRACT:
+                self._retract_reached = True
+
     def _control(self, out: WinchOutput) -> float:
         """Torque [N m] for this encoder frame in the active (closed-loop) mode."""
         tension = self.tension_n if math.isfinite(self.tension_n) else 0.0
         length, omega = self.length_m, self.omega_rad_s
-        if self.mode == WinchMode.RELAXED:
+        if self._check_tension(out):
+            self._pay_out(length)
+            command = self.host.controller.update(self.dt_s, length, omega, tension,
+                                                  self.ref_m, self.ref_rate_m_s)
+        elif self.mode == WinchMode.RELAXED:
             uav = self.uav_now()
             if uav is not None and math.isfinite(self._rejoin_m):
                 # rejoining L-bar from a longer line: wound in at rejoin_rate_m_s at most
