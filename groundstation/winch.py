@@ -162,6 +162,27 @@ class WinchParams(Params):
         "pay-out; it ends below 90 % of the limit", ge=0)
     overtension_rate_m_s: float = quantity(
         0.5, "m/s", "line speed of the over-tension pay-out", gt=0)
+    stuck_error_m: float = quantity(
+        0.1, "m", "the length this far behind a reference that pays out (the law tracks "
+        "within 2 cm) for stuck_s: the drum is stuck", gt=0)
+    sensor_rate_hz: float = quantity(
+        100.0, "Hz", "rate of the load cell's frames (Winch_Tension)", gt=0)
+    bus_window_s: float = quantity(
+        1.0, "s", "the CAN bus is judged over windows this long (of the load cell's "
+        "stamps)", gt=0)
+    bus_lost_max: float = quantity(
+        0.3, "1", "a window with more of the load cell's frames lost: the bus is degraded",
+        gt=0, le=1)
+    bus_late_max_s: float = quantity(
+        0.05, "s", "a window whose frames all came later than this (against the UAV's "
+        "position): the bus is degraded", gt=0)
+    bus_good_windows: int = quantity(
+        2, "1", "good windows in a row that end a degraded bus", ge=1)
+    stuck_speed_m_s: float = quantity(
+        0.05, "m/s", "a drum paying out slower than this while it lags may be stuck", gt=0)
+    stuck_s: float = quantity(
+        0.1, "s", "how long (simulated time) the drum lags stuck_error_m before it counts "
+        "as stuck", ge=0)
     max_extrapolation_s: float = quantity(
         0.1, "s", "the UAV's reported position is carried forward by its velocity to the "
         "winch's sample time over gaps up to this", ge=0)
@@ -330,6 +351,18 @@ class Winch:
         self._limit_noticed = False
         self._lock_noticed = False
         self._over_frames = 0               # encoder frames in a row above the limit
+        self._stuck_frames = 0              # encoder frames in a row behind the reference
+        #: Whether the CAN bus loses or delays too much (:meth:`_check_bus`): drum braked.
+        self.bus_degraded = False
+        self._bus_window_start = 0
+        self._bus_expected = 0
+        self._bus_lost = 0
+        self._bus_late_ms = 0x10000          # the least lateness of the window [ms]
+        self._bus_good = 0
+        self._bus_said: tuple[float, float] | None = None
+        self._bus_noticed = False
+        #: Whether the drum does not pay out as asked (a snag: :meth:`_check_stuck`).
+        self.drum_stuck = False
         #: Whether the over-tension pay-out is on.
         self.over_tension = False
         #: the torque law's last output (torque, Lyapunov function, ...), for diagnostics
@@ -411,7 +444,7 @@ class Winch:
     @property
     def braked(self) -> bool:
         """The winch keeps the axis IDLE (brake engaged): LOCK, HOLD or encoder lost."""
-        return self.mode in BRAKED_MODES or self.lost
+        return self.mode in BRAKED_MODES or self.lost or self.bus_degraded
 
     def taut_floor(self) -> tuple[float, float]:
         """(shortest safe length [m], its rate [m/s]): the straight-line distance to the
@@ -481,9 +514,70 @@ class Winch:
             self.sensor_length_m, self.sensor_speed_m_s = length_m, speed_m_s
 
     def _winch_tension_frame(self, wall_s: float, data: bytes) -> None:
+        last = self.sample_time_ms
         tension_n, self.sensor_brake, self.sample_time_ms = cp.decode_winch_tension(data)
         if math.isfinite(tension_n):
             self.tension_n = tension_n
+        self._check_bus(last, self.sample_time_ms)
+
+    def _check_bus(self, last_ms: int | None, stamp_ms: int) -> None:
+        """The bus's health from the load cell's frames (100 Hz, stamped with the sample's
+        time): the share lost (from the gaps between stamps) and how late they come (the
+        UAV's latest position, which the component link brings, against the sample's
+        stamp: the least of a window, so that a busy machine's lags do not count). Judged
+        once a window of ``bus_window_s`` of stamps; a window with more than
+        ``bus_lost_max`` lost or later than ``bus_late_max_s`` makes the bus degraded (the
+        drum brakes, said in :meth:`_bus_notice`), ``bus_good_windows`` good ones in a row
+        make it good again."""
+        if last_ms is None:
+            self._bus_window_start = stamp_ms
+            return
+        step = (stamp_ms - last_ms) & 0xFFFF
+        if step == 0 or step >= 0x8000:
+            return                                   # repeated or out of order
+        period_ms = 1e3 / self.p.sensor_rate_hz
+        frames = max(1, round(step / period_ms))
+        self._bus_expected += frames
+        self._bus_lost += frames - 1
+        if self.uav_time_ms is not None:
+            late = (self.uav_time_ms - stamp_ms) & 0xFFFF
+            if late < 0x8000:
+                self._bus_late_ms = min(self._bus_late_ms, late)
+            else:
+                self._bus_late_ms = min(self._bus_late_ms, 0)
+        if ((stamp_ms - self._bus_window_start) & 0xFFFF) < self.p.bus_window_s * 1e3:
+            return
+        lost = self._bus_lost / self._bus_expected
+        late_s = self._bus_late_ms * 1e-3 if self._bus_late_ms < 0x10000 else 0.0
+        bad = lost > self.p.bus_lost_max or late_s > self.p.bus_late_max_s
+        self._bus_window_start = stamp_ms
+        self._bus_expected = self._bus_lost = 0
+        self._bus_late_ms = 0x10000
+        if bad:
+            self._bus_good = 0
+            if not self.bus_degraded:
+                self.bus_degraded = True
+                self._bus_said = (lost, late_s)
+        elif self.bus_degraded:
+            self._bus_good += 1
+            if self._bus_good >= self.p.bus_good_windows:
+                self.bus_degraded = False
+                self._bus_said = None
+                if self.mode not in BRAKED_MODES and not self.lost:
+                    self._arm_pending = True
+
+    def _bus_notice(self, out: WinchOutput) -> None:
+        """Say a change of the bus's health (once each)."""
+        if self.bus_degraded and self._bus_said is not None and not self._bus_noticed:
+            lost, late_s = self._bus_said
+            self._bus_noticed = True
+            out.notices.append(_notice(
+                mavlink2.MAV_SEVERITY_CRITICAL,
+                f"winch: CAN bad ({lost:.0%} lost, {late_s * 1e3:.0f} ms), braked"))
+        elif not self.bus_degraded and self._bus_noticed:
+            self._bus_noticed = False
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE,
+                                       "winch: CAN bus good again"))
 
     def _winch_exit_angle_frame(self, wall_s: float, data: bytes) -> None:
         az, el, stamp, valid = cp.decode_winch_exit_angle(data)
@@ -590,7 +684,8 @@ class Winch:
             self.lost = False
             self._arm_pending = True
             out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE, "winch: encoder back"))
-        if self.mode in BRAKED_MODES:
+        self._bus_notice(out)
+        if self.mode in BRAKED_MODES or self.bus_degraded:
             out.frames.append(self._idle_frame())
             self._check_locked(out)
         else:
@@ -702,8 +797,31 @@ class Winch:
             command = self.host.controller.update(self.dt_s, length, omega, tension,
                                                   self.ref_m, self.ref_rate_m_s)
         self.last_command = command
+        self._check_stuck(out, length)
         torque = command.torque_n_m
         return torque if math.isfinite(torque) else 0.0
+
+    def _check_stuck(self, out: WinchOutput, length: float) -> None:
+        """A drum that does not pay out as its reference asks (a snagged line, a jammed
+        drum): the reference ``stuck_error_m`` ahead of the measured length, the line
+        slower than ``stuck_speed_m_s`` (a drum catching up moves), for ``stuck_s`` of
+        simulated time. While it is so the winch reports the drum braked
+        (CLUTCH_ENGAGED: the vehicle bounds its reach by the length) and not HEALTHY (the
+        vehicle's winder failsafe); said as it begins and ends."""
+        behind = self.ref_m - length
+        if not self.drum_stuck:
+            lagging = (behind > self.p.stuck_error_m
+                       and self.omega_rad_s * self.r_w < self.p.stuck_speed_m_s)
+            self._stuck_frames = self._stuck_frames + 1 if lagging else 0
+            if self._stuck_frames * self.dt_s > self.p.stuck_s - 1e-9:
+                self.drum_stuck = True
+                out.notices.append(_notice(mavlink2.MAV_SEVERITY_CRITICAL,
+                                           f"winch: drum stuck at {length:.1f} m, no pay-out"))
+        elif behind < 0.5 * self.p.stuck_error_m:
+            self.drum_stuck = False
+            self._stuck_frames = 0
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE,
+                                       "winch: drum no longer behind its reference"))
 
     def _advance_reference(self, out: WinchOutput) -> None:
         """One period of the reference of modes 1, 2 and 6, then the safety limits."""
@@ -792,7 +910,8 @@ class Winch:
         flags = 0
         axis_ok = self.braked or self.axis_state in (None, cp.AxisState.CLOSED_LOOP_CONTROL)
         if (self.encoder_frames and not self.lost and not self.axis_error and axis_ok
-                and self.load_cell_healthy is not False
+                and self.load_cell_healthy is not False and not self.drum_stuck
+                and not self.bus_degraded
                 and not self._foreign_recent()):
             flags |= FLAG_HEALTHY
         length = self._report_length()
@@ -802,7 +921,7 @@ class Winch:
             flags |= FLAG_FULLY_RETRACTED
         if abs(self._report_speed()) > self.p.moving_speed_m_s:
             flags |= FLAG_MOVING
-        if self.braked or self.sensor_brake:
+        if self.braked or self.sensor_brake or self.drum_stuck:
             flags |= FLAG_CLUTCH_ENGAGED
         if self.mode in BRAKED_MODES:
             flags |= FLAG_LOCKED
