@@ -73,7 +73,7 @@ def test_a_snagged_tether_stops_the_vehicle_short_of_taut_and_brings_it_down(tmp
 
 def test_a_lossy_can_bus_brakes_the_drum_and_the_vehicle_comes_down(tmp_path):
     """Half of the winder's CAN exchanges lost from 5 s: the winch judges the bus degraded
-    at its first whole window (within 1 s and one window), brakes the drum and reports it
+    at its first whole window (0.25 s; within two), brakes the drum and reports it
     unhealthy; the vehicle's winder failsafe flies RTL within the braked length 2 s later
     and lands. (With the bus at half and 100 ms late, the winder's loop went unstable:
     1488 N, taut.)"""
@@ -81,10 +81,12 @@ def test_a_lossy_can_bus_brakes_the_drum_and_the_vehicle_comes_down(tmp_path):
                        goal=(16.0, 4.0, 10.0))
     nav, winch = _said(runner)
     bad = [(ts, n) for ts, n in winch if "CAN bad" in n]
-    assert len(bad) == 1 and 5.0 < bad[0][0] <= 5.0 + 2 * 1.0 + 0.02
+    window = runner.ground.winch.p.bus_window_s
+    assert len(bad) == 1 and 5.0 < bad[0][0] <= 5.0 + 2 * window + 0.1
     assert "lost" in bad[0][1] and bad[0][1].endswith("braked")
+    # 2 s after the last healthy report (which may be a lost exchange before the notice)
     fs = [(ts, v) for ts, v in nav if v.startswith("Winch Failsafe")]
-    assert len(fs) == 1 and fs[0][0] - bad[0][0] == pytest.approx(2.0, abs=0.1)
+    assert len(fs) == 1 and 2.0 - 2 * window <= fs[0][0] - bad[0][0] <= 2.0 + 0.1
     assert runner.companion.nav.landed and not runner.companion.nav.armed
     t = res.series["t"]
     assert _slack(res)[t > 1.0].min() > 0.0
