@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from netns_util import netns_available, run_session
 
 from companion.navigation import NavEvent
 from tuav_sitl.offline import OfflineRunner
@@ -157,3 +158,25 @@ start_s = 5.0
     assert np.linalg.norm(s["vel"][t > t[-1] - 5.0], axis=1).max() < 0.1   # holding
     assert _slack(res)[t > 1.0].min() > 0.0
     assert runner.companion.nav.armed and not runner.companion.nav.landed
+
+
+@pytest.mark.skipif(not netns_available(),
+                    reason="needs root (unshare) for a private network namespace")
+def test_a_late_can_bus_in_up_brakes_the_drum_and_the_vehicle_comes_down(tmp_path):
+    """``tuav-sitl up --faults``: every winder CAN frame 100 ms late from 8 s while the
+    vehicle hovers at (4, 0, 8) m. The winch finds its load cell's frames late against the
+    UAV's position within two windows of 0.25 s, brakes the drum and says so; the vehicle's
+    winder failsafe flies RTL within the braked length 2 s later, lands and disarms; the
+    truth's tether is never taut. (The delay's onset alone trips the axis's 0.1 s watchdog:
+    100 ms without a command; the winch re-arms it.)"""
+    s = run_session("tests.netns.can_delay_session", str(tmp_path), timeout_s=900)
+    assert s["rc"] == 0, s["stderr"]
+    assert "fault can begins at 8.000 s" in s["plant_log"]
+    bad = [(t, text) for t, comp, text in s["texts"] if comp == 169 and "CAN bad" in text]
+    assert bad and 8.0 < bad[0][0] <= 8.0 + 2 * 0.25 + 0.15, s["texts"]
+    late_ms = int(bad[0][1].split("lost, ")[1].split(" ms")[0])
+    assert 50 < late_ms <= 100 and bad[0][1].endswith("braked")
+    fs = [t for t, comp, text in s["texts"] if comp == 1 and text.startswith("Winch Failsafe")]
+    assert fs and bad[0][0] < fs[0] <= bad[0][0] + 2.0 + 0.15
+    assert s["disarmed_s"] > fs[0] and s["last"]["z_m"] < 0.3 and s["last"]["armed"] == 0.0
+    assert s["min_slack_m"] > 0.0
