@@ -168,7 +168,7 @@ class WinchParams(Params):
     sensor_rate_hz: float = quantity(
         100.0, "Hz", "rate of the load cell's frames (Winch_Tension)", gt=0)
     bus_window_s: float = quantity(
-        0.25, "s", "the CAN bus is judged over windows this long (of the load cell's "
+        0.1, "s", "the CAN bus is judged over windows this long (of the load cell's "
         "stamps)", gt=0)
     bus_lost_max: float = quantity(
         0.3, "1", "a window with more of the load cell's frames lost: the bus is degraded",
@@ -177,7 +177,7 @@ class WinchParams(Params):
         0.05, "s", "a window whose frames all came later than this (against the UAV's "
         "position): the bus is degraded", gt=0)
     bus_good_windows: int = quantity(
-        8, "1", "good windows in a row that end a degraded bus", ge=1)
+        10, "1", "good windows in a row that end a degraded bus", ge=1)
     stuck_speed_m_s: float = quantity(
         0.05, "m/s", "a drum paying out slower than this while it lags may be stuck", gt=0)
     stuck_s: float = quantity(

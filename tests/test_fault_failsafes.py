@@ -13,6 +13,7 @@ import pytest
 from netns_util import netns_available, run_session
 
 from companion.navigation import NavEvent
+from groundstation.winch import WinchParams
 from tuav_sitl.offline import OfflineRunner
 from tuav_sitl.scenario import ScenarioParams
 from tuavdefs.paramspec import load_toml
@@ -74,7 +75,7 @@ def test_a_snagged_tether_stops_the_vehicle_short_of_taut_and_brings_it_down(tmp
 
 def test_a_lossy_can_bus_brakes_the_drum_and_the_vehicle_comes_down(tmp_path):
     """Half of the winder's CAN exchanges lost from 5 s: the winch judges the bus degraded
-    at its first whole window (0.25 s; within two), brakes the drum and reports it
+    at its first whole window (0.1 s; within two), brakes the drum and reports it
     unhealthy; the vehicle's winder failsafe flies RTL within the braked length 2 s later
     and lands. (With the bus at half and 100 ms late, the winder's loop went unstable:
     1488 N, taut.)"""
@@ -165,7 +166,7 @@ start_s = 5.0
 def test_a_late_can_bus_in_up_brakes_the_drum_and_the_vehicle_comes_down(tmp_path):
     """``tuav-sitl up --faults``: every winder CAN frame 100 ms late from 8 s while the
     vehicle hovers at (4, 0, 8) m. The winch finds its load cell's frames late against the
-    UAV's position within two windows of 0.25 s, brakes the drum and says so; the vehicle's
+    UAV's position within two windows (0.1 s each), brakes the drum and says so; the vehicle's
     winder failsafe flies RTL within the braked length 2 s later, lands and disarms; the
     truth's tether is never taut. (The delay's onset alone trips the axis's 0.1 s watchdog:
     100 ms without a command; the winch re-arms it.)"""
@@ -173,7 +174,8 @@ def test_a_late_can_bus_in_up_brakes_the_drum_and_the_vehicle_comes_down(tmp_pat
     assert s["rc"] == 0, s["stderr"]
     assert "fault can begins at 8.000 s" in s["plant_log"]
     bad = [(t, text) for t, comp, text in s["texts"] if comp == 169 and "CAN bad" in text]
-    assert bad and 8.0 < bad[0][0] <= 8.0 + 2 * 0.25 + 0.15, s["texts"]
+    window = WinchParams().bus_window_s
+    assert bad and 8.0 < bad[0][0] <= 8.0 + 2 * window + 0.15, s["texts"]
     late_ms = int(bad[0][1].split("lost, ")[1].split(" ms")[0])
     assert 50 < late_ms <= 100 and bad[0][1].endswith("braked")
     fs = [t for t, comp, text in s["texts"] if comp == 1 and text.startswith("Winch Failsafe")]
