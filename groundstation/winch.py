@@ -359,6 +359,7 @@ class Winch:
         self._bus_lost = 0
         self._bus_late_ms = 0x10000          # the least lateness of the window [ms]
         self._bus_good = 0
+        self._bus_min_step = 0xFFFF              # the shortest step between stamps [ms]
         self._bus_said: tuple[float, float] | None = None
         self._bus_noticed = False
         #: Whether the drum does not pay out as asked (a snag: :meth:`_check_stuck`).
@@ -535,7 +536,10 @@ class Winch:
         step = (stamp_ms - last_ms) & 0xFFFF
         if step == 0 or step >= 0x8000:
             return                                   # repeated or out of order
-        period_ms = 1e3 / self.p.sensor_rate_hz
+        # the frames' period: the nominal one, or the shortest step seen if longer (a plant
+        # whose control period is longer than the sensors' sends them on its own grid)
+        self._bus_min_step = min(self._bus_min_step, step)
+        period_ms = max(1e3 / self.p.sensor_rate_hz, self._bus_min_step)
         frames = max(1, round(step / period_ms))
         self._bus_expected += frames
         self._bus_lost += frames - 1

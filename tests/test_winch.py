@@ -926,3 +926,37 @@ def test_a_stuck_drum_is_reported_braked_and_unhealthy():
     n = len(b.notices)
     b.run(3.0)
     assert not [x for x in b.notices[n:] if "stuck" in x]
+
+
+def test_the_bus_check_counts_lost_and_late_load_cell_frames():
+    """The load cell's stamps judge the bus: a plant on a 20 ms grid (its frames 20 ms
+    apart) loses nothing; every other frame of a 10 ms stream gone is 50 % lost; frames
+    80 ms older than the UAV's position are late; each brakes the drum (IDLE on the next
+    encoder frame) and is said, and 10 good windows end it."""
+    tension_id = cp.frame_id(cp.WINCH_SENSOR_NODE_ID_DEFAULT, cp.SensorCmd.WINCH_TENSION)
+
+    def feed(w: Winch, stamps, uav_ahead_ms: int | None = None) -> list[str]:
+        said = []
+        for ms in stamps:
+            if uav_ahead_ms is not None:
+                w.set_uav(UAV, (ms + uav_ahead_ms) & 0xFFFF)
+            w.on_frame(ms * 1e-3, tension_id, cp.encode_winch_tension(5.0, False, ms & 0xFFFF))
+            out = encoder(w, ms * 1e-3, 14.0)
+            said += [n.text for n in out.notices]
+            if w.bus_degraded:
+                assert ("Set_Axis_State", cp.AxisState.IDLE) in decoded(out.frames)
+        return said
+
+    slow = ready(14.0)
+    assert feed(slow, range(0, 2000, 20)) == [] and not slow.bus_degraded
+    lossy = ready(14.0)
+    said = feed(lossy, [*range(0, 1000, 10), *range(1000, 2000, 20)])
+    assert lossy.bus_degraded and said == ["winch: CAN bad (50% lost, 0 ms), braked"]
+    assert not lossy.status_flags() & wm.FLAG_HEALTHY
+    assert lossy.status_flags() & wm.FLAG_CLUTCH_ENGAGED
+    said = feed(lossy, range(2000, 3200, 10))
+    assert said == ["winch: CAN bus good again"] and not lossy.bus_degraded
+    late = ready(14.0)
+    assert feed(late, range(0, 1000, 10), uav_ahead_ms=5) == []
+    said = feed(late, range(1000, 1500, 10), uav_ahead_ms=80)
+    assert said == ["winch: CAN bad (0% lost, 80 ms), braked"]
