@@ -49,6 +49,7 @@ from companion.navigation import NavigationParams
 from companion.onboard import Companion, OnboardInputs
 from companion.param_names import build_defs
 from companion.signing import VehicleSigning
+from companion.sim_params import sim_param_defs
 from companion.simlink_client import SimLinkClient
 from companion.telemetry import Telemetry
 from tuavdefs import component_link as cl
@@ -211,6 +212,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                       lambda v: setattr(onboard, "arming_check", v),
                       FenceParams(), set_fence, onboard.failsafes.params,
                       lambda p: setattr(onboard.failsafes, "params", p))
+    # the simulator's fault parameters, relayed to the plant (never read on board)
+    defs += sim_param_defs(client.sim_params, client.set_sim_param)
     autopilot = Autopilot(endpoints, nav, tuple(args.home), defs,
                           param_file=Path(args.param_file) if args.param_file else None,
                           component=components, signing=signing)

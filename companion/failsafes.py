@@ -15,7 +15,10 @@ the process), and leaves the mode to the pilot once the link is back (as ArduCop
   ``winch_timeout_s``, or reports without the HEALTHY flag for as long: the drum is taken
   as braked at the last reported length (the navigator bounds every target by it), then
   RTL within that reach, or LAND
-  (:class:`WinchAction`); on by default.
+  (:class:`WinchAction`); on by default. Before that, a winch silent for
+  ``winch_brake_after_s`` (its axis's watchdog has braked the drum by then: 0.1 s without
+  a command) is taken as braked at its last length at once (the navigator's tether fence
+  then stops a vehicle flying outward short of a taut line), until it reports again.
 """
 
 from __future__ import annotations
@@ -59,6 +62,10 @@ class FailsafeParams(Params):
                                  "1 RTL within the tether's reach, 2 LAND")
     winch_timeout_s: float = quantity(2.0, "s", "no (healthy) WINCH_STATUS for this long "
                                       "triggers it", ge=0.5, le=60)
+    winch_brake_after_s: float = quantity(0.3, "s", "no WINCH_STATUS for this long: the "
+                                          "drum is taken as braked at its last length "
+                                          "(the axis's watchdog brakes it after 0.1 s)",
+                                          ge=0.1, le=60)
 
     def check(self) -> None:
         for name, kind in (("gcs_action", GcsAction), ("winch_action", WinchAction)):
@@ -88,6 +95,9 @@ class Failsafes:
         self._gcs_t: float | None = None       # last ground-station heartbeat
         self._winch_t: float | None = None     # last healthy winch report
         self._winch_seen_t: float | None = None   # the first report, healthy or not
+        self._winch_any_t: float | None = None    # the last report, healthy or not
+        #: Whether a silent winch is taken as braked now (until it reports again).
+        self.winch_silent = False
         self._winch_length_m = math.nan
         #: Whether each failsafe is on now (it acts once each time it comes on).
         self.gcs_lost = False
@@ -102,6 +112,8 @@ class Failsafes:
         """A WINCH_STATUS at ``t_s``: paid-out length [m], its HEALTHY flag."""
         if self._winch_seen_t is None:
             self._winch_seen_t = t_s
+        self._winch_any_t = t_s
+        self.winch_silent = False
         if math.isfinite(length_m):
             self._winch_length_m = float(length_m)
         if healthy:
@@ -120,6 +132,11 @@ class Failsafes:
             land = p.gcs in (GcsAction.SMART_RTL_OR_LAND, GcsAction.LAND)
             self._act(FlightMode.LAND if land else FlightMode.RTL,
                       f"GCS Failsafe: {'landing' if land else 'RTL'}")
+        if (not self.winch_silent and self._winch_any_t is not None
+                and t_s - self._winch_any_t >= p.winch_brake_after_s
+                and math.isfinite(self._winch_length_m)):
+            self.winch_silent = True
+            nav.winch_report(self._winch_length_m, None, True)
         since = self._winch_t if self._winch_t is not None else self._winch_seen_t
         if (not self.winch_lost and since is not None
                 and t_s - since >= p.winch_timeout_s and p.winch != WinchAction.DISABLED):

@@ -23,6 +23,7 @@ from companion.geofence import FenceParams
 from companion.navigation import NavigationParams
 from companion.param_names import build_defs
 from companion.param_protocol import ParamDef
+from companion.sim_params import sim_param_defs
 
 __all__ = ["SHIPPED", "default_defs", "pdef_xml"]
 
@@ -35,9 +36,11 @@ _INT_TYPES = {mavlink2.MAV_PARAM_TYPE_INT8, mavlink2.MAV_PARAM_TYPE_INT16,
 
 
 def default_defs() -> list[ParamDef]:
-    """The companion's parameters at their defaults (what a fresh companion serves)."""
+    """The companion's parameters at their defaults (what a fresh companion serves, the
+    simulator's SIM_* last)."""
     return build_defs(FlightControlParams(), NavigationParams(), lambda _p: None,
-                      lambda _p: None, lambda: 1, lambda _v: None, FenceParams())
+                      lambda _p: None, lambda: 1, lambda _v: None, FenceParams()) + \
+        sim_param_defs({}, lambda _n, _v: None)
 
 
 def _number(v: float) -> str:

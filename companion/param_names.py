@@ -78,6 +78,7 @@ FAILSAFE_NAMES: dict[str, str | WireName | tuple[WireName, ...]] = {
     "gcs_timeout_s": "FS_GCS_TIMEOUT",
     "winch_action": WireName("TUAV_FS_WINCH", param_type=_I8),
     "winch_timeout_s": "TUAV_FS_WINCH_TO",
+    "winch_brake_after_s": "TUAV_FS_WINCH_BR",
 }
 
 #: Fence parameters (``companion.geofence.FenceParams``), as ArduCopter's (FENCE_ENABLE,

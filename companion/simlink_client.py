@@ -104,6 +104,9 @@ class BatchDecoder:
         self._truth: TruthState | None = None
         self._gps: GpsFix | None = None
         self._gps_new = False
+        #: The simulator's run-time parameters as the plant last said them (PARAM_VALUE:
+        #: name -> value; tuavdefs.sim_params). Never an input to control.
+        self.sim_params: dict[str, float] = {}
 
     @property
     def bad_frames(self) -> int:
@@ -137,6 +140,9 @@ class BatchDecoder:
             self._gps = GpsFix(int(v[0]), pos, vel, v[1] * 1e-7, v[2] * 1e-7, v[3] * 1e-3,
                                eph, epv, int(v[11]), int(v[12]))
             self._gps_new = True
+        elif mid == sl.MSG_PARAM_VALUE:
+            name, value = v
+            self.sim_params[name] = value
         return None
 
     def feed(self, data: bytes) -> list[SimState]:
@@ -283,6 +289,18 @@ class SimLinkClient:
         (rotor order of :mod:`tuavdefs.airframe`) and the armed flag."""
         self.send_raw(self._encoder.actuator_controls(time_usec, rotor_commands, armed,
                                                       lockstep))
+
+    @property
+    def sim_params(self) -> dict[str, float]:
+        """The simulator's run-time parameters as the plant last said them (name -> value;
+        empty until it has)."""
+        return self._decoder.sim_params
+
+    def set_sim_param(self, name: str, value: float) -> None:
+        """Ask the plant to set a simulator parameter (PARAM_SET; it answers PARAM_VALUE
+        with the value it holds, which :attr:`sim_params` then shows)."""
+        self.send_raw(sl.param_set_frame(self._encoder, (sl.PLANT_SYSID, sl.PLANT_COMPID),
+                                         name, value))
 
     def send_raw(self, data: bytes) -> None:
         """Write bytes on the link as they are (diagnostics and tests)."""

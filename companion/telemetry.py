@@ -103,6 +103,10 @@ _EKF_FLAG_BITS = 0x3FF
 _MSG_NAMES = {v: k for k, v in _MSG_IDS.items()}
 
 
+#: A receiver silent this long [s] is reported as no GPS (ArduPilot's AP_GPS timeout, 4 s).
+GPS_TIMEOUT_S = 4.0
+
+
 class Telemetry(NamedTuple):
     """What the vehicle knows of itself at a control period (inertial z-up, body FLU)."""
 
@@ -425,11 +429,13 @@ class TelemetryStreams:
             math.degrees(roll), math.degrees(pitch), b, b, dist, alt_err, 0.0, xtrack)
 
     def _gps_raw(self, tm: Telemetry) -> Any:
-        """GPS_RAW_INT of the receiver's last fix (no fix before the first)."""
+        """GPS_RAW_INT of the receiver's last fix (no fix before the first; no GPS once
+        the last is ``GPS_TIMEOUT_S`` old, as ArduPilot's driver times out)."""
         g = tm.gps
         t_us = int(tm.t_s * 1e6)
-        if g is None:
-            return M.MAVLink_gps_raw_int_message(t_us, M.GPS_FIX_TYPE_NO_FIX, 0, 0, 0, 65535,
+        if g is None or t_us - g.time_usec > GPS_TIMEOUT_S * 1e6:
+            fix = M.GPS_FIX_TYPE_NO_FIX if g is None else M.GPS_FIX_TYPE_NO_GPS
+            return M.MAVLink_gps_raw_int_message(t_us, fix, 0, 0, 0, 65535,
                                                  65535, 65535, 65535, 0)
         vn = enu_to_ned(g.velocity_enu_m_s)
         gs = math.hypot(vn[0], vn[1])

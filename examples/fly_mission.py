@@ -149,8 +149,12 @@ def main() -> int:
     # position telemetry at 20 Hz (of the vehicle's time), as a logging script would ask
     f.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 50_000)
     f.set_mode("GUIDED")
-    # arm as a ground-station user does: again while a pre-arm check refuses it (the EKF
-    # still settling: COMMAND_ACK DENIED and "PreArm: ..."), for up to a minute
+    # the pre-arm checks pass (the estimator has converged): SYS_STATUS's PREARM_CHECK
+    # health bit, as ArduPilot sets it and MAVSDK's is_armable reads it; then arm, again
+    # while a pre-arm check still denies it (COMMAND_ACK DENIED, "PreArm: ..."), for up to
+    # a minute
+    f.wait("SYS_STATUS", lambda s: s.onboard_control_sensors_health
+           & M.MAV_SYS_STATUS_PREARM_CHECK, 120)
     end = time.monotonic() + 60.0
     while (result := f.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)) == M.MAV_RESULT_DENIED \
             and time.monotonic() < end:

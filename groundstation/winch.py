@@ -165,6 +165,35 @@ class WinchParams(Params):
     duplicate_window_s: float = quantity(
         3.0, "s", "a retransmitted COMMAND_LONG within this [wall] is acknowledged again, "
         "not executed again", ge=0)
+    tension_limit_n: float = quantity(
+        30.0, "N", "load-cell tension above which the winch pays out (the over-tension "
+        "failsafe), whatever the active mode but LOCK and HOLD", gt=0)
+    overtension_s: float = quantity(
+        0.1, "s", "the tension above its limit this long (simulated time) starts the "
+        "pay-out; it ends below 90 % of the limit", ge=0)
+    overtension_rate_m_s: float = quantity(
+        0.5, "m/s", "line speed of the over-tension pay-out", gt=0)
+    stuck_error_m: float = quantity(
+        0.1, "m", "the length this far behind a reference that pays out (the law tracks "
+        "within 2 cm) for stuck_s: the drum is stuck", gt=0)
+    sensor_rate_hz: float = quantity(
+        100.0, "Hz", "rate of the load cell's frames (Winch_Tension)", gt=0)
+    bus_window_s: float = quantity(
+        0.1, "s", "the CAN bus is judged over windows this long (of the load cell's "
+        "stamps)", gt=0)
+    bus_lost_max: float = quantity(
+        0.3, "1", "a window with more of the load cell's frames lost: the bus is degraded",
+        gt=0, le=1)
+    bus_late_max_s: float = quantity(
+        0.05, "s", "a window whose frames all came later than this (against the UAV's "
+        "position): the bus is degraded", gt=0)
+    bus_good_windows: int = quantity(
+        10, "1", "good windows in a row that end a degraded bus", ge=1)
+    stuck_speed_m_s: float = quantity(
+        0.05, "m/s", "a drum paying out slower than this while it lags may be stuck", gt=0)
+    stuck_s: float = quantity(
+        0.1, "s", "how long (simulated time) the drum lags stuck_error_m before it counts "
+        "as stuck", ge=0)
     max_extrapolation_s: float = quantity(
         0.1, "s", "the UAV's reported position is carried forward by its velocity to the "
         "winch's sample time over gaps up to this", ge=0)
@@ -355,6 +384,22 @@ class Winch:
         self._ground_low = False            # ... since the UAV reported itself on the ground
         self._limit_noticed = False
         self._lock_noticed = False
+        self._over_frames = 0               # encoder frames in a row above the limit
+        self._stuck_frames = 0              # encoder frames in a row behind the reference
+        #: Whether the CAN bus loses or delays too much (:meth:`_check_bus`): drum braked.
+        self.bus_degraded = False
+        self._bus_window_start = 0
+        self._bus_expected = 0
+        self._bus_lost = 0
+        self._bus_late_ms = 0x10000          # the least lateness of the window [ms]
+        self._bus_good = 0
+        self._bus_min_step = 0xFFFF              # the shortest step between stamps [ms]
+        self._bus_said: tuple[float, float] | None = None
+        self._bus_noticed = False
+        #: Whether the drum does not pay out as asked (a snag: :meth:`_check_stuck`).
+        self.drum_stuck = False
+        #: Whether the over-tension pay-out is on.
+        self.over_tension = False
         #: the torque law's last output (torque, Lyapunov function, ...), for diagnostics
         self.last_command: WinderCommand | None = None
         # axis
@@ -443,7 +488,7 @@ class Winch:
     @property
     def braked(self) -> bool:
         """The winch keeps the axis IDLE (brake engaged): LOCK, HOLD or encoder lost."""
-        return self.mode in BRAKED_MODES or self.lost
+        return self.mode in BRAKED_MODES or self.lost or self.bus_degraded
 
     def taut_floor(self) -> tuple[float, float]:
         """(shortest safe length [m], its rate [m/s]): the straight-line distance to the
@@ -513,6 +558,7 @@ class Winch:
             self.sensor_length_m, self.sensor_speed_m_s = length_m, speed_m_s
 
     def _winch_tension_frame(self, wall_s: float, data: bytes) -> None:
+        last = self.sample_time_ms
         tension_n, self.sensor_brake, self.sample_time_ms = cp.decode_winch_tension(data)
         prev = self._sensor_clock_ms
         if prev is None:
@@ -522,6 +568,69 @@ class Winch:
             self._sensor_clock_ms = prev + (d - 0x10000 if d >= 0x8000 else d)
         if math.isfinite(tension_n):
             self.tension_n = tension_n
+        self._check_bus(last, self.sample_time_ms)
+
+    def _check_bus(self, last_ms: int | None, stamp_ms: int) -> None:
+        """The bus's health from the load cell's frames (100 Hz, stamped with the sample's
+        time): the share lost (from the gaps between stamps) and how late they come (the
+        UAV's latest position, which the component link brings, against the sample's
+        stamp: the least of a window, so that a busy machine's lags do not count). Judged
+        once a window of ``bus_window_s`` of stamps; a window with more than
+        ``bus_lost_max`` lost or later than ``bus_late_max_s`` makes the bus degraded (the
+        drum brakes, said in :meth:`_bus_notice`), ``bus_good_windows`` good ones in a row
+        make it good again."""
+        if last_ms is None:
+            self._bus_window_start = stamp_ms
+            return
+        step = (stamp_ms - last_ms) & 0xFFFF
+        if step == 0 or step >= 0x8000:
+            return                                   # repeated or out of order
+        # the frames' period: the nominal one, or the shortest step seen if longer (a plant
+        # whose control period is longer than the sensors' sends them on its own grid)
+        self._bus_min_step = min(self._bus_min_step, step)
+        period_ms = max(1e3 / self.p.sensor_rate_hz, self._bus_min_step)
+        frames = max(1, round(step / period_ms))
+        self._bus_expected += frames
+        self._bus_lost += frames - 1
+        if self.uav_time_ms is not None:
+            late = (self.uav_time_ms - stamp_ms) & 0xFFFF
+            if late < 0x8000:
+                self._bus_late_ms = min(self._bus_late_ms, late)
+            else:
+                self._bus_late_ms = min(self._bus_late_ms, 0)
+        if ((stamp_ms - self._bus_window_start) & 0xFFFF) < self.p.bus_window_s * 1e3:
+            return
+        lost = self._bus_lost / self._bus_expected
+        late_s = self._bus_late_ms * 1e-3 if self._bus_late_ms < 0x10000 else 0.0
+        bad = lost > self.p.bus_lost_max or late_s > self.p.bus_late_max_s
+        self._bus_window_start = stamp_ms
+        self._bus_expected = self._bus_lost = 0
+        self._bus_late_ms = 0x10000
+        if bad:
+            self._bus_good = 0
+            if not self.bus_degraded:
+                self.bus_degraded = True
+                self._bus_said = (lost, late_s)
+        elif self.bus_degraded:
+            self._bus_good += 1
+            if self._bus_good >= self.p.bus_good_windows:
+                self.bus_degraded = False
+                self._bus_said = None
+                if self.mode not in BRAKED_MODES and not self.lost:
+                    self._arm_pending = True
+
+    def _bus_notice(self, out: WinchOutput) -> None:
+        """Say a change of the bus's health (once each)."""
+        if self.bus_degraded and self._bus_said is not None and not self._bus_noticed:
+            lost, late_s = self._bus_said
+            self._bus_noticed = True
+            out.notices.append(_notice(
+                mavlink2.MAV_SEVERITY_CRITICAL,
+                f"winch: CAN bad ({lost:.0%} lost, {late_s * 1e3:.0f} ms), braked"))
+        elif not self.bus_degraded and self._bus_noticed:
+            self._bus_noticed = False
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE,
+                                       "winch: CAN bus good again"))
 
     def _winch_exit_angle_frame(self, wall_s: float, data: bytes) -> None:
         az, el, stamp, valid = cp.decode_winch_exit_angle(data)
@@ -628,7 +737,8 @@ class Winch:
             self.lost = False
             self._arm_pending = True
             out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE, "winch: encoder back"))
-        if self.mode in BRAKED_MODES:
+        self._bus_notice(out)
+        if self.mode in BRAKED_MODES or self.bus_degraded:
             out.frames.append(self._idle_frame())
             self._check_locked(out)
         else:
@@ -659,11 +769,55 @@ class Winch:
 
     # ------------------------------------------------------------------------- control
 
+    def _check_tension(self, out: WinchOutput) -> bool:
+        """Whether the over-tension pay-out acts for this encoder frame (said as it begins
+        and ends)."""
+        limit = self.p.tension_limit_n
+        tension = self.tension_n
+        if not self.over_tension:
+            self._over_frames = self._over_frames + 1 if tension > limit else 0
+            if self._over_frames * self.dt_s > self.p.overtension_s - 1e-9:
+                self.over_tension = True
+                out.notices.append(_notice(
+                    mavlink2.MAV_SEVERITY_WARNING,
+                    f"winch: over-tension {tension:.0f} N > {limit:.0f} N, paying out"))
+        elif not tension >= 0.9 * limit:       # (NaN: the load cell silent ends it too)
+            self.over_tension = False
+            self._over_frames = 0
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE,
+                                       f"winch: tension back below {limit:.0f} N"))
+        return self.over_tension
+
+    def _pay_out(self, length: float) -> None:
+        """One period of the over-tension pay-out: the reference moves out from where it
+        stands (at least the measured length) at ``overtension_rate_m_s``, and the active
+        mode takes it from there afterwards (RELAXED winds back to L-bar as after any
+        pay-out, the others hold it)."""
+        rate = self.p.overtension_rate_m_s
+        base = self.ref_m if math.isfinite(self.ref_m) else length
+        if math.isfinite(length):
+            base = max(base, length)
+        self.ref_m = min(base + rate * self.dt_s, self.length_max_m)
+        self.ref_rate_m_s = rate if self.ref_m < self.length_max_m else 0.0
+        if self.mode == WinchMode.RELAXED:
+            self._rejoin_m, self._rejoin_rate = self.ref_m, 0.0
+            self._hold_m = self.ref_m
+        else:
+            self._target_m = self.ref_m
+            if self.mode == WinchMode.RATE:
+                self._speed_m_s = max(self._speed_m_s, 0.0)
+            elif self.mode == WinchMode.RETRACT:
+                self._retract_reached = True
+
     def _control(self, out: WinchOutput) -> float:
         """Torque [N m] for this encoder frame in the active (closed-loop) mode."""
         tension = self.tension_n if math.isfinite(self.tension_n) else 0.0
         length, omega = self.length_m, self.omega_rad_s
-        if self.mode == WinchMode.RELAXED:
+        if self._check_tension(out):
+            self._pay_out(length)
+            command = self.host.controller.update(self.dt_s, length, omega, tension,
+                                                  self.ref_m, self.ref_rate_m_s)
+        elif self.mode == WinchMode.RELAXED:
             uav = self.uav_now()
             if uav is not None and math.isfinite(self._rejoin_m):
                 # rejoining L-bar from a longer line: wound in at rejoin_rate_m_s at most
@@ -700,6 +854,7 @@ class Winch:
             command = self.host.controller.update(self.dt_s, length, omega, tension,
                                                   self.ref_m, self.ref_rate_m_s)
         self.last_command = command
+        self._check_stuck(out, length)
         torque = command.torque_n_m
         return torque if math.isfinite(torque) else 0.0
 
@@ -753,6 +908,28 @@ class Winch:
         if ref > self.length_max_m:
             ref, rate = self.length_max_m, 0.0
         self.ref_m, self.ref_rate_m_s = ref, rate
+
+    def _check_stuck(self, out: WinchOutput, length: float) -> None:
+        """A drum that does not pay out as its reference asks (a snagged line, a jammed
+        drum): the reference ``stuck_error_m`` ahead of the measured length, the line
+        slower than ``stuck_speed_m_s`` (a drum catching up moves), for ``stuck_s`` of
+        simulated time. While it is so the winch reports the drum braked
+        (CLUTCH_ENGAGED: the vehicle bounds its reach by the length) and not HEALTHY (the
+        vehicle's winder failsafe); said as it begins and ends."""
+        behind = self.ref_m - length
+        if not self.drum_stuck:
+            lagging = (behind > self.p.stuck_error_m
+                       and self.omega_rad_s * self.r_w < self.p.stuck_speed_m_s)
+            self._stuck_frames = self._stuck_frames + 1 if lagging else 0
+            if self._stuck_frames * self.dt_s > self.p.stuck_s - 1e-9:
+                self.drum_stuck = True
+                out.notices.append(_notice(mavlink2.MAV_SEVERITY_CRITICAL,
+                                           f"winch: drum stuck at {length:.1f} m, no pay-out"))
+        elif behind < 0.5 * self.p.stuck_error_m:
+            self.drum_stuck = False
+            self._stuck_frames = 0
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE,
+                                       "winch: drum no longer behind its reference"))
 
     def _advance_reference(self, out: WinchOutput) -> None:
         """One period of the reference of modes 1, 2 and 6, then the safety limits."""
@@ -841,7 +1018,8 @@ class Winch:
         flags = 0
         axis_ok = self.braked or self.axis_state in (None, cp.AxisState.CLOSED_LOOP_CONTROL)
         if (self.encoder_frames and not self.lost and not self.axis_error and axis_ok
-                and self.load_cell_healthy is not False
+                and self.load_cell_healthy is not False and not self.drum_stuck
+                and not self.bus_degraded
                 and not self._foreign_recent()):
             flags |= FLAG_HEALTHY
         length = self._report_length()
@@ -851,7 +1029,7 @@ class Winch:
             flags |= FLAG_FULLY_RETRACTED
         if abs(self._report_speed()) > self.p.moving_speed_m_s:
             flags |= FLAG_MOVING
-        if self.braked or self.sensor_brake:
+        if self.braked or self.sensor_brake or self.drum_stuck:
             flags |= FLAG_CLUTCH_ENGAGED
         if self.mode in BRAKED_MODES:
             flags |= FLAG_LOCKED

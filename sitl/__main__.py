@@ -50,7 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--params", default=None, help="system parameters TOML")
     ap.add_argument("--faults", default=None, metavar="FILE",
                     help="faults to inject: a TOML file of [[faults]] tables (sitl/faults.py: "
-                         "kind = gnss_loss | wind | motor | winder_motor, start_s, end_s, ...)")
+                         "kind = gnss_loss | wind | motor | winder_motor | can_loss | can | "
+                         "tether_snag, start_s, end_s, ...)")
     ap.add_argument("--position", type=float, nargs=3, default=(2.0, 0.0, 10.0),
                     metavar=("X", "Y", "Z"),
                     help="start here [m], z-up frame: in hover trim, or resting on the "
@@ -133,20 +134,20 @@ def main(argv: Sequence[str] | None = None) -> int:
                                       else (sl.SIM_HOST_DEFAULT, args.port))
         print(f"plant: cannot listen on {where}: {exc.strerror}", file=sys.stderr)
         return 1
-    before_physics = None
-    if faults:
-        schedule = FaultSchedule(faults, plant, server.batches)
+    # the scenario's faults and the run-time SIM_* parameters the companion forwards
+    schedule = FaultSchedule(faults, plant, server.batches)
+    server.sim_params = schedule
 
-        def before_physics(srv: SimLinkServer) -> None:
-            for line in schedule.apply(plant.t_s):
-                print(f"plant: {line}", flush=True)
-            if node is not None:
-                node.bus_down = schedule.can_down
-            if schedule.winder_motor_failed and srv.winder_inputs.torque_n_m != 0.0:
-                srv.winder_inputs = WinderInputs(0.0, srv.winder_inputs.enabled)
-        # the faults of the start in force before the first batch goes out (a GNSS lost
-        # from 0 s: not even the first fix)
-        before_physics(server)
+    def before_physics(srv: SimLinkServer) -> None:
+        for line in schedule.apply(plant.t_s):
+            print(f"plant: {line}", flush=True)
+        if node is not None:
+            node.can = schedule.can
+        if schedule.winder_motor_failed and srv.winder_inputs.torque_n_m != 0.0:
+            srv.winder_inputs = WinderInputs(0.0, srv.winder_inputs.enabled)
+    # the faults of the start in force before the first batch goes out (a GNSS lost from
+    # 0 s: not even the first fix)
+    before_physics(server)
     loop = PlantLoop(server, node=node, truth_log=log, before_physics=before_physics)
     signal.signal(signal.SIGTERM, lambda *_: loop.stop())
     signal.signal(signal.SIGINT, lambda *_: loop.stop())

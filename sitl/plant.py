@@ -46,6 +46,8 @@ from sitl.kernel import (
     P_GEAR,
     P_LUMPED,
     P_RW,
+    P_THETA_MAX,
+    P_THETA_MIN,
     STICK_SPEED_M_S,
     W_DRUM,
     W_EX,
@@ -459,6 +461,18 @@ class Plant:
         self.wind = WindModel(params, self.dt_s)
         self.wind_m_s = tuple(params.steady_m_s)  # type: ignore[assignment]
         self._wind[:3] = self.wind_m_s
+
+    def set_snag(self, snagged: bool) -> None:
+        """The tether snagged at the winder's exit (a fault, sitl.faults): the drum's hard
+        stops close on its angle now, so it turns neither way and the length paid out stays
+        as it is; False opens them to the drum's own stops again."""
+        m = self.model
+        lo, hi = m.winder.theta_min, m.winder.theta_max
+        if snagged:
+            lo = hi = min(max(float(self.x[DRUM_ANGLE]), lo), hi)
+            self.x[DRUM_RATE] = 0.0      # the jam stops the line, and the drum with it
+        m.p[P_THETA_MIN], m.p[P_THETA_MAX] = lo, hi
+        m.winder.set_stops(lo, hi)
 
     def _ground(self, x: np.ndarray) -> None:
         """Ground contact after a step that ended at or below the gear's height."""

@@ -39,7 +39,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 from sitl.plant import Plant, PlantInputs
 from sitl.sensor_batch import SensorBatches
@@ -131,6 +131,18 @@ class DisconnectedError(Exception):
 
 class StoppedError(Exception):
     """The stop event was set while waiting for an answer."""
+
+
+class SimParamStore(Protocol):
+    """What holds the simulator's run-time parameters (:class:`sitl.faults.FaultSchedule`)."""
+
+    def sim_values(self) -> dict[str, float]:
+        """Every parameter's value now, by name."""
+        ...
+
+    def set_sim(self, name: str, value: float) -> str | None:
+        """Set one: None, or why it was refused (the value unchanged)."""
+        ...
 
 
 def _check_loopback(host: str) -> None:
@@ -246,6 +258,12 @@ class SimLinkServer:
         self._parser = sl.FrameParser()
         self._sock: socket.socket | None = None
         self._poller: select.poll | None = None
+        #: The simulator's run-time parameters (tuavdefs.sim_params) the companion may set
+        #: over the link (None: it sets none; its PARAM_SETs are ignored).
+        self.sim_params: SimParamStore | None = None
+        self._params_out = bytearray()    # PARAM_VALUEs to go out before the next batch
+        # (an encoder of their own: the batches' sequence numbers stay the batches')
+        self._param_encoder = sl.Encoder(sl.PLANT_SYSID, sl.PLANT_COMPID)
         #: The Unix-domain path listened on (None: TCP).
         self.unix_path = unix_path
         address: tuple[str, int] | str
@@ -362,6 +380,10 @@ class SimLinkServer:
                 self._sock = sock
                 self._poller = select.poll()
                 self._poller.register(sock, select.POLLIN)
+                self._params_out.clear()
+                if self.sim_params is not None:   # what they are, before the first batch
+                    for name in self.sim_params.sim_values():
+                        self._queue_param(name)
                 return True
         return False
 
@@ -375,8 +397,16 @@ class SimLinkServer:
         lockstep the plant waits for the companion anyway."""
         sock = self._sock
         assert sock is not None
+        if self._params_out:
+            # (a few frames now and then, ahead of the batch: in real time they go the way
+            # of the batch's bytes)
+            self._unsent[:0] = self._params_out
+            self._params_out.clear()
         if not self.real_time:
             try:
+                if self._unsent:
+                    sock.sendall(self._unsent)
+                    self._unsent.clear()
                 sock.sendall(self.batches.batch(t_us))
             except OSError as e:
                 raise DisconnectedError from e
@@ -453,7 +483,10 @@ class SimLinkServer:
                 items = [sl.link_values(m) for m in parser.feed(data)]
             for item in items:
                 if item is None or item[0] != sl.MSG_HIL_ACTUATOR_CONTROLS:
-                    ignored += 1
+                    if item is not None and item[0] == sl.MSG_PARAM_SET:
+                        self._param_set(*item[1])
+                    else:
+                        ignored += 1
                     continue
                 answer = sl.answer_from_wire(item[1])
                 ts = answer[0]
@@ -470,6 +503,27 @@ class SimLinkServer:
                     self.log(f"lockstep: the companion answered after "
                              f"{time.monotonic() - waited_from:.1f} s")
                 return True, late, ignored
+
+    def _param_set(self, name: str, value: float) -> None:
+        """A PARAM_SET of a simulator parameter from the companion: applied, or refused
+        (logged); the value held echoed as PARAM_VALUE either way (nothing for a name
+        that is not one)."""
+        store = self.sim_params
+        if store is None or name not in store.sim_values():
+            return
+        why = store.set_sim(name, value)
+        self.log(f"simulator parameter {name} = {value:g}" if why is None
+                 else f"simulator parameter {name}: {why}; kept "
+                      f"{store.sim_values()[name]:g}")
+        self._queue_param(name)
+
+    def _queue_param(self, name: str) -> None:
+        store = self.sim_params
+        assert store is not None
+        values = store.sim_values()
+        names = list(values)
+        self._params_out += sl.param_value_frame(self._param_encoder, name, values[name],
+                                                 names.index(name), len(names))
 
     def _hold(self, answer: tuple[int, tuple[float, float, float, float], bool, bool]
               ) -> None:

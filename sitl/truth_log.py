@@ -6,7 +6,9 @@ in the inertial frame (z up, origin at the winder's tether exit): time ``t_s`` [
 position ``x_m, y_m, z_m`` [m], velocity ``vx_m_s, vy_m_s, vz_m_s`` [m/s], the attitude's
 Euler angles ``roll_rad, pitch_rad, yaw_rad`` [rad] (body x forward, y left, z up), the
 paid-out ``tether_length_m`` [m], the drum's rate ``drum_rate_rad_s`` [rad/s], ``armed``
-(1.0 or 0.0) and the held rotor commands ``rotor1`` .. ``rotor4`` (normalised, [0, 1]).
+(1.0 or 0.0), the held rotor commands ``rotor1`` .. ``rotor4`` (normalised, [0, 1]) and
+the wind at the UAV ``wind_x_m_s, wind_y_m_s, wind_z_m_s`` [m/s] (the air's velocity: mean,
+turbulence and gusts, as the last physics step sampled it).
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ if TYPE_CHECKING:
 #: The truth log's columns, in order (units in the module docstring).
 TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "roll_rad",
                  "pitch_rad", "yaw_rad", "tether_length_m", "drum_rate_rad_s", "armed",
-                 "rotor1", "rotor2", "rotor3", "rotor4")
+                 "rotor1", "rotor2", "rotor3", "rotor4", "wind_x_m_s", "wind_y_m_s",
+                 "wind_z_m_s")
 #: A row of the truth log: the columns' values (floats) as their repr.
 _ROW = ",".join(["%r"] * len(TRUTH_COLUMNS)) + "\n"
 
@@ -53,7 +56,7 @@ class TruthLog:
         self.stream.write(_ROW % (float(p.t_s), *x[POS], *x[VEL], *quat_to_euler(x[QUAT]),
                                   float(p.tether_length_m), x[DRUM_RATE],
                                   1.0 if server.armed else 0.0, float(c0), float(c1),
-                                  float(c2), float(c3)))
+                                  float(c2), float(c3), *p.wind_m_s))
         now = time.monotonic()
         if now - self._flushed >= 1.0:
             self.stream.flush()

@@ -40,8 +40,15 @@ class WinderModel:
         self.p = winder
         self.r_w = winder.drum_radius_m
         self._packed = pack_params(SystemParams(winder=winder, tether=tether))
+        #: The drum's own hard stops [rad] (full, empty).
         self.theta_min = float(self._packed[P_THETA_MIN])
         self.theta_max = float(self._packed[P_THETA_MAX])
+
+    def set_stops(self, theta_min: float, theta_max: float) -> None:
+        """The stops acting from now on [rad] (a snagged tether closes them on the drum's
+        angle: sitl.faults); :attr:`theta_min` and :attr:`theta_max` stay the drum's own."""
+        self._packed[P_THETA_MIN] = theta_min
+        self._packed[P_THETA_MAX] = theta_max
 
     def length_m(self, theta_rad: float) -> float:
         """Paid-out unstretched tether length for a drum angle [m]."""

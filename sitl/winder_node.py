@@ -7,6 +7,12 @@ and the torque it is asked for. A host's answer to an encoder frame applies from
 control period on, in lockstep as in real time (:meth:`WinderCanNode.inputs`). The plant
 applies the torque limits' cut-back near the velocity limit itself
 (``sitl.kernel.motor_torque``).
+
+CAN faults (:attr:`WinderCanNode.can`, from :mod:`sitl.faults`): each frame, either way, is
+lost with the drop probability (all of them when the bus is down) and, kept, reaches the
+other end the delay later in simulated time (frames from the host are handed to the axis
+then; frames to the host go out then). In lockstep a host's answer that is lost or delayed
+still ends the wait for it (the wait only paces the wall clock).
 """
 
 from __future__ import annotations
@@ -15,6 +21,7 @@ import math
 import time
 
 from sitl.exit_angle import ExitAngleSensor
+from sitl.faults import CanChannel, CanFaults
 from sitl.odrive_axis import OdriveAxis, WinchSensors
 from sitl.plant import Plant
 from tuavdefs.can_protocol import (
@@ -59,10 +66,12 @@ class WinderCanNode:
         self.exit_sensor = ExitAngleSensor()
         self.frames_received = 0
         self.frames_sent = 0
-        #: A CAN-loss fault (sitl.faults): no frame reaches the node or leaves it.
-        self.bus_down = False
-        #: Frames lost to it, both ways.
+        #: The bus's faults now (sitl.faults: lost frames, delayed frames).
+        self.can = CanFaults()
+        #: Frames lost to them, both ways.
         self.frames_lost = 0
+        self._rx = CanChannel(seed=1)      # host -> node
+        self._tx = CanChannel(seed=2)      # node -> host
         self._encoder_id = frame_id(axis_node_id, Cmd.GET_ENCODER_ESTIMATES)
         self._drum_radius = w.drum_radius_m
         wm = plant.model.winder
@@ -70,17 +79,48 @@ class WinderCanNode:
         self._theta_min = wm.theta_min + 1e-9   # at the full stop at or below [rad]
         self._theta_max = wm.theta_max - 1e-9   # at the empty stop at or above [rad]
 
+    @property
+    def bus_down(self) -> bool:
+        """Whether the bus carries nothing now (a CAN-loss fault)."""
+        return self.can.down
+
     def service(self, t_s: float) -> None:
-        """Feed every frame the bus holds to the axis, and send its replies (with
-        :attr:`bus_down`, a CAN-loss fault, the frames are lost)."""
+        """Feed every frame the bus holds (and the delayed ones now due) to the axis, and
+        send its replies; under :attr:`can` frames are lost or held."""
         while True:
             rx = self.link.recv(timeout_s=0.0)
             if rx is None:
                 break
-            if self.bus_down:
-                self.frames_lost += 1
-                continue
-            self._receive(t_s, rx)
+            self._arrive(t_s, rx)
+        if self._rx.pending:
+            for rx in self._rx.due(t_s, self.can.delay_s):
+                self._receive(t_s, rx)
+        if self._tx.pending:
+            for frames in self._tx.due(t_s, self.can.delay_s):
+                self._transmit(t_s, frames)
+
+    def _arrive(self, t_s: float, rx: RxFrame) -> None:
+        """A frame off the bus at ``t_s`` [s]: lost, held (delayed) or handled now."""
+        faults = self.can
+        if faults.drop_probability > 0.0 and not self._rx.keep(faults):
+            self.frames_lost += 1
+            if self._is_host_command(rx):
+                self._awaiting = False   # (lost: no answer is coming to wait for)
+            return
+        if faults.delay_s > 0.0 or self._rx.pending:
+            if self._is_host_command(rx):
+                self.host_seen = True
+                self._awaiting = False
+            self._rx.hold(t_s, rx)
+            return
+        self._receive(t_s, rx)
+
+    def _is_host_command(self, rx: RxFrame) -> bool:
+        fid = rx.arbitration_id
+        if rx.is_extended or not 0 <= fid <= 0x7FF or rx.is_remote:
+            return False
+        node, cmd = split_id(fid)
+        return node == self.axis.node_id and cmd in _HOST_COMMANDS
 
     def _receive(self, t_s: float, rx: RxFrame) -> None:
         self.frames_received += 1
@@ -89,12 +129,11 @@ class WinderCanNode:
             # a 29-bit frame of another protocol on the same bus: not CAN Simple, and not
             # for this node (the axis counts nothing either)
             return
-        node, cmd = split_id(fid)
-        if node == self.axis.node_id and not rx.is_remote and cmd in _HOST_COMMANDS:
+        if self._is_host_command(rx):
             self.host_seen = True
             self._awaiting = False
-        self._send(self.axis.handle(t_s, rx.arbitration_id, rx.data, rx.is_remote,
-                                    rx.is_extended))
+        self._send(t_s, self.axis.handle(t_s, rx.arbitration_id, rx.data, rx.is_remote,
+                                         rx.is_extended))
 
     def await_host(self, t_s: float) -> None:
         """In lockstep, once a host has shown itself, wait (at most ``answer_timeout_s`` of
@@ -111,7 +150,7 @@ class WinderCanNode:
                 self.late_answers += 1
                 self._awaiting = False
                 return
-            self._receive(t_s, rx)
+            self._arrive(t_s, rx)
 
     def tick(self, t_s: float) -> None:
         """Emit the cyclic frames due at ``t_s`` [s]; the plant takes its inputs for the
@@ -128,12 +167,6 @@ class WinderCanNode:
         enabled = axis.enabled
         applied = self._motor_torque(axis.torque_command_nm, omega, enabled)
         frames = axis.tick(t_s, theta / _TWO_PI, omega / _TWO_PI, applied, BUS_VOLTAGE_V)
-        if frames:
-            for f in frames:
-                if f.arbitration_id == self._encoder_id and not f.is_remote:
-                    self.await_host(t_s)     # (the one before, if still unanswered)
-                    self._awaiting = True
-                    self._encoder_t = t_s
         # solved every period, not only when the sensors send: each solve starts from the
         # last one's solution, and the tensions sent must not depend on when it last ran
         tf = p.tether_forces()
@@ -154,7 +187,7 @@ class WinderCanNode:
         if frames:
             # every frame of the instant built first, then sent back to back: a host
             # tends to find them together, and wakes once
-            self._send(frames)
+            self._send(t_s, frames)
 
     def inputs(self, t_s: float) -> tuple[float, bool]:
         """(torque request [N m], motor powered) for the plant's physics from ``t_s`` [s] on.
@@ -170,8 +203,27 @@ class WinderCanNode:
             self.await_host(t_s)
         return self.axis.torque_command_nm, self.axis.enabled
 
-    def _send(self, frames: list) -> None:
-        if self.bus_down:
-            self.frames_lost += len(frames)
+    def _send(self, t_s: float, frames: list) -> None:
+        """Frames for the bus at ``t_s`` [s], under :attr:`can`."""
+        if not frames:
             return
+        faults = self.can
+        if faults.drop_probability > 0.0:
+            kept = [f for f in frames if self._tx.keep(faults)]
+            self.frames_lost += len(frames) - len(kept)
+            frames = kept
+            if not frames:
+                return
+        if faults.delay_s > 0.0 or self._tx.pending:
+            self._tx.hold(t_s, frames)
+            return
+        self._transmit(t_s, frames)
+
+    def _transmit(self, t_s: float, frames: list) -> None:
+        """Frames onto the bus now; an encoder frame among them awaits its answer."""
+        for f in frames:
+            if f.arbitration_id == self._encoder_id and not f.is_remote:
+                self.await_host(t_s)     # (the one before, if still unanswered)
+                self._awaiting = True
+                self._encoder_t = t_s
         self.frames_sent += self.link.send_frames(frames)

@@ -112,7 +112,10 @@ def test_the_can_capture_decodes_with_the_dbc(e2e):
 
 def test_ctrl_c_stops_everything_and_the_tlog_parses(e2e):
     assert e2e["up_rc"] == 0, e2e["up_stderr"]
-    assert e2e["stop_s"] < 3.0
+    # every process ended by itself within up's 2 s grace (up says "killed" otherwise); a
+    # minute of wall time catches a hang without timing a busy machine
+    assert "killed" not in e2e["up_stderr"], e2e["up_stderr"]
+    assert e2e["stop_s"] < 60.0
     assert e2e["left"] == []
     assert {"flight.tlog", "can.log", "truth.csv", "params.toml", "plant.log",
             "companion.log", "groundstation.log"} <= set(e2e["files"])

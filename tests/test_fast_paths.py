@@ -488,7 +488,7 @@ def test_the_truth_logs_row_is_each_values_repr():
         log.record(server)  # type: ignore[arg-type]
         row = (plant.t_s, *x[0:3].tolist(), *x[3:6].tolist(), *fr.quat_to_euler(
             x[6:10].tolist()), plant.tether_length_m, plant.drum_rate_rad_s,
-            int(server.armed), *server.rotor_commands)
+            int(server.armed), *server.rotor_commands, *plant.wind_m_s)
         rows.append(",".join(map(repr, map(float, row))))
     lines = stream.getvalue().splitlines()
     assert lines == [",".join(TRUTH_COLUMNS), *rows]

@@ -147,3 +147,117 @@ start_s = 10.0
 end_s = 25.0
 ''')
     return p
+
+
+# ----- the tether snag, the CAN bus's faults and the run-time SIM_* parameters
+
+
+def test_a_tether_snag_pins_the_paid_out_length_whatever_the_motor_does():
+    """Snagged at the winder's exit from 0.2 s to 0.6 s: the drum (the length paid out to
+    the UAV) does not move under a full pay-out or wind-in torque, and moves again after."""
+    plant = _hovering_plant()
+    schedule = FaultSchedule((FaultParams(kind="tether_snag", start_s=0.2, end_s=0.6),),
+                             plant, None)
+    limit = plant.params.winder.motor_torque_limit_n_m
+    lengths = []
+    for k in range(200):                        # 0.8 s of 4 ms periods
+        t = k * 0.004
+        schedule.apply(t)
+        torque = limit if (k // 25) % 2 else -limit     # out and in, 0.1 s each
+        plant.advance_held((0.55,) * 4, True, torque, True, 4)
+        lengths.append((t, plant.tether_length_m))
+    snagged = [length for t, length in lengths if 0.2 <= t < 0.6]
+    assert max(snagged) - min(snagged) == 0.0
+    free = [length for t, length in lengths if t >= 0.6]
+    assert max(free) - min(free) > 0.01
+    assert schedule.snagged is False
+
+
+def test_the_sim_parameters_act_on_the_plant_and_refuse_what_is_out_of_range():
+    plant = _hovering_plant()
+    batches = _batches(plant)
+    schedule = FaultSchedule((), plant, batches)
+    values = schedule.sim_values()
+    assert values["SIM_WIND_SPD"] == 0.0 and values["SIM_ENGINE_MUL"] == 1.0
+    assert schedule.set_sim("SIM_WIND_SPD", 41.0) == "41 outside 0..40"
+    assert schedule.set_sim("SIM_ENGINE_FAIL", 1.5) == "1.5 is not a whole number"
+    assert schedule.set_sim("SIM_GPS_DISABLE", math.nan) == "nan rejected"
+    assert schedule.set_sim("SIM_BOGUS", 1.0) == "unknown simulator parameter SIM_BOGUS"
+    assert schedule.sim_values() == values
+    for name, value in (("SIM_WIND_SPD", 6.0), ("SIM_WIND_DIR", 180.0),
+                        ("SIM_ENGINE_FAIL", 0b1010), ("SIM_ENGINE_MUL", 0.25),
+                        ("SIM_GPS_DISABLE", 1), ("SIM_TUAV_WDRFAIL", 1),
+                        ("SIM_TUAV_CANDROP", 0.5), ("SIM_TUAV_CANDLY", 20.0)):
+        assert schedule.set_sim(name, value) is None
+    schedule.apply(0.0)
+    assert plant.params.wind.steady_m_s == pytest.approx((0.0, 6.0, 0.0), abs=1e-12)
+    assert plant.params.wind.turbulence == "none"
+    assert plant.rotor_gains == (1.0, 0.25, 1.0, 0.25)     # motors 2 and 4
+    assert not batches.gps_enabled and schedule.winder_motor_failed
+    assert schedule.can.drop_probability == 0.5 and schedule.can.delay_s == pytest.approx(0.02)
+    assert schedule.set_sim("SIM_WIND_TURB", 10.0) is None
+    schedule.apply(0.004)
+    assert plant.params.wind.turbulence != "none"
+    assert plant.params.wind.wind_speed_at_6m_m_s == 10.0
+    # a scheduled fault and a parameter: the worse of the two
+    both = FaultSchedule((FaultParams(kind="can", drop_probability=0.2, delay_ms=50.0),),
+                         _hovering_plant(), None)
+    assert both.set_sim("SIM_TUAV_CANDROP", 0.4) is None
+    both.apply(0.0)
+    assert both.can.drop_probability == 0.4 and both.can.delay_s == pytest.approx(0.05)
+
+
+def test_the_plant_announces_the_runs_own_wind_in_the_sim_parameters():
+    params = SystemParams()
+    params = params.replace(wind=params.wind.replace(steady_m_s=(3.0, 4.0, 0.0),
+                                                     turbulence="moderate"))
+    x, _ = hover_trim(params, (6.0, 2.0, 12.0), 16.0)
+    values = FaultSchedule((), Plant(params, state=x), None).sim_values()
+    assert values["SIM_WIND_SPD"] == pytest.approx(5.0)
+    # blowing towards the north-east: from the south-west, 216.87 deg
+    assert values["SIM_WIND_DIR"] == pytest.approx(math.degrees(math.atan2(-3.0, -4.0)) + 360)
+    assert values["SIM_WIND_TURB"] == pytest.approx(30.0 * 1852.0 / 3600.0)
+
+
+def test_a_lossy_slow_can_bus_loses_its_share_and_delivers_the_rest_late():
+    """The winder's node on an in-process bus with 30 ms of delay: its encoder frames reach
+    the host from 30 ms on, and the host's request to arm the axis reaches the axis 30 ms
+    (8 periods of 4 ms: 32 ms) after it was sent; with half the frames lost, about half of
+    the encoder frames reach the host."""
+    from sitl.faults import CanFaults
+    from sitl.winder_node import WinderCanNode
+    from tuavdefs import can_protocol as cp
+    from tuavdefs.canbus import CanLink
+
+    node_link, host = CanLink("virtual:can_faults"), CanLink("virtual:can_faults")
+    encoder = cp.frame_id(0, cp.Cmd.GET_ENCODER_ESTIMATES)
+    try:
+        node = WinderCanNode(node_link, _hovering_plant())
+        node.can = CanFaults(0.0, 0.03)
+        seen_at, armed_at = [], None
+        for k in range(250):                  # 1 s of 4 ms periods
+            t = round(k * 0.004, 3)
+            if k == 125:                      # t = 0.5 s: the host arms the axis
+                host.send(cp.frame_id(0, cp.Cmd.SET_AXIS_STATE),
+                          cp.encode_set_axis_state(cp.AxisState.CLOSED_LOOP_CONTROL))
+            node.service(t)
+            node.tick(t)
+            if armed_at is None and node.axis.enabled:
+                armed_at = t
+            while (rx := host.recv(0.0)) is not None:
+                if rx.arbitration_id == encoder:
+                    seen_at.append(t)
+        assert seen_at[0] == 0.032 and len(seen_at) >= 95
+        assert armed_at == 0.532
+        node.can = CanFaults(0.5, 0.0)
+        got = 0
+        for k in range(250, 2750):            # 10 s, 1000 encoder frames
+            t = k * 0.004
+            node.service(t)
+            node.tick(t)
+            while (rx := host.recv(0.0)) is not None:
+                got += rx.arbitration_id == encoder
+        assert 430 < got < 570 and node.frames_lost > 500
+    finally:
+        node_link.close()
+        host.close()

@@ -133,7 +133,12 @@ def test_names_fit_mavlink_and_project_ones_are_prefixed():
                   "FENCE_ALT_MAX", "FENCE_ACTION", "FENCE_MARGIN", "FS_GCS_ENABLE",
                   "FS_GCS_TIMEOUT"}
     assert arducopter <= set(names)
-    assert all(n in arducopter or n.startswith("TUAV_") for n in names)
+    # the simulator's fault parameters: ArduPilot SITL's, and the project's as SIM_TUAV_
+    sitl = {"SIM_WIND_SPD", "SIM_WIND_DIR", "SIM_WIND_TURB", "SIM_GPS_DISABLE",
+            "SIM_ENGINE_FAIL", "SIM_ENGINE_MUL"}
+    assert sitl <= set(names)
+    assert all(n in arducopter or n in sitl or n.startswith(("TUAV_", "SIM_TUAV_"))
+               for n in names)
 
 
 def test_the_shipped_metadata_is_the_tables_and_reads_as_mavproxy_reads_it():

@@ -34,11 +34,23 @@ def test_a_run_ends_cleanly_with_its_folder(session):
 
 
 def test_ctrl_c_stops_all_three_within_3_s(session):
+    """Ctrl-C: every process ends by itself within up's grace of 2 s after its SIGTERM
+    (up kills, and says so, whatever is left then: so all are gone within 3 s of an
+    unloaded machine's time; on a busy one the wall clock stretches, so the bound is checked
+    through up's own word, not timed here beyond a hang's minute)."""
     s = session["sigint"]
     assert "tcp:127.0.0.1:4560" in s["banner"] and "clock: real time" in s["banner"], s
     assert "scheduling: SCHED_FIFO priority 10" in s["banner"]   # root in CI
     assert s["rc"] == 0
-    assert s["stop_s"] < 3.0
+    assert "killed" not in s["stderr"], s["stderr"]
+    assert "tuav-sitl up: stopped" in s["stdout"]
+    # each process's own summary, which it prints as it ends by itself (a killed one does
+    # not)
+    for name, summary in (("plant", " periods, "), ("companion", " control periods; "),
+                          ("groundstation", " encoder frames, ")):
+        last = s["logs"][name].rstrip().splitlines()[-1]
+        assert last.startswith(f"{name}: ") and summary in last, s["logs"][name][-2000:]
+    assert s["stop_s"] < 60.0
     assert s["left"] == []
 
 

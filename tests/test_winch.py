@@ -930,3 +930,110 @@ def test_the_sensor_clock_unwraps_the_sample_time_and_serves_as_the_winchs_time(
         assert w.lost == (ms > 100)
         if ms == 110:
             assert "winch: encoder lost, drum braked" in [n.text for n in out.notices]
+
+
+# ----- the over-tension pay-out and a stuck drum, against the plant's axis and drum
+
+
+def test_over_tension_pays_out_then_the_line_rejoins_lbar():
+    """RELAXED on L-bar, then the load cell reads 40 N (above the 30 N limit) for 2 s: the
+    winch says so within 0.1 s and pays out at 0.5 m/s; below the limit again, it says so
+    and winds back to L-bar no faster than its rejoin rate."""
+    b = Bench(14.0)
+    b.run(2.0)
+    lbar = b.winch.host.lbar.length(UAV[0])[0]
+    assert b.length == pytest.approx(lbar, abs=0.02)
+    b.tension = 40.0
+    b.run(0.2)
+    said = [n for n in b.notices if "over-tension" in n]
+    assert said == ["winch: over-tension 40 N > 30 N, paying out"]
+    start = b.length
+    b.run(2.0)
+    assert b.length - start == pytest.approx(2.0 * 0.5, abs=0.1)
+    b.tension = 10.0
+    b.run(0.1)
+    assert b.notices[-1] == "winch: tension back below 30 N"
+    fastest = 0.0
+    for _ in range(40):
+        b.run(0.1)
+        fastest = max(fastest, -b.omega * R_W)
+    assert 0.5 < fastest <= b.winch.p.rejoin_rate_m_s * 1.05 + 0.02
+    assert b.length == pytest.approx(lbar, abs=0.02)
+
+
+def test_over_tension_stops_a_wind_in_and_pays_out():
+    b = Bench(14.0, uav=((2.0, 2.0, 6.0), (0.0, 0.0, 0.0)))    # the taut floor near 7 m
+    b.run(0.5)
+    assert b.command(request(mavlink2.WINCH_RATE_CONTROL, rate=-0.3)).result == ACK
+    b.run(1.0)
+    assert b.omega * R_W == pytest.approx(-0.3, abs=0.05)
+    b.tension = 35.0                  # (the motor holds up to 40 N: 4 N m on 0.1 m)
+    b.run(1.0)
+    assert b.omega * R_W == pytest.approx(0.5, abs=0.05)      # paying out now
+    b.tension = 5.0
+    b.run(1.0)
+    assert abs(b.omega * R_W) < 0.02                          # and holds: no wind-in again
+
+
+def test_a_stuck_drum_is_reported_braked_and_unhealthy():
+    """The drum jammed (its stops closed on its angle, as a snagged tether closes them) and
+    the UAV moving away: the reference runs ahead, the winch says the drum is stuck within
+    0.2 s and reports it braked (CLUTCH_ENGAGED) and not HEALTHY; freed, it follows again
+    and is healthy."""
+    b = Bench(14.0)
+    b.run(2.0)
+    assert all(b.healthy(1.0))
+    theta = b.theta
+    b.model.set_stops(theta, theta)
+    far = ((4.5, 6.0, 12.0), (0.0, 0.0, 0.0))     # 14.2 m from the exit: L-bar 0.9 m longer
+    b.winch.set_uav(far)
+    b.run(0.3)
+    stuck = [n for n in b.notices if "stuck" in n]
+    assert stuck == [f"winch: drum stuck at {b.length:.1f} m, no pay-out"]
+    t_stuck = next(t for t, st in b.statuses if st.flags & wm.FLAG_CLUTCH_ENGAGED)
+    assert t_stuck <= 2.2 + 0.05
+    last = b.statuses[-1][1]
+    assert last.flags & wm.FLAG_CLUTCH_ENGAGED and not last.flags & wm.FLAG_HEALTHY
+    b.model.set_stops(b.model.theta_min, b.model.theta_max)
+    b.run(3.0)
+    assert "winch: drum no longer behind its reference" in b.notices
+    assert b.healthy(b.t - 0.5) and all(b.healthy(b.t - 0.5))
+    # a drum catching up with a jump of L-bar (it moves) is not stuck
+    b.winch.set_uav(((7.0, 9.0, 12.0), (0.0, 0.0, 0.0)))
+    n = len(b.notices)
+    b.run(3.0)
+    assert not [x for x in b.notices[n:] if "stuck" in x]
+
+
+def test_the_bus_check_counts_lost_and_late_load_cell_frames():
+    """The load cell's stamps judge the bus: a plant on a 20 ms grid (its frames 20 ms
+    apart) loses nothing; every other frame of a 10 ms stream gone is 50 % lost; frames
+    80 ms older than the UAV's position are late; each brakes the drum (IDLE on the next
+    encoder frame) and is said, and 10 good windows end it."""
+    tension_id = cp.frame_id(cp.WINCH_SENSOR_NODE_ID_DEFAULT, cp.SensorCmd.WINCH_TENSION)
+
+    def feed(w: Winch, stamps, uav_ahead_ms: int | None = None) -> list[str]:
+        said = []
+        for ms in stamps:
+            if uav_ahead_ms is not None:
+                w.set_uav(UAV, (ms + uav_ahead_ms) & 0xFFFF)
+            w.on_frame(ms * 1e-3, tension_id, cp.encode_winch_tension(5.0, False, ms & 0xFFFF))
+            out = encoder(w, ms * 1e-3, 14.0)
+            said += [n.text for n in out.notices]
+            if w.bus_degraded:
+                assert ("Set_Axis_State", cp.AxisState.IDLE) in decoded(out.frames)
+        return said
+
+    slow = ready(14.0)
+    assert feed(slow, range(0, 2000, 20)) == [] and not slow.bus_degraded
+    lossy = ready(14.0)
+    said = feed(lossy, [*range(0, 1000, 10), *range(1000, 2000, 20)])
+    assert lossy.bus_degraded and said == ["winch: CAN bad (50% lost, 0 ms), braked"]
+    assert not lossy.status_flags() & wm.FLAG_HEALTHY
+    assert lossy.status_flags() & wm.FLAG_CLUTCH_ENGAGED
+    said = feed(lossy, range(2000, 3200, 10))
+    assert said == ["winch: CAN bus good again"] and not lossy.bus_degraded
+    late = ready(14.0)
+    assert feed(late, range(0, 1000, 10), uav_ahead_ms=5) == []
+    said = feed(late, range(1000, 1500, 10), uav_ahead_ms=80)
+    assert said == ["winch: CAN bad (0% lost, 80 ms), braked"]

@@ -35,7 +35,7 @@ from groundstation.winch import CommandRequest, Winch, WinchStatusReport
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
 from sitl.exit_angle import ExitAngleSensor
-from sitl.faults import FaultSchedule
+from sitl.faults import CanChannel, FaultSchedule
 from sitl.lumped import L_MAXN
 from sitl.plant import (
     DRUM_ANGLE,
@@ -385,6 +385,10 @@ class OfflineRunner:
                                     self.sensors.batches if self.sensors else None)
         #: what began or ended, with its time (metrics.json's "faults")
         self.fault_log: list[str] = []
+        # a lossy or slow CAN bus (a "can" fault): a winder period's exchange lost, or the
+        # torque it brings applied the round trip (twice the delay) later
+        self._can_lost = CanChannel(seed=1)
+        self._can_late = CanChannel(seed=2)
 
     def _on_start(self) -> None:
         """The ground station's script, once the vehicle has a state: upload the mission,
@@ -462,6 +466,7 @@ class OfflineRunner:
         inputs = PlantInputs()
         winder_torque, winder_lyap, lbar_m, lbar_rate = 0.0, 0.0, 0.0, 0.0
         winder_enabled = True
+        plant_torque, plant_enabled = 0.0, True   # what the axis holds (a late bus)
         g = self.model.environment.gravity_m_s2   # the companion's: WINCH_STATUS is in kg
         mission = sc.flies_mission
         sensors = self.sensors
@@ -494,6 +499,8 @@ class OfflineRunner:
                     # brakes), the winch hears nothing and says nothing
                     status = None
                     winder_torque, winder_enabled = 0.0, False
+                elif faults and not self._can_lost.keep(self.faults.can):
+                    status = None       # this period's frames lost: the axis holds its torque
                 else:
                     exit_angle = (self.exit_sensor.read(tf.on_exit_n)
                                   if (k // n_wind) % self._exit_every == 0 else None)
@@ -507,6 +514,12 @@ class OfflineRunner:
                         if ext is not None:
                             companion.external_position(ext)
                     winder_torque, winder_enabled = ground.torque_n_m, ground.axis_enabled
+                    if faults and (self.faults.can.delay_s > 0.0 or self._can_late.pending):
+                        self._can_late.hold(t, (winder_torque, winder_enabled))
+                        due = self._can_late.due(t, 2.0 * self.faults.can.delay_s)
+                        winder_torque, winder_enabled = (due[-1] if due else
+                                                         (plant_torque, plant_enabled))
+                plant_torque, plant_enabled = winder_torque, winder_enabled
                 if faults and self.faults.winder_motor_failed:
                     winder_torque = 0.0
                 cmd = winch.last_command

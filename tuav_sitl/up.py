@@ -184,17 +184,19 @@ class Stack:
 
     def stop(self) -> None:
         """SIGTERM to all, then SIGKILL to whatever is left after the grace time."""
-        everyone = [*self.procs.values(), *self.recorders.values()]
-        for proc in everyone:
+        everyone = [*self.procs.items(), *self.recorders.items()]
+        for _, proc in everyone:
             if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + STOP_GRACE_S
-        for proc in everyone:
+        for name, proc in everyone:
             try:
                 proc.wait(timeout=max(deadline - time.monotonic(), 0.01))
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait(timeout=5)
+                print(f"tuav-sitl up: {name} did not stop within {STOP_GRACE_S:g} s: killed",
+                      file=sys.stderr, flush=True)
         for log in self.logs.values():
             log.close()
 

@@ -99,6 +99,11 @@ MSG_HIL_ACTUATOR_CONTROLS = mavlink2.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS  # 93
 MSG_HIL_SENSOR = mavlink2.MAVLINK_MSG_ID_HIL_SENSOR  # 107
 MSG_HIL_GPS = mavlink2.MAVLINK_MSG_ID_HIL_GPS  # 113
 MSG_HIL_STATE_QUATERNION = mavlink2.MAVLINK_MSG_ID_HIL_STATE_QUATERNION  # 115
+#: The simulator's run-time parameters (tuavdefs.sim_params) cross the link as these: the
+#: companion sends PARAM_SET, the plant PARAM_VALUE (at the session's start, and after
+#: each PARAM_SET, with the value it holds).
+MSG_PARAM_SET = mavlink2.MAVLINK_MSG_ID_PARAM_SET  # 23
+MSG_PARAM_VALUE = mavlink2.MAVLINK_MSG_ID_PARAM_VALUE  # 22
 
 #: HIL_SENSOR.fields_updated bits.
 SENSOR_ACCEL = 0b111
@@ -688,9 +693,34 @@ _ACTUATOR_CRC_EXTRA = _CODECS[MSG_HIL_ACTUATOR_CONTROLS].crc_extra
 
 def link_values(msg: mavlink2.MAVLink_message) -> tuple[int, tuple] | None:
     """(message id, values in wire order) of one of the link's messages (None for any
-    other message): what :meth:`FrameParser.feed_link` returns for it."""
-    codec = _CODECS.get(msg.get_msgId())
-    return None if codec is None else (codec.msg_id, codec.wire_of(msg))
+    other message): what :meth:`FrameParser.feed_link` returns for it. PARAM_SET and
+    PARAM_VALUE give (name, value) instead."""
+    mid = msg.get_msgId()
+    codec = _CODECS.get(mid)
+    if codec is None:
+        if mid in (MSG_PARAM_SET, MSG_PARAM_VALUE):
+            name = msg.param_id
+            if isinstance(name, bytes):
+                name = name.decode("ascii", "replace")
+            return mid, (str(name).split("\0", 1)[0], float(msg.param_value))
+        return None
+    return (codec.msg_id, codec.wire_of(msg))
+
+
+def param_set_frame(encoder: Encoder, target: tuple[int, int], name: str,
+                    value: float) -> bytes:
+    """A PARAM_SET of a simulator parameter (a REAL32 on the wire) for ``target``
+    (system, component)."""
+    return encoder.pack(mavlink2.MAVLink_param_set_message(
+        target[0], target[1], name.encode("ascii"), float(value),
+        mavlink2.MAV_PARAM_TYPE_REAL32))
+
+
+def param_value_frame(encoder: Encoder, name: str, value: float, index: int,
+                      count: int) -> bytes:
+    """A PARAM_VALUE of a simulator parameter (a REAL32 on the wire)."""
+    return encoder.pack(mavlink2.MAVLink_param_value_message(
+        name.encode("ascii"), float(value), mavlink2.MAV_PARAM_TYPE_REAL32, count, index))
 
 
 class Encoder:

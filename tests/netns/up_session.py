@@ -83,8 +83,11 @@ def main() -> int:
     t0 = time.monotonic()
     p.send_signal(signal.SIGINT)
     so, se = p.communicate(timeout=30)
+    run2 = next(d2.iterdir())
     out["sigint"] = {"rc": p.returncode, "banner": banner, "stop_s": time.monotonic() - t0,
-                     "stdout": so, "stderr": se, "left": processes_mentioning(str(d2))}
+                     "stdout": so, "stderr": se, "left": processes_mentioning(str(d2)),
+                     "logs": {n: (run2 / f"{n}.log").read_text()
+                              for n in ("plant", "companion", "groundstation")}}
     # 3. one process dies: the others are stopped and the exit code says so
     out["dies"] = kill_one(base / "dies", "groundstation")
     # 3b. the bus recorder dies: up says so and stops (can.log would stay silent)
