@@ -635,7 +635,9 @@ class Winch:
                                                       self.ref_m, self.ref_rate_m_s)
             elif uav is not None:
                 pos, vel = uav
-                step = self.host.update(length, omega, tension, pos, vel)
+                ea = self.exit_angle
+                step = self.host.update(length, omega, tension, pos, vel,
+                                        ea[1] if ea is not None and ea[3] else math.nan)
                 self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
                 command = step.command
             else:
