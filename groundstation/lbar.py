@@ -268,17 +268,20 @@ def line_weight_n_m(tension_n: float, elevation_rad: float, length_m: float,
 
 @njit
 def weight_estimate(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, w_n_m: float,
-                    elevation_rad: float, length_m: float, height_m: float) -> float:
+                    tension_n: float, elevation_rad: float, length_m: float,
+                    height_m: float) -> float:
     """One period of the line's weight estimate (docs/control.md §3): the low-passed
     (``trim_p[5]`` [s]) :func:`line_weight_n_m` of the trim's filtered drum tension
-    ``trim_s[2]``, the measured exit elevation, the paid-out length and the UAV's reported
+    ``trim_s[2]`` (before its first sample: ``tension_n`` [N], the one measured now), the
+    measured exit elevation, the paid-out length and the UAV's reported
     height, bounded to [1/r, r] times the model's ``w_n_m`` (r = ``trim_p[6]``), held
     while the exit angle is below ``trim_p[7]`` or unknown (NaN). Its state is
     ``trim_s[3]`` (NaN: no estimate yet); returns the weight to use [N/m] (the model's
     until there is one)."""
     r, w_hat = trim_p[6], trim_s[3]
     if elevation_rad >= trim_p[7]:   # (not NaN)
-        w = line_weight_n_m(trim_s[2], elevation_rad, length_m, height_m)
+        t = trim_s[2] if trim_s[2] == trim_s[2] else tension_n
+        w = line_weight_n_m(t, elevation_rad, length_m, height_m)
         if w == w:
             w = min(max(w, w_n_m / r), w_n_m * r)
             if w_hat == w_hat:

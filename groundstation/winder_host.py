@@ -92,7 +92,8 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     fields)."""
     lbar_m, rate, a, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
                                         min_slack, root_guess)
-    w = weight_estimate(trim_p, trim_s, dt_s, w_n_m, elevation_rad, length_m, pz)
+    w = weight_estimate(trim_p, trim_s, dt_s, w_n_m, drum_tension_n, elevation_rad,
+                        length_m, pz)
     tension_trim(trim_p, trim_s, dt_s, a, px, py, pz, w, drum_tension_n)
     lbar_m += trim_s[0]
     rate += trim_s[1]
