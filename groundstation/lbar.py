@@ -353,6 +353,12 @@ class LBarEstimator:
         #: (offset [m], its rate [m/s], filtered drum tension [N], line weight [N/m])
         self.trim_state = np.array([0.0, 0.0, math.nan, math.nan])
 
+    def weight_n_m(self) -> float:
+        """The line's weight per metre [N/m]: the estimate (:func:`weight_estimate`) once
+        there is one, else the model's."""
+        w = float(self.trim_state[3])
+        return w if math.isfinite(w) else self.w
+
     def length(self, pos_m: tuple[float, float, float]) -> tuple[float, float]:
         """(L-bar [m], a [m]) for the UAV at ``pos_m``."""
         x, y, z = pos_m

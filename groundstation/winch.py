@@ -511,7 +511,8 @@ class Winch:
         if abs(gap_ms) * 1e-3 > fixer.p.max_age_s:
             return None
         reported = self.uav[0] if self.uav is not None else None
-        pos, cov, ground = fixer.position(self.length_m, self.tension_n, az, el, reported)
+        pos, cov, ground = fixer.position(self.length_m, self.tension_n, az, el, reported,
+                                          self.host.lbar.weight_n_m())
         self.fixes += 1
         return TetherFix(pos, cov, self._unwrap_ms(stamp), ground)
 
