@@ -71,6 +71,10 @@ class TetherFixParams(Params):
                                      "slip)", ge=0)
     weight_uncertainty_fraction: float = quantity(
         0.03, "1", "uncertainty of the tether's weight per metre (wet, ice, dirt)", ge=0)
+    weight_band_fraction: float = quantity(
+        0.1, "1", "the winder's estimate of the weight per metre is used only for its part "
+        "beyond this fraction off the belief (within it the belief, which is exact when "
+        "the line is as designed, holds)", ge=0)
     design_wind_m_s: float = quantity(
         3.0, "m/s", "the wind on the line the covariance allows for (its drag bends the "
         "line, which the windless model ignores)", ge=0)
@@ -186,8 +190,13 @@ class TetherFixer:
         """(position [m], covariance [m^2], on the ground) of the line's far end;
         ``reported_m`` [m] the UAV's position as the vehicle reports it (None: unknown),
         used only when the line lies on the ground; ``w_n_m`` [N/m] the line's weight per
-        metre as estimated (the winder's, docs/control.md §3; None: the belief's)."""
-        w = self.w if w_n_m is None or not w_n_m > 0.0 else float(w_n_m)
+        metre as estimated (the winder's, docs/control.md §3), used beyond
+        ``weight_band_fraction`` off the belief (None: the belief)."""
+        w = self.w
+        if w_n_m is not None and w_n_m > 0.0:
+            band = self.p.weight_band_fraction * w
+            off = float(w_n_m) - w
+            w += math.copysign(max(abs(off) - band, 0.0), off)
         uav_height_m = reported_m[2] if reported_m is not None else None
         p = self.p
         L = max(length_m, 0.0)
