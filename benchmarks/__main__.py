@@ -321,6 +321,26 @@ def bench_offline(quick: bool) -> list[Row]:
     return rows
 
 
+def bench_peer(quick: bool) -> list[Row]:
+    """RotorPy's own quadrotor on a circle against our loop with the EKF and the lumped
+    tether, the same simulated time, interleaved (benchmarks/peer.py)."""
+    from benchmarks.peer import ROTORPY_RATE_HZ, peer_ratio, rotorpy_available
+
+    why = rotorpy_available()
+    name = "peer: our loop (EKF, lumped tether) vs RotorPy circle"
+    if why is not None:
+        return [Row(name, math.nan, "x RotorPy", note=f"skipped: {why}")]
+    duration = 1.0 if quick else 20.0
+    r = peer_ratio(duration, 1 if quick else 3)
+    return [Row(name, r["ratio"], "x RotorPy", reference=duration / r["rotorpy_wall_s"],
+                ratio_text=f"ours {duration / r['ours_wall_s']:.0f}x real time, RotorPy "
+                           f"{duration / r['rotorpy_wall_s']:.1f}x",
+                note=f"{duration:.0f} s simulated each; RotorPy at its {ROTORPY_RATE_HZ} Hz, "
+                     f"ours physics 1 kHz, control 250 Hz; RMSE ours "
+                     f"{r['ours_rmse_m']:.3f} m, RotorPy {r['rotorpy_rmse_m']:.3f} m",
+                goal=f">= 20x: {'met' if r['ratio'] >= 20.0 else 'NOT met'}")]
+
+
 def _warm_worker(sc: object) -> bool:
     """On a Dask worker: one short run, so the compiled kernels are loaded before timing."""
     from tuav_sitl.offline import run_scenario
@@ -503,7 +523,7 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[Row] = []
     from benchmarks.first_result import bench_first_result
 
-    benches = [bench_tether, bench_plant_step, bench_estimator, bench_offline,
+    benches = [bench_tether, bench_plant_step, bench_estimator, bench_offline, bench_peer,
                bench_first_result, bench_sweep]
     if not args.no_processes:
         benches += [bench_processes, bench_command_latency]

@@ -23,10 +23,10 @@ class FlightControlParams(Params):
     pos_k2_1_s: tuple[float, ...] = quantity(
         (2.6, 2.6, 3.0), "1/s", "velocity error gain K2 (x, y, z)", gt=0, length=3)
     disturbance_gain_1_s2: tuple[float, ...] = quantity(
-        (0.8, 0.8, 1.0), "1/s^2", "adaptation gain Gamma of the disturbance estimate",
+        (3.0, 3.0, 1.0), "1/s^2", "adaptation gain Gamma of the disturbance estimate",
         ge=0, length=3)
     disturbance_limit_m_s2: float = quantity(
-        4.0, "m/s^2", "bound on the disturbance estimate (projection, anti-windup)", gt=0)
+        8.0, "m/s^2", "bound on the disturbance estimate (projection, anti-windup)", gt=0)
     max_tilt_rad: float = quantity(
         math.radians(35.0), "rad", "largest tilt of the thrust from vertical", gt=0,
         lt=math.pi / 2)

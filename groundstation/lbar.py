@@ -64,6 +64,15 @@ class LBarParams(Params):
         0.5, "s", "tension trim: time constant of the low-pass on the measured drum tension "
         "it compares (0: none): the trim corrects a slow position error, not the tether's "
         "axial waves and snaps", ge=0)
+    weight_filter_s: float = quantity(
+        2.0, "s", "line weight estimate: time constant of its low-pass (docs/control.md §3)",
+        gt=0)
+    weight_ratio_max: float = quantity(
+        3.0, "1", "line weight estimate: bounded to [1/ratio, ratio] times the model's "
+        "weight per metre (1: the model's always)", ge=1)
+    weight_min_exit_angle_rad: float = quantity(
+        math.radians(2.0), "rad", "line weight estimate: held while the measured exit "
+        "angle is below this (the line may lie on the ground)", ge=0, lt=math.pi / 2)
 
 
 #: Width of the smooth maxima [m]: over this range the larger argument takes over.
@@ -243,6 +252,47 @@ def expected_drum_tension_n(a_m: float, h_m: float, v_m: float, w_n_m: float) ->
 
 
 @njit
+def line_weight_n_m(tension_n: float, elevation_rad: float, length_m: float,
+                    height_m: float) -> float:
+    """The weight per metre [N/m] of an inextensible line hanging clear of the ground from
+    the exit (tension ``tension_n`` [N] leaving at ``elevation_rad`` above the horizontal)
+    to a point ``height_m`` [m] up along ``length_m`` [m] of line; NaN where it does not
+    say (a straight or vertical line, no tension). The top tension exceeds the exit's by
+    w z, and the vertical tension grows by w per metre of line: with H = T cos(el),
+    V = T sin(el), (T + w z)^2 = H^2 + (V + w L)^2 gives w = 2 (z T - V L) / (L^2 - z^2)."""
+    den = length_m * length_m - height_m * height_m
+    if not (tension_n > 0.0 and den > 1e-6 * length_m * length_m and height_m > 0.0):
+        return math.nan
+    return 2.0 * (height_m * tension_n - tension_n * math.sin(elevation_rad) * length_m) / den
+
+
+@njit
+def weight_estimate(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, w_n_m: float,
+                    tension_n: float, elevation_rad: float, length_m: float,
+                    height_m: float) -> float:
+    """One period of the line's weight estimate (docs/control.md §3): the low-passed
+    (``trim_p[5]`` [s]) :func:`line_weight_n_m` of the trim's filtered drum tension
+    ``trim_s[2]`` (before its first sample: ``tension_n`` [N], the one measured now), the
+    measured exit elevation, the paid-out length and the UAV's reported
+    height, bounded to [1/r, r] times the model's ``w_n_m`` (r = ``trim_p[6]``), held
+    while the exit angle is below ``trim_p[7]`` or unknown (NaN). Its state is
+    ``trim_s[3]`` (NaN: no estimate yet); returns the weight to use [N/m] (the model's
+    until there is one)."""
+    r, w_hat = trim_p[6], trim_s[3]
+    if elevation_rad >= trim_p[7]:   # (not NaN)
+        t = trim_s[2] if trim_s[2] == trim_s[2] else tension_n
+        w = line_weight_n_m(t, elevation_rad, length_m, height_m)
+        if w == w:
+            w = min(max(w, w_n_m / r), w_n_m * r)
+            if w_hat == w_hat:
+                w_hat += (1.0 - math.exp(-dt_s / trim_p[5])) * (w - w_hat)
+            else:
+                w_hat = w
+            trim_s[3] = w_hat
+    return w_hat if w_hat == w_hat else w_n_m
+
+
+@njit
 def tension_trim(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, a_m: float, px: float,
                  py: float, pz: float, w_n_m: float, tension_n: float) -> None:
     """One period of the tension trim (docs/control.md §3): the extra length ``trim_s[0]``
@@ -297,8 +347,17 @@ class LBarEstimator:
         self.trim_params = np.array([params.tension_trim_rate_m_s,
                                      params.tension_trim_max_rate_m_s,
                                      params.tension_trim_max_m, params.tension_trim_band,
-                                     params.tension_trim_filter_s])
-        self.trim_state = np.array([0.0, 0.0, math.nan])
+                                     params.tension_trim_filter_s,
+                                     params.weight_filter_s, params.weight_ratio_max,
+                                     params.weight_min_exit_angle_rad])
+        #: (offset [m], its rate [m/s], filtered drum tension [N], line weight [N/m])
+        self.trim_state = np.array([0.0, 0.0, math.nan, math.nan])
+
+    def weight_n_m(self) -> float:
+        """The line's weight per metre [N/m]: the estimate (:func:`weight_estimate`) once
+        there is one, else the model's."""
+        w = float(self.trim_state[3])
+        return w if math.isfinite(w) else self.w
 
     def length(self, pos_m: tuple[float, float, float]) -> tuple[float, float]:
         """(L-bar [m], a [m]) for the UAV at ``pos_m``."""

@@ -73,6 +73,10 @@ class TetherFixParams(Params):
                                      "slip)", ge=0)
     weight_uncertainty_fraction: float = quantity(
         0.03, "1", "uncertainty of the tether's weight per metre (wet, ice, dirt)", ge=0)
+    weight_band_fraction: float = quantity(
+        0.1, "1", "the winder's estimate of the weight per metre is used only for its part "
+        "beyond this fraction off the belief (within it the belief, which is exact when "
+        "the line is as designed, holds)", ge=0)
     design_wind_m_s: float = quantity(
         3.0, "m/s", "the wind on the line the covariance allows for (its drag bends the "
         "line, which the windless model ignores)", ge=0)
@@ -188,11 +192,18 @@ class TetherFixer:
         return (c * k + top[0], s * k + top[1], top[2])
 
     def position(self, length_m: float, tension_n: float, azimuth_rad: float,
-                 elevation_rad: float, reported_m: Vec3 | None = None
-                 ) -> tuple[Vec3, Cov3, bool]:
+                 elevation_rad: float, reported_m: Vec3 | None = None,
+                 w_n_m: float | None = None) -> tuple[Vec3, Cov3, bool]:
         """(position [m], covariance [m^2], on the ground) of the line's far end;
         ``reported_m`` [m] the UAV's position as the vehicle reports it (None: unknown),
-        used only when the line lies on the ground."""
+        used only when the line lies on the ground; ``w_n_m`` [N/m] the line's weight per
+        metre as estimated (the winder's, docs/control.md §3), used beyond
+        ``weight_band_fraction`` off the belief (None: the belief)."""
+        w = self.w
+        if w_n_m is not None and w_n_m > 0.0:
+            band = self.p.weight_band_fraction * w
+            off = float(w_n_m) - w
+            w += math.copysign(max(abs(off) - band, 0.0), off)
         uav_height_m = reported_m[2] if reported_m is not None else None
         p = self.p
         L = max(length_m, 0.0)
@@ -205,10 +216,10 @@ class TetherFixer:
         z_known = ground and uav_height_m is not None and math.isfinite(uav_height_m)
         zh = uav_height_m if z_known else None
         if z_known:
-            mean = self._end(L, T, az, el, self.w, on_ground=True, height_m=zh)
-            hi = self._end(L, T, az, el, self.w, on_ground=True,
+            mean = self._end(L, T, az, el, w, on_ground=True, height_m=zh)
+            hi = self._end(L, T, az, el, w, on_ground=True,
                            height_m=zh + p.reported_height_sigma_m)
-            lo = self._end(L, T, az, el, self.w, on_ground=True,
+            lo = self._end(L, T, az, el, w, on_ground=True,
                            height_m=zh - p.reported_height_sigma_m)
             d = (0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1]), 0.0)
             _outer(d, d, 1.0, acc)
@@ -225,7 +236,7 @@ class TetherFixer:
             # the line all on the ground to a vehicle on the ground at its end (where a
             # line lying out ends at take-off and landing), the spread of the other
             # touchdowns about it as the covariance
-            ends = [self._end(L, T, az, el, self.w, on_ground=True, ground_fraction=f)
+            ends = [self._end(L, T, az, el, w, on_ground=True, ground_fraction=f)
                     for f in _GROUND_NODES]
             n = len(ends)
             mean = ends[-1]
@@ -233,18 +244,18 @@ class TetherFixer:
                 d = _sub(e, mean)
                 _outer(d, d, 1.0 / n, acc)
         else:
-            mean = self._end(L, T, az, el, self.w)
+            mean = self._end(L, T, az, el, w)
 
         def at(dL: float = 0.0, dT: float = 0.0, daz: float = 0.0, delv: float = 0.0,
                dw: float = 0.0, wind: tuple[float, float] = (0.0, 0.0)) -> Vec3:
             e = max(el + delv, 0.0) if ground else el + delv
             return self._end(max(L + dL, 0.0), max(T + dT, 1e-3), az + daz, e,
-                             self.w + dw, wind, ground, 0.5, zh)
+                             w + dw, wind, ground, 0.5, zh)
 
         sigma_angle = math.hypot(p.angle_noise_rad, p.angle_bias_rad)
         sigma_t = math.hypot(p.tension_noise_n, p.tension_noise_fraction * T)
         for kw, sigma in (("dL", p.length_noise_m), ("dT", sigma_t), ("daz", sigma_angle),
-                          ("delv", sigma_angle), ("dw", p.weight_uncertainty_fraction * self.w)):
+                          ("delv", sigma_angle), ("dw", p.weight_uncertainty_fraction * w)):
             if sigma <= 0.0:
                 continue
             hi, lo = at(**{kw: sigma}), at(**{kw: -sigma})

@@ -669,7 +669,8 @@ class Winch:
         if abs(gap_ms) * 1e-3 > fixer.p.max_age_s:
             return None
         reported = self.uav[0] if self.uav is not None else None
-        pos, cov, ground = fixer.position(self.length_m, self.tension_n, az, el, reported)
+        pos, cov, ground = fixer.position(self.length_m, self.tension_n, az, el, reported,
+                                          self.host.lbar.weight_n_m())
         self.fixes += 1
         return TetherFix(pos, cov, self._unwrap_ms(stamp), ground)
 
@@ -842,7 +843,9 @@ class Winch:
                                                       self.ref_m, self.ref_rate_m_s)
             elif uav is not None:
                 pos, vel = uav
-                step = self.host.update(length, omega, tension, pos, vel)
+                ea = self.exit_angle
+                step = self.host.update(length, omega, tension, pos, vel,
+                                        ea[1] if ea is not None and ea[3] else math.nan)
                 self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
                 command = step.command
             else:

@@ -14,7 +14,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from groundstation.lbar import LBarEstimator, LBarParams, lbar_kernel, tension_trim
+from groundstation.lbar import (
+    LBarEstimator,
+    LBarParams,
+    lbar_kernel,
+    tension_trim,
+    weight_estimate,
+)
 from groundstation.winder_control import (
     WinderCommand,
     WinderController,
@@ -51,20 +57,22 @@ class WinderHost:
         self._step = entry_point(winder_step, 1.0, 0.0, 10.0, 0.0, 0.0, 0.0, lb.a_target,
                                  lb._tan_min, lb.p.min_slack_m, math.nan, ctl.params(),
                                  ctl.state, self.dt_s, 10.0, 0.0, 1.0, lb.w, lb.trim_params,
-                                 np.array([0.0, 0.0, math.nan]))
+                                 np.array([0.0, 0.0, math.nan, math.nan]), 0.1)
 
     def update(self, length_m: float, omega_rad_s: float, drum_tension_n: float,
                uav_pos_m: tuple[float, float, float],
-               uav_vel_m_s: tuple[float, float, float]) -> WinderStep:
+               uav_vel_m_s: tuple[float, float, float],
+               exit_elevation_rad: float = math.nan) -> WinderStep:
         """Torque request [N m] for the measured length [m], drum rate [rad/s] and drum
-        tension [N], and the UAV's position [m] and velocity [m/s]."""
+        tension [N], the UAV's position [m] and velocity [m/s], and the line's measured
+        exit elevation [rad] (NaN: none; the tension trim then uses the model's weight)."""
         lb, ctl = self.lbar, self.controller
         px, py, pz = uav_pos_m
         vx, vy, vz = uav_vel_m_s
         lbar_m, rate, lb._root, cmd = self._step(
             px, py, pz, vx, vy, vz, lb.a_target, lb._tan_min, lb.p.min_slack_m, lb._root,
             ctl.params(), ctl.state, self.dt_s, length_m, omega_rad_s, drum_tension_n, lb.w,
-            lb.trim_params, lb.trim_state)
+            lb.trim_params, lb.trim_state, exit_elevation_rad)
         return WinderStep(cmd[0], lbar_m, rate, _command(cmd))
 
 
@@ -73,16 +81,20 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
                 a_target: float, tan_min: float, min_slack: float, root_guess: float,
                 law_p: np.ndarray, law_s: np.ndarray, dt_s: float, length_m: float,
                 omega_rad_s: float, drum_tension_n: float, w_n_m: float,
-                trim_p: np.ndarray, trim_s: np.ndarray
+                trim_p: np.ndarray, trim_s: np.ndarray, elevation_rad: float
                 ) -> tuple[float, float, float, tuple[float, float, float, float, float, bool]]:
     """:meth:`WinderHost.update` in scalars: L-bar and its rate (:func:`lbar_kernel`), the
-    tension trim's offset (:func:`tension_trim`, advanced in place), then the torque law
+    line's weight (:func:`weight_estimate`, from the exit elevation ``elevation_rad``
+    [rad]; the model's ``w_n_m`` without one), the tension trim's offset
+    (:func:`tension_trim` on that weight, both advanced in place), then the torque law
     (:func:`winder_law`, its filter ``law_s`` advanced in place) on L-bar + offset. Returns
     (the length reference, its rate, the exit-angle root for next time, the WinderCommand's
     fields)."""
     lbar_m, rate, a, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
                                         min_slack, root_guess)
-    tension_trim(trim_p, trim_s, dt_s, a, px, py, pz, w_n_m, drum_tension_n)
+    w = weight_estimate(trim_p, trim_s, dt_s, w_n_m, drum_tension_n, elevation_rad,
+                        length_m, pz)
+    tension_trim(trim_p, trim_s, dt_s, a, px, py, pz, w, drum_tension_n)
     lbar_m += trim_s[0]
     rate += trim_s[1]
     cmd = winder_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, lbar_m,

@@ -38,6 +38,13 @@ def test_benchmarks_run_quick():
                 "COMMAND_LONG -> COMMAND_ACK, lockstep, p50"):
         assert row in out, row
     assert "faster than MoorPy" in out
+    # the peer: RotorPy's own quadrotor flown in the same run (or a note why not)
+    peer = next(ln for ln in out.splitlines() if ln.startswith("peer: our loop"))
+    try:
+        import rotorpy  # noqa: F401
+        assert "RotorPy at its 100 Hz" in peer and "goal >= 20x" in peer, peer
+    except ImportError:
+        assert "skipped: rotorpy is not installed" in peer, peer
     assert "the rest of the machine meanwhile" in out and "host steal" in out
     assert "goal >= 100x" in out and "goal >= 20x" in out or "skipped" in out
     # the command latency: every command answered, in both modes

@@ -96,6 +96,11 @@ def test_a_heavier_plant_than_the_controllers_believe_still_flies(tmp_path):
     assert m["position_rmse_m"] < 0.10
     assert m["min_tether_slack_m"] > 0.0
     assert m["motor_saturation_fraction"] < 0.01
+    # the winder learnt the line's weight from its exit tension and angle (elastic
+    # truth, inextensible estimate: within 5 %) and laid none of it on the ground
+    w_hat = host.lbar.trim_state[3]
+    assert w_hat == pytest.approx(0.051 * g, rel=0.05)
+    assert m["tether_ground_contact_fraction"] == 0.0
     # and the mismatch is felt: the same run with the truth equal to the model tracks
     # better (the test can fail if the plant silently used the model)
     nominal = sc.replace(plant=sc.plant.replace(vehicle=sc.vehicle, tether=sc.tether))

@@ -156,6 +156,87 @@ def test_wind_direction_is_where_it_blows_from():
     assert west.wind.steady_m_s == pytest.approx((4.0, 0.0, 0.0), abs=1e-12)
 
 
+FAULTS = """\
+name = "faulty"
+scenario = "hover"
+runs = 6
+seed = 3
+duration_s = 12.0
+
+[[vary]]
+parameter = "mass_factor"
+distribution = "uniform"
+low = 0.95
+high = 1.05
+
+[[faults]]
+probability = 0.5
+start_low_s = 6.0
+start_high_s = 8.0
+
+[faults.fault]
+kind = "motor"
+motor = 1
+thrust_multiplier = 0.0
+
+[[faults]]
+probability = 0.25
+start_low_s = 2.0
+start_high_s = 4.0
+duration_low_s = 1.0
+duration_high_s = 3.0
+
+[faults.fault]
+kind = "gnss_loss"
+"""
+
+
+def test_fault_draws_follow_their_probability_and_times(tmp_path):
+    sweep, sc = sw.load_sweep(_write(tmp_path, FAULTS, "faulty.toml"))
+    motor, gnss = (f.columns(i) for i, f in enumerate(sweep.faults))
+    assert motor == ("fault0_motor_start_s", "fault0_motor_end_s")
+    # adding faults leaves the quantities' draws as they were
+    plain = sw.load_sweep(_write(tmp_path, FAULTS.split("[[faults]]")[0], "plain.toml"))[0]
+    assert sw.draw(sweep, 5)[1]["mass_factor"] == sw.draw(plain, 5)[1]["mass_factor"]
+    n = 4000
+    draws = [sw.draw(sweep, i)[1] for i in range(n)]
+    for (start, end), p, lo, hi, dur in ((motor, 0.5, 6.0, 8.0, None),
+                                         (gnss, 0.25, 2.0, 4.0, (1.0, 3.0))):
+        had = [d for d in draws if d[start] is not None]
+        assert all(d[end] is None for d in draws if d[start] is None)
+        assert binomtest(len(had), n, p).pvalue > 1e-4
+        t0 = np.array([d[start] for d in had])
+        assert t0.min() >= lo and t0.max() <= hi
+        length = np.array([d[end] for d in had]) - t0
+        if dur is None:
+            assert np.all(np.array([d[end] for d in had]) == sw.NEVER_S)
+        else:
+            assert length.min() >= dur[0] and length.max() <= dur[1]
+    # the faults a run has are its scenario's [[faults]] entries at the drawn times
+    i = next(i for i, d in enumerate(draws) if d[motor[0]] is not None and d[gnss[0]] is None)
+    run = sw.run_scenario_of(sweep, sc, i)
+    assert run.faults == (sweep.faults[0].fault.replace(start_s=draws[i][motor[0]],
+                                                         end_s=sw.NEVER_S),)
+
+
+def test_a_drawn_dead_motor_brings_the_runs_that_have_it_down(tmp_path):
+    """On a LocalCluster: the hovering runs that draw a rotor at zero thrust come down
+    (the plant's own physics); the others hold their hover."""
+    sweep, sc = sw.load_sweep(_write(tmp_path, FAULTS, "faulty.toml"))
+    rows, summary = sw.run_sweep(sweep, sc, tmp_path / "out", workers=2, progress=None)
+    start = sweep.faults[0].columns(0)[0]
+    dead = [r for r in rows if r[start] is not None]
+    alive = [r for r in rows if r[start] is None]
+    assert dead and alive
+    assert all(r["failed"] and r["position_max_error_m"] > 2.0 for r in dead)
+    assert all(r["position_max_error_m"] < 0.5 for r in alive)
+    by = summary["failures_against"]["fault0_motor"]["failure_rate_by_value"]
+    assert by["with"] == 1.0
+    # the table read back holds the same drawn times
+    again = sw.read_table(tmp_path / "out" / "runs.csv", sweep)
+    assert [r[start] for r in again] == [r[start] for r in rows]
+
+
 @pytest.mark.parametrize(("patch", "field"), [
     (SMALL.replace("high = 1.2", "high = 0.5"), "bad.vary[0].high"),
     (SMALL.replace('"mass_factor"', '"mass_fraction"'), "bad.vary[0].parameter"),
@@ -167,6 +248,9 @@ def test_wind_direction_is_where_it_blows_from():
      "bad.targets.position_rmse_m"),
     (SMALL + '\n[[vary]]\nparameter = "mass_factor"\nlow = 0.9\nhigh = 1.0\n',
      "bad.vary[4].parameter"),
+    (FAULTS.replace("start_high_s = 8.0", "start_high_s = 5.0"), "bad.faults[0].start_high_s"),
+    (FAULTS.replace("probability = 0.25", "probability = 1.5"), "bad.faults[1].probability"),
+    (FAULTS.replace('kind = "gnss_loss"', 'kind = "meteor"'), "bad.faults[1].fault.kind"),
 ])
 def test_a_bad_sweep_file_fails_naming_the_field(tmp_path, capsys, patch, field):
     path = _write(tmp_path, patch, "bad.toml")

@@ -1037,3 +1037,54 @@ def test_the_bus_check_counts_lost_and_late_load_cell_frames():
     assert feed(late, range(0, 1000, 10), uav_ahead_ms=5) == []
     said = feed(late, range(1000, 1500, 10), uav_ahead_ms=80)
     assert said == ["winch: CAN bad (0% lost, 80 ms), braked"]
+
+
+@pytest.mark.parametrize(("a", "x0", "h"), [(6.0, 0.5, 12.0), (20.0, 3.0, 15.0),
+                                            (3.0, 0.1, 4.0)])
+def test_line_weight_from_exit_tension_and_angle_is_the_catenarys(a, x0, h):
+    """An inextensible catenary y = a cosh(x/a) leaving the exit at x0 (upward) and
+    reaching the UAV h further: its exit tension, exit angle, arc length and rise give
+    back its weight per metre, whatever the weight."""
+    from groundstation.lbar import line_weight_n_m
+
+    for w in (0.2, 0.33, 1.1):
+        x1 = x0 + h
+        z = a * (math.cosh(x1 / a) - math.cosh(x0 / a))
+        length = a * (math.sinh(x1 / a) - math.sinh(x0 / a))
+        tension = w * a * math.cosh(x0 / a)
+        elevation = math.atan(math.sinh(x0 / a))
+        assert line_weight_n_m(tension, elevation, length, z) == pytest.approx(w, rel=1e-9)
+    # no tension, a vertical or a straight line: nothing to say
+    assert math.isnan(line_weight_n_m(0.0, 0.3, 10.0, 5.0))
+    assert math.isnan(line_weight_n_m(5.0, 0.3, 10.0, 10.0))
+
+
+def test_a_heavier_line_than_the_model_does_not_trip_the_tension_trim():
+    """The drum tension of a line twice the model's weight, at the geometry the model
+    expects (exit angle and all): the trim pays out nothing once the weight estimate has
+    it, and it still pays out for a tension above what that weight explains."""
+    from groundstation.lbar import LBarParams, catenary_length_m, exit_slope
+
+    lp = LBarParams(tension_trim_filter_s=0.0)
+    host = WinderHost(WinderControlParams(), lp, PARAMS.winder, PARAMS.tether, G)
+    lb = host.lbar
+    pos = (12.0, 0.0, 20.0)
+    _, a = lb.length(pos)
+    h, v = math.hypot(pos[0], pos[1]), pos[2]
+    length = catenary_length_m(a, h, v)    # the model's catenary, paid out
+    slope = exit_slope(a, h, v)
+    heavy = 2.0 * lb.w
+    tension = heavy * a * math.sqrt(1.0 + slope * slope)
+    for _ in range(2000):   # 20 s at 100 Hz
+        host.update(length, 0.0, tension, pos, (0.0, 0.0, 0.0), math.atan(slope))
+    assert lb.trim_state[3] == pytest.approx(heavy, rel=1e-3)
+    assert lb.trim_state[0] == 0.0
+    # without the exit angle the model's weight is all it has: the heavy line reads tight
+    blind = WinderHost(WinderControlParams(), lp, PARAMS.winder, PARAMS.tether, G)
+    for _ in range(200):
+        blind.update(length, 0.0, tension, pos, (0.0, 0.0, 0.0))
+    assert blind.lbar.trim_state[0] > 0.5
+    # a UAV farther than reported pulls harder than the heavy line explains: it pays out
+    for _ in range(100):
+        host.update(length, 0.0, 1.6 * tension, pos, (0.0, 0.0, 0.0), math.atan(slope))
+    assert lb.trim_state[0] > 0.1

@@ -31,6 +31,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from sitl.faults import NEVER_S, FaultParams
 from tuav_sitl.scenario import ScenarioParams, load_scenario
 from tuavdefs.params import GustParams
 from tuavdefs.paramspec import ParameterError, Params, load_toml, quantity
@@ -170,6 +171,50 @@ _LABELS: dict[Quantity, tuple[str, ...]] = {
 
 
 @dataclass(frozen=True)
+class FaultDrawParams(Params):
+    """A fault a run may have: the fault (a scenario's ``[[faults]]`` entry: its kind and
+    settings), the chance that a run has it, and its start and duration drawn uniformly."""
+
+    fault: FaultParams = quantity(FaultParams(), "", "the fault: kind and settings (its "
+                                  "start_s and end_s are drawn)")
+    probability: float = quantity(1.0, "1", "chance that a run has it", ge=0, le=1)
+    start_low_s: float = quantity(0.0, "s", "its start: uniform from", ge=0)
+    start_high_s: float = quantity(0.0, "s", "its start: uniform to", ge=0)
+    duration_low_s: float = quantity(0.0, "s", "its duration: uniform from (both 0: to the "
+                                     "end of the run)", ge=0)
+    duration_high_s: float = quantity(0.0, "s", "its duration: uniform to", ge=0)
+
+    def check(self) -> None:
+        if self.start_high_s < self.start_low_s:
+            raise ValueError("start_high_s: must be at least start_low_s")
+        if self.duration_high_s < self.duration_low_s:
+            raise ValueError("duration_high_s: must be at least duration_low_s")
+        if self.duration_high_s > 0 and not self.duration_low_s > 0:
+            raise ValueError("duration_low_s: must be > 0 (or both 0: to the end)")
+
+    def columns(self, i: int) -> tuple[str, str]:
+        """The table's columns of fault ``i``: its start and end [s] (empty: not drawn)."""
+        name = f"fault{i}_{self.fault.kind}"
+        return f"{name}_start_s", f"{name}_end_s"
+
+    def draw(self, rng: np.random.Generator) -> tuple[float, float] | None:
+        """(start, end) [s] of the fault in one run, or None if the run does not have it;
+        three numbers from ``rng`` whatever the outcome (later draws do not depend on it)."""
+        u, a, b = rng.random(3)
+        if not u < self.probability:
+            return None
+        start = self.start_low_s + a * (self.start_high_s - self.start_low_s)
+        if self.duration_high_s == 0:
+            return float(start), NEVER_S
+        return float(start), float(start + self.duration_low_s
+                                   + b * (self.duration_high_s - self.duration_low_s))
+
+    def params(self, start_s: float, end_s: float) -> FaultParams:
+        """The fault from ``start_s`` to ``end_s`` [s]."""
+        return self.fault.replace(start_s=start_s, end_s=end_s)
+
+
+@dataclass(frozen=True)
 class TargetParams(Params):
     """What a run must achieve; a run that misses one fails with that kind."""
 
@@ -201,6 +246,8 @@ class SweepParams(Params):
                            "turbulence (false: the scenario's)")
     targets: TargetParams = quantity(TargetParams(), "", "the targets a run must meet")
     vary: tuple[VaryParams, ...] = quantity((), "", "the drawn quantities")
+    faults: tuple[FaultDrawParams, ...] = quantity((), "", "the drawn faults (added to the "
+                                                   "scenario's own)")
 
     def check(self) -> None:
         seen: set[str] = set()
@@ -230,21 +277,31 @@ def load_sweep(path: str | Path) -> tuple[SweepParams, ScenarioParams]:
 
 # --- the draws and the scenario of one run ---------------------------------------------
 
-def draw(sweep: SweepParams, index: int) -> tuple[int, dict[str, float | str]]:
-    """Run ``index``'s seed and drawn values (by quantity name): a function of the sweep's
-    seed and ``index`` only."""
+def draw(sweep: SweepParams, index: int) -> tuple[int, dict[str, float | str | None]]:
+    """Run ``index``'s seed and drawn values (by quantity name, then each drawn fault's
+    start and end by column, None where the run does not have it): a function of the
+    sweep's seed and ``index`` only."""
     rng = np.random.default_rng([sweep.seed, index])
     seed = int(rng.integers(0, 2**31 - 1))
-    return seed, {v.parameter: v.draw(rng) for v in sweep.vary}
+    drawn: dict[str, float | str | None] = {v.parameter: v.draw(rng) for v in sweep.vary}
+    for i, f in enumerate(sweep.faults):
+        when = f.draw(rng)
+        start, end = f.columns(i)
+        drawn[start], drawn[end] = when if when is not None else (None, None)
+    return seed, drawn
 
 
-def apply(sc: ScenarioParams, seed: int | None, drawn: dict[str, float | str]
-          ) -> ScenarioParams:
-    """``sc`` with the drawn truth, wind and sensors (and, if ``seed`` is given, the
-    sensors' and the turbulence's seed)."""
+_QUANTITIES = frozenset(q.value for q in Quantity)
+
+
+def apply(sc: ScenarioParams, seed: int | None, drawn: dict[str, float | str | None],
+          faults: tuple[FaultDrawParams, ...] = ()) -> ScenarioParams:
+    """``sc`` with the drawn truth, wind and sensors, the drawn ``faults`` that the run has
+    (their times in ``drawn``) added to its own, and, if ``seed`` is given, the sensors'
+    and the turbulence's seed."""
     plant = sc.plant
     veh, teth, wind, sensors = plant.vehicle, plant.tether, sc.wind, sc.sensors
-    d = {Quantity(k): v for k, v in drawn.items()}
+    d = {Quantity(k): v for k, v in drawn.items() if k in _QUANTITIES}
     if (f := d.get(Quantity.MASS_FACTOR)) is not None:
         veh = veh.replace(mass_kg=veh.mass_kg * f)
     if (f := d.get(Quantity.INERTIA_FACTOR)) is not None:
@@ -287,14 +344,19 @@ def apply(sc: ScenarioParams, seed: int | None, drawn: dict[str, float | str]
     if seed is not None:
         sensors = sensors.replace(seed=seed)
         wind = wind.replace(seed=seed)
+    extra = []
+    for i, f in enumerate(faults):
+        start, end = (drawn.get(c) for c in f.columns(i))
+        if start is not None and end is not None:
+            extra.append(f.params(float(start), float(end)))
     return sc.replace(plant=plant.replace(vehicle=veh, tether=teth), wind=wind,
-                      sensors=sensors)
+                      sensors=sensors, faults=(*sc.faults, *extra))
 
 
 def run_scenario_of(sweep: SweepParams, sc: ScenarioParams, index: int) -> ScenarioParams:
     """The scenario run ``index`` flies."""
     seed, drawn = draw(sweep, index)
-    return apply(sc, seed if sweep.seeds else None, drawn)
+    return apply(sc, seed if sweep.seeds else None, drawn, sweep.faults)
 
 
 # --- one run and its row --------------------------------------------------------------
@@ -340,12 +402,13 @@ def run_one(sweep: SweepParams, sc: ScenarioParams, index: int) -> dict[str, Any
     from tuav_sitl.offline import run_scenario
 
     seed, drawn = draw(sweep, index)
-    result = run_scenario(apply(sc, seed if sweep.seeds else None, drawn), progress=None)
+    result = run_scenario(apply(sc, seed if sweep.seeds else None, drawn, sweep.faults),
+                          progress=None)
     return row_of(sweep, sc, index, seed, drawn, result.metrics, result.series)
 
 
 def row_of(sweep: SweepParams, sc: ScenarioParams, index: int, seed: int,
-           drawn: dict[str, float | str], metrics: dict[str, Any],
+           drawn: dict[str, float | str | None], metrics: dict[str, Any],
            series: dict[str, np.ndarray]) -> dict[str, Any]:
     """A run's row from its metrics and series."""
     m = {k: metrics.get(k) for k in METRIC_COLUMNS}
@@ -354,14 +417,19 @@ def row_of(sweep: SweepParams, sc: ScenarioParams, index: int, seed: int,
     m["min_height_flying_m"] = (float(series["pos"][airborne, 2].min()) if airborne.any()
                                 else None)
     fails = failures(sc, sweep.targets, m)
-    return {"index": index, "seed": seed, **{v.parameter: drawn[v.parameter] for v in sweep.vary},
+    return {"index": index, "seed": seed, **{c: drawn[c] for c in drawn_columns(sweep)},
             **m, "failed": bool(fails), "failures": ";".join(f.value for f in fails)}
+
+
+def drawn_columns(sweep: SweepParams) -> list[str]:
+    """The columns of the drawn values: the quantities, then each fault's start and end."""
+    return [*(v.parameter for v in sweep.vary),
+            *(c for i, f in enumerate(sweep.faults) for c in f.columns(i))]
 
 
 def columns(sweep: SweepParams) -> list[str]:
     """The table's columns, in order."""
-    return ["index", "seed", *(v.parameter for v in sweep.vary), *METRIC_COLUMNS, "failed",
-            "failures"]
+    return ["index", "seed", *drawn_columns(sweep), *METRIC_COLUMNS, "failed", "failures"]
 
 
 # --- the table -----------------------------------------------------------------------
@@ -479,6 +547,10 @@ def summarise(sweep: SweepParams, rows: list[dict[str, Any]]) -> dict[str, Any]:
         corr[v.parameter] = {"correlation_with_failure": r,
                             "failure_rate_below_median": _rate(failed[x <= med]),
                             "failure_rate_above_median": _rate(failed[x > med])}
+    for i, f in enumerate(sweep.faults):
+        had = np.array([r[f.columns(i)[0]] is not None for r in rows], dtype=bool)
+        corr[f"fault{i}_{f.fault.kind}"] = {"failure_rate_by_value": {
+            "with": _rate(failed[had]), "without": _rate(failed[~had])}}
     return {"sweep": sweep.name, "scenario": sweep.scenario, "runs": n, "failed": k,
             "failure_rate": k / n if n else None, "failure_rate_95ci": [lo, hi],
             "failures_by_kind": by_kind, "percentiles": pct, "failures_against": corr}
