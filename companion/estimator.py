@@ -940,6 +940,11 @@ def _vec3(v: Sequence[float]) -> tuple[float, float, float]:
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
+#: The least time between the first and the last fix an alignment in the air takes
+#: the acceleration from [s].
+AIR_ALIGN_SPAN_S = 0.15
+
+
 class NavFilter:
     """The onboard navigation filter (module docstring, docs/estimation.md).
 
@@ -1010,6 +1015,10 @@ class NavFilter:
         self._baro_sum = 0.0
         self._baro_n = 0
         self._align_t0: float | None = None
+        #: the fixes' (measurement time [s], velocity [m/s]) since the alignment began, and
+        #: whether it aligns in the air (:meth:`start_in_air`)
+        self._align_vels: list[tuple[float, Vec3]] = []
+        self._in_air = False
         self._fix: tuple[float, Vec3, Vec3, float, float] | None = None
         self._baro_ref_m: float | None = None
         # times
@@ -1159,6 +1168,8 @@ class NavFilter:
         self._t_fix = t_s
         if not self._aligned:
             self._fix = (t_s, pos, vel, float(eph_m), float(epv_m))
+            if self._align_t0 is not None:
+                self._align_vels.append((t_s - p.gnss_delay_s, vel))
             self._try_align(t_s)
             return False
         # the fix's age is known only to within gnss_delay_uncertainty_s: at speed v that is
@@ -1399,8 +1410,30 @@ class NavFilter:
         self._acc_n += 1
         self._try_align(t_s)
 
+    def start_in_air(self) -> None:
+        """The first fix found the vehicle in the air (a simulation started in hover): it
+        hovers open loop while the filter aligns, over ``air_align_time_s``, on the specific
+        force less the acceleration the fixes' velocities show (:meth:`_try_align`)."""
+        self.align_time_s = self.params.air_align_time_s
+        self._in_air = True
+
+    def _fix_acceleration(self) -> Vec3 | None:
+        """The acceleration [m/s^2] the fixes since the alignment began show: the least-
+        squares slope of their velocities; None until two fixes ``AIR_ALIGN_SPAN_S`` apart
+        are in."""
+        pts = self._align_vels
+        if len(pts) < 2 or pts[-1][0] - pts[0][0] < AIR_ALIGN_SPAN_S:
+            return None
+        ts = np.array([t for t, _ in pts])
+        vs = np.array([v for _, v in pts])
+        dt = ts - ts.mean()
+        sxx = float(dt @ dt)
+        slope = (dt @ (vs - vs.mean(axis=0))) / sxx
+        return (float(slope[0]), float(slope[1]), float(slope[2]))
+
     def _restart_alignment(self, t_s: float) -> None:
         self._align_t0 = t_s
+        self._align_vels.clear()
         self._acc_sum[:] = 0.0
         self._acc_norm = self._acc_norm_sq = 0.0
         self._acc_n = 0
@@ -1426,15 +1459,28 @@ class NavFilter:
         if self._mag_n == 0 or not (gnss or tether):
             return
         fx, fy, fz = self._acc_sum / n
-        roll = math.atan2(fy, fz)
-        pitch = math.atan2(-fx, math.hypot(fy, fz))
-        q_tilt = euler_to_quat(roll, pitch, 0.0)
+        accel = None
+        if self._in_air and gnss:
+            accel = self._fix_acceleration()
+            if accel is None:
+                return      # not yet two fixes far enough apart
         x = self._x
-        x[_X_Q:_X_Q + 4] = q_tilt
-        m = self._mag_lp
-        x_tilt = np.array(_rot_py(q_tilt)).reshape(3, 3) @ m
-        yaw = self._heading_earth_rad - math.atan2(x_tilt[1], x_tilt[0])
-        q = euler_to_quat(roll, pitch, yaw)
+        if accel is not None and any(accel):
+            # accelerating open loop (a tether pulling the hover off its trim): the mean
+            # specific force is the acceleration less gravity, not gravity alone; tilt and
+            # heading together from it and the field (TRIAD)
+            q = _triad((fx, fy, fz), tuple(self._mag_lp),
+                       (accel[0], accel[1], accel[2] + self.gravity_m_s2),
+                       tuple(self.earth_field_enu_gauss))
+        else:
+            roll = math.atan2(fy, fz)
+            pitch = math.atan2(-fx, math.hypot(fy, fz))
+            q_tilt = euler_to_quat(roll, pitch, 0.0)
+            x[_X_Q:_X_Q + 4] = q_tilt
+            m = self._mag_lp
+            x_tilt = np.array(_rot_py(q_tilt)).reshape(3, 3) @ m
+            yaw = self._heading_earth_rad - math.atan2(x_tilt[1], x_tilt[0])
+            q = euler_to_quat(roll, pitch, yaw)
         P = self._P
         P[:] = 0.0
         x[:] = 0.0
@@ -1617,6 +1663,21 @@ class NavFilter:
             sources=sources,
             tether_variance=math.sqrt(max(d[_D_TETHER_TR], 0.0)),
             tether_innovation_m=_vec3(d[_D_TETHER_INNOV:_D_TETHER_INNOV + 3]))
+
+
+def _triad(body1: Vec3, body2: Vec3, nav1: Vec3, nav2: Vec3) -> Quat:
+    """The attitude (quaternion body FLU -> inertial ENU) that takes ``body1`` onto
+    ``nav1`` exactly and ``body2`` as near ``nav2`` as that allows (TRIAD)."""
+    def frame(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        t1 = a / np.linalg.norm(a)
+        t2 = np.cross(a, b)
+        t2 /= np.linalg.norm(t2)
+        return np.column_stack((t1, t2, np.cross(t1, t2)))
+    r = frame(np.array(nav1), np.array(nav2)) @ frame(np.array(body1), np.array(body2)).T
+    roll = math.atan2(r[2, 1], r[2, 2])
+    pitch = -math.asin(max(-1.0, min(1.0, r[2, 0])))
+    yaw = math.atan2(r[1, 0], r[0, 0])
+    return euler_to_quat(roll, pitch, yaw)
 
 
 def _rot_py(q: Quat) -> tuple[float, ...]:

@@ -296,7 +296,7 @@ class Companion:
                 self._airborne_at_boot = (gps.position_enu_m[2]
                                           > self.params.vehicle.gear_height_m + 0.3)
                 if self._airborne_at_boot:   # flying open loop: align sooner
-                    f.align_time_s = self.estimator_params.air_align_time_s
+                    f.start_in_air()
             f.fuse_gnss(t, gps.position_enu_m, gps.velocity_enu_m_s, gps.eph_m, gps.epv_m)
         return f.state() if f.aligned else None
 
@@ -322,6 +322,27 @@ class Companion:
             self.flight.reset(state, (self.hover_speed_rad_s,) * 4)
             self._was_flying = True
 
+    def _open_loop_hover(self, t_s: float) -> tuple[float, float, float, float]:
+        """The rotor commands a vehicle found in the air flies while its filter aligns:
+        the thrust that balances its weight and the tether's pull as its own model has it
+        at the fix's position, the winch's reported length and tension (its weight alone
+        before a report), on the attitude it has (a tethered hover is tilted into the
+        pull: the magnitude, not the vertical part). Without the pull a heavy line drags
+        the vehicle down in free fall, where the accelerometer shows no tilt to align on."""
+        gps, fc = self.gps, self.flight
+        veh = self.params.vehicle
+        weight = veh.mass_kg * self.params.environment.gravity_m_s2
+        if gps is None:
+            return self._hover_commands
+        winch = fc.winch
+        fx, fy, fz = fc.tether_model.estimate(gps.position_enu_m, winch.length_at(t_s),
+                                               winch.tension_n)[0]
+        thrust = math.sqrt(fx * fx + fy * fy + (weight - fz) ** 2)
+        if not math.isfinite(thrust):
+            return self._hover_commands
+        speed = math.sqrt(thrust / (4.0 * veh.rotor_thrust_coeff))
+        return (rotor_speed_to_command(speed, veh),) * 4
+
     def step(self, inputs: OnboardInputs, diagnostics: bool = False) -> OnboardOutputs:
         """One control period: the estimate, the navigator's reference, then the flight
         controller's rotor commands (with its diagnostics if ``diagnostics``). Until the
@@ -332,8 +353,8 @@ class Companion:
         if state is None:
             self.steps += 1
             if self._airborne_at_boot:
-                return OnboardOutputs(self._hover_commands, MotorState.FLY, True, None, None,
-                                      None)
+                return OnboardOutputs(self._open_loop_hover(t), MotorState.FLY, True, None,
+                                      None, None)
             return OnboardOutputs(_STOPPED, MotorState.OFF, False, None, None, None)
         if not self.started:
             self.start(t, state)
