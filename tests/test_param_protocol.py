@@ -49,6 +49,7 @@ FC_NAMES = {
     "att_disturbance_limit_n_m": "FC_ATT_DIST_LIM",
     "command_filter_hz": "FC_CMDF_HZ",
     "command_filter_damping": "FC_CMDF_DAMP",
+    "command_filter_pole_hz": "FC_CMDF_POLE",
     "use_tether_model": "FC_USE_TETHER",
     "use_measured_tension": "FC_USE_TENSION",
 }
@@ -109,7 +110,7 @@ def n_params() -> int:
 def test_params_to_defs_covers_every_field_of_flight_control_params():
     v = Vehicle()
     names = [d.name for d in v.defs]
-    assert len(names) == n_params() == 27
+    assert len(names) == n_params() == 28
     assert len(set(names)) == len(names)
     assert all(len(n) <= 16 and n.isascii() and n == n.upper() for n in names)
     p = FlightControlParams()
@@ -287,7 +288,7 @@ def test_read_by_name_and_by_index():
     assert (m.param_type, m.param_value) == (INT8, 1.0)
 
 
-@pytest.mark.parametrize("name,index", [(b"NO_SUCH_PARAM", -1), (b"", -1), (b"x", 27),
+@pytest.mark.parametrize("name,index", [(b"NO_SUCH_PARAM", -1), (b"", -1), (b"x", 28),
                                         (b"x", 32767), (b"x", -2), (b"\xff\xfe", -1)])
 def test_unknown_reads_get_no_answer(name, index):
     v = Vehicle()
