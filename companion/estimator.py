@@ -1476,7 +1476,6 @@ class NavFilter:
             roll = math.atan2(fy, fz)
             pitch = math.atan2(-fx, math.hypot(fy, fz))
             q_tilt = euler_to_quat(roll, pitch, 0.0)
-            x[_X_Q:_X_Q + 4] = q_tilt
             m = self._mag_lp
             x_tilt = np.array(_rot_py(q_tilt)).reshape(3, 3) @ m
             yaw = self._heading_earth_rad - math.atan2(x_tilt[1], x_tilt[0])
