@@ -294,8 +294,12 @@ def test_tlog_guided_targets_are_those_accepted(plotted):
     assert target.pos_m == pytest.approx(GUIDED_TARGET, abs=1e-6)
     assert 0 < takeoff.t_s < target.t_s < c["t_s"][-1]
     # when the target was sent the UAV was at the take-off altitude, not yet moving to it
+    # (3 m away); the tlog's wall stamp maps to simulated time through the telemetry's
+    # pairing, a few tens of ms of wall time off at --speedup max, which is up to about a
+    # metre of the 1.5 m/s climb: near the take-off point, far from the target
     at = [np.interp(target.t_s, c["t_s"], pos[:, i]) for i in range(3)]
-    assert math.dist(at, (2.0, 0.0, TAKEOFF_ALT)) < 0.3
+    assert math.dist(at, (2.0, 0.0, TAKEOFF_ALT)) < 1.0
+    assert math.dist(at, GUIDED_TARGET) > 2.0
 
 
 def test_guided_goals_count_as_reached_by_proximity_without_a_reference(plotted):
