@@ -6,6 +6,7 @@ heartbeats arrive too: whom pymavlink then addresses and which mode map it uses.
 JSON line."""
 
 import json
+import os
 import re
 import signal
 import subprocess
@@ -23,13 +24,24 @@ def python_blocks() -> list[str]:
 
 
 def run(code: str, path: Path, timeout_s: float) -> dict:
+    """Run ``code`` as the script ``path``; on a timeout its threads' tracebacks (the
+    fault handler's, on SIGABRT) are what it left on stderr."""
     path.write_text(code)
+    p = subprocess.Popen([sys.executable, str(path)], cwd=path.parent, text=True,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         env=dict(os.environ, PYTHONFAULTHANDLER="1"))
     try:
-        res = subprocess.run([sys.executable, str(path)], cwd=path.parent,
-                             capture_output=True, text=True, timeout=timeout_s)
-        return {"rc": res.returncode, "stdout": res.stdout, "stderr": res.stderr[-3000:]}
-    except subprocess.TimeoutExpired as exc:
-        return {"rc": None, "stdout": str(exc.stdout), "stderr": "timed out"}
+        so, se = p.communicate(timeout=timeout_s)
+        return {"rc": p.returncode, "stdout": so, "stderr": se[-3000:]}
+    except subprocess.TimeoutExpired:
+        p.send_signal(signal.SIGABRT)
+        try:
+            so, se = p.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            so, se = p.communicate()
+        return {"rc": None, "stdout": so, "stderr": f"timed out after {timeout_s} s\n"
+                + se[-6000:]}
 
 
 def with_stack(logdir: Path, fn) -> dict:
