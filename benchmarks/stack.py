@@ -45,6 +45,7 @@ from pathlib import Path
 
 from tuav_sitl.realtime import (
     BACKGROUND,
+    LOCKSTEP_SPIN_US,
     NICENESS,
     PRIORITIES,
     cpu_split,
@@ -372,6 +373,10 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
     wake: dict[str, int] = {}
     traces: dict[str, subprocess.Popen] = {}
     pin = (not real_time) if pin is None else pin
+    if pin and not real_time and cpu_split() is not None:
+        # as up runs it: a plant on a CPU of its own spins briefly in its lockstep waits
+        # (before plant_extra, which may say otherwise)
+        commands["plant"][2:2] = ["--lockstep-spin-us", repr(LOCKSTEP_SPIN_US)]
     try:
         if recorder:
             logs["candump"] = work / "candump.log"
@@ -501,6 +506,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="scheduling for the three processes (experiments)")
     ap.add_argument("--sim-link", choices=("unix", "tcp"), default=SIM_LINK_DEFAULT,
                     help="the simulator link, as up --sim-link (default: up's)")
+    ap.add_argument("--no-spin", action="store_true",
+                    help="the plant sleeps at once in its lockstep waits (as up --no-pin)")
     ap.add_argument("--syscalls", action="store_true",
                     help="count each process's system calls over the flight (perf trace "
                          "-s, root; slows the run) and print them per control period")
@@ -511,7 +518,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     res = run_stack(Path(args.work), duration, flight, profile=args.profile,
                     priority=args.priority, pin=False if args.no_pin else None,
                     recorder=not args.no_recorder, sim_link=args.sim_link,
-                    syscalls=args.syscalls)
+                    syscalls=args.syscalls,
+                    plant_extra=["--lockstep-spin-us", "0"] if args.no_spin else [])
     out = asdict(res)
     out["real_time_factor"] = res.real_time_factor
     print(json.dumps(out))

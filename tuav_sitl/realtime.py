@@ -70,6 +70,13 @@ def cpu_split(available: set[int] | None = None) -> dict[str, set[int]] | None:
     return {"plant": plant, "companion": rest, "groundstation": rest, "candump": plant}
 
 
+#: In lockstep with the plant on a CPU of its own (:func:`cpu_split`), how long its waits
+#: for the companion's answer and the ground station's torque spin before sleeping [us]
+#: (``python -m sitl --lockstep-spin-us``, :mod:`sitl.spin`): the senders then need not
+#: wake the plant's CPU, which took about a fifth of the companion's CPU time per period
+#: off the CPU it shares with the ground station (docs/performance.md).
+LOCKSTEP_SPIN_US = 200.0
+
 #: Processes that in lockstep only use CPU time the others leave (:func:`set_background`):
 #: the bus recorder, which reads in bursts and keeps each frame's kernel receive time.
 BACKGROUND = frozenset({"candump"})
