@@ -315,7 +315,8 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
               priority: str | None = None,
               on_connected: Callable[[], object] | None = None,
               pin: bool | None = None, recorder: bool = True,
-              sim_link: str = SIM_LINK_DEFAULT, syscalls: bool = False) -> StackResult:
+              sim_link: str = SIM_LINK_DEFAULT, syscalls: bool = False,
+              spin: bool = False) -> StackResult:
     """Run the three processes in ``work`` (logs, profiles, truth series) and return what
     they did: in lockstep, or paced by the wall clock (``real_time``), at
     ``control_rate_hz`` [Hz] (the companion's gains get the same rate), flying ``flight``
@@ -331,7 +332,9 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
     in lockstep only), and the simulator link is ``sim_link``: "unix" (an abstract
     Unix-domain name of this process's own) or "tcp" (a free port). ``syscalls``: count
     each process's system calls over the flight with ``perf trace -s`` (root; it slows
-    every call, so the run's speed is not the benchmark's) and its wake-ups."""
+    every call, so the run's speed is not the benchmark's) and its wake-ups. ``spin``:
+    a pinned plant's lockstep waits spin first (``--lockstep-spin-us``
+    :data:`tuav_sitl.realtime.LOCKSTEP_SPIN_US`; an experiment, up does not)."""
     flight = flight if flight is not None else goto_flight()
     if (duration_s is None) == (not flight.client):
         raise ValueError("a flight without a client needs a duration; one with a client "
@@ -373,10 +376,9 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
     wake: dict[str, int] = {}
     traces: dict[str, subprocess.Popen] = {}
     pin = (not real_time) if pin is None else pin
-    if pin and not real_time and cpu_split() is not None:
-        # as up runs it: a plant on a CPU of its own spins briefly in its lockstep waits
-        # (before plant_extra, which may say otherwise)
-        commands["plant"][2:2] = ["--lockstep-spin-us", repr(LOCKSTEP_SPIN_US)]
+    if spin and pin and not real_time and cpu_split() is not None:
+        # a plant on a CPU of its own spins briefly in its lockstep waits
+        commands["plant"] += ["--lockstep-spin-us", repr(LOCKSTEP_SPIN_US)]
     try:
         if recorder:
             logs["candump"] = work / "candump.log"
@@ -506,8 +508,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="scheduling for the three processes (experiments)")
     ap.add_argument("--sim-link", choices=("unix", "tcp"), default=SIM_LINK_DEFAULT,
                     help="the simulator link, as up --sim-link (default: up's)")
-    ap.add_argument("--no-spin", action="store_true",
-                    help="the plant sleeps at once in its lockstep waits (as up --no-pin)")
+    ap.add_argument("--spin", action="store_true",
+                    help="experiment: the pinned plant's lockstep waits spin first "
+                         "(python -m sitl --lockstep-spin-us)")
     ap.add_argument("--syscalls", action="store_true",
                     help="count each process's system calls over the flight (perf trace "
                          "-s, root; slows the run) and print them per control period")
@@ -518,8 +521,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     res = run_stack(Path(args.work), duration, flight, profile=args.profile,
                     priority=args.priority, pin=False if args.no_pin else None,
                     recorder=not args.no_recorder, sim_link=args.sim_link,
-                    syscalls=args.syscalls,
-                    plant_extra=["--lockstep-spin-us", "0"] if args.no_spin else [])
+                    syscalls=args.syscalls, spin=args.spin)
     out = asdict(res)
     out["real_time_factor"] = res.real_time_factor
     print(json.dumps(out))

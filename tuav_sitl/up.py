@@ -506,11 +506,6 @@ def run_up(args: argparse.Namespace) -> int:
         plant_args += ["--speedup", repr(speedup)]
     if args.duration is not None:
         plant_args += ["--duration", str(args.duration)]
-    if speedup != 1.0 and not args.no_pin:
-        from tuav_sitl.realtime import LOCKSTEP_SPIN_US, cpu_split
-
-        if cpu_split() is not None:   # the plant will have a CPU of its own: it may spin
-            plant_args += ["--lockstep-spin-us", repr(LOCKSTEP_SPIN_US)]
     comp_args = ["-m", "companion", "--sim", sl.format_sim_address(sim), "--component-port",
                  str(ports.component), "--home", *home, "--gcs-tcp", str(ports.gcs_tcp),
                  "--gcs-udp", f"127.0.0.1:{ports.udp_gcs}",
