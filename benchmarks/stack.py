@@ -45,6 +45,7 @@ from pathlib import Path
 
 from tuav_sitl.realtime import (
     BACKGROUND,
+    LOCKSTEP_SPIN_US,
     NICENESS,
     PRIORITIES,
     cpu_split,
@@ -186,12 +187,16 @@ def mission_flight(short: bool = False) -> Flight:
 class ProcessResult:
     """One process of a run: exit code, CPU time [s] (user + system) from the companion's
     connection to its end, its log's text and, when profiled, its profile's shares by
-    category."""
+    category; when traced, its system calls and wake-ups."""
 
     exit_code: int
     cpu_s: float
     log: str
     shares: dict[str, float] = field(default_factory=dict)
+    #: with ``syscalls``: system calls by name from the flight's start to its end (``perf
+    #: trace -s``), and the voluntary context switches (wake-ups after a wait) meanwhile
+    syscalls: dict[str, int] = field(default_factory=dict)
+    wakeups: int = 0
 
 
 @dataclass
@@ -253,6 +258,47 @@ def _reap(proc: subprocess.Popen, timeout_s: float) -> tuple[int, float]:
         time.sleep(0.01)
 
 
+def _wakeups(pid: int) -> int:
+    """Voluntary context switches of a running process so far (each a wait that blocked:
+    one wake-up), summed over its threads (0 if unknown)."""
+    total = 0
+    try:
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            for line in (task / "status").read_text().splitlines():
+                if line.startswith("voluntary_ctxt_switches:"):
+                    total += int(line.split()[1])
+    except (OSError, ValueError):
+        return 0
+    return total
+
+
+_SYSCALL_ROW = re.compile(r"^\s+([a-z_0-9]+)\s+(\d+)\s+\d+\s+[\d.]+")
+
+
+def _trace(pid: int, out: Path) -> subprocess.Popen:
+    """``perf trace -s`` of process ``pid`` to ``out`` until it gets SIGINT."""
+    return subprocess.Popen(["perf", "trace", "-s", "-o", str(out), "-p", str(pid)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def _end_trace(proc: subprocess.Popen, out: Path) -> dict[str, int]:
+    """Stop a :func:`_trace` and read its summary: calls by system call, all threads."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(30.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    calls: dict[str, int] = {}
+    if out.is_file():
+        for line in out.read_text().splitlines():
+            m = _SYSCALL_ROW.match(line)
+            if m:
+                calls[m.group(1)] = calls.get(m.group(1), 0) + int(m.group(2))
+    return calls
+
+
 def busy_loads(n: int) -> list[subprocess.Popen]:
     """``n`` processes that spin on a CPU each (the second load of the real-time runs)."""
     return [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
@@ -269,7 +315,8 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
               priority: str | None = None,
               on_connected: Callable[[], object] | None = None,
               pin: bool | None = None, recorder: bool = True,
-              sim_link: str = SIM_LINK_DEFAULT) -> StackResult:
+              sim_link: str = SIM_LINK_DEFAULT, syscalls: bool = False,
+              spin: bool = False) -> StackResult:
     """Run the three processes in ``work`` (logs, profiles, truth series) and return what
     they did: in lockstep, or paced by the wall clock (``real_time``), at
     ``control_rate_hz`` [Hz] (the companion's gains get the same rate), flying ``flight``
@@ -283,7 +330,11 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
     :data:`tuav_sitl.realtime.NICENESS`) share the rest and the recorder runs at idle
     priority beside the plant (:mod:`tuav_sitl.realtime`) unless ``pin`` is False (None: pin
     in lockstep only), and the simulator link is ``sim_link``: "unix" (an abstract
-    Unix-domain name of this process's own) or "tcp" (a free port)."""
+    Unix-domain name of this process's own) or "tcp" (a free port). ``syscalls``: count
+    each process's system calls over the flight with ``perf trace -s`` (root; it slows
+    every call, so the run's speed is not the benchmark's) and its wake-ups. ``spin``:
+    a pinned plant's lockstep waits spin first (``--lockstep-spin-us``
+    :data:`tuav_sitl.realtime.LOCKSTEP_SPIN_US`; an experiment, up does not)."""
     flight = flight if flight is not None else goto_flight()
     if (duration_s is None) == (not flight.client):
         raise ValueError("a flight without a client needs a duration; one with a client "
@@ -305,8 +356,11 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
                   "--control-rate", str(float(control_rate_hz)),
                   "--truth-log", str(work / "truth.csv"),
                   *(["--real-time"] if real_time else []), *plant_extra],
+        # in lockstep the winch runs on the plant's time, as up runs it: on a busy host a
+        # stalled plant is no lost encoder (the wall clock's 0.1 s would brake the drum)
         "groundstation": ["-m", "groundstation", "--can", can, "--mavlink",
-                          f"127.0.0.1:{comp_port}"],
+                          f"127.0.0.1:{comp_port}",
+                          *([] if real_time else ["--clock", "frames"])],
         "companion": ["-m", "companion", "--sim", format_sim_address(sim),
                       "--component-port", str(comp_port), *gains, *flight.companion_args,
                       *([] if real_time else ["--telemetry-batch", repr(TELEMETRY_BATCH_S)])],
@@ -318,7 +372,13 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]))
     results: dict[str, ProcessResult] = {}
+    traced: dict[str, dict[str, int]] = {}
+    wake: dict[str, int] = {}
+    traces: dict[str, subprocess.Popen] = {}
     pin = (not real_time) if pin is None else pin
+    if spin and pin and not real_time and cpu_split() is not None:
+        # a plant on a CPU of its own spins briefly in its lockstep waits
+        commands["plant"] += ["--lockstep-spin-us", repr(LOCKSTEP_SPIN_US)]
     try:
         if recorder:
             logs["candump"] = work / "candump.log"
@@ -339,6 +399,9 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
         # (start-up) is left out of its figure
         _wait_ready(procs["companion"], logs["companion"], "companion: connected")
         start_cpu = {name: _cpu_s(p.pid) for name, p in procs.items()}
+        start_wake = {name: _wakeups(p.pid) for name, p in procs.items()}
+        traces = ({name: _trace(p.pid, work / f"{name}.syscalls") for name, p in procs.items()}
+                  if syscalls else {})
         if priority is not None:
             for name in PROCESSES:
                 set_priority(procs[name].pid, priority)
@@ -368,15 +431,35 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
             # its start-up (imports) is left out of its figure, as the others'
             _wait_ready(procs["client"], logs["client"], flight.client_ready)
             start_cpu["client"] = _cpu_s(procs["client"].pid)
+            start_wake["client"] = _wakeups(procs["client"].pid)
+            if syscalls:
+                traces["client"] = _trace(procs["client"].pid, work / "client.syscalls")
             if profile:
                 procs["client"].send_signal(signal.SIGUSR1)
+            client_wake = 0
+            # its count just before it exits (it is gone once reaped); WNOWAIT: not reaped
+            while os.waitid(os.P_PID, procs["client"].pid,
+                            os.WEXITED | os.WNOHANG | os.WNOWAIT) is None:
+                client_wake = _wakeups(procs["client"].pid) or client_wake
+                time.sleep(0.05)
             code, cpu = _reap(procs["client"], MISSION_TIMEOUT_S + 60.0)
-            results["client"] = ProcessResult(code, cpu - start_cpu["client"], "")
+            results["client"] = ProcessResult(code, cpu - start_cpu["client"], "",
+                                              wakeups=client_wake - start_wake["client"])
+            # the flight is over: the counts stop here
+            wake = {n: _wakeups(p.pid) - start_wake[n] for n, p in procs.items()
+                    if n != "client"}
+            for n, tr in traces.items():
+                calls = _end_trace(tr, work / f"{n}.syscalls")
+                if n == "client":
+                    results["client"].syscalls = calls
+                else:
+                    traced[n] = calls
             procs["plant"].send_signal(signal.SIGTERM)   # it prints its summary and exits
             plant_budget_s = 60.0
         else:
             assert duration_s is not None
             plant_budget_s = 60.0 + 50.0 * duration_s
+            wake = {}
         code, cpu = _reap(procs["plant"], plant_budget_s)
         if profile and procs["groundstation"].poll() is None:
             procs["groundstation"].send_signal(signal.SIGUSR2)   # the flight is over
@@ -391,13 +474,15 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
             code, cpu = _reap(procs["candump"], 30.0)
             results["candump"] = ProcessResult(code, cpu - start_cpu["candump"], "")
     finally:
-        for p in procs.values():
+        for p in (*traces.values(), *procs.values()):
             if p.returncode is None and p.poll() is None:
                 p.kill()
                 p.wait()
     results = {k: results[k] for k in (*PROCESSES, "client", "candump") if k in results}
     for name, r in results.items():
         r.log = logs[name].read_text()
+        r.syscalls = traced.get(name, r.syscalls)
+        r.wakeups = wake.get(name, r.wakeups)
         if profile and (work / f"{name}.prof").is_file():
             r.shares = profile_shares(work / f"{name}.prof")
     m = re.search(r"([\d.]+) s simulated in ([\d.]+) s", results["plant"].log)
@@ -423,16 +508,34 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="scheduling for the three processes (experiments)")
     ap.add_argument("--sim-link", choices=("unix", "tcp"), default=SIM_LINK_DEFAULT,
                     help="the simulator link, as up --sim-link (default: up's)")
+    ap.add_argument("--spin", action="store_true",
+                    help="experiment: the pinned plant's lockstep waits spin first "
+                         "(python -m sitl --lockstep-spin-us)")
+    ap.add_argument("--syscalls", action="store_true",
+                    help="count each process's system calls over the flight (perf trace "
+                         "-s, root; slows the run) and print them per control period")
     args = ap.parse_args(argv)
     flight = goto_flight() if args.flight == "goto" else mission_flight(
         args.flight == "short-mission")
     duration = None if flight.client else args.duration or 10.0
     res = run_stack(Path(args.work), duration, flight, profile=args.profile,
                     priority=args.priority, pin=False if args.no_pin else None,
-                    recorder=not args.no_recorder, sim_link=args.sim_link)
+                    recorder=not args.no_recorder, sim_link=args.sim_link,
+                    syscalls=args.syscalls, spin=args.spin)
     out = asdict(res)
     out["real_time_factor"] = res.real_time_factor
     print(json.dumps(out))
+    periods = res.sim_s * 250.0   # (the mission's control rate)
+    print(f"{res.real_time_factor:.2f}x real time, {res.sim_s:.2f} s simulated "
+          f"in {res.wall_s:.2f} s", file=sys.stderr)
+    for name, r in res.processes.items():
+        calls = sum(r.syscalls.values())
+        top = ", ".join(f"{k} {v / periods:.2f}" for k, v in
+                        sorted(r.syscalls.items(), key=lambda kv: -kv[1])[:6])
+        print(f"{name:14s} CPU {r.cpu_s / periods * 1e6:6.1f} us/period, wake-ups "
+              f"{r.wakeups / periods:5.2f}/period"
+              + (f", syscalls {calls / periods:5.2f}/period ({top})" if r.syscalls else ""),
+              file=sys.stderr)
     return 0
 
 

@@ -142,6 +142,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             # back, and what the component link brought meanwhile is read after them
             rx = link.recv(timeout_s=LOOP_S)
             frames = () if rx is None else [rx, *link.recv_ready()]
+            if mav is not None:
+                # the turn's messages to the vehicle (the fix, WINCH_STATUS) in one write,
+                # after the torque: it wakes the companion once
+                mav.hold()
             for rx in frames:
                 out = handle(now_s(), rx.arbitration_id, rx.data, rx.is_remote)
                 if out is not None:
@@ -162,6 +166,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         mav.command_ack(reply.command, reply.result, reply.target_system,
                                         reply.target_component)
                         emit(WinchOutput(notices=list(reply.notices)))
+                mav.flush()
             if winch.lost != was_lost:      # the log lines of the stream itself
                 was_lost = winch.lost
                 print(f"groundstation: encoder frames {'lost' if was_lost else 'back'}",

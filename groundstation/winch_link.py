@@ -61,6 +61,8 @@ class WinchLinkClient:
         self._commands: list[CommandRequest] = []
         self.bad_frames = 0
         self._refused_said = 0
+        self._held = False          # (hold: what is sent waits in _out until flush)
+        self._out = bytearray()
 
     def _connect(self) -> bool:
         if self.sock is not None:
@@ -204,16 +206,41 @@ class WinchLinkClient:
         """Send STATUSTEXT (``severity`` a MAV_SEVERITY; text cut to 50 characters)."""
         self._send(self.mav.statustext_encode(severity, text.encode()[:50]))
 
+    def hold(self) -> None:
+        """Keep what is sent from here on until :meth:`flush`: one write for the messages
+        of one turn of the process's loop (a winder cycle's ODOMETRY and WINCH_STATUS),
+        which wakes the vehicle once instead of once per message. The bytes are the same,
+        in the same order."""
+        self._held = True
+
+    def flush(self) -> None:
+        """Write what :meth:`hold` kept, in one write, and send at once again."""
+        self._held = False
+        if self._out:
+            data = bytes(self._out)
+            self._out.clear()
+            self._write(data)
+
     def _send(self, msg: mavlink2.MAVLink_message) -> None:
         if self.sock is None:
             return
+        data = msg.pack(self.mav)
+        if self._held:
+            self._out += data
+        else:
+            self._write(data)
+
+    def _write(self, data: bytes) -> None:
+        if self.sock is None:
+            return
         try:
-            self.sock.sendall(msg.pack(self.mav))
+            self.sock.sendall(data)
         except (BlockingIOError, OSError):
             self.close()
 
     def close(self) -> None:
-        """Close the connection."""
+        """Close the connection (anything held is dropped with it)."""
+        self._out.clear()
         if self.sock is not None:
             self.sock.close()
             self.sock = None

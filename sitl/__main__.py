@@ -78,6 +78,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--can", default=None, metavar="SPEC",
                     help="CAN bus of the winder: auto, socketcan:IFACE, udp_multicast[:GROUP] "
                          "(default: none, the winder stays braked)")
+    ap.add_argument("--lockstep-spin-us", type=float, default=0.0, metavar="US",
+                    help="in lockstep, spin this long [us] waiting for the companion's "
+                         "answer and the ground station's torque before sleeping (for a "
+                         "plant on a CPU of its own; 0, the default: sleep at once)")
     ap.add_argument("--accept-timeout", type=float, default=60.0,
                     help="give up if no companion connects within [s]")
     return ap
@@ -87,6 +91,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the plant process; returns the exit code."""
     args = build_parser().parse_args(argv)
     real_time = args.real_time or args.speedup == 1.0
+    if not args.lockstep_spin_us >= 0.0:
+        print("plant: --lockstep-spin-us must be >= 0", file=sys.stderr)
+        return 2
+    spin_s = 0.0 if real_time else args.lockstep_spin_us * 1e-6
     try:
         noise = (SensorNoise.off(args.gnss) if args.no_noise
                  else SensorNoise.preset(args.gnss, seed=args.sensor_seed))
@@ -117,7 +125,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     node = None
     if args.can:
         try:
-            node = WinderCanNode(CanLink(args.can), plant, lockstep=not real_time)
+            node = WinderCanNode(CanLink(args.can), plant, lockstep=not real_time,
+                                 spin_s=spin_s)
         except CanBusError as exc:
             print(f"plant: {exc}", file=sys.stderr)
             return 1
@@ -128,7 +137,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                home=tuple(args.home), port=args.port,
                                real_time=real_time, speedup=args.speedup,
                                sensor_noise=noise,
-                               unix_path=args.socket)
+                               unix_path=args.socket, lockstep_spin_s=spin_s)
     except OSError as exc:
         where = sl.format_sim_address(args.socket if args.socket is not None
                                       else (sl.SIM_HOST_DEFAULT, args.port))
@@ -178,6 +187,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                        f"{100.0 * summary.missed_fraction:.3f} % of "
                        f"{summary.periods_in_service} periods from the first answer, "
                        f"{summary.overruns} overruns")
+    if spin_s > 0.0:
+        spins = [server.spin, *([node.spin] if node is not None else [])]
+        pacing_text += (f"; spun {sum(w.spins for w in spins)} waits, "
+                        f"{sum(w.hits for w in spins)} answered awake")
     print(f"plant: {summary.end_reason}: {summary.steps} periods, "
           f"{summary.sim_time_s:.2f} s simulated in {summary.wall_time_s:.3f} s, "
           f"{summary.bad_frames} bad frames, {summary.missed_deadlines} missed deadlines"

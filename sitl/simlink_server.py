@@ -29,6 +29,7 @@ with the server's ``on_step`` and ``before_physics``, and returns its
 from __future__ import annotations
 
 import errno
+import functools
 import ipaddress
 import math
 import os
@@ -44,6 +45,7 @@ from typing import NamedTuple, Protocol
 from sitl.plant import Plant, PlantInputs
 from sitl.sensor_batch import SensorBatches
 from sitl.sensors import SensorNoise, SensorSuite
+from sitl.spin import SpinWait
 from tuavdefs import simlink as sl
 
 #: In lockstep, a wait for the companion's answer longer than this [s, wall] is said ...
@@ -196,7 +198,8 @@ class SimLinkServer:
     (None or inf: as fast as possible); the loop that runs it is
     :class:`sitl.plant_loop.PlantLoop`. ``winder_inputs`` are the winder's inputs until the
     loop sets others; ``on_step`` and ``before_physics`` are the hooks :meth:`serve` runs
-    its loop with.
+    its loop with. ``lockstep_spin_s`` [s]: in lockstep, how long each wait for an answer
+    spins before it sleeps (:mod:`sitl.spin`; 0: it sleeps at once).
     """
 
     def __init__(self, plant: Plant, control_rate_hz: float = sl.CONTROL_RATE_HZ_DEFAULT,
@@ -210,7 +213,8 @@ class SimLinkServer:
                  speedup: float | None = None,
                  before_physics: Callable[[SimLinkServer], None] | None = None,
                  unix_path: str | None = None,
-                 log: Callable[[str], None] | None = None) -> None:
+                 log: Callable[[str], None] | None = None,
+                 lockstep_spin_s: float = 0.0) -> None:
         if unix_path is None:
             _check_loopback(host)
         self.plant = plant
@@ -256,8 +260,13 @@ class SimLinkServer:
         self.batches = SensorBatches(plant, self.sensors, self.home, self.period_us,
                                      self.gps_period_us, self._encoder)
         self._parser = sl.FrameParser()
+        #: In lockstep, how long the wait for an answer spins before it sleeps
+        #: (:class:`sitl.spin.SpinWait`; ``lockstep_spin_s`` [s], 0: never).
+        self.spin = SpinWait(lockstep_spin_s)
         self._sock: socket.socket | None = None
         self._poller: select.poll | None = None
+        #: Whether the answer's bytes are there (a poll(0) on the connection).
+        self._ready: Callable[[], object] = lambda: False
         #: The simulator's run-time parameters (tuavdefs.sim_params) the companion may set
         #: over the link (None: it sets none; its PARAM_SETs are ignored).
         self.sim_params: SimParamStore | None = None
@@ -380,6 +389,7 @@ class SimLinkServer:
                 self._sock = sock
                 self._poller = select.poll()
                 self._poller.register(sock, select.POLLIN)
+                self._ready = functools.partial(self._poller.poll, 0)
                 self._params_out.clear()
                 if self.sim_params is not None:   # what they are, before the first batch
                     for name in self.sim_params.sim_values():
@@ -448,6 +458,8 @@ class SimLinkServer:
         poller = self._poller
         assert sock is not None and poller is not None
         parser = self._parser
+        spin = self.spin if self.spin.budget_s > 0.0 and deadline is None else None
+        ready = self._ready
         late = ignored = 0
         # lockstep: a wait this long is said (and again every LOCKSTEP_REPEAT_S)
         notice_at = None if deadline is not None else time.monotonic() + LOCKSTEP_NOTICE_S
@@ -468,6 +480,10 @@ class SimLinkServer:
                     return False, late, ignored
                 if not poller.poll(min(wait, STOP_POLL_S) * 1e3):
                     continue
+            elif spin is not None:
+                # lockstep: the answer is usually tens of microseconds away; waiting awake
+                # spares the companion waking this process (sitl/spin.py)
+                spin.until(ready)
             try:
                 data = sock.recv(65536)   # (lockstep: waits up to STOP_POLL_S)
             except BlockingIOError:   # the socket's receive timeout

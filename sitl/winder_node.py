@@ -24,6 +24,7 @@ from sitl.exit_angle import ExitAngleSensor
 from sitl.faults import CanChannel, CanFaults
 from sitl.odrive_axis import OdriveAxis, WinchSensors
 from sitl.plant import Plant
+from sitl.spin import SpinWait
 from tuavdefs.can_protocol import (
     AXIS_NODE_ID_DEFAULT,
     WINCH_SENSOR_NODE_ID_DEFAULT,
@@ -43,15 +44,19 @@ _TWO_PI = 2.0 * math.pi
 
 
 class WinderCanNode:
-    """Axis + sensors on a bus, stepped with the plant's simulated time."""
+    """Axis + sensors on a bus, stepped with the plant's simulated time. In lockstep
+    (``lockstep``) a host's answer is awaited for at most ``answer_timeout_s`` [s] of wall
+    time, spinning for the first ``spin_s`` [s] of it (:mod:`sitl.spin`; 0: sleeping)."""
 
     def __init__(self, link: CanLink, plant: Plant, axis_node_id: int = AXIS_NODE_ID_DEFAULT,
                  sensor_node_id: int = WINCH_SENSOR_NODE_ID_DEFAULT,
                  watchdog_timeout_s: float = 0.1, lockstep: bool = False,
-                 answer_timeout_s: float = 0.25) -> None:
+                 answer_timeout_s: float = 0.25, spin_s: float = 0.0) -> None:
         self.link = link
         self.lockstep = lockstep
         self.answer_timeout_s = answer_timeout_s
+        #: How long a wait for the host's answer spins before it sleeps [s] (0: never).
+        self.spin = SpinWait(spin_s if link.pollable else 0.0)
         self.host_seen = False
         self.late_answers = 0
         self._awaiting = False
@@ -145,6 +150,10 @@ class WinderCanNode:
             return
         end = time.monotonic() + self.answer_timeout_s
         while self._awaiting:
+            if self.spin.budget_s > 0.0:
+                # usually tens of microseconds away: awake, the ground station's send
+                # need not wake this process (sitl/spin.py)
+                self.spin.until(self.link.readable)
             rx = self.link.recv(timeout_s=max(end - time.monotonic(), 0.0))
             if rx is None:
                 self.late_answers += 1

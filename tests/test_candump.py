@@ -42,3 +42,11 @@ def test_cantools_decodes_the_log_output(dump):
     assert "Input_Torque: 1.5" in text
     assert "2.25" in text and "-0.5" in text
     assert "12.5" in text
+
+
+def test_a_stopped_recorder_logs_what_is_still_queued(dump):
+    """SIGTERM to a recorder asleep between bursts (up's, at idle priority, may be behind):
+    the frames queued on its socket are logged before it exits, none lost."""
+    assert dump["recorder_rc"] == 0
+    strip = [re.sub(r"^\(\d{10}\.\d{6}\) ", "", ln) for ln in dump["recorder_log"]]
+    assert strip == [re.sub(r"^\(\d{10}\.\d{6}\) ", "", ln) for ln in dump["L"]]

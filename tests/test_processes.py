@@ -1,6 +1,7 @@
 """The plant and companion as separate OS processes over the real simulator link."""
 
 import csv
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -13,10 +14,11 @@ GOAL = (5.0, 1.0, 11.0)
 
 
 
-def _fly(tmp: Path, duration: float = 12.0, unix: bool = False
+def _fly(tmp: Path, duration: float = 12.0, unix: bool = False, spin_us: float = 0.0
          ) -> tuple[np.ndarray, str, str]:
     """The flight with the simulator link on TCP, or (``unix``) on a Unix-domain socket
-    file in ``tmp``, which the plant removes when it ends."""
+    file in ``tmp``, which the plant removes when it ends; the plant's lockstep waits spin
+    for ``spin_us`` [us] before sleeping."""
     port = free_port()
     sock = tmp / "sim.sock"
     listen, sim, banner = ((["--socket", str(sock)], f"unix:{sock}", f"listening on unix:{sock}")
@@ -26,7 +28,7 @@ def _fly(tmp: Path, duration: float = 12.0, unix: bool = False
     plant = subprocess.Popen(
         [sys.executable, "-m", "sitl", *listen, "--duration", str(duration),
          "--truth-log", str(log), "--no-noise", "--position", "4", "0", "10",
-         "--accept-timeout", "60"],
+         "--accept-timeout", "60", "--lockstep-spin-us", repr(spin_us)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         ready = plant.stdout.readline()
@@ -61,15 +63,18 @@ def test_companion_flies_the_plant_in_lockstep(tmp_path):
     assert np.all(pos[:, 2] > 9.5)                   # no sagging on the way
     assert np.ptp(data[:, 4]) == 0.0                 # the winder stays braked (no ground station)
     assert "max_sim_time: 3000 periods" in out and "0 bad frames" in out
+    assert "spun" not in out                         # (it sleeps at once by default)
     # lockstep: a second flight is identical to the bit, and so is one over a Unix-domain
-    # socket (the transport carries the same bytes)
+    # socket (the transport carries the same bytes) with the plant waiting awake for its
+    # answers (only when it notices them changes)
     (tmp_path / "again").mkdir()
     _, text2, _ = _fly(tmp_path / "again")
     assert text2 == text
     (tmp_path / "unix").mkdir()
-    _, text3, out3 = _fly(tmp_path / "unix", unix=True)
+    _, text3, out3 = _fly(tmp_path / "unix", unix=True, spin_us=200.0)
     assert text3 == text
     assert "connected to the plant at unix:" in out3
+    assert re.search(r"spun [1-9]\d* waits, \d+ answered awake", out3), out3
 
 
 def test_plant_without_a_companion_gives_up_cleanly():

@@ -77,6 +77,48 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     bad = 0
     last_rx = time.monotonic()
     last_flush = last_rx
+    counted = {"done": False}
+
+    def take(frames: list) -> None:
+        """Print and log a burst of frames (and flush the log at most once a second)."""
+        nonlocal n, bad, last_flush
+        now = time.monotonic()
+        lines: list[str] = []
+        logged: list[str] = []
+        for f in frames:
+            ts = f.timestamp if f.timestamp > 0.0 else time.time()
+            try:
+                log_line = (format_log(ts, iface, f.arbitration_id, f.data, f.is_remote,
+                                       f.is_extended)
+                            if log_file is not None or args.log_format else "")
+                line = (log_line if args.log_format else format_default(
+                    iface, f.arbitration_id, f.data, f.is_remote, f.is_extended,
+                    len(iface))) if show else ""
+            except ValueError as exc:   # a datagram no CAN frame can be: said, skipped
+                bad += 1
+                if bad == 1 or bad % 1000 == 0:
+                    print(f"tuav-sitl candump: {bad} bad frame(s) skipped, the last: "
+                          f"{exc}", file=sys.stderr, flush=True)
+                continue
+            if show:
+                if db is not None and not f.is_remote:
+                    line += _decoded(db, f.arbitration_id, f.data)
+                lines.append(line)
+            if log_file is not None:
+                logged.append(log_line)
+            n += 1
+            if args.count is not None and n >= args.count:
+                stop["now"] = counted["done"] = True
+                break
+        if lines:
+            out.write("\n".join(lines) + "\n")
+            out.flush()
+        if log_file is not None and logged:
+            log_file.write("\n".join(logged) + "\n")
+            if now - last_flush >= 1.0:
+                log_file.flush()
+                last_flush = now
+
     try:
         while not stop["now"]:
             rx = link.recv(timeout_s=0.1)
@@ -86,43 +128,16 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                     break
                 continue
             last_rx = now
-            lines: list[str] = []
-            logged: list[str] = []
-            for f in (rx, *link.recv_ready()):
-                ts = f.timestamp if f.timestamp > 0.0 else time.time()
-                try:
-                    log_line = (format_log(ts, iface, f.arbitration_id, f.data, f.is_remote,
-                                           f.is_extended)
-                                if log_file is not None or args.log_format else "")
-                    line = (log_line if args.log_format else format_default(
-                        iface, f.arbitration_id, f.data, f.is_remote, f.is_extended,
-                        len(iface))) if show else ""
-                except ValueError as exc:   # a datagram no CAN frame can be: said, skipped
-                    bad += 1
-                    if bad == 1 or bad % 1000 == 0:
-                        print(f"tuav-sitl candump: {bad} bad frame(s) skipped, the last: "
-                              f"{exc}", file=sys.stderr, flush=True)
-                    continue
-                if show:
-                    if db is not None and not f.is_remote:
-                        line += _decoded(db, f.arbitration_id, f.data)
-                    lines.append(line)
-                if log_file is not None:
-                    logged.append(log_line)
-                n += 1
-                if args.count is not None and n >= args.count:
-                    stop["now"] = True
-                    break
-            if lines:
-                out.write("\n".join(lines) + "\n")
-                out.flush()
-            if log_file is not None:
-                log_file.write("\n".join(logged) + "\n")
-                if now - last_flush >= 1.0:
-                    log_file.flush()
-                    last_flush = now
-            if args.interval > 0.0 and not stop["now"]:
-                time.sleep(args.interval)
+            take([rx, *link.recv_ready()])
+            # (in steps of at most 50 ms: a SIGTERM ends the wait, as sleep resumes after
+            # its handler)
+            end = time.monotonic() + args.interval
+            while not stop["now"] and (left := end - time.monotonic()) > 0.0:
+                time.sleep(min(left, 0.05))
+        if stop["now"] and not counted["done"]:
+            # stopped (SIGTERM): what the bus carried until now is still queued on the
+            # socket (a recorder at idle priority may be behind): logged too
+            take(link.recv_ready())
     except KeyboardInterrupt:
         pass
     except BrokenPipeError:

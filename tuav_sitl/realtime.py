@@ -70,6 +70,14 @@ def cpu_split(available: set[int] | None = None) -> dict[str, set[int]] | None:
     return {"plant": plant, "companion": rest, "groundstation": rest, "candump": plant}
 
 
+#: A spin for the plant's lockstep waits when it has a CPU of its own (:func:`cpu_split`)
+#: [us] (``python -m sitl --lockstep-spin-us``, :mod:`sitl.spin`; ``python -m
+#: benchmarks.stack --spin``): the senders then need not wake the plant's CPU, which took
+#: 7-15 % of the companion's CPU time per period off the CPU it shares with the ground
+#: station, but on a host busy with other work the flights were slower, so ``up`` does not
+#: pass it (docs/performance.md).
+LOCKSTEP_SPIN_US = 200.0
+
 #: Processes that in lockstep only use CPU time the others leave (:func:`set_background`):
 #: the bus recorder, which reads in bursts and keeps each frame's kernel receive time.
 BACKGROUND = frozenset({"candump"})

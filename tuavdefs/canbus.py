@@ -103,6 +103,11 @@ class CanLink:
                 self.bus = can.Bus(interface=self.interface, channel=self.channel, **kwargs)
         except (OSError, can.CanError, ImportError) as exc:
             raise CanBusError(f"cannot open {self.interface}:{self.channel}: {exc}") from exc
+        self._ready_poll: select.poll | None = None
+        fd = self.fileno()
+        if fd >= 0:
+            self._ready_poll = select.poll()
+            self._ready_poll.register(fd, select.POLLIN)
 
     @property
     def description(self) -> str:
@@ -178,6 +183,18 @@ class CanLink:
             with contextlib.suppress(OSError):
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size_bytes)
         return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+
+    @property
+    def pollable(self) -> bool:
+        """Whether :meth:`readable` can tell (the bus has a descriptor to poll)."""
+        return self._ready_poll is not None
+
+    def readable(self) -> bool:
+        """Whether something waits to be read, without reading it: one ``poll(0)`` (on
+        udp_multicast it may be one of this link's own datagrams or a malformed one, and
+        :meth:`recv` then finds nothing). Always False where the bus is not
+        :attr:`pollable`."""
+        return bool(self._ready_poll.poll(0)) if self._ready_poll is not None else False
 
     def recv_ready(self) -> list[RxFrame]:
         """Every frame from another node that has already arrived (none: an empty list),

@@ -54,7 +54,13 @@ def main() -> int:
     dump_l = subprocess.Popen([*cmd, "-L", "--log", str(log)], cwd=ROOT,
                               stdout=subprocess.PIPE, text=True)
     dump_d = subprocess.Popen([*cmd, "--decode"], cwd=ROOT, stdout=subprocess.PIPE, text=True)
-    _wait_for_members(2, 60.0)   # both have joined the group (a busy machine is slow)
+    # a recorder as up runs it, but asleep for 60 s after its first burst: the frames after
+    # the first are still queued on its socket when SIGTERM stops it
+    rec_log = Path(sys.argv[1]) / "recorder.log"
+    recorder = subprocess.Popen([sys.executable, "-m", "tuav_sitl", "candump", "--can",
+                                 "udp_multicast", "-s", "2", "--interval", "60", "--log",
+                                 str(rec_log)], cwd=ROOT)
+    _wait_for_members(3, 60.0)   # all have joined the group (a busy machine is slow)
     link = CanLink("udp_multicast")
     for fid, data, remote in FRAMES:
         link.send(fid, data, is_remote=remote, dlc=len(data))
@@ -62,10 +68,14 @@ def main() -> int:
     out_l = dump_l.communicate(timeout=60)[0]
     out_d = dump_d.communicate(timeout=60)[0]
     link.close()
+    recorder.terminate()
+    recorder.wait(timeout=30)
     decoded = subprocess.run([sys.executable, "-m", "cantools", "decode", str(cp.dbc_path())],
                              input=out_l, capture_output=True, text=True, timeout=60)
     print(json.dumps({"L": out_l.splitlines(), "default": out_d.splitlines(),
                       "log_file": log.read_text().splitlines(),
+                      "recorder_log": rec_log.read_text().splitlines(),
+                      "recorder_rc": recorder.returncode,
                       "cantools": decoded.stdout, "cantools_rc": decoded.returncode}))
     return 0
 

@@ -27,7 +27,9 @@ def main() -> int:
     plant = subprocess.Popen(
         [py, "-m", "sitl", "--port", str(sim_port), "--duration", duration, *pacing,
          "--can", "udp_multicast", "--no-noise", "--position", "4", "0", "10",
-         "--tether-length", "12.5", "--truth-log", str(log)],
+         "--tether-length", "12.5", "--truth-log", str(log),
+         # in lockstep its waits spin first (sitl/spin.py): the same flight
+         *([] if pacing else ["--lockstep-spin-us", "200"])],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     ready = plant.stdout.readline()
     gs = subprocess.Popen([py, "-m", "groundstation", "--can", "udp_multicast", "--mavlink",
