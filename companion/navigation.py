@@ -128,6 +128,8 @@ class NavigationParams(Params):
                                       "which the vehicle moves towards the winder", gt=0)
     tension_step_m: float = quantity(2.0, "m", "how far towards the winder each over-"
                                      "tension move goes", gt=0, le=10)
+    tether_governor: int = quantity(1, "", "the tether governor (docs/control.md): 1 on, "
+                                    "0 off", ge=0, le=1)
     tether_brake_acc_m_s2: float = quantity(
         3.0, "m/s^2", "tether governor: the deceleration it brakes at (reached at "
         "TETHER_BRAKE_JERK_M_S3) and assumes of the vehicle", gt=0, le=10)
@@ -868,7 +870,8 @@ class Navigator:
             ref = self._braking(dt)
             if ref is not None:
                 return ref
-        return self._govern(self._advance_plan(t, dt), dt)
+        ref = self._advance_plan(t, dt)
+        return self._govern(ref, dt) if self.p.tether_governor else ref
 
     # ----- the tether governor
 
