@@ -78,8 +78,9 @@ class LBarParams(Params):
         "(its reaction to a drum that stops, and the links' delays; docs/control.md §3)",
         ge=0)
     stop_lead_acc_m_s2: float = quantity(
-        2.5, "m/s^2", "stop lead: the UAV's braking deceleration its stopping distance "
-        "v^2/2a is paid out for (0: no stop lead)", ge=0)
+        0.0, "m/s^2", "stop lead: the UAV's braking deceleration its stopping distance "
+        "v^2/2a is paid out for (0, the default: no stop lead; 2.5 with the companion's "
+        "tether governor)", ge=0)
     stop_lead_margin_m: float = quantity(
         0.1, "m", "stop lead: extra length paid out once the UAV moves outward at "
         "stop_lead_full_speed_m_s (in proportion below)", ge=0)

@@ -18,6 +18,13 @@ from tuav_sitl.offline import OfflineRunner
 from tuav_sitl.scenario import ScenarioParams
 from tuavdefs.paramspec import load_toml
 
+#: The companion's tether governor and the winder's stop lead, on (both off by default:
+#: the lead's slack lays the paper scenarios' line on the ground; docs/control.md §3).
+_SAFETY = """[navigation]
+tether_governor = 1
+[lbar]
+stop_lead_acc_m_s2 = 2.5"""
+
 
 def _run(tmp_path, fault: str, goal=(8.0, 4.0, 10.0), duration_s: float = 60.0,
          start_s: float = 5.0):
@@ -34,6 +41,7 @@ position_m = [8.0, 4.0, 10.0]
 kind = "setpoint"
 start_s = 10.0
 goal_m = [{goal[0]}, {goal[1]}, {goal[2]}]
+{_SAFETY}
 [[faults]]
 start_s = {start_s}
 {fault}
@@ -148,6 +156,7 @@ kind = "setpoint"
 start_s = 10.0
 goal_m = [{goal[0]}, {goal[1]}, {goal[2]}]
 max_speed_m_s = {speed}
+{_SAFETY}
 [[faults]]
 start_s = {start_s}
 {fault}
