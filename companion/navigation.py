@@ -128,6 +128,21 @@ class NavigationParams(Params):
                                       "which the vehicle moves towards the winder", gt=0)
     tension_step_m: float = quantity(2.0, "m", "how far towards the winder each over-"
                                      "tension move goes", gt=0, le=10)
+    tether_governor: int = quantity(0, "", "the tether governor (docs/control.md): 1 on, "
+                                    "0 off (off by default until the winder's stop lead "
+                                    "keeps the line off the ground)", ge=0, le=1)
+    tether_brake_acc_m_s2: float = quantity(
+        3.0, "m/s^2", "tether governor: the deceleration it brakes at (reached at "
+        "TETHER_BRAKE_JERK_M_S3) and assumes of the vehicle", gt=0, le=10)
+    tether_latency_s: float = quantity(
+        0.3, "s", "tether governor: how long the vehicle goes on at its speed before it "
+        "follows a braking reference (its tracking lag)", ge=0, le=2)
+    tether_margin_m: float = quantity(
+        0.03, "m", "tether governor: length the stopping point keeps short of the last "
+        "reported tether length", ge=0, le=1)
+    tether_sigma_k: float = quantity(
+        2.0, "1", "tether governor: multiples of the estimate's horizontal position "
+        "standard deviation added to the margin", ge=0, le=5)
 
 
 # ----- mission commands (the autopilot converts MAVLink items into these)
@@ -287,6 +302,73 @@ class _VelocityRef:
                          self.yaw, self.yaw_rate)
 
 
+#: The tether governor's jerk while its brake builds up [m/s^3].
+TETHER_BRAKE_JERK_M_S3 = 20.0
+#: A drum whose line moves slower than this [m/s] has caught up with its reference.
+TETHER_CAUGHT_UP_M_S = 0.02
+#: Outward speed [m/s] from which the governor keeps its whole margin for the
+#: estimate's uncertainty (in proportion below).
+GOVERNOR_SIGMA_SPEED_M_S = 0.5
+#: Room [m] the governor wants between the vehicle's distance and its limit before it
+#: resumes what it stopped (or that it moves in to, when beyond).
+TETHER_RESUME_ROOM_M = 0.1
+
+
+class _BrakeRef:
+    """The tether governor's stop: the reference's speed brought to rest along its
+    direction, the deceleration ``acc`` [m/s^2] reached at ``jerk`` [m/s^3] from the
+    acceleration it had along it; the position integrates it."""
+
+    def __init__(self, ref: RefSample, acc: float, jerk: float) -> None:
+        self.pos = list(ref.pos_m)
+        v = ref.vel_m_s
+        s = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        self.dir: Vec3 = (v[0] / s, v[1] / s, v[2] / s) if s > 1e-9 else _ZERO3
+        self.speed = s if s > 1e-9 else 0.0
+        self.acc_along = sum(ref.acc_m_s2[i] * self.dir[i] for i in range(3))
+        self.acc_max = acc
+        self.jerk_max = jerk
+        self.yaw = ref.yaw_rad
+
+    @property
+    def stopped(self) -> bool:
+        """Whether the reference is at rest."""
+        return self.speed <= 0.0
+
+    def step(self, dt: float) -> RefSample:
+        d = self.dir
+        if self.speed <= 0.0:
+            return RefSample(tuple(self.pos), _ZERO3, _ZERO3, _ZERO3,  # type: ignore
+                             self.yaw, 0.0)
+        a = max(self.acc_along - self.jerk_max * dt, -self.acc_max)
+        jerk = (a - self.acc_along) / dt
+        speed = self.speed + a * dt
+        if speed <= 0.0:         # at rest within this period
+            step_m = 0.5 * self.speed * self.speed / max(-a, 1e-9)
+            speed, a, jerk = 0.0, 0.0, 0.0
+        else:
+            step_m = 0.5 * (self.speed + speed) * dt
+        self.pos = [self.pos[i] + d[i] * step_m for i in range(3)]
+        self.speed, self.acc_along = speed, a
+        return RefSample(tuple(self.pos), tuple(d[i] * speed for i in range(3)),  # type: ignore
+                         tuple(d[i] * a for i in range(3)), tuple(d[i] * jerk for i in range(3)),
+                         self.yaw, 0.0)
+
+
+def brake_distance_m(speed_m_s: float, acc_along_m_s2: float, acc_m_s2: float,
+                     jerk_m_s3: float) -> float:
+    """An upper bound of the distance [m] a :class:`_BrakeRef` runs from ``speed_m_s``
+    [m/s] with ``acc_along_m_s2`` [m/s^2] along its motion: the build-up of the brake at
+    ``jerk_m_s3`` [m/s^3] at the speed and acceleration it had, then ``v^2 / 2a`` at
+    ``acc_m_s2``."""
+    if speed_m_s <= 0.0:
+        return 0.0
+    a0 = max(acc_along_m_s2, 0.0)
+    ramp = (a0 + acc_m_s2) / jerk_m_s3
+    v1 = speed_m_s + 0.5 * a0 * ramp
+    return speed_m_s * ramp + 0.5 * a0 * ramp * ramp + v1 * v1 / (2.0 * acc_m_s2)
+
+
 def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
@@ -335,6 +417,13 @@ class Navigator:
         self._locked_length_m: float | None = None   # the drum's length while braked
         self._tension_move_t = -math.inf             # the last over-tension move [s]
         self._vel_limited = False                    # a velocity target cut at the reach
+        self._winch_length_m: float | None = None    # the last reported length [m]
+        self._winch_speed_m_s = 0.0                  # and line speed [m/s]
+        self._brake: _BrakeRef | None = None         # the tether governor's stop
+        self._paused: list[_Leg] = []                # the legs it stopped, to resume
+        #: The estimate's position standard deviation [m] (largest axis; 0 on the
+        #: truth), which the tether governor keeps as margin (set by the onboard step).
+        self.position_sigma_m = 0.0
         #: the pre-arm checks of the rest of the vehicle (the estimator's), or None
         self.prearm: Callable[[], Refusal | None] | None = None
 
@@ -378,14 +467,36 @@ class Navigator:
             length = min(length, self._locked_length_m)
         return max(length - self.p.reach_slack_m, 0.0)
 
+    @property
+    def governor_limit_m(self) -> float:
+        """Distance [m] from the winder the tether governor keeps the stopping point of
+        the reference and of the vehicle within: the length the drum last reported (it
+        may stop there at any moment: a snag, a lost bus's watchdog; while winding in,
+        where it would be 0.15 s on), or the whole tether before any report, less
+        ``tether_margin_m`` (moving outward, :meth:`_govern` keeps ``tether_sigma_k``
+        times the estimate's position standard deviation more)."""
+        length = self.tether_length_m
+        if self._winch_length_m is not None:
+            length = min(length, self._winch_length_m
+                         + 0.15 * min(self._winch_speed_m_s, 0.0))
+        if self._locked_length_m is not None:
+            length = min(length, self._locked_length_m)
+        return length - self.p.tether_margin_m
+
     def winch_report(self, length_m: float, tension_n: float | None,
-                     braked: bool) -> None:
+                     braked: bool, speed_m_s: float | None = None) -> None:
         """The winch's report: paid-out length [m], drum tension [N] (None: unknown),
-        whether its drum is braked. A braked drum bounds the reach; a tension above
-        ``tension_limit_n`` moves the vehicle towards the winder, ``tension_step_m`` at a
-        time (again every 2 s while it lasts), in GUIDED."""
+        whether its drum is braked, its line speed [m/s] (None: unchanged). A braked drum
+        bounds the reach; the length bounds the tether governor's stopping point (the drum
+        may stop at any moment); a tension above ``tension_limit_n`` moves the vehicle
+        towards the winder, ``tension_step_m`` at a time (again every 2 s while it lasts),
+        in GUIDED."""
         self._locked_length_m = (float(length_m) if braked and math.isfinite(length_m)
                                  else None)
+        if math.isfinite(length_m):
+            self._winch_length_m = float(length_m)
+        if speed_m_s is not None and math.isfinite(speed_m_s):
+            self._winch_speed_m_s = float(speed_m_s)
         if (tension_n is None or not tension_n > self.p.tension_limit_n or not self.flying
                 or self.mode in (FlightMode.RTL, FlightMode.LAND)   # on the way in already
                 or self._t - self._tension_move_t < 2.0):
@@ -518,6 +629,7 @@ class Navigator:
     def _disarm(self) -> None:
         self.armed = False
         self._leg, self._legs, self._vel, self._script = None, [], None, None
+        self._brake, self._paused = None, []
         self.mission_running = False
         self._armed_on_ground_since = None
         self._auto_takeoff_pending = False
@@ -616,6 +728,7 @@ class Navigator:
         if self._vel is None:
             self._vel = _VelocityRef(ref, self.p.acc_m_s2)
             self._leg, self._legs, self._script = None, [], None
+            self._brake, self._paused = None, []
         self._vel.cmd = tuple(float(v) for v in vel_m_s)
         if yaw_rad is not None and math.isfinite(yaw_rad):
             self._vel.yaw = yaw_rad
@@ -637,6 +750,7 @@ class Navigator:
         if not self.flying:
             return Refusal(Reason.NOT_FLYING, "not flying (take off first)")
         self._leg, self._legs, self._vel = None, [], None
+        self._brake, self._paused = None, []
         self._script = source
         return None
 
@@ -751,6 +865,127 @@ class Navigator:
         return ref, MotorState.FLY
 
     def _advance(self, t: float, dt: float) -> RefSample:
+        """The period's reference: the tether governor's stop while it brakes, else the
+        plan's (script, velocity target or legs), governed."""
+        if self._brake is not None:
+            ref = self._braking(dt)
+            if ref is not None:
+                return ref
+        ref = self._advance_plan(t, dt)
+        return self._govern(ref, dt) if self.p.tether_governor else ref
+
+    # ----- the tether governor
+
+    def _govern(self, ref: RefSample, dt: float) -> RefSample:
+        """The tether governor, in every mode: when the stopping point of the reference
+        moving outward, or of the vehicle (its estimate, going on for
+        ``tether_latency_s`` before it follows), braking at ``tether_brake_acc_m_s2``,
+        would pass :attr:`governor_limit_m`, the reference brakes now (what it was doing
+        is paused: a leg is resumed once the drum has paid out room again, a script or a
+        velocity target ends). A stopped vehicle beyond the limit of a braked drum moves
+        in; a paused leg resumes with :data:`TETHER_RESUME_ROOM_M` of room, or once the
+        drum stands (:data:`TETHER_CAUGHT_UP_M_S`) with some room, and not braked."""
+        p, v, a = ref.pos_m, ref.vel_m_s, ref.acc_m_s2
+        lim = self.governor_limit_m
+        leg = self._leg
+        if leg is not None and leg.landing:
+            return ref                    # the final descent: the ground stops it
+        d_ref = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+        speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        if speed < 1e-3:
+            return self._at_rest(ref, lim)
+        u = (v[0] / speed, v[1] / speed, v[2] / speed)
+        ab, jerk = self.p.tether_brake_acc_m_s2, TETHER_BRAKE_JERK_M_S3
+        run = brake_distance_m(speed, a[0] * u[0] + a[1] * u[1] + a[2] * u[2], ab, jerk)
+        stop = math.sqrt(sum((p[i] + u[i] * run) ** 2 for i in range(3)))
+        if stop <= d_ref + 1e-4:          # not outward: nothing to govern
+            return ref
+        v_out = (v[0] * p[0] + v[1] * p[1] + v[2] * p[2]) / d_ref if d_ref > 0 else speed
+        pe, ve = self._pos, self._vel_now
+        se = math.sqrt(ve[0] * ve[0] + ve[1] * ve[1] + ve[2] * ve[2])
+        d_e = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
+        if se > 1e-6:       # the vehicle's own stopping point, if it is outward too
+            run_e = se * self.p.tether_latency_s + se * se / (2.0 * ab)
+            stop = max(stop, math.sqrt(sum((pe[i] + ve[i] / se * run_e) ** 2
+                                           for i in range(3))))
+            if d_e > 0:
+                v_out = max(v_out, (ve[0] * pe[0] + ve[1] * pe[1] + ve[2] * pe[2]) / d_e)
+        # the estimate's uncertainty as margin, in full from an outward speed of
+        # GOVERNOR_SIGMA_SPEED_M_S (at rest a margin beyond the winder's least slack
+        # would forbid every move outward)
+        lim -= (self.p.tether_sigma_k * self.position_sigma_m
+                * min(1.0, max(v_out, 0.0) / GOVERNOR_SIGMA_SPEED_M_S))
+        if stop <= lim:
+            return ref
+        return self._start_brake(ref, lim, dt)
+
+    def _start_brake(self, ref: RefSample, lim: float, dt: float) -> RefSample:
+        """Brake the reference (:meth:`_govern`), pausing what it flew."""
+        paused: list[_Leg] = []
+        if self._script is not None:
+            self._emit(NavEvent.ERROR, "scripted reference stopped at the tether's reach")
+        elif self._vel is not None:
+            if not self._vel_limited:
+                self._vel_limited = True
+                self._emit(NavEvent.WARNING, "Guided velocity stopped at the tether's reach")
+        elif self._leg is not None:
+            paused = [self._leg, *self._legs]
+        self._emit(NavEvent.WARNING, f"Tether: braking {lim:.2f} m from the winder "
+                   "(the reported length)")
+        self._script, self._vel, self._leg, self._legs = None, None, None, []
+        self._paused = paused
+        self._brake = _BrakeRef(ref, self.p.tether_brake_acc_m_s2, TETHER_BRAKE_JERK_M_S3)
+        return self._brake.step(dt)
+
+    def _braking(self, dt: float) -> RefSample | None:
+        """The governor's stop, stepped; None once at rest (the plan goes on: a hold, a
+        move in, or the paused legs)."""
+        b = self._brake
+        assert b is not None
+        ref = b.step(dt)
+        if not b.stopped:
+            return ref
+        self._brake = None
+        self._ref = ref
+        paused = self._paused
+        self._queue([_Leg(self._follower(self.speed_m_s), GotoItem(ref.pos_m, ref.yaw_rad),
+                          tag=LegTag.HOLD)])
+        self._paused = paused
+        return None
+
+    def _at_rest(self, ref: RefSample, lim: float) -> RefSample:
+        """A reference at rest: a paused leg resumes when there is room; beyond the limit
+        of a braked drum, the vehicle moves in (radially, to the room short of it)."""
+        p = ref.pos_m
+        d = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+        pe = self._pos
+        room = lim - max(d, math.sqrt(pe[0] ** 2 + pe[1] ** 2 + pe[2] ** 2))
+        leg = self._leg
+        # room: the drum has paid out the resume room, or (a line with little slack at
+        # rest) it has caught up with the winder's reference and stands
+        caught_up = abs(self._winch_speed_m_s) < TETHER_CAUGHT_UP_M_S and room > 0.0
+        if self._paused and (room >= TETHER_RESUME_ROOM_M or caught_up) \
+                and self._locked_length_m is None and leg is not None \
+                and leg.tag is LegTag.HOLD and leg.follower.done:
+            paused = self._paused
+            self._emit(NavEvent.WARNING, "Tether: room again, resuming")
+            self._ref = ref
+            self._queue(paused)
+            return self._leg.follower.update(self._t, self._pos)
+        if (self._locked_length_m is not None and d > lim and d > 0 and leg is not None
+                and leg.tag is LegTag.HOLD and self._vel is None and self._script is None):
+            k = max(lim - TETHER_RESUME_ROOM_M, 0.0) / d
+            target = (k * p[0], k * p[1], max(k * p[2], min(p[2], self.gear_height_m + 1.0)))
+            if math.dist(target, leg.follower.target_m or p) > 0.05:
+                paused = self._paused
+                self._emit(NavEvent.WARNING, f"Tether: moving in within the braked length "
+                           f"({lim:.2f} m)")
+                self._queue([_Leg(self._follower(self.speed_m_s), GotoItem(target, ref.yaw_rad),
+                                  tag=LegTag.HOLD)])
+                self._paused = paused
+        return ref
+
+    def _advance_plan(self, t: float, dt: float) -> RefSample:
         if self._script is not None:
             ref = self._script(t, self._pos)
             x, y, z = ref.pos_m
@@ -758,7 +993,7 @@ class Navigator:
             if not (z >= 0.0 and x * x + y * y + z * z <= reach * reach):   # NaN too
                 self._emit(NavEvent.ERROR, f"scripted reference {self.check_target(ref.pos_m)}")
                 self._hold()
-                return self._advance(t, dt)
+                return self._advance_plan(t, dt)
             return ref
         if self._vel is not None:
             if t > self._vel_deadline:
@@ -859,8 +1094,10 @@ class Navigator:
         self._leg = leg
 
     def _queue(self, legs: list[_Leg]) -> None:
-        """Fly these legs in order, the first from the current reference."""
+        """Fly these legs in order, the first from the current reference (what the tether
+        governor stopped is forgotten)."""
         self._script = None
+        self._brake, self._paused = None, []
         self._legs = legs[1:]
         self._start_leg(legs[0])
 

@@ -193,7 +193,8 @@ class Companion:
         (the winder failsafe)."""
         self.failsafes.winch_heard(t_s, length_m, healthy)
         self.flight.winch_report(t_s, length_m, speed_m_s, tension_n)
-        self.nav.winch_report(length_m, tension_n, braked or self.failsafes.winch_lost)
+        self.nav.winch_report(length_m, tension_n, braked or self.failsafes.winch_lost,
+                              speed_m_s)
 
     def gcs_heard(self, t_s: float) -> None:
         """A ground station's HEARTBEAT at ``t_s`` [s] (the ground-station failsafe)."""
@@ -262,6 +263,9 @@ class Companion:
         self._status = st = f.status(t_s)
         self._healthy = f.aligned and st.healthy
         if f.aligned:
+            # the tether governor's margin: the estimate's largest position sigma [m]
+            sig = max(st.pos_sigma_m)
+            self.nav.position_sigma_m = sig if math.isfinite(sig) else 0.0
             self._announce_sources(st.sources)
 
     def _prearm(self) -> Refusal | None:

@@ -73,6 +73,24 @@ class LBarParams(Params):
     weight_min_exit_angle_rad: float = quantity(
         math.radians(2.0), "rad", "line weight estimate: held while the measured exit "
         "angle is below this (the line may lie on the ground)", ge=0, lt=math.pi / 2)
+    stop_lead_time_s: float = quantity(
+        0.6, "s", "stop lead: seconds of the UAV's outward speed paid out ahead of L-bar "
+        "(its reaction to a drum that stops, and the links' delays; docs/control.md §3)",
+        ge=0)
+    stop_lead_acc_m_s2: float = quantity(
+        0.0, "m/s^2", "stop lead: the UAV's braking deceleration its stopping distance "
+        "v^2/2a is paid out for (0, the default: no stop lead; 2.5 with the companion's "
+        "tether governor)", ge=0)
+    stop_lead_margin_m: float = quantity(
+        0.1, "m", "stop lead: extra length paid out once the UAV moves outward at "
+        "stop_lead_full_speed_m_s (in proportion below)", ge=0)
+    stop_lead_full_speed_m_s: float = quantity(
+        0.5, "m/s", "stop lead: outward speed from which the margin is paid out in full",
+        gt=0)
+    stop_lead_rate_m_s: float = quantity(
+        4.0, "m/s", "stop lead: fastest change of the lead", gt=0)
+    stop_lead_filter_s: float = quantity(
+        0.05, "s", "stop lead: time constant of the low-pass on its target", ge=0)
 
 
 #: Width of the smooth maxima [m]: over this range the larger argument takes over.
@@ -334,6 +352,45 @@ def tension_trim(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, a_m: float
     trim_s[1] = rate
 
 
+@njit
+def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py: float,
+              pz: float, vx: float, vy: float, vz: float) -> None:
+    """One period of the stop lead (docs/control.md §3): the extra length ``trim_s[4]``
+    [m] paid out beyond L-bar while the UAV moves, and its rate ``trim_s[5]`` [m/s].
+
+    Should the drum stop (a snag, a brake, a lost bus) the UAV at (``px``, ``py``, ``pz``)
+    [m] moving at (``vx``, ``vy``, ``vz``) [m/s] runs on ``s = v t + v^2 / 2a`` along its
+    velocity before it is stopped: the lead is what that adds to its distance from the
+    winder, and ``margin min(1, v_out / v_full)`` with v_out its outward speed, so that
+    the line it has is slack enough to stop in. The target is low-passed (time constant
+    ``trim_p[13]`` [s], into ``trim_s[6]``) and followed at most ``trim_p[12]`` [m/s]
+    fast. ``trim_p[8:12]`` = (t [s], a [m/s^2], margin [m], v_full [m/s]); a = 0 switches
+    it off."""
+    t_lead, acc, margin, v_full = trim_p[8], trim_p[9], trim_p[10], trim_p[11]
+    if not acc > 0.0:
+        trim_s[4], trim_s[5] = 0.0, 0.0
+        return
+    d = math.sqrt(px * px + py * py + pz * pz)
+    speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+    target = 0.0
+    if speed > 0.0 and d > 0.0:
+        run = (speed * t_lead + speed * speed / (2.0 * acc)) / speed
+        sx, sy, sz = px + vx * run, py + vy * run, pz + vz * run
+        v_out = (px * vx + py * vy + pz * vz) / d
+        target = (max(math.sqrt(sx * sx + sy * sy + sz * sz) - d, 0.0)
+                  + margin * min(1.0, max(v_out, 0.0) / v_full))
+    tau = trim_p[13]
+    if tau > 0.0:
+        trim_s[6] += (1.0 - math.exp(-dt_s / tau)) * (target - trim_s[6])
+    else:
+        trim_s[6] = target
+    step = trim_s[6] - trim_s[4]
+    most = trim_p[12] * dt_s
+    step = min(max(step, -most), most)
+    trim_s[4] += step
+    trim_s[5] = step / dt_s
+
+
 class LBarEstimator:
     """Desired tether length and its rate for a UAV position and velocity."""
 
@@ -349,9 +406,14 @@ class LBarEstimator:
                                      params.tension_trim_max_m, params.tension_trim_band,
                                      params.tension_trim_filter_s,
                                      params.weight_filter_s, params.weight_ratio_max,
-                                     params.weight_min_exit_angle_rad])
-        #: (offset [m], its rate [m/s], filtered drum tension [N], line weight [N/m])
-        self.trim_state = np.array([0.0, 0.0, math.nan, math.nan])
+                                     params.weight_min_exit_angle_rad,
+                                     params.stop_lead_time_s, params.stop_lead_acc_m_s2,
+                                     params.stop_lead_margin_m,
+                                     params.stop_lead_full_speed_m_s,
+                                     params.stop_lead_rate_m_s, params.stop_lead_filter_s])
+        #: (offset [m], its rate [m/s], filtered drum tension [N], line weight [N/m],
+        #: stop lead [m], its rate [m/s], its filtered target [m])
+        self.trim_state = np.array([0.0, 0.0, math.nan, math.nan, 0.0, 0.0, 0.0])
 
     def weight_n_m(self) -> float:
         """The line's weight per metre [N/m]: the estimate (:func:`weight_estimate`) once

@@ -386,6 +386,7 @@ class Winch:
         self._lock_noticed = False
         self._over_frames = 0               # encoder frames in a row above the limit
         self._stuck_frames = 0              # encoder frames in a row behind the reference
+        self._stuck_length_m = math.nan     # the length at which the drum was found stuck
         #: Whether the CAN bus loses or delays too much (:meth:`_check_bus`): drum braked.
         self.bus_degraded = False
         self._bus_window_start = 0
@@ -918,7 +919,10 @@ class Winch:
         slower than ``stuck_speed_m_s`` (a drum catching up moves), for ``stuck_s`` of
         simulated time. While it is so the winch reports the drum braked
         (CLUTCH_ENGAGED: the vehicle bounds its reach by the length) and not HEALTHY (the
-        vehicle's winder failsafe); said as it begins and ends."""
+        vehicle's winder failsafe); said as it begins and ends. It ends when the reference
+        is back within half of ``stuck_error_m`` and the drum has moved as far from where
+        it stuck (it is free): a vehicle that stopped short of the snag (its tether
+        governor) brings the reference back without freeing the drum."""
         behind = self.ref_m - length
         if not self.drum_stuck:
             lagging = (behind > self.p.stuck_error_m
@@ -926,9 +930,11 @@ class Winch:
             self._stuck_frames = self._stuck_frames + 1 if lagging else 0
             if self._stuck_frames * self.dt_s > self.p.stuck_s - 1e-9:
                 self.drum_stuck = True
+                self._stuck_length_m = length
                 out.notices.append(_notice(mavlink2.MAV_SEVERITY_CRITICAL,
                                            f"winch: drum stuck at {length:.1f} m, no pay-out"))
-        elif behind < 0.5 * self.p.stuck_error_m:
+        elif (behind < 0.5 * self.p.stuck_error_m
+              and abs(length - self._stuck_length_m) > 0.5 * self.p.stuck_error_m):
             self.drum_stuck = False
             self._stuck_frames = 0
             out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE,

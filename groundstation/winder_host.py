@@ -18,6 +18,7 @@ from groundstation.lbar import (
     LBarEstimator,
     LBarParams,
     lbar_kernel,
+    stop_lead,
     tension_trim,
     weight_estimate,
 )
@@ -57,7 +58,7 @@ class WinderHost:
         self._step = entry_point(winder_step, 1.0, 0.0, 10.0, 0.0, 0.0, 0.0, lb.a_target,
                                  lb._tan_min, lb.p.min_slack_m, math.nan, ctl.params(),
                                  ctl.state, self.dt_s, 10.0, 0.0, 1.0, lb.w, lb.trim_params,
-                                 np.array([0.0, 0.0, math.nan, math.nan]), 0.1)
+                                 np.array([0.0, 0.0, math.nan, math.nan, 0.0, 0.0, 0.0]), 0.1)
 
     def update(self, length_m: float, omega_rad_s: float, drum_tension_n: float,
                uav_pos_m: tuple[float, float, float],
@@ -86,8 +87,9 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     """:meth:`WinderHost.update` in scalars: L-bar and its rate (:func:`lbar_kernel`), the
     line's weight (:func:`weight_estimate`, from the exit elevation ``elevation_rad``
     [rad]; the model's ``w_n_m`` without one), the tension trim's offset
-    (:func:`tension_trim` on that weight, both advanced in place), then the torque law
-    (:func:`winder_law`, its filter ``law_s`` advanced in place) on L-bar + offset. Returns
+    (:func:`tension_trim` on that weight, both advanced in place), the stop lead
+    (:func:`stop_lead`, on the UAV's position and velocity), then the torque law
+    (:func:`winder_law`, its filter ``law_s`` advanced in place) on L-bar + offset + lead. Returns
     (the length reference, its rate, the exit-angle root for next time, the WinderCommand's
     fields)."""
     lbar_m, rate, a, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
@@ -95,8 +97,9 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     w = weight_estimate(trim_p, trim_s, dt_s, w_n_m, drum_tension_n, elevation_rad,
                         length_m, pz)
     tension_trim(trim_p, trim_s, dt_s, a, px, py, pz, w, drum_tension_n)
-    lbar_m += trim_s[0]
-    rate += trim_s[1]
+    stop_lead(trim_p, trim_s, dt_s, px, py, pz, vx, vy, vz)
+    lbar_m += trim_s[0] + trim_s[4]
+    rate += trim_s[1] + trim_s[5]
     cmd = winder_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, lbar_m,
                      rate)
     return lbar_m, rate, root, cmd

@@ -18,6 +18,13 @@ from tuav_sitl.offline import OfflineRunner
 from tuav_sitl.scenario import ScenarioParams
 from tuavdefs.paramspec import load_toml
 
+#: The companion's tether governor and the winder's stop lead, on (both off by default:
+#: the lead's slack lays the paper scenarios' line on the ground; docs/control.md §3).
+_SAFETY = """[navigation]
+tether_governor = 1
+[lbar]
+stop_lead_acc_m_s2 = 2.5"""
+
 
 def _run(tmp_path, fault: str, goal=(8.0, 4.0, 10.0), duration_s: float = 60.0,
          start_s: float = 5.0):
@@ -34,6 +41,7 @@ position_m = [8.0, 4.0, 10.0]
 kind = "setpoint"
 start_s = 10.0
 goal_m = [{goal[0]}, {goal[1]}, {goal[2]}]
+{_SAFETY}
 [[faults]]
 start_s = {start_s}
 {fault}
@@ -53,15 +61,13 @@ def _slack(res) -> np.ndarray:
     return s["length"] - np.linalg.norm(s["pos"], axis=1)
 
 
-@pytest.mark.xfail(strict=True, reason="since the merge of the estimate-fed winch, the "
-                   "line-weight trim and the wider disturbance estimate the vehicle overshoots "
-                   "the snagged reach by 1.4 cm (slack -0.014 m at 12.0 s, 84 N): open")
 def test_a_snagged_tether_stops_the_vehicle_short_of_taut_and_brings_it_down(tmp_path):
     """Snagged at the exit at 5 s (invisible while hovering), then told to fly 8 m outward
     at 10 s: the winch finds its drum stuck within 0.1 s of lagging 0.1 m, reports it
     braked (the vehicle holds within the snagged length) and unhealthy; 2 s later the
     winder failsafe flies RTL within the tether and lands. Without the check the line went
-    taut (slack -2 cm, 160 N)."""
+    taut (slack -2 cm, 160 N); with it, before the tether governor and the winder's stop
+    lead, the stop came 1.4 cm too late (-0.014 m, 84 N)."""
     runner, res = _run(tmp_path, 'kind = "tether_snag"', goal=(16.0, 4.0, 10.0))
     nav, winch = _said(runner)
     s, t = res.series, res.series["t"]
@@ -115,8 +121,59 @@ def test_a_can_bus_lost_after_a_move_leaves_the_line_slack(tmp_path):
     assert _slack(res)[t > 1.0].min() > 0.0
 
 
+#: (fault, fault start [s], start position [m], goal [m], move's top speed [m/s]): the
+#: drum stopped mid-move, outward at different speeds, directions and heights
+_DRAWS = [
+    ('kind = "can"\ndrop_probability = 1.0', 11.5, (8.0, 4.0, 10.0), (16.0, 4.0, 10.0), 4.0),
+    ('kind = "can"\ndrop_probability = 1.0', 10.9, (8.0, 4.0, 10.0), (16.0, 4.0, 10.0), 1.3),
+    ('kind = "can"\ndrop_probability = 1.0', 12.3, (-6.0, 3.0, 6.0), (-14.0, 9.0, 18.0), 3.0),
+    ('kind = "can"\ndrop_probability = 1.0', 11.0, (0.0, -10.0, 15.0), (3.0, -3.0, 25.0), 2.0),
+    ('kind = "can"\ndrop_probability = 1.0', 13.7, (5.0, 0.0, 20.0), (20.0, 0.0, 8.0), 2.5),
+    ('kind = "tether_snag"', 11.2, (-6.0, 3.0, 6.0), (-14.0, 9.0, 18.0), 3.0),
+    ('kind = "tether_snag"', 12.0, (5.0, 0.0, 20.0), (20.0, 0.0, 8.0), 2.5),
+    ('kind = "tether_snag"', 10.6, (0.0, -10.0, 15.0), (3.0, -3.0, 25.0), 1.0),
+]
+
+
+@pytest.mark.parametrize("fault,start_s,initial,goal,speed", _DRAWS)
+def test_a_drum_stopped_during_an_outward_move_never_pulls_the_line_taut(
+        tmp_path, fault, start_s, initial, goal, speed):
+    """The winder's bus lost, or the tether snagged, while the vehicle moves outward
+    (different speeds, directions, heights, moments): the drum stops at what it had paid
+    out. The winder had paid out the vehicle's stopping distance ahead (its stop lead), and
+    the vehicle's tether governor brakes as soon as its stopping point would pass the
+    last length the winch reported; then the winder failsafe brings it down. The truth's
+    tether is never taut (slack > 0, drum tension under 30 N) and the vehicle lands."""
+    p = tmp_path / "draw.toml"
+    p.write_text(f'''name = "draw"
+description = "a drum stopped during an outward move"
+duration_s = 70.0
+metrics_after_s = 2.0
+[initial]
+position_m = [{initial[0]}, {initial[1]}, {initial[2]}]
+[trajectory]
+kind = "setpoint"
+start_s = 10.0
+goal_m = [{goal[0]}, {goal[1]}, {goal[2]}]
+max_speed_m_s = {speed}
+{_SAFETY}
+[[faults]]
+start_s = {start_s}
+{fault}
+''')
+    runner = OfflineRunner(load_toml(ScenarioParams, p))
+    res = runner.run()
+    t = res.series["t"]
+    nav, _ = _said(runner)
+    assert any(v.startswith("Winch Failsafe") for _, v in nav), nav
+    assert _slack(res)[t > 1.0].min() > 0.0
+    assert res.metrics["max_drum_tension_n"] < 30.0
+    assert runner.companion.nav.landed and not runner.companion.nav.armed
+
+
 def test_over_tension_brings_the_tension_back_before_the_line_is_taut(tmp_path):
-    """The backstop behind the stuck-drum check (switched off here): the tether snagged,
+    """The backstop behind the tether governor and the stuck-drum check (both switched off
+    here): the tether snagged,
     the vehicle creeping outward at 0.2 m/s. As the slack runs out the load cell's tension
     climbs past the 20 N limit (TUAV_TENS_MAX, the winch's tension_limit_n): the vehicle
     says so and moves 2 m towards the winder, the winch says so and pays out (it cannot:
@@ -140,6 +197,7 @@ stuck_error_m = 100.0
 tension_limit_n = 20.0
 [navigation]
 tension_limit_n = 20.0
+tether_governor = 0
 [[faults]]
 kind = "tether_snag"
 start_s = 5.0
