@@ -191,6 +191,24 @@ class TetherFixer:
         k = lg * (1.0 + T / self.ea if self.ea > 0 else 1.0)
         return (c * k + top[0], s * k + top[1], top[2])
 
+    def weight(self, w_n_m: float | None = None) -> tuple[float, float]:
+        """(the weight per metre the fix uses [N/m], its standard deviation [N/m]) given
+        the winder's estimate ``w_n_m`` [N/m] (None or not positive: none). The fix uses
+        the belief moved to within ``weight_band_fraction`` of the estimate (the estimate
+        wanders on a line as designed, which the belief then fixes exactly); the weight
+        used is thus off the estimate by a known ``w - w_hat``, and the estimate is off
+        the truth by about ``weight_uncertainty_fraction``: the standard deviation is
+        ``hypot(fraction w, w - w_hat)`` (docs/estimation.md §10)."""
+        w = self.w
+        frac = self.p.weight_uncertainty_fraction
+        if w_n_m is None or not w_n_m > 0.0 or not math.isfinite(w_n_m):
+            return w, frac * w
+        band = self.p.weight_band_fraction * w
+        off = float(w_n_m) - w
+        w += math.copysign(max(abs(off) - band, 0.0), off)
+        # the central differences take w -+ sigma: kept to half the weight
+        return w, min(math.hypot(frac * w, w - float(w_n_m)), 0.5 * w)
+
     def position(self, length_m: float, tension_n: float, azimuth_rad: float,
                  elevation_rad: float, reported_m: Vec3 | None = None,
                  w_n_m: float | None = None) -> tuple[Vec3, Cov3, bool]:
@@ -199,11 +217,7 @@ class TetherFixer:
         used only when the line lies on the ground; ``w_n_m`` [N/m] the line's weight per
         metre as estimated (the winder's, docs/control.md §3), used beyond
         ``weight_band_fraction`` off the belief (None: the belief)."""
-        w = self.w
-        if w_n_m is not None and w_n_m > 0.0:
-            band = self.p.weight_band_fraction * w
-            off = float(w_n_m) - w
-            w += math.copysign(max(abs(off) - band, 0.0), off)
+        w, sigma_w = self.weight(w_n_m)
         uav_height_m = reported_m[2] if reported_m is not None else None
         p = self.p
         L = max(length_m, 0.0)
@@ -255,7 +269,7 @@ class TetherFixer:
         sigma_angle = math.hypot(p.angle_noise_rad, p.angle_bias_rad)
         sigma_t = math.hypot(p.tension_noise_n, p.tension_noise_fraction * T)
         for kw, sigma in (("dL", p.length_noise_m), ("dT", sigma_t), ("daz", sigma_angle),
-                          ("delv", sigma_angle), ("dw", p.weight_uncertainty_fraction * w)):
+                          ("delv", sigma_angle), ("dw", sigma_w)):
             if sigma <= 0.0:
                 continue
             hi, lo = at(**{kw: sigma}), at(**{kw: -sigma})
