@@ -8,9 +8,8 @@ PX4's EKF2 and ArduPilot's EKF3 (docs/estimation.md has the equations):
   x east, y north, origin at the winder), attitude ``q`` (body FLU -> inertial, (w, x, y,
   z)), gyro bias ``b_g`` [rad/s], accelerometer bias ``b_a`` [m/s^2], barometer offset
   ``b_h`` [m], magnetometer bias ``b_m`` [gauss] (body FLU), the GNSS receiver's position
-  error ``b_p`` [m] (ENU; a Gauss-Markov wander, when its correlation time is set), the
-  tether fix's slow error ``b_t`` [m] (likewise);
-- error state (25): ``dp, dv, dtheta, db_g, db_a, db_h, db_m, db_p, db_t``; the attitude error is a
+  error ``b_p`` [m] (ENU; a Gauss-Markov wander, when its correlation time is set);
+- error state (22): ``dp, dv, dtheta, db_g, db_a, db_h, db_m, db_p``; the attitude error is a
   small rotation in the inertial frame, ``R_true = Exp(dtheta) R``;
 - predict with each IMU sample (:meth:`NavFilter.predict`); fuse GNSS position and velocity
   against the state at the measurement's time (a ring buffer of past states, the
@@ -42,23 +41,20 @@ from tuavdefs.paramspec import Params, quantity
 
 # ----- layouts of the packed arrays
 #: Nominal state x: p 0-2, v 3-5, q 6-9 (w, x, y, z), b_g 10-12, b_a 13-15, b_h 16,
-#: b_m 17-19, b_p 20-22, b_t 23-25.
-NX = 26
+#: b_m 17-19, b_p 20-22.
+NX = 23
 #: Error state (the covariance's rows): dp 0-2, dv 3-5, dtheta 6-8, db_g 9-11, db_a 12-14,
-#: db_h 15, db_m 16-18, db_p 19-21, db_t 22-24.
-N_ERR = 25
+#: db_h 15, db_m 16-18, db_p 19-21.
+N_ERR = 22
 IDX_P, IDX_V, IDX_TH, IDX_BG, IDX_BA, IDX_BH, IDX_BM, IDX_BP = 0, 3, 6, 9, 12, 15, 16, 19
-IDX_BT = 22
-_X_Q, _X_BG, _X_BA, _X_BH, _X_BM, _X_BP, _X_BT = 6, 10, 13, 16, 17, 20, 23
+_X_Q, _X_BG, _X_BA, _X_BH, _X_BM, _X_BP = 6, 10, 13, 16, 17, 20
 #: The ring buffer's columns: t [s], p [m] (3), v [m/s] (3).
 _BUF_COLS = 7
 
 # the packed parameter array (prm) of the kernels
 (_P_GRAV, _P_GYRO_N, _P_ACC_N, _P_BG_W, _P_BA_W, _P_BH_W, _P_DT_MAX, _P_VAR_MIN, _P_BM_W,
- _P_BP_TAU, _P_BP_VAR_H, _P_BP_VAR_V, _P_BT_TAU) = range(13)
-#: the tether fix's slow error's stationary covariance [m^2]: c00 c01 c02 c11 c12 c22
-_P_BT_C = 13
-_N_PRM = 19
+ _P_BP_TAU, _P_BP_VAR_H, _P_BP_VAR_V) = range(12)
+_N_PRM = 12
 
 # diagnostics written by the fusion kernels (diag)
 (_D_POS_INNOV, _D_VEL_INNOV, _D_POS_TR, _D_VEL_TR, _D_BARO_INNOV, _D_BARO_TR,
@@ -237,15 +233,6 @@ class EstimatorParams(Params):
     tether_noise_min_m: float = quantity(
         0.05, "m", "floor on each axis's standard deviation of a tether fix (added to its "
         "covariance)", gt=0)
-    tether_bias_tau_s: float = quantity(
-        30.0, "s", "correlation time of the tether fix's error (its line weight, the wind on "
-        "the line, the exit angles' zeros: it changes with the geometry, not from fix to "
-        "fix); above 0 the error's slow part is a Gauss-Markov state per axis, so that "
-        "fixes at 10 Hz do not outweigh a receiver whose own error is modelled (0: white, "
-        "each fix independent)", ge=0, le=600)
-    tether_bias_fraction: float = quantity(
-        0.9, "1", "with tether_bias_tau_s > 0: the share of a fix's covariance that is the "
-        "slow error (the rest, and tether_noise_min_m, white)", gt=0, lt=1)
     tether_gate_sigma: float = quantity(
         5.0, "1", "tether fix gate: its innovation's Mahalanobis distance [standard "
         "deviations]", gt=0)
@@ -531,27 +518,6 @@ def predict_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarr
                 P[j, 19 + i] *= phi
             var = prm[_P_BP_VAR_H] if i < 2 else prm[_P_BP_VAR_V]
             P[19 + i, 19 + i] += var * (1.0 - phi * phi)
-    # the tether fix's slow error: b_t <- exp(-dt/tau) b_t, its stationary covariance kept
-    tau = prm[_P_BT_TAU]
-    if tau > 0.0:
-        phi = math.exp(-dt_s / tau)
-        q = 1.0 - phi * phi
-        c = prm[_P_BT_C:_P_BT_C + 6]
-        for i in range(3):
-            x[23 + i] *= phi
-            for j in range(n):
-                P[22 + i, j] *= phi
-            for j in range(n):
-                P[j, 22 + i] *= phi
-        P[22, 22] += q * c[0]
-        P[22, 23] += q * c[1]
-        P[23, 22] += q * c[1]
-        P[22, 24] += q * c[2]
-        P[24, 22] += q * c[2]
-        P[23, 23] += q * c[3]
-        P[23, 24] += q * c[4]
-        P[24, 23] += q * c[4]
-        P[24, 24] += q * c[5]
     _symmetrise(P)
     # the ring buffer of (t, p, v)
     k = meta[0]
@@ -694,7 +660,6 @@ def inject(x: np.ndarray, dx: np.ndarray, buf: np.ndarray, meta: np.ndarray) -> 
     for i in range(3):
         x[17 + i] += dx[16 + i]
         x[20 + i] += dx[19 + i]
-        x[23 + i] += dx[22 + i]
     for m in range(meta[1]):
         for i in range(6):
             buf[m, 1 + i] += dx[i]
@@ -924,11 +889,9 @@ def fuse_tether_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.n
                        dx: np.ndarray, diag: np.ndarray, delayed: np.ndarray,
                        var_min: float, t_meas_s: float, px: float, py: float, pz: float,
                        c00: float, c01: float, c02: float, c11: float, c12: float,
-                       c22: float, gate: float, bias: bool) -> int:
+                       c22: float, gate: float) -> int:
     """A tether fix of the time ``t_meas_s`` [s]: position ``p*`` [m] with the covariance
-    ``c`` [m^2] (its upper triangle; with ``bias``, of its white part: the fix is then
-    ``p + b_t``, the slow error state's estimate taken off and its covariance in the
-    innovation's), against the state at that time (``delayed``). Gated
+    ``c`` [m^2] (its upper triangle), against the state at that time (``delayed``). Gated
     as one on the innovation's Mahalanobis distance (``diag``: the innovation and the test
     ratio d^2 / gate^2); fused as three whitened scalar measurements (``L^-1 z`` with ``C =
     L L'``: unit, independent noises), the correction injected into the current state.
@@ -936,19 +899,10 @@ def fuse_tether_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.n
     covariance not positive definite)."""
     _delayed(buf, meta, x, t_meas_s, delayed)
     y0, y1, y2 = px - delayed[0], py - delayed[1], pz - delayed[2]
-    # S = H P H' + C (H = [I on dp, I on db_t with bias]), its Cholesky factor, and
-    # d^2 = y' S^-1 y
+    diag[_D_TETHER_INNOV], diag[_D_TETHER_INNOV + 1], diag[_D_TETHER_INNOV + 2] = y0, y1, y2
+    # S = P_pp + C, its Cholesky factor, and d^2 = y' S^-1 y
     s00, s01, s02 = P[0, 0] + c00, P[0, 1] + c01, P[0, 2] + c02
     s11, s12, s22 = P[1, 1] + c11, P[1, 2] + c12, P[2, 2] + c22
-    if bias:
-        y0, y1, y2 = y0 - x[23], y1 - x[24], y2 - x[25]
-        s00 += 2.0 * P[0, 22] + P[22, 22]
-        s01 += P[0, 23] + P[22, 1] + P[22, 23]
-        s02 += P[0, 24] + P[22, 2] + P[22, 24]
-        s11 += 2.0 * P[1, 23] + P[23, 23]
-        s12 += P[1, 24] + P[23, 2] + P[23, 24]
-        s22 += 2.0 * P[2, 24] + P[24, 24]
-    diag[_D_TETHER_INNOV], diag[_D_TETHER_INNOV + 1], diag[_D_TETHER_INNOV + 2] = y0, y1, y2
     ok, a00, a10, a20, a11, a21, a22 = _cholesky3(s00, s01, s02, s11, s12, s22)
     if not ok:
         return _NUMERIC
@@ -970,18 +924,6 @@ def fuse_tether_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.n
     m21 = -l21 / (l11 * l22)
     m22 = 1.0 / l22
     res = 1
-    if bias:
-        # each whitened row on dp and on db_t alike
-        rows = ((m00, 0.0, 0.0, m00 * y0), (m10, m11, 0.0, m10 * y0 + m11 * y1),
-                (m20, m21, m22, m20 * y0 + m21 * y1 + m22 * y2))
-        h = np.zeros(P.shape[0])
-        for r0, r1, r2, yk in rows:
-            h[0], h[1], h[2] = r0, r1, r2
-            h[22], h[23], h[24] = r0, r1, r2
-            if not row_update(P, dx, var_min, yk, 1.0, h, 0, 0):
-                res = _NUMERIC
-        inject(x, dx, buf, meta)
-        return res
     if not scalar_update(P, dx, var_min, m00 * y0, 1.0, 0, m00, -1, 0.0, -1, 0.0):
         res = _NUMERIC
     if not scalar_update(P, dx, var_min, m10 * y0 + m11 * y1, 1.0, 0, m10, 1, m11, -1, 0.0):
@@ -1047,13 +989,6 @@ class NavFilter:
         self._prm[_P_BM_W] = p.mag_bias_walk_gauss_sqrt_s
         self._prm[_P_BP_TAU] = p.gnss_pos_tau_s
         self._wander = p.gnss_pos_tau_s > 0.0
-        self._prm[_P_BT_TAU] = p.tether_bias_tau_s if p.tether_aid else 0.0
-        self._prm[_P_BT_C:_P_BT_C + 6] = 0.0
-        #: the tether fix's slow error is a state (tether_bias_tau_s > 0)
-        self._tether_bias = p.tether_aid and p.tether_bias_tau_s > 0.0
-        #: whether the slow error's state has had its prior (at the first fix after an
-        #: alignment)
-        self._bt_ready = False
         self._accel_offsets = _vec3(p.accel_offsets_m_s2)
         self._mag3d = p.mag_fusion == "3d"
         self._prm[_P_DT_MAX] = 5.0 / p.imu_rate_hz
@@ -1136,7 +1071,7 @@ class NavFilter:
                                        0.0)
         self._tether_k = (entry_point(fuse_tether_kernel, x, P, buf, meta, dx, diag, dl, 0.0,
                                       0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                                      0.0, True) if self.params.tether_aid else None)
+                                      0.0) if self.params.tether_aid else None)
 
     # ----- properties
     @property
@@ -1146,9 +1081,8 @@ class NavFilter:
 
     @property
     def covariance(self) -> np.ndarray:
-        """The error-state covariance (25 x 25, a copy): dp [m], dv [m/s], dtheta [rad]
-        (inertial axes), db_g [rad/s], db_a [m/s^2], db_h [m], db_m [gauss], db_p [m],
-        db_t [m]."""
+        """The error-state covariance (22 x 22, a copy): dp [m], dv [m/s], dtheta [rad]
+        (inertial axes), db_g [rad/s], db_a [m/s^2], db_h [m], db_m [gauss], db_p [m]."""
         return self._P.copy()
 
     @property
@@ -1165,12 +1099,6 @@ class NavFilter:
     def mag_bias_gauss(self) -> Vec3:
         """The magnetometer bias estimate [gauss], body FLU (0 with heading fusion)."""
         return _vec3(self._x[_X_BM:_X_BM + 3])
-
-    @property
-    def tether_bias_m(self) -> Vec3:
-        """The estimate of the tether fix's slow error [m] (ENU; 0 unless
-        ``tether_bias_tau_s`` > 0)."""
-        return _vec3(self._x[_X_BT:_X_BT + 3])
 
     @property
     def gnss_wander_m(self) -> Vec3:
@@ -1325,27 +1253,10 @@ class NavFilter:
             self._tether_fix = (t_meas, pos, np.array(((a, b, c), (b, d, e), (c, e, f))))
             self._try_align(t_s)
             return False
-        # the slow part of the fix's error is the state b_t once a GNSS can tell it from the
-        # position (with none from the start the two are one: the fix is fused whole, as
-        # the only position source); after a GNSS loss b_t is held, decaying over its
-        # correlation time
-        bias = self._tether_bias and (self._bt_ready
-                                      or t_s - self._t_gnss_pos <= p.gnss_timeout_s)
-        if bias:
-            # its stationary covariance follows the fix's; the white part (and the floor)
-            # is the measurement's noise
-            k = p.tether_bias_fraction
-            cov = np.array(cov_m2, dtype=float)
-            cov = 0.5 * (cov + cov.T)
-            self._prm[_P_BT_C:_P_BT_C + 6] = k * cov[np.triu_indices(3)]
-            if not self._bt_ready:
-                self._bias_prior()
-            a, b, c, d, e, f = (1.0 - k) * np.asarray(cov[np.triu_indices(3)]) + (
-                floor, 0.0, 0.0, floor, 0.0, floor)
         before = self._x[0:6].copy()
         res = self._tether_k(self._x, self._P, self._buf, self._meta, self._dx, self._diag,
                              self._delayed_pv, self._var_min, t_meas, px, py, pz, a, b, c, d,
-                             e, f, p.tether_gate_sigma, bias)
+                             e, f, p.tether_gate_sigma)
         self._lag_correction(before)
         if res & _NUMERIC:
             self._numeric_refusals += 1
@@ -1358,7 +1269,7 @@ class NavFilter:
             self._fail_since["tether"] = min(self._fail_since["tether"], t_s)
             if (t_s - self._fail_since["tether"] >= p.tether_reset_s
                     and t_s - self._t_gnss_pos > p.gnss_timeout_s):
-                self._reset_to_tether(pos, np.array(((a, b, c), (b, d, e), (c, e, f))))
+                self._reset_to_tether(pos, c)
                 self._t_tether = t_s
                 self._fail_since["tether"] = math.inf
                 self._const_pos = None
@@ -1366,9 +1277,8 @@ class NavFilter:
         return False
 
     def _reset_to_tether(self, pos: Vec3, c: np.ndarray) -> None:
-        """Position set to the fix, its covariance to the fix's (``c`` [m^2]: its white
-        part where the slow error is a state, which is reset too: the position then holds
-        it, ``P[p, b_t] = -P[b_t, b_t]``), uncorrelated with the rest; the velocity kept."""
+        """Position set to the fix, its covariance to the fix's (uncorrelated with the
+        rest); the velocity kept."""
         delta = np.array(pos) - self._x[0:3]
         self._x[0:3] = pos
         n = int(self._meta[1])
@@ -1377,32 +1287,8 @@ class NavFilter:
         P[0:3, :] = 0.0
         P[:, 0:3] = 0.0
         P[0:3, 0:3] = c
-        if self._bt_ready:
-            self._bias_prior(position_from_fix=True)
         self.tether_resets += 1
         self._out_lag[0:3] = 0.0
-
-    def _slow_cov(self) -> np.ndarray:
-        """The tether fix's slow error's stationary covariance [m^2] (3 x 3)."""
-        c = self._prm[_P_BT_C:_P_BT_C + 6]
-        return np.array(((c[0], c[1], c[2]), (c[1], c[3], c[4]), (c[2], c[4], c[5])))
-
-    def _bias_prior(self, position_from_fix: bool = False) -> None:
-        """The tether fix's slow error state: estimate 0, covariance its stationary one
-        (the last fix's share), uncorrelated with the rest; ``position_from_fix``: the
-        position was just set from a fix, so its error holds the slow error's
-        (``P[p, p] += B``, ``P[p, b_t] = -B``)."""
-        B = self._slow_cov()
-        P = self._P
-        self._x[_X_BT:_X_BT + 3] = 0.0
-        P[IDX_BT:IDX_BT + 3, :] = 0.0
-        P[:, IDX_BT:IDX_BT + 3] = 0.0
-        P[IDX_BT:IDX_BT + 3, IDX_BT:IDX_BT + 3] = B
-        if position_from_fix:
-            P[0:3, 0:3] += B
-            P[0:3, IDX_BT:IDX_BT + 3] = -B
-            P[IDX_BT:IDX_BT + 3, 0:3] = -B
-        self._bt_ready = True
 
     def _gnss_white_var(self, eph_m: float, epv_m: float) -> tuple[float, float]:
         """The white part of a fix's position variance [m^2] (horizontal, vertical) from
@@ -1597,7 +1483,6 @@ class NavFilter:
         P = self._P
         P[:] = 0.0
         x[:] = 0.0
-        self._bt_ready = False
         if gnss:
             t_fix, pos, vel, eph, epv = self._fix
             age = t_s - t_fix + p.gnss_delay_s
