@@ -194,6 +194,33 @@ def test_filter_aligns_and_holds_on_tether_fixes_alone():
     assert not g.aligned
 
 
+def test_a_fix_rejected_for_long_without_gnss_is_reset_to_with_its_covariance():
+    """No GNSS: fixes 20 m off the estimate, each rejected by the gate, for longer than
+    tether_reset_s: the position is reset to the fix and its covariance is the fix's
+    (with the floor on the diagonal), not one of its entries spread over the block."""
+    params = EstimatorParams()
+    f, step = _still_filter(params)
+    t = 0.0
+    for k in range(250 * 3):
+        t = k / 250
+        step(t, HOVER if k % 25 == 0 else None)
+    assert f.aligned
+    off = (HOVER[0] + 20.0, HOVER[1], HOVER[2])
+    cov = ((0.04, 0.01, 0.005), (0.01, 0.09, 0.0), (0.005, 0.0, 0.01))
+    k0 = k
+    while f.tether_resets == 0 and k < k0 + 250 * (params.tether_reset_s + 2.0):
+        k += 1
+        t = k / 250
+        step(t)
+        if k % 25 == 0:
+            f.fuse_tether(t, t, off, cov)
+    assert f.tether_resets == 1
+    assert f.state().pos_m == pytest.approx(off, abs=0.05)
+    floor = params.tether_noise_min_m ** 2
+    want = np.array(cov) + floor * np.eye(3)
+    assert f.covariance[0:3, 0:3] == pytest.approx(want, rel=0.05, abs=1e-4)
+
+
 def _hover(aid: bool):
     sc = load_scenario("hover-gnss-loss")
     sc = sc.replace(duration_s=50.0, faults=(sc.faults[0].replace(start_s=15.0, end_s=40.0),),
