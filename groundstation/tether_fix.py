@@ -29,7 +29,8 @@ the ground), and the spread of the other touchdowns (``L_g`` uniform in [0, L]) 
 is its covariance.
 
 The covariance is the measurement noises propagated through the model (central differences
-in ``L``, ``T0``, ``psi``, ``eps`` and the weight per metre), the wind's share (a horizontal
+in ``L``, ``T0``, ``psi``, ``eps`` and the weight per metre, whose standard deviation covers
+its distance to the winder's estimate: :meth:`TetherFixer.weight`), the wind's share (a horizontal
 drag load of ``design_wind_m_s`` on the line from any direction, which the windless model
 ignores), the ground regime's spread and a floor. It grows where the fix is weak: a long or
 slack line (``T0`` small: the shape depends strongly on it), the line near the vertical (the
@@ -72,7 +73,10 @@ class TetherFixParams(Params):
     length_noise_m: float = quantity(0.02, "m", "paid-out length error (drum layers, "
                                      "slip)", ge=0)
     weight_uncertainty_fraction: float = quantity(
-        0.03, "1", "uncertainty of the tether's weight per metre (wet, ice, dirt)", ge=0)
+        0.03, "1", "uncertainty of the weight per metre the winder estimates (of the "
+        "belief's, without an estimate); the weight the fix uses is further off it by "
+        "up to weight_band_fraction, which its covariance adds (docs/estimation.md §10)",
+        ge=0)
     weight_band_fraction: float = quantity(
         0.1, "1", "the winder's estimate of the weight per metre is used only for its part "
         "beyond this fraction off the belief (within it the belief, which is exact when "
