@@ -1269,7 +1269,7 @@ class NavFilter:
             self._fail_since["tether"] = min(self._fail_since["tether"], t_s)
             if (t_s - self._fail_since["tether"] >= p.tether_reset_s
                     and t_s - self._t_gnss_pos > p.gnss_timeout_s):
-                self._reset_to_tether(pos, c)
+                self._reset_to_tether(pos, np.array(((a, b, c), (b, d, e), (c, e, f))))
                 self._t_tether = t_s
                 self._fail_since["tether"] = math.inf
                 self._const_pos = None
@@ -1277,8 +1277,8 @@ class NavFilter:
         return False
 
     def _reset_to_tether(self, pos: Vec3, c: np.ndarray) -> None:
-        """Position set to the fix, its covariance to the fix's (uncorrelated with the
-        rest); the velocity kept."""
+        """Position set to the fix ``pos`` [m], its covariance to the fix's ``c`` [m^2]
+        (3 x 3, with the floor; uncorrelated with the rest); the velocity kept."""
         delta = np.array(pos) - self._x[0:3]
         self._x[0:3] = pos
         n = int(self._meta[1])

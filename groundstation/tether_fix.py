@@ -29,7 +29,8 @@ the ground), and the spread of the other touchdowns (``L_g`` uniform in [0, L]) 
 is its covariance.
 
 The covariance is the measurement noises propagated through the model (central differences
-in ``L``, ``T0``, ``psi``, ``eps`` and the weight per metre), the wind's share (a horizontal
+in ``L``, ``T0``, ``psi``, ``eps`` and the weight per metre, whose standard deviation covers
+its distance to the winder's estimate: :meth:`TetherFixer.weight`), the wind's share (a horizontal
 drag load of ``design_wind_m_s`` on the line from any direction, which the windless model
 ignores), the ground regime's spread and a floor. It grows where the fix is weak: a long or
 slack line (``T0`` small: the shape depends strongly on it), the line near the vertical (the
@@ -72,7 +73,10 @@ class TetherFixParams(Params):
     length_noise_m: float = quantity(0.02, "m", "paid-out length error (drum layers, "
                                      "slip)", ge=0)
     weight_uncertainty_fraction: float = quantity(
-        0.03, "1", "uncertainty of the tether's weight per metre (wet, ice, dirt)", ge=0)
+        0.03, "1", "uncertainty of the weight per metre the winder estimates (of the "
+        "belief's, without an estimate); the weight the fix uses is further off it by "
+        "up to weight_band_fraction, which its covariance adds (docs/estimation.md §10)",
+        ge=0)
     weight_band_fraction: float = quantity(
         0.1, "1", "the winder's estimate of the weight per metre is used only for its part "
         "beyond this fraction off the belief (within it the belief, which is exact when "
@@ -191,6 +195,24 @@ class TetherFixer:
         k = lg * (1.0 + T / self.ea if self.ea > 0 else 1.0)
         return (c * k + top[0], s * k + top[1], top[2])
 
+    def weight(self, w_n_m: float | None = None) -> tuple[float, float]:
+        """(the weight per metre the fix uses [N/m], its standard deviation [N/m]) given
+        the winder's estimate ``w_n_m`` [N/m] (None or not positive: none). The fix uses
+        the belief moved to within ``weight_band_fraction`` of the estimate (the estimate
+        wanders on a line as designed, which the belief then fixes exactly); the weight
+        used is thus off the estimate by a known ``w - w_hat``, and the estimate is off
+        the truth by about ``weight_uncertainty_fraction``: the standard deviation is
+        ``hypot(fraction w, w - w_hat)`` (docs/estimation.md §10)."""
+        w = self.w
+        frac = self.p.weight_uncertainty_fraction
+        if w_n_m is None or not w_n_m > 0.0 or not math.isfinite(w_n_m):
+            return w, frac * w
+        band = self.p.weight_band_fraction * w
+        off = float(w_n_m) - w
+        w += math.copysign(max(abs(off) - band, 0.0), off)
+        # the central differences take w -+ sigma: kept to half the weight
+        return w, min(math.hypot(frac * w, w - float(w_n_m)), 0.5 * w)
+
     def position(self, length_m: float, tension_n: float, azimuth_rad: float,
                  elevation_rad: float, reported_m: Vec3 | None = None,
                  w_n_m: float | None = None) -> tuple[Vec3, Cov3, bool]:
@@ -199,11 +221,7 @@ class TetherFixer:
         used only when the line lies on the ground; ``w_n_m`` [N/m] the line's weight per
         metre as estimated (the winder's, docs/control.md §3), used beyond
         ``weight_band_fraction`` off the belief (None: the belief)."""
-        w = self.w
-        if w_n_m is not None and w_n_m > 0.0:
-            band = self.p.weight_band_fraction * w
-            off = float(w_n_m) - w
-            w += math.copysign(max(abs(off) - band, 0.0), off)
+        w, sigma_w = self.weight(w_n_m)
         uav_height_m = reported_m[2] if reported_m is not None else None
         p = self.p
         L = max(length_m, 0.0)
@@ -255,7 +273,7 @@ class TetherFixer:
         sigma_angle = math.hypot(p.angle_noise_rad, p.angle_bias_rad)
         sigma_t = math.hypot(p.tension_noise_n, p.tension_noise_fraction * T)
         for kw, sigma in (("dL", p.length_noise_m), ("dT", sigma_t), ("daz", sigma_angle),
-                          ("delv", sigma_angle), ("dw", p.weight_uncertainty_fraction * w)):
+                          ("delv", sigma_angle), ("dw", sigma_w)):
             if sigma <= 0.0:
                 continue
             hi, lo = at(**{kw: sigma}), at(**{kw: -sigma})
