@@ -191,6 +191,28 @@ class TetherFixer:
         k = lg * (1.0 + T / self.ea if self.ea > 0 else 1.0)
         return (c * k + top[0], s * k + top[1], top[2])
 
+    def weight_n_m(self, w_n_m: float | None) -> float:
+        """The weight per metre [N/m] the fix uses: the belief, moved by the part of the
+        winder's estimate ``w_n_m`` [N/m] (None: none) beyond ``weight_band_fraction``
+        off it."""
+        w = self.w
+        if w_n_m is not None and w_n_m > 0.0:
+            band = self.p.weight_band_fraction * w
+            off = float(w_n_m) - w
+            w += math.copysign(max(abs(off) - band, 0.0), off)
+        return w
+
+    def suspended_end(self, length_m: float, tension_n: float, azimuth_rad: float,
+                      elevation_rad: float, w_n_m: float | None = None) -> Vec3:
+        """The far end [m] of the line taken as hanging clear of the ground from the exit
+        (the fix's mean for a suspended line, without its covariance: cheap enough for
+        every winder period). An elevation below the horizontal is taken as level: where
+        part of the line lies on the ground the true end is no nearer than this (the part
+        lying flat is straight), so as a distance it errs short, never long."""
+        return line_end(max(length_m, 0.0), max(tension_n, 1e-3), azimuth_rad,
+                        max(elevation_rad, 0.0), (0.0, 0.0, -self.weight_n_m(w_n_m)),
+                        self.ea)
+
     def position(self, length_m: float, tension_n: float, azimuth_rad: float,
                  elevation_rad: float, reported_m: Vec3 | None = None,
                  w_n_m: float | None = None) -> tuple[Vec3, Cov3, bool]:
@@ -199,11 +221,7 @@ class TetherFixer:
         used only when the line lies on the ground; ``w_n_m`` [N/m] the line's weight per
         metre as estimated (the winder's, docs/control.md §3), used beyond
         ``weight_band_fraction`` off the belief (None: the belief)."""
-        w = self.w
-        if w_n_m is not None and w_n_m > 0.0:
-            band = self.p.weight_band_fraction * w
-            off = float(w_n_m) - w
-            w += math.copysign(max(abs(off) - band, 0.0), off)
+        w = self.weight_n_m(w_n_m)
         uav_height_m = reported_m[2] if reported_m is not None else None
         p = self.p
         L = max(length_m, 0.0)
