@@ -128,9 +128,9 @@ class NavigationParams(Params):
                                       "which the vehicle moves towards the winder", gt=0)
     tension_step_m: float = quantity(2.0, "m", "how far towards the winder each over-"
                                      "tension move goes", gt=0, le=10)
-    tether_governor: int = quantity(0, "", "the tether governor (docs/control.md): 1 on, "
-                                    "0 off (off by default until the winder's stop lead "
-                                    "keeps the line off the ground)", ge=0, le=1)
+    tether_governor: int = quantity(0, "", "the tether governor (docs/control.md §3): 1 on, "
+                                    "0 off (off by default: its stops make the missions' "
+                                    "rotors saturate)", ge=0, le=1)
     tether_brake_acc_m_s2: float = quantity(
         3.0, "m/s^2", "tether governor: the deceleration it brakes at (reached at "
         "TETHER_BRAKE_JERK_M_S3) and assumes of the vehicle", gt=0, le=10)
@@ -261,10 +261,11 @@ class _Leg:
 
     def __init__(self, follower: LegFollower, item: GotoItem | CircleItem,
                  landing: bool = False, seq: int | None = None,
-                 tag: LegTag = LegTag.HOLD) -> None:
+                 tag: LegTag = LegTag.HOLD, takeoff: bool = False) -> None:
         self.follower = follower
         self.item = item
         self.landing = landing
+        self.takeoff = takeoff or tag is LegTag.TAKEOFF   # a climb from the ground
         self.seq = seq
         self.tag = tag
         self.finished = False
@@ -888,8 +889,11 @@ class Navigator:
         p, v, a = ref.pos_m, ref.vel_m_s, ref.acc_m_s2
         lim = self.governor_limit_m
         leg = self._leg
-        if leg is not None and leg.landing:
-            return ref                    # the final descent: the ground stops it
+        if leg is not None and (leg.landing or leg.takeoff):
+            # the final descent: the ground stops it; the take-off: the winch pays out on
+            # its ground pre-tension as the climb pulls (no reported length to keep
+            # within until it follows L-bar), and a snag there stops a climb, not a run
+            return ref
         d_ref = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
         speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
         if speed < 1e-3:
@@ -1118,7 +1122,7 @@ class Navigator:
         self._ref = RefSample(self._pos, _ZERO3, _ZERO3, _ZERO3, self._yaw, 0.0)
         tag = LegTag.MISSION if seq is not None else LegTag.TAKEOFF
         self._queue([_Leg(self._follower(self.p.speed_up_m_s, self.p.takeoff_accept_m),
-                          GotoItem(target, None), seq=seq, tag=tag)])
+                          GotoItem(target, None), seq=seq, tag=tag, takeoff=True)])
 
     def _landing_legs(self, xy: tuple[float, float], seq: int | None = None
                       ) -> list[_Leg]:

@@ -74,23 +74,49 @@ class LBarParams(Params):
         math.radians(2.0), "rad", "line weight estimate: held while the measured exit "
         "angle is below this (the line may lie on the ground)", ge=0, lt=math.pi / 2)
     stop_lead_time_s: float = quantity(
-        0.6, "s", "stop lead: seconds of the UAV's outward speed paid out ahead of L-bar "
-        "(its reaction to a drum that stops, and the links' delays; docs/control.md §3)",
-        ge=0)
+        0.6, "s", "stop lead: seconds of the UAV's speed it runs on before braking, when "
+        "the drum stops (its reaction, the links' delays; docs/control.md §3)", ge=0)
     stop_lead_acc_m_s2: float = quantity(
         0.0, "m/s^2", "stop lead: the UAV's braking deceleration its stopping distance "
-        "v^2/2a is paid out for (0, the default: no stop lead; 2.5 with the companion's "
+        "v^2/2a is allowed for (0, the default: no stop lead; 2.5 with the companion's "
         "tether governor)", ge=0)
     stop_lead_margin_m: float = quantity(
-        0.1, "m", "stop lead: extra length paid out once the UAV moves outward at "
-        "stop_lead_full_speed_m_s (in proportion below)", ge=0)
+        0.1, "m", "stop lead: slack kept beyond the stopping point's distance once the UAV "
+        "moves outward at stop_lead_full_speed_m_s (in proportion below)", ge=0)
     stop_lead_full_speed_m_s: float = quantity(
-        0.5, "m/s", "stop lead: outward speed from which the margin is paid out in full",
+        0.5, "m/s", "stop lead: outward speed from which the margin is kept in full",
         gt=0)
     stop_lead_rate_m_s: float = quantity(
         4.0, "m/s", "stop lead: fastest change of the lead", gt=0)
     stop_lead_filter_s: float = quantity(
         0.05, "s", "stop lead: time constant of the low-pass on its target", ge=0)
+    stop_lead_min_exit_angle_rad: float = quantity(
+        math.radians(2.0), "rad", "stop lead: the lead is bounded so that the catenary at "
+        "the reported position leaves the winder at least this far above the ground (the "
+        "line off the ground); where that leaves less room than the stopping distance, "
+        "the vehicle's tether governor slows it", ge=0, lt=math.pi / 2)
+    slack_floor_m: float = quantity(
+        0.03, "m", "slack floor: least slack (paid-out length less the distance to the "
+        "UAV) as the winder measures it (its tether fix: length, tension, exit angles); "
+        "below it (or tighter than slack_floor_tension_ratio), line is paid out whatever "
+        "the UAV's reported position (0: off)", ge=0)
+    slack_floor_tension_ratio: float = quantity(
+        4.0, "1", "slack floor: the line is kept at least as long as the catenary through "
+        "the fix's position whose horizontal tension is this many times "
+        "target_horizontal_tension_n (a line much tighter than L-bar's pulls hard long "
+        "before it is taut)", ge=1)
+    slack_floor_rate_m_s: float = quantity(
+        2.0, "m/s", "slack floor: fastest pay-out of the floor's extra length", gt=0)
+    slack_floor_release_m_s: float = quantity(
+        0.1, "m/s", "slack floor: fastest take-back of the floor's extra length, once the "
+        "measured slack is above the floor again", gt=0)
+    slack_floor_hold_s: float = quantity(
+        0.5, "s", "slack floor: how long the last fix's need holds without a valid fix "
+        "(the exit angle's frames late or lost) before the extra length is taken back",
+        ge=0)
+    slack_floor_filter_s: float = quantity(
+        0.05, "s", "slack floor: time constant of the low-pass on the measured distance "
+        "(the load cell's axial waves)", ge=0)
 
 
 #: Width of the smooth maxima [m]: over this range the larger argument takes over.
@@ -354,18 +380,22 @@ def tension_trim(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, a_m: float
 
 @njit
 def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py: float,
-              pz: float, vx: float, vy: float, vz: float) -> None:
+              pz: float, vx: float, vy: float, vz: float, base_m: float, room_m: float
+              ) -> None:
     """One period of the stop lead (docs/control.md §3): the extra length ``trim_s[4]``
-    [m] paid out beyond L-bar while the UAV moves, and its rate ``trim_s[5]`` [m/s].
+    [m] paid out beyond the reference ``base_m`` [m] (L-bar and the trim) while the UAV
+    moves, and its rate ``trim_s[5]`` [m/s].
 
     Should the drum stop (a snag, a brake, a lost bus) the UAV at (``px``, ``py``, ``pz``)
     [m] moving at (``vx``, ``vy``, ``vz``) [m/s] runs on ``s = v t + v^2 / 2a`` along its
-    velocity before it is stopped: the lead is what that adds to its distance from the
-    winder, and ``margin min(1, v_out / v_full)`` with v_out its outward speed, so that
-    the line it has is slack enough to stop in. The target is low-passed (time constant
-    ``trim_p[13]`` [s], into ``trim_s[6]``) and followed at most ``trim_p[12]`` [m/s]
-    fast. ``trim_p[8:12]`` = (t [s], a [m/s^2], margin [m], v_full [m/s]); a = 0 switches
-    it off."""
+    velocity before it is stopped. The lead is what the line lacks for that: the stopping
+    point's distance from the winder, plus ``margin min(1, v_out / v_full)`` (v_out the
+    outward speed), less ``base_m`` (the slack L-bar already has counts); never negative
+    and at most ``room_m`` [m] (the longest line that stays off the ground, less
+    ``base_m``: where the room is smaller than the stop, the vehicle's governor slows it).
+    The target is low-passed (time constant ``trim_p[13]`` [s], into ``trim_s[6]``) and
+    followed at most ``trim_p[12]`` [m/s] fast. ``trim_p[8:12]`` = (t [s], a [m/s^2],
+    margin [m], v_full [m/s]); a = 0 switches it off."""
     t_lead, acc, margin, v_full = trim_p[8], trim_p[9], trim_p[10], trim_p[11]
     if not acc > 0.0:
         trim_s[4], trim_s[5] = 0.0, 0.0
@@ -377,8 +407,9 @@ def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py
         run = (speed * t_lead + speed * speed / (2.0 * acc)) / speed
         sx, sy, sz = px + vx * run, py + vy * run, pz + vz * run
         v_out = (px * vx + py * vy + pz * vz) / d
-        target = (max(math.sqrt(sx * sx + sy * sy + sz * sz) - d, 0.0)
-                  + margin * min(1.0, max(v_out, 0.0) / v_full))
+        need = (max(math.sqrt(sx * sx + sy * sy + sz * sz), d)
+                + margin * min(1.0, max(v_out, 0.0) / v_full) - base_m)
+        target = min(max(need, 0.0), max(room_m, 0.0)) if room_m == room_m else 0.0
     tau = trim_p[13]
     if tau > 0.0:
         trim_s[6] += (1.0 - math.exp(-dt_s / tau)) * (target - trim_s[6])
@@ -389,6 +420,68 @@ def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py
     step = min(max(step, -most), most)
     trim_s[4] += step
     trim_s[5] = step / dt_s
+
+
+@njit
+def slack_floor(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, base_m: float,
+                needed_m: float) -> None:
+    """One period of the slack floor (docs/control.md §3): the extra length ``trim_s[7]``
+    [m] paid out beyond the reference ``base_m`` [m] (L-bar, trim and lead) so that the
+    line is never shorter than ``needed_m`` [m], the length the winder's own measurements
+    ask for (:func:`floor_length_m` at its tether fix; NaN: no valid fix now: the last
+    one holds for ``trim_p[20]`` [s], ``trim_s[10]`` counting, then the floor is taken
+    back), whatever the UAV's reported position; its rate ``trim_s[8]`` [m/s]. The needed
+    length is low-passed (``trim_p[17]`` [s], into ``trim_s[9]``); the extra length
+    grows at most ``trim_p[15]`` and shrinks at most ``trim_p[16]`` [m/s], never below 0.
+    ``trim_p[14]`` (the least slack) 0 switches it off."""
+    if not trim_p[14] > 0.0:
+        trim_s[7], trim_s[8] = 0.0, 0.0
+        return
+    if needed_m == needed_m:
+        tau = trim_p[17]
+        if tau > 0.0 and trim_s[9] == trim_s[9]:
+            trim_s[9] += (1.0 - math.exp(-dt_s / tau)) * (needed_m - trim_s[9])
+        else:
+            trim_s[9] = needed_m
+        trim_s[10] = 0.0
+    else:
+        trim_s[10] += dt_s
+        if trim_s[10] > trim_p[20]:
+            trim_s[9] = math.nan
+    target = max(trim_s[9] - base_m, 0.0) if trim_s[9] == trim_s[9] else 0.0
+    step = min(max(target - trim_s[7], -trim_p[16] * dt_s), trim_p[15] * dt_s)
+    trim_s[7] += step
+    trim_s[8] = step / dt_s
+
+
+@njit
+def floor_length_m(fx: float, fy: float, fz: float, a_floor: float, floor_m: float
+                   ) -> float:
+    """The least length [m] the slack floor keeps for the UAV at (``fx``, ``fy``, ``fz``)
+    [m] as the winder's own tether fix places it: the distance plus ``floor_m`` [m], and
+    at least the catenary of parameter ``a_floor`` [m] through it (the line no tighter
+    than a horizontal tension ``a_floor`` w: a line much tighter than L-bar's pulls hard
+    long before it is taut); NaN without a fix."""
+    if not (fx == fx and fy == fy and fz == fz):
+        return math.nan
+    chord = math.sqrt(fx * fx + fy * fy + fz * fz)
+    return max(chord + floor_m, catenary_length_m(a_floor, math.hypot(fx, fy), fz))
+
+
+def initial_trim_state() -> np.ndarray:
+    """The trim's, the lead's and the floor's state before the first period (see
+    :attr:`LBarEstimator.trim_state`)."""
+    return np.array([0.0, 0.0, math.nan, math.nan, 0.0, 0.0, 0.0, 0.0, 0.0, math.nan,
+                     0.0])
+
+
+@njit
+def lead_room_m(px: float, py: float, pz: float, tan_min: float, min_slack: float) -> float:
+    """The longest line [m] from the winder to the UAV at (``px``, ``py``, ``pz``) [m]
+    whose catenary still leaves the winder at least ``tan_min`` (tangent) above the ground:
+    the most the stop lead may pay out to (``chord + min_slack`` where the chord itself is
+    flatter, or vertical)."""
+    return _length(px, py, pz, 1e-3, tan_min, min_slack, math.nan)[0]
 
 
 class LBarEstimator:
@@ -410,10 +503,17 @@ class LBarEstimator:
                                      params.stop_lead_time_s, params.stop_lead_acc_m_s2,
                                      params.stop_lead_margin_m,
                                      params.stop_lead_full_speed_m_s,
-                                     params.stop_lead_rate_m_s, params.stop_lead_filter_s])
+                                     params.stop_lead_rate_m_s, params.stop_lead_filter_s,
+                                     params.slack_floor_m, params.slack_floor_rate_m_s,
+                                     params.slack_floor_release_m_s,
+                                     params.slack_floor_filter_s,
+                                     math.tan(params.stop_lead_min_exit_angle_rad),
+                                     params.slack_floor_tension_ratio,
+                                     params.slack_floor_hold_s])
         #: (offset [m], its rate [m/s], filtered drum tension [N], line weight [N/m],
-        #: stop lead [m], its rate [m/s], its filtered target [m])
-        self.trim_state = np.array([0.0, 0.0, math.nan, math.nan, 0.0, 0.0, 0.0])
+        #: stop lead [m], its rate [m/s], its filtered target [m], slack floor [m], its
+        #: rate [m/s], its filtered needed length [m], the time without a fix [s])
+        self.trim_state = initial_trim_state()
 
     def weight_n_m(self) -> float:
         """The line's weight per metre [N/m]: the estimate (:func:`weight_estimate`) once

@@ -213,6 +213,21 @@ class TetherFixer:
         # the central differences take w -+ sigma: kept to half the weight
         return w, min(math.hypot(frac * w, w - float(w_n_m)), 0.5 * w)
 
+    def weight_n_m(self, w_n_m: float | None) -> float:
+        """The weight per metre [N/m] the fix uses (:meth:`weight`'s first value)."""
+        return self.weight(w_n_m)[0]
+
+    def suspended_end(self, length_m: float, tension_n: float, azimuth_rad: float,
+                      elevation_rad: float, w_n_m: float | None = None) -> Vec3:
+        """The far end [m] of the line taken as hanging clear of the ground from the exit
+        (the fix's mean for a suspended line, without its covariance: cheap enough for
+        every winder period). An elevation below the horizontal is taken as level: where
+        part of the line lies on the ground the true end is no nearer than this (the part
+        lying flat is straight), so as a distance it errs short, never long."""
+        return line_end(max(length_m, 0.0), max(tension_n, 1e-3), azimuth_rad,
+                        max(elevation_rad, 0.0), (0.0, 0.0, -self.weight_n_m(w_n_m)),
+                        self.ea)
+
     def position(self, length_m: float, tension_n: float, azimuth_rad: float,
                  elevation_rad: float, reported_m: Vec3 | None = None,
                  w_n_m: float | None = None) -> tuple[Vec3, Cov3, bool]:

@@ -655,20 +655,39 @@ class Winch:
         self._clock_ms = full
         return full
 
-    def tether_fix(self) -> TetherFix | None:
-        """The UAV's position from length, tension and exit angles now, or None when one
-        is missing, invalid or older than ``max_age_s`` against the tension's sample."""
+    def _fix_inputs_valid(self) -> bool:
+        """Whether length, tension and a valid exit angle no older than ``max_age_s``
+        against the tension's sample are at hand for the tether fix."""
         fixer, ea = self.fixer, self.exit_angle
         if (fixer is None or ea is None or not ea[3] or self.sample_time_ms is None
                 or not (math.isfinite(self.length_m) and math.isfinite(self.tension_n))
                 or self.load_cell_healthy is False):
-            return None
-        az, el, stamp, _ = ea
-        gap_ms = (self.sample_time_ms - stamp) & 0xFFFF
+            return False
+        gap_ms = (self.sample_time_ms - ea[2]) & 0xFFFF
         if gap_ms >= 0x8000:
             gap_ms -= 0x10000
-        if abs(gap_ms) * 1e-3 > fixer.p.max_age_s:
+        return abs(gap_ms) * 1e-3 <= fixer.p.max_age_s
+
+    def measured_position_m(self) -> tuple[float, float, float] | None:
+        """The UAV's position [m] as the winder itself measures it (its tether fix's mean
+        from length, tension and exit angles, the line taken as hanging from the exit),
+        None when the fix has no valid inputs: the slack floor's input
+        (docs/control.md §3), whatever the vehicle reports or fuses."""
+        if not self._fix_inputs_valid():
             return None
+        fixer, ea = self.fixer, self.exit_angle
+        assert fixer is not None and ea is not None
+        return fixer.suspended_end(self.length_m, self.tension_n, ea[0], ea[1],
+                                   self.host.lbar.weight_n_m())
+
+    def tether_fix(self) -> TetherFix | None:
+        """The UAV's position from length, tension and exit angles now, or None when one
+        is missing, invalid or older than ``max_age_s`` against the tension's sample."""
+        fixer, ea = self.fixer, self.exit_angle
+        if not self._fix_inputs_valid():
+            return None
+        assert fixer is not None and ea is not None
+        az, el, stamp, _ = ea
         reported = self.uav[0] if self.uav is not None else None
         pos, cov, ground = fixer.position(self.length_m, self.tension_n, az, el, reported,
                                           self.host.lbar.weight_n_m())
@@ -846,7 +865,8 @@ class Winch:
                 pos, vel = uav
                 ea = self.exit_angle
                 step = self.host.update(length, omega, tension, pos, vel,
-                                        ea[1] if ea is not None and ea[3] else math.nan)
+                                        ea[1] if ea is not None and ea[3] else math.nan,
+                                        self.measured_position_m())
                 self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
                 command = step.command
             else:

@@ -17,7 +17,11 @@ import numpy as np
 from groundstation.lbar import (
     LBarEstimator,
     LBarParams,
+    floor_length_m,
+    initial_trim_state,
     lbar_kernel,
+    lead_room_m,
+    slack_floor,
     stop_lead,
     tension_trim,
     weight_estimate,
@@ -58,22 +62,27 @@ class WinderHost:
         self._step = entry_point(winder_step, 1.0, 0.0, 10.0, 0.0, 0.0, 0.0, lb.a_target,
                                  lb._tan_min, lb.p.min_slack_m, math.nan, ctl.params(),
                                  ctl.state, self.dt_s, 10.0, 0.0, 1.0, lb.w, lb.trim_params,
-                                 np.array([0.0, 0.0, math.nan, math.nan, 0.0, 0.0, 0.0]), 0.1)
+                                 initial_trim_state(), 0.1, math.nan, math.nan,
+                                 math.nan)
 
     def update(self, length_m: float, omega_rad_s: float, drum_tension_n: float,
                uav_pos_m: tuple[float, float, float],
                uav_vel_m_s: tuple[float, float, float],
-               exit_elevation_rad: float = math.nan) -> WinderStep:
+               exit_elevation_rad: float = math.nan,
+               fix_m: tuple[float, float, float] | None = None) -> WinderStep:
         """Torque request [N m] for the measured length [m], drum rate [rad/s] and drum
-        tension [N], the UAV's position [m] and velocity [m/s], and the line's measured
-        exit elevation [rad] (NaN: none; the tension trim then uses the model's weight)."""
+        tension [N], the UAV's position [m] and velocity [m/s], the line's measured
+        exit elevation [rad] (NaN: none; the tension trim then uses the model's weight)
+        and the UAV's position [m] as the winder's own tether fix places it (None: none
+        now; the slack floor is taken back)."""
         lb, ctl = self.lbar, self.controller
         px, py, pz = uav_pos_m
         vx, vy, vz = uav_vel_m_s
         lbar_m, rate, lb._root, cmd = self._step(
             px, py, pz, vx, vy, vz, lb.a_target, lb._tan_min, lb.p.min_slack_m, lb._root,
             ctl.params(), ctl.state, self.dt_s, length_m, omega_rad_s, drum_tension_n, lb.w,
-            lb.trim_params, lb.trim_state, exit_elevation_rad)
+            lb.trim_params, lb.trim_state, exit_elevation_rad,
+            *(fix_m if fix_m is not None else (math.nan, math.nan, math.nan)))
         return WinderStep(cmd[0], lbar_m, rate, _command(cmd))
 
 
@@ -82,14 +91,19 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
                 a_target: float, tan_min: float, min_slack: float, root_guess: float,
                 law_p: np.ndarray, law_s: np.ndarray, dt_s: float, length_m: float,
                 omega_rad_s: float, drum_tension_n: float, w_n_m: float,
-                trim_p: np.ndarray, trim_s: np.ndarray, elevation_rad: float
+                trim_p: np.ndarray, trim_s: np.ndarray, elevation_rad: float,
+                fix_x: float, fix_y: float, fix_z: float
                 ) -> tuple[float, float, float, tuple[float, float, float, float, float, bool]]:
     """:meth:`WinderHost.update` in scalars: L-bar and its rate (:func:`lbar_kernel`), the
     line's weight (:func:`weight_estimate`, from the exit elevation ``elevation_rad``
     [rad]; the model's ``w_n_m`` without one), the tension trim's offset
     (:func:`tension_trim` on that weight, both advanced in place), the stop lead
-    (:func:`stop_lead`, on the UAV's position and velocity), then the torque law
-    (:func:`winder_law`, its filter ``law_s`` advanced in place) on L-bar + offset + lead. Returns
+    (:func:`stop_lead`, on the UAV's position and velocity, bounded by
+    :func:`lead_room_m`), the slack floor (:func:`slack_floor`, on the length
+    :func:`floor_length_m` asks at the winder's own fix, (``fix_x``, ``fix_y``,
+    ``fix_z``) [m], NaN: none), then the torque law
+    (:func:`winder_law`, its filter ``law_s`` advanced in place) on L-bar + offset + lead
+    + floor. Returns
     (the length reference, its rate, the exit-angle root for next time, the WinderCommand's
     fields)."""
     lbar_m, rate, a, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
@@ -97,9 +111,17 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     w = weight_estimate(trim_p, trim_s, dt_s, w_n_m, drum_tension_n, elevation_rad,
                         length_m, pz)
     tension_trim(trim_p, trim_s, dt_s, a, px, py, pz, w, drum_tension_n)
-    stop_lead(trim_p, trim_s, dt_s, px, py, pz, vx, vy, vz)
-    lbar_m += trim_s[0] + trim_s[4]
-    rate += trim_s[1] + trim_s[5]
+    lbar_m += trim_s[0]
+    rate += trim_s[1]
+    room = (lead_room_m(px, py, pz, trim_p[18], min_slack) - lbar_m
+            if trim_p[9] > 0.0 else 0.0)
+    stop_lead(trim_p, trim_s, dt_s, px, py, pz, vx, vy, vz, lbar_m, room)
+    lbar_m += trim_s[4]
+    rate += trim_s[5]
+    needed = floor_length_m(fix_x, fix_y, fix_z, trim_p[19] * a_target, trim_p[14])
+    slack_floor(trim_p, trim_s, dt_s, lbar_m, needed)
+    lbar_m += trim_s[7]
+    rate += trim_s[8]
     cmd = winder_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, lbar_m,
                      rate)
     return lbar_m, rate, root, cmd

@@ -13,7 +13,15 @@ from companion.flight_controller import FlightController, VehicleState
 from companion.gains import FlightControlParams
 from companion.position import PositionController
 from companion.reference import RefSample
-from groundstation.lbar import LBarParams, _a_for_exit_slope, _exit_slope_root, tension_trim
+from groundstation.lbar import (
+    LBarParams,
+    _a_for_exit_slope,
+    _exit_slope_root,
+    lead_room_m,
+    slack_floor,
+    stop_lead,
+    tension_trim,
+)
 from groundstation.winder_control import WinderControlParams
 from groundstation.winder_host import WinderHost
 from tuavdefs.frames import euler_to_quat, quat_to_euler, quat_to_matrix
@@ -129,8 +137,14 @@ def test_the_winder_step_is_its_components_step():
         b = hosts[1]
         lb = b.lbar.estimate(pos, vel)
         est = b.lbar
-        tension_trim(est.trim_params, est.trim_state, b.dt_s, lb.a_m, *pos, est.w, tension)
-        ref, rate = lb.length_m + est.trim_state[0], lb.rate_m_s + est.trim_state[1]
+        tp, ts = est.trim_params, est.trim_state
+        tension_trim(tp, ts, b.dt_s, lb.a_m, *pos, est.w, tension)
+        ref, rate = lb.length_m + ts[0], lb.rate_m_s + ts[1]
+        room = lead_room_m(*pos, tp[18], est.p.min_slack_m) - ref
+        stop_lead(tp, ts, b.dt_s, *pos, *vel, ref, room)
+        ref, rate = ref + ts[4], rate + ts[5]
+        slack_floor(tp, ts, b.dt_s, ref, math.nan)     # no fix: no floor
+        ref, rate = ref + ts[7], rate + ts[8]
         cmd = b.controller.update(b.dt_s, length, omega, tension, ref, rate)
         assert a == (cmd.torque_n_m, ref, rate, cmd)
 
