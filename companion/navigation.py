@@ -313,6 +313,37 @@ GOVERNOR_SIGMA_SPEED_M_S = 0.5
 #: Room [m] the governor wants between the vehicle's distance and its limit before it
 #: resumes what it stopped (or that it moves in to, when beyond).
 TETHER_RESUME_ROOM_M = 0.1
+#: The governor's slowing of a leg (its clock): the time [s] its deceleration takes to
+#: build up, added to the vehicle's latency in the speed limit.
+GOVERNOR_SLOW_RAMP_S = 0.25
+#: Largest deceleration [m/s^2] and jerk [m/s^3] the slowing of a leg puts on the
+#: reference, and the acceleration [m/s^2] with which it gives the speed back.
+GOVERNOR_SLOW_ACC_M_S2 = 2.0
+GOVERNOR_SLOW_JERK_M_S3 = 8.0
+GOVERNOR_RESUME_ACC_M_S2 = 0.8
+#: Bandwidth [rad/s] of the leg clock's rate following its limit (critically damped).
+GOVERNOR_CLOCK_OMEGA = 4.0
+#: How far ahead [s] the slowing looks at the leg's own speed (its acceleration on).
+GOVERNOR_LOOKAHEAD_S = 0.5
+#: Length [m] the slowing keeps inside the braking limit (in full from an outward speed
+#: of GOVERNOR_SIGMA_SPEED_M_S, in proportion below), so that in a flight without a fault
+#: the brake is never needed.
+GOVERNOR_SLOW_MARGIN_M = 0.02
+
+
+def governed_speed_m_s(pos: Vec3, direction: Vec3, limit_m: float, latency_s: float,
+                       acc_m_s2: float) -> float:
+    """Largest speed [m/s] along the unit ``direction`` at ``pos`` [m] from which a stop
+    (``latency_s`` [s] at that speed, then braking at ``acc_m_s2`` [m/s^2]) stays within
+    ``limit_m`` [m] of the origin (the winder): ``v t + v^2 / 2a <= r`` with ``r`` the
+    distance along ``direction`` to that sphere (ArduPilot's fence idea, sqrt(2 a r),
+    with a latency). ``math.inf`` for a motion inward from beyond it."""
+    d2 = pos[0] * pos[0] + pos[1] * pos[1] + pos[2] * pos[2]
+    dc = pos[0] * direction[0] + pos[1] * direction[1] + pos[2] * direction[2]
+    if d2 >= limit_m * limit_m:          # on or beyond the limit
+        return math.inf if dc < 0.0 else 0.0
+    r = -dc + math.sqrt(max(limit_m * limit_m - d2 + dc * dc, 0.0))
+    return acc_m_s2 * (-latency_s + math.sqrt(latency_s * latency_s + 2.0 * r / acc_m_s2))
 
 
 class _BrakeRef:
@@ -422,6 +453,12 @@ class Navigator:
         self._winch_speed_m_s = 0.0                  # and line speed [m/s]
         self._brake: _BrakeRef | None = None         # the tether governor's stop
         self._paused: list[_Leg] = []                # the legs it stopped, to resume
+        # the governor's slowing of legs: the leg clock runs at rate s (ds/dt = sd),
+        # ``_clock_lag`` [s] behind the vehicle's; ``_nominal`` the leg's unscaled sample
+        self._s, self._sd = 1.0, 0.0
+        self._clock_lag = 0.0
+        self._nominal: RefSample | None = None
+        self._slowed = False                         # said once per slowing
         #: The estimate's position standard deviation [m] (largest axis; 0 on the
         #: truth), which the tether governor keeps as margin (set by the onboard step).
         self.position_sigma_m = 0.0
@@ -858,7 +895,7 @@ class Navigator:
             self.mission_running = False
             self._leg, self._legs, self._vel = None, [], None
             self._hold()
-            ref = self._leg.follower.update(t, self._pos)
+            ref = self._leg.follower.update(self._leg_clock, self._pos)
         self._ref = ref
         self._land_detector(t, pos, vel)
         if not self.armed:
@@ -872,8 +909,103 @@ class Navigator:
             ref = self._braking(dt)
             if ref is not None:
                 return ref
+        if not self.p.tether_governor:
+            return self._advance_plan(t, dt)
+        leg = self._leg
+        slow = (self._script is None and self._vel is None and leg is not None
+                and not (leg.landing or leg.takeoff))
+        if slow:
+            self._slow_clock(dt)
+        elif self._s != 1.0 or self._sd != 0.0:
+            self._s, self._sd = 1.0, 0.0
         ref = self._advance_plan(t, dt)
-        return self._govern(ref, dt) if self.p.tether_governor else ref
+        if slow and self._leg is leg:
+            self._nominal = ref
+            ref = self._scaled(ref)
+        else:
+            self._nominal = None
+        return self._govern(ref, dt)
+
+    @property
+    def _leg_clock(self) -> float:
+        """The legs' clock [s]: the vehicle's, less what the governor's slowing took."""
+        return self._t - self._clock_lag
+
+    def _scaled(self, ref: RefSample) -> RefSample:
+        """A leg's sample ``ref`` on a clock running at rate s (ds/dt = sd, its own rate
+        taken as 0): velocity v s, acceleration a s^2 + v sd, jerk j s^3 + 3 a s sd, with
+        v, a, j the leg's derivatives in its own time (position, velocity and acceleration
+        continuous)."""
+        s, sd = self._s, self._sd
+        if s == 1.0 and sd == 0.0:
+            return ref
+        v, a, j = ref.vel_m_s, ref.acc_m_s2, ref.jerk_m_s3
+        return RefSample(ref.pos_m, (v[0] * s, v[1] * s, v[2] * s),
+                         tuple(a[i] * s * s + v[i] * sd for i in range(3)),  # type: ignore
+                         tuple(j[i] * s * s * s + 3.0 * a[i] * s * sd  # type: ignore
+                               for i in range(3)),
+                         ref.yaw_rad, ref.yaw_rate_rad_s * s)
+
+    def _slow_clock(self, dt: float) -> None:
+        """The fence-like part of the tether governor: the rate s of the leg's clock
+        follows (critically damped, its effect on the reference limited to
+        :data:`GOVERNOR_SLOW_JERK_M_S3` and :data:`GOVERNOR_SLOW_ACC_M_S2`) the largest
+        rate at which the leg's speed along its path stays within
+        :func:`governed_speed_m_s` of the room the tether leaves, from the reference's and
+        the vehicle's positions (latency ``tether_latency_s`` +
+        :data:`GOVERNOR_SLOW_RAMP_S`, deceleration ``tether_brake_acc_m_s2``, the limit
+        :attr:`governor_limit_m` less ``tether_sigma_k`` position standard deviations)."""
+        nom = self._nominal
+        s, sd = self._s, self._sd
+        target = 1.0
+        speed = 0.0
+        if nom is not None:
+            v = nom.vel_m_s
+            speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+            if speed > 1e-3:
+                u = (v[0] / speed, v[1] / speed, v[2] / speed)
+                lim = self.governor_limit_m
+                p, pe = nom.pos_m, self._pos
+                d = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+                v_out = s * (v[0] * p[0] + v[1] * p[1] + v[2] * p[2]) / d if d > 0 else 0.0
+                ve = self._vel_now
+                d_e = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
+                if d_e > 0:
+                    v_out = max(v_out, (ve[0] * pe[0] + ve[1] * pe[1] + ve[2] * pe[2]) / d_e)
+                lim -= ((GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k * self.position_sigma_m)
+                        * min(1.0, max(v_out, 0.0) / GOVERNOR_SIGMA_SPEED_M_S))
+                lat = self.p.tether_latency_s + GOVERNOR_SLOW_RAMP_S
+                ab = self.p.tether_brake_acc_m_s2
+                v_max = min(governed_speed_m_s(p, u, lim, lat, ab),
+                            governed_speed_m_s(pe, u, lim, lat, ab))
+                # and GOVERNOR_LOOKAHEAD_S on: the leg's speed, direction and place then
+                a, h = nom.acc_m_s2, GOVERNOR_LOOKAHEAD_S
+                ahead = speed + h * max(a[0] * u[0] + a[1] * u[1] + a[2] * u[2], 0.0)
+                target = min(1.0, v_max / ahead)
+                va = (v[0] + a[0] * h, v[1] + a[1] * h, v[2] + a[2] * h)
+                sa = math.sqrt(va[0] * va[0] + va[1] * va[1] + va[2] * va[2])
+                if sa > 1e-3:
+                    ua = (va[0] / sa, va[1] / sa, va[2] / sa)
+                    pa = (p[0] + v[0] * s * h, p[1] + v[1] * s * h, p[2] + v[2] * s * h)
+                    target = min(target, governed_speed_m_s(pa, ua, lim, lat, ab) / sa)
+        vs = max(speed, 0.1)
+        w = GOVERNOR_CLOCK_OMEGA
+        jm = GOVERNOR_SLOW_JERK_M_S3 / vs
+        sdd = max(-jm, min(jm, w * w * (target - s) - 2.0 * w * sd))
+        sd_new = max(-GOVERNOR_SLOW_ACC_M_S2 / vs,
+                     min(GOVERNOR_RESUME_ACC_M_S2 / vs, sd + sdd * dt))
+        s_new = s + 0.5 * (sd + sd_new) * dt
+        if s_new >= 1.0:
+            s_new, sd_new = 1.0, 0.0
+        elif s_new <= 0.0:
+            s_new, sd_new = 0.0, 0.0
+        if target < 0.999 and not self._slowed:
+            self._slowed = True
+            self._emit(NavEvent.WARNING, "Tether: slowing to the room the line gives")
+        elif target >= 1.0 and s_new >= 1.0:
+            self._slowed = False
+        self._clock_lag += (1.0 - 0.5 * (s + s_new)) * dt
+        self._s, self._sd = s_new, sd_new
 
     # ----- the tether governor
 
@@ -975,7 +1107,7 @@ class Navigator:
             self._emit(NavEvent.WARNING, "Tether: room again, resuming")
             self._ref = ref
             self._queue(paused)
-            return self._leg.follower.update(self._t, self._pos)
+            return self._leg.follower.update(self._leg_clock, self._pos)
         if (self._locked_length_m is not None and d > lim and d > 0 and leg is not None
                 and leg.tag is LegTag.HOLD and self._vel is None and self._script is None):
             k = max(lim - TETHER_RESUME_ROOM_M, 0.0) / d
@@ -1009,7 +1141,7 @@ class Navigator:
         leg = self._leg
         assert leg is not None
         follower = leg.follower
-        ref = follower.update(t, self._pos)
+        ref = follower.update(self._leg_clock, self._pos)
         if follower.reached_t_s is not None and not leg.reported:
             leg.reported = True
             if leg.seq is not None and leg.tag is LegTag.MISSION:
@@ -1093,9 +1225,10 @@ class Navigator:
 
     def _start_leg(self, leg: _Leg) -> None:
         ref = self._current_ref()
-        leg.follower.start(self._t, ref.pos_m, ref.vel_m_s, leg.item,
+        leg.follower.start(self._leg_clock, ref.pos_m, ref.vel_m_s, leg.item,
                            current_yaw=ref.yaw_rad, current_acc=ref.acc_m_s2)
         self._leg = leg
+        self._s, self._sd, self._nominal = 1.0, 0.0, None
 
     def _queue(self, legs: list[_Leg]) -> None:
         """Fly these legs in order, the first from the current reference (what the tether

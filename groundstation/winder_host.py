@@ -115,7 +115,8 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     rate += trim_s[1]
     room = (lead_room_m(px, py, pz, trim_p[18], min_slack) - lbar_m
             if trim_p[9] > 0.0 else 0.0)
-    stop_lead(trim_p, trim_s, dt_s, px, py, pz, vx, vy, vz, lbar_m, room)
+    # L-bar's least slack is the vehicle's governor's margin, not room to stop in
+    stop_lead(trim_p, trim_s, dt_s, px, py, pz, vx, vy, vz, lbar_m - min_slack, room)
     lbar_m += trim_s[4]
     rate += trim_s[5]
     needed = floor_length_m(fix_x, fix_y, fix_z, trim_p[19] * a_target, trim_p[14])
