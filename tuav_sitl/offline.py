@@ -30,7 +30,7 @@ from companion.mission_items import ItemRefused, nav_commands
 from companion.navigation import FlightMode, NavCommand, NavEvent, NavKind, Refusal
 from companion.onboard import Companion, OnboardInputs
 from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
-from groundstation.tether_fix import TetherFix
+from groundstation.tether_fix import TetherFix, TetherFixParams
 from groundstation.winch import CommandRequest, Winch, WinchStatusReport
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
@@ -313,8 +313,12 @@ class OfflineRunner:
         self.n_wind = round(sc.physics_rate_hz / sc.winder_control.rate_hz)
         self.winder_host = WinderHost(sc.winder_control, sc.lbar, model.winder,
                                       model.tether, g)
+        # the winch's tether fix only for a vehicle that fuses it: one flying on the
+        # truth drops every fix (Companion.external_position), so it is not computed (it
+        # changes nothing else the winch does)
+        fix = TetherFixParams(enabled=sc.estimator.kind != "truth")
         self.ground = GroundStation(Winch(self.winder_host, model.winder, model.tether, g,
-                                          sc.winch))
+                                          sc.winch, fix_params=fix))
         start = tuple(sc.initial.position_m)
         gear = params.vehicle.gear_height_m
         self.plant = Plant(params, dt_s=self.dt)
