@@ -193,6 +193,7 @@ _NAN3 = (math.nan,) * 3
 #: The estimate's columns (est_pos, est_vel, est_euler, est_pos_sigma) without one.
 _NO_ESTIMATE = (math.nan,) * 12
 _ORIGIN = (0.0, 0.0, 0.0)
+_new = tuple.__new__
 #: LOCAL_POSITION_NED's six position and velocity fields (float32)
 _F32 = struct.Struct("<6f")
 
@@ -467,7 +468,8 @@ class OfflineRunner:
         n_log = n_steps // n_ctrl + 1
         log = _Log(n_log, SERIES)
         bar = ProgressBar(sc.duration_s, progress)
-        inputs = PlantInputs()
+        # the plant's inputs (PlantInputs' fields), held between control and winder steps
+        rotor_commands, armed = PlantInputs().rotor_commands, PlantInputs().armed
         winder_torque, winder_lyap, lbar_m, lbar_rate = 0.0, 0.0, 0.0, 0.0
         winder_enabled = True
         plant_torque, plant_enabled = 0.0, True   # what the axis holds (a late bus)
@@ -477,7 +479,7 @@ class OfflineRunner:
         faults = bool(sc.faults)
         filt = companion.filter
         was_armed = False
-        advance, tether_forces = plant.advance, plant.tether_forces
+        advance, tether_forces = plant.advance_held, plant.tether_forces
         step, add_row = companion.step, log.add
         # the lumped tether's nodes (exit to attachment point) at LINE_NODES_RATE_HZ, float32,
         # padded with NaN to the most points the line can have
@@ -546,19 +548,20 @@ class OfflineRunner:
                     self._try_arm()
                 pos, vel, quat, rates = (tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]),
                                          tuple(x[RATES]))
-                truth = VehicleState(pos, vel, quat, rates)
+                # (the records built as the tuples they are, without their Python-level
+                # constructors: tuple.__new__)
+                truth = _new(VehicleState, (pos, vel, quat, rates))
                 if sensors is not None:
                     sim = sensors.read(t)
-                    out = step(OnboardInputs(t, truth, sim.imu,
-                                             sim.gps if sim.gps_updated else None),
+                    out = step(_new(OnboardInputs, (t, truth, sim.imu, sim.gps
+                                                    if sim.gps_updated else None)),
                                diagnostics=True)
                 else:
-                    out = step(OnboardInputs(t, truth), diagnostics=True)
+                    out = step(_new(OnboardInputs, (t, truth, None, None)), diagnostics=True)
                 state, fs, ref = out.state, out.flight, out.reference
                 if state is not None:   # LOCAL_POSITION_NED on the component link
                     ground.uav_report(t, state.pos_m, state.vel_m_s)
-                inputs = PlantInputs(out.rotor_commands, out.armed, winder_torque,
-                                     winder_enabled)
+                rotor_commands, armed = out.rotor_commands, out.armed
                 forces = tether_forces()
                 info = forces.info
                 if fs is not None:
@@ -600,15 +603,12 @@ class OfflineRunner:
                     was_armed = True
                 elif mission and was_armed and nav.landed:
                     break   # landed and disarmed: the mission is over
-            elif fresh:   # the winder's new torque, the rotors' commands held
-                inputs = PlantInputs(inputs.rotor_commands, inputs.armed, winder_torque,
-                                     winder_enabled)
             if k >= n_steps:
                 break
             # the plant runs with the inputs held up to the next control or winder step, in
             # one compiled call
             nxt = min(k - k % n_ctrl + n_ctrl, k - k % n_wind + n_wind, n_steps)
-            advance(inputs, nxt - k)
+            advance(rotor_commands, armed, winder_torque, winder_enabled, nxt - k)
             k = nxt
         wall = time.perf_counter() - wall0
         bar.close()
