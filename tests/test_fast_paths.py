@@ -513,3 +513,33 @@ def test_the_answers_usual_case_is_the_general_decoding():
         want = (int(values[0]), *sl.rotor_commands_from_controls(values[2:6], values[18]),
                 sl.lockstep_flag(values[1]))
         assert repr(got) == repr(want) and got[0] == values[0]
+
+
+@pytest.mark.parametrize("gnss", ["rtk", "gnss"])
+def test_the_offline_sensor_feed_is_the_companions_decoding(gnss: str):
+    """The offline runner's sensor feed (tuav_sitl/sensor_feed.py: the frames' payloads
+    unpacked without their checksums, HIL_STATE_QUATERNION left undecoded) hands the
+    companion the same IMU sample and GNSS fix, to the bit, as its simulator-link decoder
+    reading the same batch's bytes; through a GNSS outage too."""
+    from companion.simlink_client import BatchDecoder
+    from tuav_sitl.sensor_feed import SensorFeed
+
+    params = _windy()
+    x, u = hover_trim(params, (12.0, 5.0, 20.0), 24.5)
+    plant = Plant(params, state=x)
+    home = sl.HOME_DEFAULT
+    fast = SensorFeed(plant, SensorNoise.preset(gnss, 7), home, 0.004)
+    slow = SensorFeed(plant, SensorNoise.preset(gnss, 7), home, 0.004)
+    decoder = BatchDecoder(home)
+    fixes = 0
+    for k in range(600):
+        t = k * 0.004
+        fast.batches.gps_enabled = slow.batches.gps_enabled = not 200 <= k < 300
+        got = fast.read(t)
+        (want,) = decoder.feed(bytes(slow.batches.batch(round(t * 1e6))))
+        assert got.time_usec == want.time_usec
+        assert got.imu == want.imu
+        assert got.gps == want.gps and got.gps_updated == want.gps_updated
+        fixes += got.gps_updated
+        plant.advance(u, 4)
+    assert fixes >= 8        # 5 or 10 Hz, but for the outage
