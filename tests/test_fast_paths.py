@@ -543,3 +543,23 @@ def test_the_offline_sensor_feed_is_the_companions_decoding(gnss: str):
         fixes += got.gps_updated
         plant.advance(u, 4)
     assert fixes >= 8        # 5 or 10 Hz, but for the outage
+
+
+def test_the_scalar_piecewise_is_horners_to_the_bit():
+    """companion.planner.Piecewise evaluates a one-dimensional piece's four derivatives in
+    one loop (the shorter led by zeros): the same bits as _horner on each, before, inside
+    and after the pieces, degree 0 included."""
+    from companion.planner import Piecewise, _horner
+
+    rng = np.random.default_rng(5)
+    for degree in (0, 1, 3, 5, 7):
+        pieces = [(float(rng.uniform(0.1, 3.0)), rng.normal(0.0, 10.0, (1, degree + 1)))
+                  for _ in range(3)]
+        pw = Piecewise(float(rng.uniform(-5.0, 5.0)), pieces, None, 1)
+        for i in range(len(pieces)):
+            for tau in (*rng.uniform(-1.0, 4.0, 200), 0.0, -0.0, 1e-300, -1e-300):
+                got = pw._eval_piece(i, float(tau))
+                want = tuple((_horner(store[i][0], float(tau)),)
+                             for store in (pw._p, pw._v, pw._a, pw._j))
+                assert struct.pack("4d", *(v for (v,) in got)) == \
+                    struct.pack("4d", *(v for (v,) in want))

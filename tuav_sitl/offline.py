@@ -196,6 +196,8 @@ _ORIGIN = (0.0, 0.0, 0.0)
 _new = tuple.__new__
 #: LOCAL_POSITION_NED's six position and velocity fields (float32)
 _F32 = struct.Struct("<6f")
+#: Revolutions per radian (the encoder's unit)
+_REV = 1.0 / (2.0 * math.pi)
 
 
 class GroundStation:
@@ -259,9 +261,8 @@ link brings (:meth:`uav_report`);
                 exit_angle[0], exit_angle[1], stamp, exit_angle[2]))
         w.handle_frame(t_s, self._tension_id,
                        cp.encode_winch_tension(drum_tension_n, not self.axis_enabled, stamp))
-        rev = 1.0 / (2.0 * math.pi)
         out = w.handle_frame(t_s, self._encoder_id, cp.encode_encoder_estimates(
-            drum_angle_rad * rev, drum_rate_rad_s * rev))
+            drum_angle_rad * _REV, drum_rate_rad_s * _REV))
         if out is None:
             return None
         if out.fix is not None:
@@ -274,7 +275,8 @@ link brings (:meth:`uav_report`);
                                      == cp.AxisState.CLOSED_LOOP_CONTROL)
                 if not self.axis_enabled:
                     self.torque_n_m = 0.0
-        self.notices.extend((t_s, n.text) for n in out.notices)
+        if out.notices:
+            self.notices.extend((t_s, n.text) for n in out.notices)
         return out.status
 
     def command(self, t_s: float, params: tuple[float, float, float, float]) -> int:
@@ -596,7 +598,8 @@ class OfflineRunner:
                     row[:nodes.shape[0]] = nodes
                     line_t.append(t)
                     line_nodes.append(row)
-                bar.update(t)
+                if progress is not None:
+                    bar.update(t)
                 if on_sample is not None:
                     on_sample(t)
                 if nav.armed:
