@@ -215,7 +215,6 @@ OFFLINE_SHARES = {
     "winder host (WinderHost.update)": ("groundstation/winder_host.py", "update"),
     "reference (trajectory)": ("tuav_sitl/offline.py", "sample"),
     "truth read-out (Plant.tether_forces)": ("sitl/plant.py", "tether_forces"),
-    "log row": ("tuav_sitl/offline.py", "add"),
 }
 
 

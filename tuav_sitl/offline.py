@@ -482,7 +482,11 @@ class OfflineRunner:
         filt = companion.filter
         was_armed = False
         advance, tether_forces = plant.advance_held, plant.tether_forces
-        step, add_row = companion.step, log.add
+        step = companion.step
+        # the log's rows packed here, without a method call per row (_Log.add's work: the
+        # loop makes at most n_log rows)
+        pack_row, log_buffer, row_bytes = log.pack_into, log.buffer, log.row_bytes
+        row_at = 0
         # the lumped tether's nodes (exit to attachment point) at LINE_NODES_RATE_HZ, float32,
         # padded with NaN to the most points the line can have
         lumped = plant.model.lumped
@@ -585,12 +589,13 @@ class OfflineRunner:
                 else:
                     estimate = (*state.pos_m, *state.vel_m_s, *quat_to_euler(state.quat),
                                 *filt.position_sigma_m())
-                add_row(t, *pos, *vel, *ref_pos, *ref_vel,
-                        *quat_to_euler(quat), *control, winder_lyap, *lyap_raw,
-                        r_w * x[DRUM_ANGLE], lbar_m, lbar_rate, fresh, x[DRUM_RATE],
-                        winder_torque, forces.drum_tension_n, forces.top_tension_n,
-                        int(info.regime), info.lowest_point_height_m, *plant.wind_m_s,
-                        *forces.on_uav_n, *est, *estimate)
+                pack_row(log_buffer, row_at, t, *pos, *vel, *ref_pos, *ref_vel,
+                         *quat_to_euler(quat), *control, winder_lyap, *lyap_raw,
+                         r_w * x[DRUM_ANGLE], lbar_m, lbar_rate, fresh, x[DRUM_RATE],
+                         winder_torque, forces.drum_tension_n, forces.top_tension_n,
+                         int(info.regime), info.lowest_point_height_m, *plant.wind_m_s,
+                         *forces.on_uav_n, *est, *estimate)
+                row_at += row_bytes
                 if lumped and t >= next_nodes_t - 1e-9:
                     next_nodes_t += 1.0 / LINE_NODES_RATE_HZ
                     nodes = plant.line_nodes_m()
@@ -615,6 +620,7 @@ class OfflineRunner:
             k = nxt
         wall = time.perf_counter() - wall0
         bar.close()
+        log.i = row_at // row_bytes
         series = log.arrays()
         metrics = compute_metrics(sc, series, self.reference, wall)
         if sc.faults:
@@ -646,17 +652,19 @@ class _Log:
         self.columns = columns
         self.width = sum(max(w, 1) for _, w in columns)
         packer = struct.Struct(f"{self.width}d")
-        self._pack_into = packer.pack_into
-        self._row_bytes = packer.size
+        #: ``pack_into(buffer, offset, *row)``: a row into :attr:`buffer` at ``offset``
+        #: [bytes] (rows :attr:`row_bytes` apart); set :attr:`i` to the rows written
+        self.pack_into = packer.pack_into
+        self.row_bytes = packer.size
         self._data = np.empty((n, self.width))
-        self._buffer = memoryview(self._data).cast("B")
+        self.buffer = memoryview(self._data).cast("B")
 
     def add(self, *row: Any) -> None:
         """One row: the columns' values in order, vectors flattened (bools count 0/1)."""
         i = self.i
         if i >= self.n:
             return
-        self._pack_into(self._buffer, i * self._row_bytes, *row)
+        self.pack_into(self.buffer, i * self.row_bytes, *row)
         self.i = i + 1
 
     def arrays(self) -> dict[str, np.ndarray]:
