@@ -1123,8 +1123,10 @@ class NavFilter:
         takes it."""
         px, py, pz, vx, vy, vz, qw, qx, qy, qz = self._x[:10].tolist()
         r0, r1, r2, r3, r4, r5 = self._out_lag.tolist()
-        return VehicleState((px - r0, py - r1, pz - r2), (vx - r3, vy - r4, vz - r5),
-                            (qw, qx, qy, qz), tuple(self._rates[0:3].tolist()))
+        # (built as the tuple it is, without its Python-level constructor: every period)
+        return tuple.__new__(VehicleState, ((px - r0, py - r1, pz - r2),
+                                            (vx - r3, vy - r4, vz - r5), (qw, qx, qy, qz),
+                                            tuple(self._rates[0:3].tolist())))
 
     # ----- inputs
     def predict(self, t_s: float, gyro_flu_rad_s: Sequence[float],
