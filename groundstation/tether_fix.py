@@ -83,7 +83,19 @@ class TetherFixParams(Params):
         "the line is as designed, holds)", ge=0)
     design_wind_m_s: float = quantity(
         3.0, "m/s", "the wind on the line the covariance allows for (its drag bends the "
-        "line, which the windless model ignores)", ge=0)
+        "line, which the windless model ignores), as blowing at wind_reference_height_m",
+        ge=0)
+    wind_reference_height_m: float = quantity(
+        10.0, "m", "the height at which design_wind_m_s blows (the meteorological 10 m)",
+        gt=0)
+    wind_shear_exponent: float = quantity(
+        1.0 / 7.0, "1", "the design wind's power-law profile, U(z) = U_ref (z/z_ref)^alpha "
+        "(1/7: open terrain; 0: uniform)", ge=0, le=1)
+    wind_min_height_m: float = quantity(
+        1.0, "m", "heights below this take the profile's wind at this height", gt=0)
+    wind_steps: int = quantity(
+        32, "1", "steps of the line's integration under the wind's drag (midpoint rule)",
+        ge=4, le=1000)
     air_density_kg_m3: float = quantity(1.225, "kg/m^3", "air density", gt=0)
     drag_coeff: float = quantity(1.2, "1", "the line's drag coefficient normal to it, on its "
                                  "diameter", ge=0)
@@ -150,6 +162,55 @@ def line_end(length_m: float, t0_n: float, azimuth_rad: float, elevation_rad: fl
             ehz * across + uz * along_u)
 
 
+def line_end_in_wind(length_m: float, t0_n: float, azimuth_rad: float,
+                     elevation_rad: float, w_n_m: float, ea_n: float,
+                     wind_m_s: tuple[float, float], drag_n_s2_m3: float,
+                     reference_height_m: float, shear_exponent: float,
+                     min_height_m: float, steps: int) -> Vec3:
+    """The far end [m] of the elastic line of :func:`line_end` under its weight ``w_n_m``
+    [N/m] and the drag of a horizontal wind ``wind_m_s`` [m/s] (as blowing at
+    ``reference_height_m`` [m]; at height ``z`` it is ``(max(z, min_height_m) /
+    reference_height_m)^shear_exponent`` times that), integrated from the exit over
+    ``steps`` midpoint steps. The drag per metre is ``drag_n_s2_m3 |U_n| U_n``
+    (``drag_n_s2_m3`` = rho C_d d / 2 [N s^2/m^3]) with ``U_n`` the wind's part normal to
+    the line (the cross-flow principle: a cylinder feels only the wind across it)."""
+    ce = math.cos(elevation_rad)
+    t0 = max(t0_n, 1e-9)
+    tx, ty, tz = (t0 * ce * math.cos(azimuth_rad), t0 * ce * math.sin(azimuth_rad),
+                  t0 * math.sin(elevation_rad))
+    stretch = 1.0 / ea_n if ea_n > 0.0 and math.isfinite(ea_n) else 0.0
+    ux, uy = wind_m_s
+    windy = (ux != 0.0 or uy != 0.0) and drag_n_s2_m3 > 0.0
+    zr, zmin = reference_height_m, min_height_m
+    px = py = pz = 0.0
+    ds = max(length_m, 0.0) / steps
+
+    def load(z: float, ax: float, ay: float, az: float, tn: float) -> Vec3:
+        # the load per metre (weight and drag) at height z [m], line tangent (a/tn)
+        if not windy:
+            return (0.0, 0.0, -w_n_m)
+        k = (max(z, zmin) / zr) ** shear_exponent
+        wx, wy = ux * k, uy * k
+        along = (wx * ax + wy * ay) / (tn * tn)
+        nx, ny, nz = wx - along * ax, wy - along * ay, -along * az
+        c = drag_n_s2_m3 * math.sqrt(nx * nx + ny * ny + nz * nz)
+        return (c * nx, c * ny, c * nz - w_n_m)
+
+    for _ in range(steps):
+        tn = math.sqrt(tx * tx + ty * ty + tz * tz)
+        fx, fy, fz = load(pz, tx, ty, tz, tn)
+        h = 0.5 * ds * (1.0 / tn + stretch)
+        mx, my, mz = tx - 0.5 * ds * fx, ty - 0.5 * ds * fy, tz - 0.5 * ds * fz
+        mn = math.sqrt(mx * mx + my * my + mz * mz)
+        if mn <= 1e-12:
+            break
+        gx, gy, gz = load(pz + h * tz, mx, my, mz, mn)
+        k = ds * (1.0 / mn + stretch)
+        px, py, pz = px + k * mx, py + k * my, pz + k * mz
+        tx, ty, tz = tx - ds * gx, ty - ds * gy, tz - ds * gz
+    return (px, py, pz)
+
+
 def _outer(a: Vec3, b: Vec3, k: float, acc: list[list[float]]) -> None:
     for i in range(3):
         for j in range(3):
@@ -170,9 +231,10 @@ class TetherFixer:
         self.p = params
         self.w = float(w_n_m)
         self.ea = float(ea_n)
+        #: the line's drag per metre per (m/s)^2 of wind across it [N s^2/m^3]
+        self.drag = 0.5 * params.air_density_kg_m3 * params.drag_coeff * diameter_m
         #: the design wind's drag per metre of line [N/m]
-        self.q_wind = (0.5 * params.air_density_kg_m3 * params.drag_coeff * diameter_m
-                       * params.design_wind_m_s ** 2)
+        self.q_wind = self.drag * params.design_wind_m_s ** 2
 
     def _end(self, L: float, T: float, az: float, el: float, w: float,
              wind: tuple[float, float] = (0.0, 0.0), on_ground: bool = False,
@@ -279,12 +341,24 @@ class TetherFixer:
             hi, lo = at(**{kw: sigma}), at(**{kw: -sigma})
             d = (0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1]), 0.5 * (hi[2] - lo[2]))
             _outer(d, d, 1.0, acc)
-        if self.q_wind > 0.0:
+        if self.q_wind > 0.0 and ground:
             base = at()
             c, s = math.cos(az), math.sin(az)
             for wx, wy in ((c, s), (-s, c)):     # along the line's azimuth, and across
                 d = _sub(at(wind=(self.q_wind * wx, self.q_wind * wy)), base)
                 _outer(d, d, 0.5, acc)
+        elif self.q_wind > 0.0:
+            # the design wind from the four directions along and across the line's azimuth,
+            # its drag normal to the line and sheared with height (module docstring)
+            u = p.design_wind_m_s
+            c, s = math.cos(az), math.sin(az)
+            args = (L, T, az, el, w, self.ea)
+            shape = (self.drag, p.wind_reference_height_m, p.wind_shear_exponent,
+                     p.wind_min_height_m, p.wind_steps)
+            base = line_end_in_wind(*args, (0.0, 0.0), *shape)
+            for wx, wy in ((c, s), (-c, -s), (-s, c), (s, -c)):
+                d = _sub(line_end_in_wind(*args, (u * wx, u * wy), *shape), base)
+                _outer(d, d, 0.25, acc)
         floor = p.min_sigma_m ** 2
         for i in range(3):
             acc[i][i] += floor
