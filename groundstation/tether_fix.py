@@ -81,6 +81,10 @@ class TetherFixParams(Params):
         0.1, "1", "the winder's estimate of the weight per metre is used only for its part "
         "beyond this fraction off the belief (within it the belief, which is exact when "
         "the line is as designed, holds)", ge=0)
+    weight_height_sigma_m: float = quantity(
+        0.3, "m", "the error of the vehicle's reported height that the winder's weight "
+        "estimate inherits (its bias: the estimate's low-pass takes out the noise); the "
+        "band widens to the weight error this makes (weight_spread)", ge=0)
     design_wind_m_s: float = quantity(
         3.0, "m/s", "the wind on the line the covariance allows for (its drag bends the "
         "line, which the windless model ignores), as blowing at wind_reference_height_m",
@@ -257,19 +261,39 @@ class TetherFixer:
         k = lg * (1.0 + T / self.ea if self.ea > 0 else 1.0)
         return (c * k + top[0], s * k + top[1], top[2])
 
-    def weight(self, w_n_m: float | None = None) -> tuple[float, float]:
+    def weight_spread(self, length_m: float, tension_n: float, height_m: float | None
+                      ) -> float:
+        """How far [N/m] the winder's weight estimate may be off for the error
+        ``weight_height_sigma_m`` of the reported height ``height_m`` [m] it is computed
+        with: the estimate is ``w = 2 T (z - L sin(el)) / (L^2 - z^2)`` (the exit tension
+        ``tension_n`` [N], the paid-out ``length_m`` [m]; ``groundstation.lbar``), so
+        ``dw/dz = 2 (T + w z) / (L^2 - z^2)``, which grows without bound as the line
+        straightens (z -> L: a steep, taut line says little of its weight). 0 without a
+        height; infinite for a line no longer than the height."""
+        if height_m is None or not math.isfinite(height_m) or height_m <= 0.0:
+            return 0.0
+        den = length_m * length_m - height_m * height_m
+        if den <= 0.0:
+            return math.inf
+        return (2.0 * (max(tension_n, 0.0) + self.w * height_m) / den
+                * self.p.weight_height_sigma_m)
+
+    def weight(self, w_n_m: float | None = None, spread_n_m: float = 0.0
+               ) -> tuple[float, float]:
         """(the weight per metre the fix uses [N/m], its standard deviation [N/m]) given
-        the winder's estimate ``w_n_m`` [N/m] (None or not positive: none). The fix uses
-        the belief moved to within ``weight_band_fraction`` of the estimate (the estimate
-        wanders on a line as designed, which the belief then fixes exactly); the weight
-        used is thus off the estimate by a known ``w - w_hat``, and the estimate is off
-        the truth by about ``weight_uncertainty_fraction``: the standard deviation is
+        the winder's estimate ``w_n_m`` [N/m] (None or not positive: none) and how far it
+        may be off by its geometry, ``spread_n_m`` [N/m] (:meth:`weight_spread`). The fix
+        uses the belief moved to within a band of the estimate, the larger of
+        ``weight_band_fraction`` of the belief (the estimate wanders on a line as designed,
+        which the belief then fixes exactly) and ``spread_n_m``; the weight used is thus
+        off the estimate by a known ``w - w_hat``, and the estimate is off the truth by
+        about ``weight_uncertainty_fraction``: the standard deviation is
         ``hypot(fraction w, w - w_hat)`` (docs/estimation.md §10)."""
         w = self.w
         frac = self.p.weight_uncertainty_fraction
         if w_n_m is None or not w_n_m > 0.0 or not math.isfinite(w_n_m):
             return w, frac * w
-        band = self.p.weight_band_fraction * w
+        band = max(self.p.weight_band_fraction * w, spread_n_m)
         off = float(w_n_m) - w
         w += math.copysign(max(abs(off) - band, 0.0), off)
         # the central differences take w -+ sigma: kept to half the weight
@@ -280,14 +304,15 @@ class TetherFixer:
                  w_n_m: float | None = None) -> tuple[Vec3, Cov3, bool]:
         """(position [m], covariance [m^2], on the ground) of the line's far end;
         ``reported_m`` [m] the UAV's position as the vehicle reports it (None: unknown),
-        used only when the line lies on the ground; ``w_n_m`` [N/m] the line's weight per
+        used when the line lies on the ground, and its height for how far the weight
+        estimate may be off (:meth:`weight_spread`); ``w_n_m`` [N/m] the line's weight per
         metre as estimated (the winder's, docs/control.md §3), used beyond
         ``weight_band_fraction`` off the belief (None: the belief)."""
-        w, sigma_w = self.weight(w_n_m)
         uav_height_m = reported_m[2] if reported_m is not None else None
         p = self.p
         L = max(length_m, 0.0)
         T = max(tension_n, 1e-3)
+        w, sigma_w = self.weight(w_n_m, self.weight_spread(L, T, uav_height_m))
         az, el = azimuth_rad, elevation_rad
         ground = el < p.ground_elevation_rad
         if ground:
