@@ -95,6 +95,7 @@ def _variant(pos: tuple[float, float, float], wind: tuple[float, float, float],
     ((0.0, -14.0, 25.0), (0.0, -5.0, 0.0), "light"),      # long, steep, wind along the line
     ((-10.0, 3.0, 20.0), (-4.0, 2.0, 0.0), "moderate"),
     ((0.0, 12.0, 18.0), (5.5, -5.5, 0.0), "moderate"),     # 7.8 m/s, across the line
+    ((-5.0, -5.0, 35.0), (0.0, 8.0, 0.0), "light"),        # 35 m up, 9 m/s there
 ])
 def test_hover_variants_hold_through_an_early_gnss_loss(pos, wind, turbulence):
     """Hover elsewhere than the shipped scenario, the consumer receiver lost at 10 s (the
@@ -111,3 +112,25 @@ def test_hover_variants_hold_through_an_early_gnss_loss(pos, wind, turbulence):
     assert hold.max() <= 0.5
     assert est.max() <= 0.5
     assert res.metrics["min_tether_slack_m"] > 0.0
+
+
+def test_a_steep_lines_weight_estimate_does_not_move_the_fix():
+    """The winder's weight estimate ``2 T (z - L sin(el)) / (L^2 - z^2)`` inherits the
+    reported height's error as ``2 (T + w z) / (L^2 - z^2)`` per metre: on a steep line (35 m
+    up on 35.8 m) a 35 % heavy estimate is within that spread and the fix keeps the belief,
+    which the plant's catenary (the belief's weight) confirms within 5 cm; on a shallow
+    line the band stays the belief's 10 %."""
+    tp = TetherParams()
+    w = tp.linear_density_kg_m * G
+    fixer = TetherFixer(TetherFixParams(), w, tp.axial_stiffness_n, tp.diameter_m)
+    top, length = (-5.0, -5.0, 35.0), 35.8     # 4.9 N at the exit, as at hgl7's hover
+    cat = Tether(tp, G)
+    f = cat.forces(*top, length)
+    ex, ey, ez = f.on_exit_n
+    psi, eps = math.atan2(ey, ex), math.atan2(ez, math.hypot(ex, ey))
+    spread = fixer.weight_spread(length, f.drum_tension_n, top[2])
+    assert spread > 0.35 * w
+    assert fixer.weight(1.35 * w, spread)[0] == pytest.approx(w)
+    pos, _, _ = fixer.position(length, f.drum_tension_n, psi, eps, top, 1.35 * w)
+    assert math.dist(pos, top) < 0.05
+    assert fixer.weight_spread(12.0, 1.0, 5.0) < 0.1 * w     # 5 m up on 12 m of line
