@@ -110,7 +110,9 @@ class EstimatorParams(Params):
     accel_bias_walk_m_s2_sqrt_s: float = quantity(
         3.0e-3, "m/s^2/sqrt(s)", "accelerometer bias random walk", ge=0)
     baro_offset_walk_m_sqrt_s: float = quantity(
-        0.03, "m/sqrt(s)", "random walk of the barometer's height offset", ge=0)
+        0.07, "m/sqrt(s)", "random walk of the barometer's height offset (an MS5611-class "
+        "sensor's in-flight thermal and airflow drift, ~0.1 hPa = 0.8 m over ~300 s: "
+        "0.8 sqrt(2/300); docs/estimation.md §10)", ge=0)
     gyro_bias_sigma_rad_s: float = quantity(
         0.01, "rad/s", "prior standard deviation of each gyro bias", gt=0)
     accel_bias_sigma_m_s2: float = quantity(
