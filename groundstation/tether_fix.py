@@ -46,6 +46,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from tuavdefs.component_link import TETHER_FIX_RATE_HZ
+from tuavdefs.jit import njit
 from tuavdefs.paramspec import Params, quantity
 
 Vec3 = tuple[float, float, float]
@@ -166,6 +167,56 @@ def line_end(length_m: float, t0_n: float, azimuth_rad: float, elevation_rad: fl
             ehz * across + uz * along_u)
 
 
+@njit
+def _line_load(z: float, ax: float, ay: float, az: float, tn: float, ux: float, uy: float,
+               drag: float, zr: float, shear: float, zmin: float, w: float
+               ) -> tuple[float, float, float]:
+    """The load per metre [N/m] on the line at height ``z`` [m] with tangent (``ax``,
+    ``ay``, ``az``)/``tn``: its weight ``w`` [N/m] and the drag ``drag |U_n| U_n`` of the
+    wind (``ux``, ``uy``) [m/s] at ``zr`` [m], sheared as ``(max(z, zmin)/zr)^shear``,
+    ``U_n`` its part normal to the line (:func:`line_end_in_wind`)."""
+    k = (max(z, zmin) / zr) ** shear
+    wx, wy = ux * k, uy * k
+    along = (wx * ax + wy * ay) / (tn * tn)
+    nx, ny, nz = wx - along * ax, wy - along * ay, -along * az
+    c = drag * math.sqrt(nx * nx + ny * ny + nz * nz)
+    return (c * nx, c * ny, c * nz - w)
+
+
+@njit
+def _line_end_in_wind(length_m: float, t0_n: float, azimuth_rad: float,
+                      elevation_rad: float, w_n_m: float, ea_n: float, ux: float,
+                      uy: float, drag_n_s2_m3: float, reference_height_m: float,
+                      shear_exponent: float, min_height_m: float, steps: int
+                      ) -> tuple[float, float, float]:
+    """:func:`line_end_in_wind` in scalars, compiled (each fix integrates the line five
+    times for its covariance)."""
+    ce = math.cos(elevation_rad)
+    t0 = max(t0_n, 1e-9)
+    tx = t0 * ce * math.cos(azimuth_rad)
+    ty = t0 * ce * math.sin(azimuth_rad)
+    tz = t0 * math.sin(elevation_rad)
+    stretch = 1.0 / ea_n if ea_n > 0.0 and math.isfinite(ea_n) else 0.0
+    drag = drag_n_s2_m3 if (ux != 0.0 or uy != 0.0) and drag_n_s2_m3 > 0.0 else 0.0
+    px = py = pz = 0.0
+    ds = max(length_m, 0.0) / steps
+    for _ in range(steps):
+        tn = math.sqrt(tx * tx + ty * ty + tz * tz)
+        fx, fy, fz = _line_load(pz, tx, ty, tz, tn, ux, uy, drag, reference_height_m,
+                                shear_exponent, min_height_m, w_n_m)
+        h = 0.5 * ds * (1.0 / tn + stretch)
+        mx, my, mz = tx - 0.5 * ds * fx, ty - 0.5 * ds * fy, tz - 0.5 * ds * fz
+        mn = math.sqrt(mx * mx + my * my + mz * mz)
+        if mn <= 1e-12:
+            break
+        gx, gy, gz = _line_load(pz + h * tz, mx, my, mz, mn, ux, uy, drag,
+                                reference_height_m, shear_exponent, min_height_m, w_n_m)
+        k = ds * (1.0 / mn + stretch)
+        px, py, pz = px + k * mx, py + k * my, pz + k * mz
+        tx, ty, tz = tx - ds * gx, ty - ds * gy, tz - ds * gz
+    return (px, py, pz)
+
+
 def line_end_in_wind(length_m: float, t0_n: float, azimuth_rad: float,
                      elevation_rad: float, w_n_m: float, ea_n: float,
                      wind_m_s: tuple[float, float], drag_n_s2_m3: float,
@@ -178,41 +229,11 @@ def line_end_in_wind(length_m: float, t0_n: float, azimuth_rad: float,
     ``steps`` midpoint steps. The drag per metre is ``drag_n_s2_m3 |U_n| U_n``
     (``drag_n_s2_m3`` = rho C_d d / 2 [N s^2/m^3]) with ``U_n`` the wind's part normal to
     the line (the cross-flow principle: a cylinder feels only the wind across it)."""
-    ce = math.cos(elevation_rad)
-    t0 = max(t0_n, 1e-9)
-    tx, ty, tz = (t0 * ce * math.cos(azimuth_rad), t0 * ce * math.sin(azimuth_rad),
-                  t0 * math.sin(elevation_rad))
-    stretch = 1.0 / ea_n if ea_n > 0.0 and math.isfinite(ea_n) else 0.0
-    ux, uy = wind_m_s
-    windy = (ux != 0.0 or uy != 0.0) and drag_n_s2_m3 > 0.0
-    zr, zmin = reference_height_m, min_height_m
-    px = py = pz = 0.0
-    ds = max(length_m, 0.0) / steps
-
-    def load(z: float, ax: float, ay: float, az: float, tn: float) -> Vec3:
-        # the load per metre (weight and drag) at height z [m], line tangent (a/tn)
-        if not windy:
-            return (0.0, 0.0, -w_n_m)
-        k = (max(z, zmin) / zr) ** shear_exponent
-        wx, wy = ux * k, uy * k
-        along = (wx * ax + wy * ay) / (tn * tn)
-        nx, ny, nz = wx - along * ax, wy - along * ay, -along * az
-        c = drag_n_s2_m3 * math.sqrt(nx * nx + ny * ny + nz * nz)
-        return (c * nx, c * ny, c * nz - w_n_m)
-
-    for _ in range(steps):
-        tn = math.sqrt(tx * tx + ty * ty + tz * tz)
-        fx, fy, fz = load(pz, tx, ty, tz, tn)
-        h = 0.5 * ds * (1.0 / tn + stretch)
-        mx, my, mz = tx - 0.5 * ds * fx, ty - 0.5 * ds * fy, tz - 0.5 * ds * fz
-        mn = math.sqrt(mx * mx + my * my + mz * mz)
-        if mn <= 1e-12:
-            break
-        gx, gy, gz = load(pz + h * tz, mx, my, mz, mn)
-        k = ds * (1.0 / mn + stretch)
-        px, py, pz = px + k * mx, py + k * my, pz + k * mz
-        tx, ty, tz = tx - ds * gx, ty - ds * gy, tz - ds * gz
-    return (px, py, pz)
+    return _line_end_in_wind(float(length_m), float(t0_n), float(azimuth_rad),
+                             float(elevation_rad), float(w_n_m), float(ea_n),
+                             float(wind_m_s[0]), float(wind_m_s[1]), float(drag_n_s2_m3),
+                             float(reference_height_m), float(shear_exponent),
+                             float(min_height_m), int(steps))
 
 
 def _outer(a: Vec3, b: Vec3, k: float, acc: list[list[float]]) -> None:
