@@ -134,3 +134,20 @@ def test_a_steep_lines_weight_estimate_does_not_move_the_fix():
     pos, _, _ = fixer.position(length, f.drum_tension_n, psi, eps, top, 1.35 * w)
     assert math.dist(pos, top) < 0.05
     assert fixer.weight_spread(12.0, 1.0, 5.0) < 0.1 * w     # 5 m up on 12 m of line
+
+
+def test_an_in_air_start_on_a_metre_low_first_estimate_winds_no_line_taut():
+    """Starting in the air 35 m up in a 9 m/s wind, the consumer receiver's first fixes put
+    the vehicle 0.9 m low: L-bar from that position is 10 cm short of the line paid out,
+    and the winch's rejoin wound it in while the vehicle, on its estimate, climbed back
+    (taut at 0.86 s, 52 N). The rejoin stops at the slack floor the winder measures itself
+    (length, tension, exit angles). Truth: the plant's line against its distance."""
+    sc = _variant((-5.0, -5.0, 35.0), (0.0, 8.0, 0.0), "light", (20.0, 30.0), 30.0)
+    sc = sc.replace(duration_s=3.0, metrics_after_s=0.5,
+                    sensors=sc.sensors.replace(seed=3))
+    res = OfflineRunner(sc).run()
+    s = res.series
+    est_err_z = s["est_pos"][:, 2] - s["pos"][:, 2]
+    assert np.nanmin(est_err_z) < -0.5                    # the case: a metre-low start
+    slack = s["length"] - np.linalg.norm(s["pos"], axis=1)
+    assert slack.min() > 0.0, slack.min()
