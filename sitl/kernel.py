@@ -23,8 +23,9 @@ from tuavdefs.params import SystemParams, TetherModel
 (P_G, P_M, P_IXX, P_IYY, P_IZZ, P_KF, P_KM, P_D, P_TAU_M, P_DRAG_X, P_DRAG_Y, P_DRAG_Z,
  P_ROT_DAMP, P_GEAR, P_MU, P_W, P_EA, P_RW, P_THETA_MIN, P_THETA_MAX, P_M_BAR, P_RHO,
  P_LT, P_RADII_SQ, P_I_ROTOR, P_BETA, P_TAU_MAX, P_OMEGA_MAX, P_KV, P_BRAKE, P_HALF_RHO_AIR,
- P_CDA_X, P_CDA_Y, P_CDA_Z, P_ATT_X, P_ATT_Y, P_ATT_Z, P_LUMPED) = range(38)
-N_PARAMS = 38
+ P_CDA_X, P_CDA_Y, P_CDA_Z, P_ATT_X, P_ATT_Y, P_ATT_Z, P_LUMPED, P_CONTACT_X, P_CONTACT_Y,
+ P_CONTACT_Z) = range(41)
+N_PARAMS = 41
 
 # the tether's auxiliary array ("warm"): the catenary's warm start (H, V), and the lumped
 # line's pull on the UAV (x, y, z) [N], drum tension [N], top tension [N] and pull on the

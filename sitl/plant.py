@@ -43,6 +43,9 @@ from sitl.catenary import CatenaryInfo, CatenaryRegime
 from sitl.kernel import (
     GROUND_EPS_M,
     N_WARM,
+    P_CONTACT_X,
+    P_CONTACT_Y,
+    P_CONTACT_Z,
     P_GEAR,
     P_LUMPED,
     P_RW,
@@ -256,15 +259,19 @@ def specific_force_kernel(x: np.ndarray, p: np.ndarray, wind_e: float, wind_n: f
     """What an ideal accelerometer at the centre of mass reads at the state ``x`` [m/s^2],
     body FLU: ``R^T (a + g e3)`` (:func:`sitl.sensors.specific_force_flu`) with the
     acceleration ``a`` of the state derivative (:func:`rhs`: rotor set-points at the
-    rotors' speeds, winder unpowered, the wind (east, north, up) [m/s]); the tether
-    solver's warm start ``warm`` is restored."""
+    rotors' speeds, winder unpowered, the wind (east, north, up) [m/s]) plus the ground's
+    impact over the IMU's sample, ``p[P_CONTACT_X:P_CONTACT_Z + 1]`` [m/s^2]
+    (:meth:`Plant.take_contact_impulse`); the tether solver's warm start ``warm`` is
+    restored."""
     wind = np.empty(3)
     wind[0], wind[1], wind[2] = wind_e, wind_n, wind_u
     dx = np.empty(N_STATES)
     h, v = warm[0], warm[1]
     rhs_into(dx, x, p, x[13:17], 0.0, False, wind, warm)
     warm[0], warm[1] = h, v
-    return quat_rotate_kernel((x[6], -x[7], -x[8], -x[9]), (dx[3], dx[4], dx[5] + g))
+    return quat_rotate_kernel((x[6], -x[7], -x[8], -x[9]),
+                              (dx[3] + p[P_CONTACT_X], dx[4] + p[P_CONTACT_Y],
+                               dx[5] + g + p[P_CONTACT_Z]))
 
 
 class PlantInputs(NamedTuple):
@@ -386,6 +393,9 @@ class Plant:
         self._setpoints = np.zeros(4)
         #: What each rotor gives of its command (1: all; a failed motor less: sitl.faults).
         self.rotor_gains: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+        #: The velocity [m/s] (ENU) the ground has taken from the UAV on touching down since
+        #: the IMU last read it (:meth:`take_contact_impulse`).
+        self.contact_dv = np.zeros(3)
         # load (or compile) the kernels' machine code now, not in the first step, and call
         # it without numba's dispatch (the arguments' types never change)
         m = self.model
@@ -474,8 +484,25 @@ class Plant:
         m.p[P_THETA_MIN], m.p[P_THETA_MAX] = lo, hi
         m.winder.set_stops(lo, hi)
 
+    def take_contact_impulse(self, sample_s: float) -> None:
+        """The IMU's sample of ``sample_s`` [s] begins to be read: the velocity the ground
+        took from the UAV since the last (the projection of a touchdown, which the state
+        derivative does not see) becomes the average acceleration over the sample that the
+        accelerometer adds (:func:`specific_force_kernel`), and is forgotten; 0 without."""
+        p = self.model.p
+        dv = self.contact_dv
+        k = 1.0 / sample_s if sample_s > 0.0 else 0.0
+        p[P_CONTACT_X], p[P_CONTACT_Y], p[P_CONTACT_Z] = dv[0] * k, dv[1] * k, dv[2] * k
+        dv[:] = 0.0
+
     def _ground(self, x: np.ndarray) -> None:
-        """Ground contact after a step that ended at or below the gear's height."""
+        """Ground contact after a step that ended at or below the gear's height (the
+        velocity it takes away kept for the accelerometer: :attr:`contact_dv`)."""
+        v_before = x[3:6].copy()
+        self._project_ground(x)
+        self.contact_dv += x[3:6] - v_before
+
+    def _project_ground(self, x: np.ndarray) -> None:
         m = self.model
         x[2] = max(x[2], m.gear)
         if x[5] < 0.0:

@@ -56,6 +56,8 @@ class SensorBatches:
         if self.gps_enabled and (last is None or t_us - last >= self.gps_period_us):
             gps_dt = (self.gps_period_us if last is None else t_us - last) * 1e-6
             self._last_gps_us = t_us
+        # the IMU's sample covers the period before t_us: a touchdown in it is felt
+        self.plant.take_contact_impulse(self.period_us * 1e-6)
         data = None if self.packer is None else self.packer.pack(t_us, gps_dt)
         self.last_gps = gps_dt is not None
         self.last_packed = data is not None

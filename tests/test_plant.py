@@ -367,3 +367,37 @@ def test_deterministic_for_a_seed():
         runs.append(plant.x.copy())
     assert np.array_equal(runs[0], runs[1])
     assert not np.allclose(runs[0][POS], (12.0, 5.0, 20.0), atol=1e-4)  # the wind acted
+
+
+def test_the_accelerometer_feels_the_touchdown():
+    """A fall onto the gear: the ground's projection stops the UAV within a step, which the
+    state derivative does not see. The accelerometer's samples (one a 4 ms period, as the
+    batches read them) must integrate to the velocity the UAV lost, as a real IMU's delta
+    velocity does, or a filter fed them sinks on: the mission's landing left the onboard
+    estimate 23 cm below the gear, its GNSS height then gated out. Truth: the plant's own
+    velocity before and after."""
+    params = _params(tether=FEATHER, vehicle=VehicleParams(drag_coeff_n_s_m=(0, 0, 0),
+                                                                drag_area_m2=(0, 0, 0)))
+    gear = params.vehicle.gear_height_m
+    x = initial_state(PlantModel(params), position_m=(3.0, 4.0, gear + 0.05),
+                      tether_length_m=200.0)
+    plant = Plant(params, state=x)
+    g = params.environment.gravity_m_s2
+    period = 0.004
+    felt = 0.0
+    v0 = float(plant.velocity_m_s[2])
+    for _ in range(60):
+        plant.advance(PlantInputs(), 4)
+        plant.take_contact_impulse(period)
+        felt += (plant.specific_force_flu()[2] - g) * period      # level: body z is up
+    assert plant.position_m[2] == pytest.approx(gear)              # it landed
+    lost = float(plant.velocity_m_s[2]) - v0                       # 0: fell and stopped
+    # a fall of 5 cm: ~0.1 s at -g, then stopped; the samples at the period's end state
+    assert felt == pytest.approx(lost, abs=0.02)
+    # without the impulse the samples say the UAV still falls at ~1 m/s
+    plant2 = Plant(params, state=x)
+    felt2 = 0.0
+    for _ in range(60):
+        plant2.advance(PlantInputs(), 4)
+        felt2 += (plant2.specific_force_flu()[2] - g) * period
+    assert felt2 < -0.8
