@@ -677,7 +677,12 @@ class Winch:
             return None
         fixer, ea = self.fixer, self.exit_angle
         assert fixer is not None and ea is not None
-        return fixer.suspended_end(self.length_m, self.tension_n, ea[0], ea[1],
+        # the tension as the trim low-passes it: a dynamic line's axial waves and snaps
+        # (0-20 N at 20-25 Hz) would otherwise swing the fix, and the floor, which pays
+        # out fast and takes back slowly, would ratchet the line out onto the ground
+        filtered = self.host.lbar.trim_state[2]
+        tension = filtered if math.isfinite(filtered) else self.tension_n
+        return fixer.suspended_end(self.length_m, tension, ea[0], ea[1],
                                    self.host.lbar.weight_n_m())
 
     def tether_fix(self) -> TetherFix | None:

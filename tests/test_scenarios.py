@@ -323,16 +323,14 @@ def test_an_unhealthy_filter_in_flight_lands_the_vehicle():
     assert runner.companion.nav.mode == FlightMode.LAND
     s = res.series
     assert s["pos"][-1, 2] < s["pos"][np.searchsorted(s["t"], t_fs), 2] - 2.0   # descending
-    # the winch follows the position the vehicle reports (L-bar and its tension trim, made
-    # for a metre-class error): the line slack while the unaided estimate is within a metre
-    # of the truth, which it is for the failsafe's first 5 s; it then wanders off by metres
-    # (7 m by 30 s), faster than the trim pays out, and the line, taut, holds the vehicle
+    # the unaided estimate wanders off by metres (7 m by 30 s) while the winch follows the
+    # position the vehicle reports; its slack floor, from what the winder itself measures
+    # (length, tension, exit angles), keeps the line slack all the same
     err = np.linalg.norm(s["est_pos"] - s["pos"], axis=1)
     slack = s["length"] - np.linalg.norm(s["pos"], axis=1)
-    within = err < 1.0            # (NaN before the filter aligned: not within)
     t = s["t"]
-    assert within[(t >= t_fs) & (t <= t_fs + 5.0)].all()
-    assert (slack[within] > 0.0).all()
+    assert np.nanmax(err[t >= t_fs + 10.0]) > 2.0          # it did wander
+    assert (slack > 0.0).all(), slack.min()
 
 
 def test_a_run_that_never_flies_has_metrics():
@@ -343,3 +341,19 @@ def test_a_run_that_never_flies_has_metrics():
     assert m["items_reached"] == []
     assert math.isnan(m["position_max_error_m"]) and math.isnan(m["position_rmse_m"])
     assert m["motor_saturation_fraction"] == 0.0
+
+
+def test_the_slack_floor_keeps_a_dynamic_line_off_the_ground(tmp_path):
+    """The winch's slack floor (docs/control.md §3) reads the winder's own fix from the
+    tension low-passed as its trim does: on the lumped (dynamic) line in the windy circle
+    the load cell sees axial waves and snaps, and a floor fed the raw tension (paying out
+    fast, taking back slowly) ratcheted the line out onto the ground (98 % of the run).
+    Truth: the plant's lumped line, its nodes against the ground."""
+    text = shipped_scenarios()["circle-windy"].read_text()
+    assert "[tether]" not in text
+    (tmp_path / "s.toml").write_text(text + '\n[tether]\nmodel = "lumped"\n')
+    sc = load_scenario(str(tmp_path / "s.toml")).replace(duration_s=40.0)
+    m = run_scenario(sc, None, progress=None).metrics
+    assert m["tether_ground_contact_fraction"] == 0.0
+    assert m["min_tether_slack_m"] > 0.0
+    assert m["position_rmse_m"] < 0.05
