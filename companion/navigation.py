@@ -312,9 +312,10 @@ GOVERNOR_SIGMA_SPEED_M_S = 0.5
 #: Room [m] the governor wants between the vehicle's distance and its limit before it
 #: resumes what it stopped (or that it moves in to, when beyond).
 TETHER_RESUME_ROOM_M = 0.1
-#: The governor's slowing of a leg (its clock): the time [s] its deceleration takes to
-#: build up, added to the vehicle's latency in the speed limit.
-GOVERNOR_SLOW_RAMP_S = 0.25
+#: The governor's slowing of a leg (its clock): the time [s] its deceleration's build-up
+#: loses (a brake at tether_brake_acc_m_s2 reached at TETHER_BRAKE_JERK_M_S3, 3/20 s,
+#: loses half of it; rounded up), added to the vehicle's latency in the speed limit.
+GOVERNOR_SLOW_RAMP_S = 0.1
 #: Largest deceleration [m/s^2] and jerk [m/s^3] the slowing of a leg puts on the
 #: reference, and the acceleration [m/s^2] with which it gives the speed back.
 GOVERNOR_SLOW_ACC_M_S2 = 2.0
