@@ -285,10 +285,15 @@ class _VelocityRef:
         self.acc_max = acc_max
         self.omega = omega
         self.yaw_rate = 0.0
+        #: the tether governor's cap on the commanded speed [m/s] (inf: none)
+        self.cap = math.inf
 
     def step(self, dt: float) -> RefSample:
         w = self.omega
-        jerk = [w * w * (self.cmd[i] - self.vel[i]) - 2.0 * w * self.acc[i] for i in range(3)]
+        c = self.cmd
+        n = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+        k = self.cap / n if n > self.cap else 1.0
+        jerk = [w * w * (c[i] * k - self.vel[i]) - 2.0 * w * self.acc[i] for i in range(3)]
         acc = [self.acc[i] + jerk[i] * dt for i in range(3)]
         n = math.sqrt(sum(a * a for a in acc))
         if n > self.acc_max:
@@ -1135,6 +1140,8 @@ class Navigator:
             if t > self._vel_deadline:
                 self._vel.cmd = _ZERO3
             self._limit_velocity()
+            if self.p.tether_governor:
+                self._slow_velocity()
             return self._vel.step(dt)
         if self._leg is None:
             self._hold()
@@ -1175,6 +1182,39 @@ class Navigator:
             if not self._vel_limited:
                 self._vel_limited = True
                 self._emit(NavEvent.WARNING, "Guided velocity stopped at the tether's reach")
+
+    def _slow_velocity(self) -> None:
+        """The fence-like part of the tether governor for a velocity target: its command's
+        speed is capped (:attr:`_VelocityRef.cap`, [m/s]) at :func:`governed_speed_m_s` of
+        the room the tether leaves ahead of the reference (latency
+        :data:`GOVERNOR_SLOW_RAMP_S`, its brake's build-up) and of the vehicle (latency
+        ``tether_latency_s``), less a leg's slowing margin: the brake's own test with
+        margin (the reference approaches the cap without overshoot), so that a target
+        streamed outward slows to the line's room rather than meeting the brake."""
+        v = self._vel
+        assert v is not None
+        cmd = v.cmd
+        speed = math.sqrt(cmd[0] * cmd[0] + cmd[1] * cmd[1] + cmd[2] * cmd[2])
+        if speed < 1e-3:
+            v.cap = math.inf
+            return
+        u = (cmd[0] / speed, cmd[1] / speed, cmd[2] / speed)
+        p, pe = v.pos, self._pos
+        d = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+        v_out = speed * (u[0] * p[0] + u[1] * p[1] + u[2] * p[2]) / d if d > 0 else speed
+        lim = self.governor_limit_m - ((GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k
+                                        * self.position_sigma_m)
+                                       * min(1.0, max(v_out, 0.0) / GOVERNOR_SIGMA_SPEED_M_S))
+        ab = self.p.tether_brake_acc_m_s2
+        v_max = min(governed_speed_m_s((p[0], p[1], p[2]), u, lim, GOVERNOR_SLOW_RAMP_S, ab),
+                    governed_speed_m_s(pe, u, lim, self.p.tether_latency_s, ab))
+        v.cap = max(v_max, 0.0)
+        if v_max < speed:
+            if not self._slowed:
+                self._slowed = True
+                self._emit(NavEvent.WARNING, "Tether: slowing to the room the line gives")
+        else:
+            self._slowed = False
 
     def _leg_done(self, t: float, leg: _Leg) -> None:
         if leg.tag is LegTag.TAKEOFF:
