@@ -462,6 +462,7 @@ class Navigator:
         # ``_clock_lag`` [s] behind the vehicle's; ``_nominal`` the leg's unscaled sample
         self._s, self._sd = 1.0, 0.0
         self._clock_lag = 0.0
+        self._script_lag = 0.0                       # _clock_lag when a script began [s]
         self._nominal: RefSample | None = None
         self._slowed = False                         # said once per slowing
         #: The estimate's position standard deviation [m] (largest axis; 0 on the
@@ -795,6 +796,8 @@ class Navigator:
         self._leg, self._legs, self._vel = None, [], None
         self._brake, self._paused = None, []
         self._script = source
+        self._script_lag = self._clock_lag
+        self._s, self._sd, self._nominal = 1.0, 0.0, None
         return None
 
     def set_yaw(self, yaw_rad: float) -> Refusal | None:
@@ -916,15 +919,15 @@ class Navigator:
                 return ref
         if not self.p.tether_governor:
             return self._advance_plan(t, dt)
-        leg = self._leg
-        slow = (self._script is None and self._vel is None and leg is not None
-                and not (leg.landing or leg.takeoff))
+        leg, script = self._leg, self._script
+        slow = self._vel is None and (script is not None or (
+            leg is not None and not (leg.landing or leg.takeoff)))
         if slow:
             self._slow_clock(dt)
         elif self._s != 1.0 or self._sd != 0.0:
             self._s, self._sd = 1.0, 0.0
         ref = self._advance_plan(t, dt)
-        if slow and self._leg is leg:
+        if slow and self._leg is leg and self._script is script:
             self._nominal = ref
             ref = self._scaled(ref)
         else:
@@ -1128,7 +1131,8 @@ class Navigator:
 
     def _advance_plan(self, t: float, dt: float) -> RefSample:
         if self._script is not None:
-            ref = self._script(t, self._pos)
+            # on the script's clock: the vehicle's, less what the slowing took since it began
+            ref = self._script(t - (self._clock_lag - self._script_lag), self._pos)
             x, y, z = ref.pos_m
             reach = self.reach_m
             if not (z >= 0.0 and x * x + y * y + z * z <= reach * reach):   # NaN too
