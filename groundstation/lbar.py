@@ -102,7 +102,7 @@ class LBarParams(Params):
     stop_lead_filter_s: float = quantity(
         0.05, "s", "stop lead: time constant of the low-pass on its target", ge=0)
     stop_lead_min_exit_angle_rad: float = quantity(
-        math.radians(2.0), "rad", "stop lead: the lead is bounded so that the catenary at "
+        math.radians(4.0), "rad", "stop lead: the lead is bounded so that the catenary at "
         "the reported position leaves the winder at least this far above the ground (the "
         "line off the ground); where that leaves less room than the stopping distance, "
         "the vehicle's tether governor slows it", ge=0, lt=math.pi / 2)
