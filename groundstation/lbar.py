@@ -73,6 +73,10 @@ class LBarParams(Params):
     weight_min_exit_angle_rad: float = quantity(
         math.radians(2.0), "rad", "line weight estimate: held while the measured exit "
         "angle is below this (the line may lie on the ground)", ge=0, lt=math.pi / 2)
+    weight_max_gain_1_m: float = quantity(
+        0.5, "1/m", "line weight estimate: held where its sensitivity to the tension, "
+        "2 z / (L^2 - z^2), exceeds this (near the vertical the estimate is ill-"
+        "conditioned: a tenth of a newton reads as a fifth of the weight)", gt=0)
     stop_lead_time_s: float = quantity(
         0.6, "s", "stop lead: seconds of the UAV's speed it runs on before braking, when "
         "the drum stops (its reaction, the links' delays; docs/control.md §3)", ge=0)
@@ -330,11 +334,14 @@ def weight_estimate(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, w_n_m: 
     ``trim_s[2]`` (before its first sample: ``tension_n`` [N], the one measured now), the
     measured exit elevation, the paid-out length and the UAV's reported
     height, bounded to [1/r, r] times the model's ``w_n_m`` (r = ``trim_p[6]``), held
-    while the exit angle is below ``trim_p[7]`` or unknown (NaN). Its state is
+    while the exit angle is below ``trim_p[7]`` or unknown (NaN), or where the estimate's
+    sensitivity to the tension 2 z / (L^2 - z^2) exceeds ``trim_p[24]`` [1/m] (near the
+    vertical). Its state is
     ``trim_s[3]`` (NaN: no estimate yet); returns the weight to use [N/m] (the model's
     until there is one)."""
     r, w_hat = trim_p[6], trim_s[3]
-    if elevation_rad >= trim_p[7]:   # (not NaN)
+    den = length_m * length_m - height_m * height_m
+    if elevation_rad >= trim_p[7] and 2.0 * height_m <= trim_p[24] * den:   # (not NaN)
         t = trim_s[2] if trim_s[2] == trim_s[2] else tension_n
         w = line_weight_n_m(t, elevation_rad, length_m, height_m)
         if w == w:
@@ -534,7 +541,8 @@ class LBarEstimator:
                                      params.slack_floor_hold_s,
                                      params.stop_lead_min_speed_m_s,
                                      params.stop_lead_onset_m_s,
-                                     params.stop_lead_release_m_s])
+                                     params.stop_lead_release_m_s,
+                                     params.weight_max_gain_1_m])
         #: (offset [m], its rate [m/s], filtered drum tension [N], line weight [N/m],
         #: stop lead [m], its rate [m/s], its filtered target [m], slack floor [m], its
         #: rate [m/s], its filtered needed length [m], the time without a fix [s], the
