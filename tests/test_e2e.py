@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from netns_util import netns_available, run_session
 
-from groundstation.lbar import LBarEstimator, LBarParams, lead_room_m
+from groundstation.lbar import LBarEstimator, LBarParams
 from tuavdefs.params import SystemParams
 
 EARTH_R_M = 6378137.0
@@ -71,20 +71,12 @@ def test_the_paid_out_length_follows_lbar_and_the_tether_is_never_taut(e2e):
     assert np.min(length - dist) > 0.02
     flying = (armed == 1) & (pos[:, 2] > 0.5)
     assert flying.sum() > 1000
-    lbar = _lbar(pos[flying])
-    err = length[flying] - lbar
+    err = length[flying] - _lbar(pos[flying])
     # the ground station follows L-bar of the position the companion reports, its RTK-grade
-    # estimate (about 1-2 cm off the truth), carried forward to the winch's sample time,
-    # plus the stop lead while the UAV moves (docs/control.md §3): never shorter than L-bar
-    # of the truth by more than the estimate's error ...
-    short = np.minimum(err, 0.0)
-    assert np.sqrt(np.mean(short**2)) < 0.03
-    assert short.min() > -0.1
-    # ... and longer only by the lead, which the ground bounds (the line off the ground)
-    lp = LBarParams()
-    room = np.array([lead_room_m(*q, math.tan(lp.stop_lead_min_exit_angle_rad),
-                                 lp.min_slack_m) for q in pos[flying]])
-    assert np.all(length[flying] < np.maximum(room, lbar) + 0.1)
+    # estimate (about 1-2 cm off the truth), carried forward to the winch's sample time;
+    # measured against L-bar of the truth: 1.6 cm RMSE (1.5 mm when it flew on the truth)
+    assert np.sqrt(np.mean(err**2)) < 0.03
+    assert np.max(np.abs(err)) < 0.1
     assert pos[:, 2].max() > 11.5                       # it really flew the mission
 
 
