@@ -209,13 +209,12 @@ def bench_plant_step(quick: bool) -> list[Row]:
 
 #: The offline loop's shares: (label, (file suffix, function)), cumulative time of each.
 OFFLINE_SHARES = {
-    "plant physics (Plant.advance)": ("sitl/plant.py", "advance"),
+    "plant physics (Plant.advance_held)": ("sitl/plant.py", "advance_held"),
     "flight controller (FlightController.update)": ("companion/flight_controller.py",
                                                     "update"),
     "winder host (WinderHost.update)": ("groundstation/winder_host.py", "update"),
     "reference (trajectory)": ("tuav_sitl/offline.py", "sample"),
     "truth read-out (Plant.tether_forces)": ("sitl/plant.py", "tether_forces"),
-    "log row": ("tuav_sitl/offline.py", "add"),
 }
 
 
@@ -280,7 +279,10 @@ def bench_estimator(quick: bool) -> list[Row]:
 
 
 def bench_offline(quick: bool) -> list[Row]:
-    """``tuav-sitl run circle``: simulated seconds per wall second, and where time goes."""
+    """``tuav-sitl run circle`` (on the truth), ``circle-rtk`` (on the onboard EKF), each
+    also on the lumped tether: simulated seconds per wall second and per second of the
+    loop's CPU time (the goals are judged on the latter: what an idle machine's wall clock
+    would show, whatever else the machine runs), and where the truth loop's time goes."""
     import cProfile
     import pstats
 
@@ -289,21 +291,26 @@ def bench_offline(quick: bool) -> list[Row]:
 
     duration = 1.0 if quick else 20.0
     sc = load_scenario("circle").replace(duration_s=duration, metrics_after_s=0.0)
+    rtk = load_scenario("circle-rtk").replace(duration_s=duration, metrics_after_s=0.0)
     rows = []
-    for label, scenario in (("", sc), (", lumped tether", sc.replace(
-            tether=sc.tether.replace(model="lumped")))):
+    for label, scenario in (("circle", sc),
+                            ("circle, lumped tether", sc.replace(
+                                tether=sc.tether.replace(model="lumped"))),
+                            ("circle-rtk, EKF", rtk),
+                            ("circle-rtk, EKF, lumped tether", rtk.replace(
+                                tether=rtk.tether.replace(model="lumped")))):
         runner = OfflineRunner(scenario)
         c0 = time.thread_time()
         t0 = time.perf_counter()
         runner.run()
         wall = time.perf_counter() - t0
         cpu = time.thread_time() - c0
-        rtf = duration / wall
-        rows.append(Row(f"offline closed loop (circle{label})", rtf, "sim s / wall s",
-                        note=f"{duration:.0f} s simulated in {wall:.2f} s ({duration / cpu:.0f}x "
+        rtf, per_cpu = duration / wall, duration / cpu
+        rows.append(Row(f"offline closed loop ({label})", rtf, "sim s / wall s",
+                        note=f"{duration:.0f} s simulated in {wall:.2f} s ({per_cpu:.0f}x "
                              "per second of the loop's CPU time); physics 1 kHz, control "
                              "250 Hz, winder 100 Hz",
-                        goal=f">= 100x: {'met' if rtf >= 100.0 else 'NOT met'}"))
+                        goal=f">= 100x per CPU second: {'met' if per_cpu >= 100.0 else 'NOT met'}"))
     prof = cProfile.Profile()
     runner = OfflineRunner(sc.replace(duration_s=min(duration, 5.0)))
     prof.enable()

@@ -110,7 +110,9 @@ class EstimatorParams(Params):
     accel_bias_walk_m_s2_sqrt_s: float = quantity(
         3.0e-3, "m/s^2/sqrt(s)", "accelerometer bias random walk", ge=0)
     baro_offset_walk_m_sqrt_s: float = quantity(
-        0.03, "m/sqrt(s)", "random walk of the barometer's height offset", ge=0)
+        0.07, "m/sqrt(s)", "random walk of the barometer's height offset (an MS5611-class "
+        "sensor's in-flight thermal and airflow drift, ~0.1 hPa = 0.8 m over ~300 s: "
+        "0.8 sqrt(2/300); docs/estimation.md §10)", ge=0)
     gyro_bias_sigma_rad_s: float = quantity(
         0.01, "rad/s", "prior standard deviation of each gyro bias", gt=0)
     accel_bias_sigma_m_s2: float = quantity(
@@ -1123,8 +1125,10 @@ class NavFilter:
         takes it."""
         px, py, pz, vx, vy, vz, qw, qx, qy, qz = self._x[:10].tolist()
         r0, r1, r2, r3, r4, r5 = self._out_lag.tolist()
-        return VehicleState((px - r0, py - r1, pz - r2), (vx - r3, vy - r4, vz - r5),
-                            (qw, qx, qy, qz), tuple(self._rates[0:3].tolist()))
+        # (built as the tuple it is, without its Python-level constructor: every period)
+        return tuple.__new__(VehicleState, ((px - r0, py - r1, pz - r2),
+                                            (vx - r3, vy - r4, vz - r5), (qw, qx, qy, qz),
+                                            tuple(self._rates[0:3].tolist())))
 
     # ----- inputs
     def predict(self, t_s: float, gyro_flu_rad_s: Sequence[float],

@@ -28,8 +28,9 @@ from tuavdefs.jit import entry_point, njit
 from tuavdefs.params import TetherParams, VehicleParams
 
 _ZERO3 = (0.0, 0.0, 0.0)
-_position_output = PositionOutput._make
-_attitude_output = AttitudeOutput._make
+#: Records built as the tuples they are (tuple.__new__), without their Python-level
+#: constructors: the step's results, every control period
+_new = tuple.__new__
 
 
 class VehicleState(NamedTuple):
@@ -106,8 +107,8 @@ class FlightController:
         """One control step at time ``t_s`` [s]."""
         commands, saturated, p, a, tether_force = self._step(*self._arguments(
             t_s, state, ref, armed))
-        return FlightStep(commands, saturated, _position_output(p), _attitude_output(a),
-                          tether_force)
+        return _new(FlightStep, (commands, saturated, _new(PositionOutput, p),
+                                 _new(AttitudeOutput, a), tether_force))
 
     def commands(self, t_s: float, state: VehicleState, ref: RefSample,
                  armed: bool = True) -> tuple[float, float, float, float]:

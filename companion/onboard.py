@@ -43,6 +43,8 @@ from tuavdefs.frames import ned_to_enu, quat_rotate
 from tuavdefs.params import SystemParams
 
 _STOPPED = (0.0, 0.0, 0.0, 0.0)
+#: A record built as the tuple it is (tuple.__new__), without its Python-level constructor
+_new = tuple.__new__
 #: An unhealthy navigation filter for this long in flight triggers the EKF failsafe [s]
 #: (ArduCopter checks its EKF's variances at 10 Hz and acts after about 1 s).
 EKF_FAILSAFE_S = 1.0
@@ -382,4 +384,4 @@ class Companion:
             self._was_flying = False
             cmds = _STOPPED
         self.steps += 1
-        return OnboardOutputs(cmds, motors, motors is not MotorState.OFF, state, ref, fs)
+        return _new(OnboardOutputs, (cmds, motors, motors is not MotorState.OFF, state, ref, fs))

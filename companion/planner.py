@@ -92,6 +92,13 @@ def _horner3(cols: list[tuple[float, float, float]], x: float) -> tuple[float, f
     return (a, b, c)
 
 
+def _lead_zeros(rev_coefs: list[float], n: int) -> list[float]:
+    """``rev_coefs`` (highest power first) led by zeros to ``n`` coefficients: the same
+    polynomial for :func:`_horner` (its steps through the zeros leave the sum at +0.0 for
+    any finite ``x``, and a non-finite ``x`` gives NaN either way)."""
+    return [0.0] * (n - len(rev_coefs)) + list(rev_coefs)
+
+
 def smoothstep5(x: float) -> float:
     """The quintic smoothstep s(x) = 10x^3 - 15x^4 + 6x^5 (x normalised time, unitless)."""
     return x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
@@ -108,7 +115,7 @@ class Piecewise:
     ``final_pos`` (default: where the last piece ends) after its end ``end`` [s]."""
 
     __slots__ = ("t0", "end", "ndim", "_starts", "_durs", "_p", "_v", "_a", "_j", "_cols3",
-                 "_first", "_final")
+                 "_cols1", "_first", "_final")
 
     def __init__(self, t0: float, pieces: list[Piece], final_pos: tuple[float, ...] | None,
                  ndim: int) -> None:
@@ -136,6 +143,12 @@ class Piecewise:
         self._cols3 = [tuple([list(zip(*store[i], strict=True)) for store in
                               (self._p, self._v, self._a, self._j)])
                        for i in range(len(self._starts))] if ndim == 3 else []
+        # in one dimension, the four derivatives' coefficients by power (the shorter ones
+        # led by zeros, whose steps leave the sum at +0.0, as it starts) for one loop
+        self._cols1 = [list(zip(*(_lead_zeros(store[i][0], len(self._p[i][0]))
+                                  for store in (self._p, self._v, self._a, self._j)),
+                                strict=True))
+                       for i in range(len(self._starts))] if ndim == 1 else []
         self.end = t
         zeros = (0.0,) * ndim
         if final_pos is None:
@@ -144,9 +157,14 @@ class Piecewise:
         self._first = self._eval_piece(0, 0.0) if pieces else self._final
 
     def _eval_piece(self, i: int, tau: float) -> tuple[tuple[float, ...], ...]:
-        if self.ndim == 1:  # the common scalar case (arc length), without the loops
-            return ((_horner(self._p[i][0], tau),), (_horner(self._v[i][0], tau),),
-                    (_horner(self._a[i][0], tau),), (_horner(self._j[i][0], tau),))
+        if self.ndim == 1:  # the common scalar case (arc length): _horner's steps, at once
+            p = v = a = j = 0.0
+            for cp, cv, ca, cj in self._cols1[i]:
+                p = p * tau + cp
+                v = v * tau + cv
+                a = a * tau + ca
+                j = j * tau + cj
+            return ((p,), (v,), (a,), (j,))
         if self.ndim == 3:  # positions: the three axes together
             p, v, a, j = self._cols3[i]
             return (_horner3(p, tau), _horner3(v, tau), _horner3(a, tau), _horner3(j, tau))

@@ -78,6 +78,11 @@ class RefSample(NamedTuple):
     yaw_rate_rad_s: float
 
 
+#: A record built as the tuple it is (tuple.__new__), without its Python-level constructor
+#: (the samplers run every control period).
+_new = tuple.__new__
+
+
 # --- argument checks ------------------------------------------------------------------------
 
 def vec(v: Iterable[float], name: str, n: int = 3) -> tuple[float, ...]:
@@ -229,7 +234,7 @@ class Transition(Trajectory):
     def _sample(self, t_s: float) -> RefSample:
         p, v, a, j = self._pos.eval(t_s)
         y, yr, _, _ = self._yaw.eval(t_s)
-        return RefSample(p, v, a, j, wrap_pi(y[0]), yr[0])  # type: ignore[arg-type]
+        return _new(RefSample, (p, v, a, j, wrap_pi(y[0]), yr[0]))
 
     def yaw_acc_rad_s2(self, t_s: float) -> float:
         return self._yaw.eval(t_s)[2][0]
@@ -303,7 +308,7 @@ class Line(Trajectory):
 
     def sample(self, t_s: float) -> RefSample:
         p, v, a, j = self._pos.eval(t_s)
-        return RefSample(p, v, a, j, self.final_yaw_rad, 0.0)  # type: ignore[arg-type]
+        return _new(RefSample, (p, v, a, j, self.final_yaw_rad, 0.0))
 
 
 class Circle(Trajectory):
@@ -450,11 +455,11 @@ class Circle(Trajectory):
             yaw, yaw_rate = wrap_pi(th + self._sgn * 0.5 * math.pi), w
         else:
             yaw, yaw_rate = self._yaw, 0.0
-        return RefSample((cx + r * c, cy + r * sn, self.altitude_m),
-                         (-r * w * sn, r * w * c, 0.0),
-                         (-r * al * sn - rw2 * c, r * al * c - rw2 * sn, 0.0),
-                         (-tj * sn - rj * c, tj * c - rj * sn, 0.0),
-                         yaw, yaw_rate)
+        return _new(RefSample, ((cx + r * c, cy + r * sn, self.altitude_m),
+                                (-r * w * sn, r * w * c, 0.0),
+                                (-r * al * sn - rw2 * c, r * al * c - rw2 * sn, 0.0),
+                                (-tj * sn - rj * c, tj * c - rj * sn, 0.0),
+                                yaw, yaw_rate))
 
     def yaw_acc_rad_s2(self, t_s: float) -> float:
         if not self.face_travel:

@@ -46,6 +46,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from tuavdefs.component_link import TETHER_FIX_RATE_HZ
+from tuavdefs.jit import njit
 from tuavdefs.paramspec import Params, quantity
 
 Vec3 = tuple[float, float, float]
@@ -81,9 +82,25 @@ class TetherFixParams(Params):
         0.1, "1", "the winder's estimate of the weight per metre is used only for its part "
         "beyond this fraction off the belief (within it the belief, which is exact when "
         "the line is as designed, holds)", ge=0)
+    weight_height_sigma_m: float = quantity(
+        0.3, "m", "the error of the vehicle's reported height that the winder's weight "
+        "estimate inherits (its bias: the estimate's low-pass takes out the noise); the "
+        "band widens to the weight error this makes (weight_spread)", ge=0)
     design_wind_m_s: float = quantity(
         3.0, "m/s", "the wind on the line the covariance allows for (its drag bends the "
-        "line, which the windless model ignores)", ge=0)
+        "line, which the windless model ignores), as blowing at wind_reference_height_m",
+        ge=0)
+    wind_reference_height_m: float = quantity(
+        10.0, "m", "the height at which design_wind_m_s blows (the meteorological 10 m)",
+        gt=0)
+    wind_shear_exponent: float = quantity(
+        1.0 / 7.0, "1", "the design wind's power-law profile, U(z) = U_ref (z/z_ref)^alpha "
+        "(1/7: open terrain; 0: uniform)", ge=0, le=1)
+    wind_min_height_m: float = quantity(
+        1.0, "m", "heights below this take the profile's wind at this height", gt=0)
+    wind_steps: int = quantity(
+        32, "1", "steps of the line's integration under the wind's drag (midpoint rule)",
+        ge=4, le=1000)
     air_density_kg_m3: float = quantity(1.225, "kg/m^3", "air density", gt=0)
     drag_coeff: float = quantity(1.2, "1", "the line's drag coefficient normal to it, on its "
                                  "diameter", ge=0)
@@ -150,6 +167,75 @@ def line_end(length_m: float, t0_n: float, azimuth_rad: float, elevation_rad: fl
             ehz * across + uz * along_u)
 
 
+@njit
+def _line_load(z: float, ax: float, ay: float, az: float, tn: float, ux: float, uy: float,
+               drag: float, zr: float, shear: float, zmin: float, w: float
+               ) -> tuple[float, float, float]:
+    """The load per metre [N/m] on the line at height ``z`` [m] with tangent (``ax``,
+    ``ay``, ``az``)/``tn``: its weight ``w`` [N/m] and the drag ``drag |U_n| U_n`` of the
+    wind (``ux``, ``uy``) [m/s] at ``zr`` [m], sheared as ``(max(z, zmin)/zr)^shear``,
+    ``U_n`` its part normal to the line (:func:`line_end_in_wind`)."""
+    k = (max(z, zmin) / zr) ** shear
+    wx, wy = ux * k, uy * k
+    along = (wx * ax + wy * ay) / (tn * tn)
+    nx, ny, nz = wx - along * ax, wy - along * ay, -along * az
+    c = drag * math.sqrt(nx * nx + ny * ny + nz * nz)
+    return (c * nx, c * ny, c * nz - w)
+
+
+@njit
+def _line_end_in_wind(length_m: float, t0_n: float, azimuth_rad: float,
+                      elevation_rad: float, w_n_m: float, ea_n: float, ux: float,
+                      uy: float, drag_n_s2_m3: float, reference_height_m: float,
+                      shear_exponent: float, min_height_m: float, steps: int
+                      ) -> tuple[float, float, float]:
+    """:func:`line_end_in_wind` in scalars, compiled (each fix integrates the line five
+    times for its covariance)."""
+    ce = math.cos(elevation_rad)
+    t0 = max(t0_n, 1e-9)
+    tx = t0 * ce * math.cos(azimuth_rad)
+    ty = t0 * ce * math.sin(azimuth_rad)
+    tz = t0 * math.sin(elevation_rad)
+    stretch = 1.0 / ea_n if ea_n > 0.0 and math.isfinite(ea_n) else 0.0
+    drag = drag_n_s2_m3 if (ux != 0.0 or uy != 0.0) and drag_n_s2_m3 > 0.0 else 0.0
+    px = py = pz = 0.0
+    ds = max(length_m, 0.0) / steps
+    for _ in range(steps):
+        tn = math.sqrt(tx * tx + ty * ty + tz * tz)
+        fx, fy, fz = _line_load(pz, tx, ty, tz, tn, ux, uy, drag, reference_height_m,
+                                shear_exponent, min_height_m, w_n_m)
+        h = 0.5 * ds * (1.0 / tn + stretch)
+        mx, my, mz = tx - 0.5 * ds * fx, ty - 0.5 * ds * fy, tz - 0.5 * ds * fz
+        mn = math.sqrt(mx * mx + my * my + mz * mz)
+        if mn <= 1e-12:
+            break
+        gx, gy, gz = _line_load(pz + h * tz, mx, my, mz, mn, ux, uy, drag,
+                                reference_height_m, shear_exponent, min_height_m, w_n_m)
+        k = ds * (1.0 / mn + stretch)
+        px, py, pz = px + k * mx, py + k * my, pz + k * mz
+        tx, ty, tz = tx - ds * gx, ty - ds * gy, tz - ds * gz
+    return (px, py, pz)
+
+
+def line_end_in_wind(length_m: float, t0_n: float, azimuth_rad: float,
+                     elevation_rad: float, w_n_m: float, ea_n: float,
+                     wind_m_s: tuple[float, float], drag_n_s2_m3: float,
+                     reference_height_m: float, shear_exponent: float,
+                     min_height_m: float, steps: int) -> Vec3:
+    """The far end [m] of the elastic line of :func:`line_end` under its weight ``w_n_m``
+    [N/m] and the drag of a horizontal wind ``wind_m_s`` [m/s] (as blowing at
+    ``reference_height_m`` [m]; at height ``z`` it is ``(max(z, min_height_m) /
+    reference_height_m)^shear_exponent`` times that), integrated from the exit over
+    ``steps`` midpoint steps. The drag per metre is ``drag_n_s2_m3 |U_n| U_n``
+    (``drag_n_s2_m3`` = rho C_d d / 2 [N s^2/m^3]) with ``U_n`` the wind's part normal to
+    the line (the cross-flow principle: a cylinder feels only the wind across it)."""
+    return _line_end_in_wind(float(length_m), float(t0_n), float(azimuth_rad),
+                             float(elevation_rad), float(w_n_m), float(ea_n),
+                             float(wind_m_s[0]), float(wind_m_s[1]), float(drag_n_s2_m3),
+                             float(reference_height_m), float(shear_exponent),
+                             float(min_height_m), int(steps))
+
+
 def _outer(a: Vec3, b: Vec3, k: float, acc: list[list[float]]) -> None:
     for i in range(3):
         for j in range(3):
@@ -170,9 +256,10 @@ class TetherFixer:
         self.p = params
         self.w = float(w_n_m)
         self.ea = float(ea_n)
+        #: the line's drag per metre per (m/s)^2 of wind across it [N s^2/m^3]
+        self.drag = 0.5 * params.air_density_kg_m3 * params.drag_coeff * diameter_m
         #: the design wind's drag per metre of line [N/m]
-        self.q_wind = (0.5 * params.air_density_kg_m3 * params.drag_coeff * diameter_m
-                       * params.design_wind_m_s ** 2)
+        self.q_wind = self.drag * params.design_wind_m_s ** 2
 
     def _end(self, L: float, T: float, az: float, el: float, w: float,
              wind: tuple[float, float] = (0.0, 0.0), on_ground: bool = False,
@@ -195,19 +282,39 @@ class TetherFixer:
         k = lg * (1.0 + T / self.ea if self.ea > 0 else 1.0)
         return (c * k + top[0], s * k + top[1], top[2])
 
-    def weight(self, w_n_m: float | None = None) -> tuple[float, float]:
+    def weight_spread(self, length_m: float, tension_n: float, height_m: float | None
+                      ) -> float:
+        """How far [N/m] the winder's weight estimate may be off for the error
+        ``weight_height_sigma_m`` of the reported height ``height_m`` [m] it is computed
+        with: the estimate is ``w = 2 T (z - L sin(el)) / (L^2 - z^2)`` (the exit tension
+        ``tension_n`` [N], the paid-out ``length_m`` [m]; ``groundstation.lbar``), so
+        ``dw/dz = 2 (T + w z) / (L^2 - z^2)``, which grows without bound as the line
+        straightens (z -> L: a steep, taut line says little of its weight). 0 without a
+        height; infinite for a line no longer than the height."""
+        if height_m is None or not math.isfinite(height_m) or height_m <= 0.0:
+            return 0.0
+        den = length_m * length_m - height_m * height_m
+        if den <= 0.0:
+            return math.inf
+        return (2.0 * (max(tension_n, 0.0) + self.w * height_m) / den
+                * self.p.weight_height_sigma_m)
+
+    def weight(self, w_n_m: float | None = None, spread_n_m: float = 0.0
+               ) -> tuple[float, float]:
         """(the weight per metre the fix uses [N/m], its standard deviation [N/m]) given
-        the winder's estimate ``w_n_m`` [N/m] (None or not positive: none). The fix uses
-        the belief moved to within ``weight_band_fraction`` of the estimate (the estimate
-        wanders on a line as designed, which the belief then fixes exactly); the weight
-        used is thus off the estimate by a known ``w - w_hat``, and the estimate is off
-        the truth by about ``weight_uncertainty_fraction``: the standard deviation is
+        the winder's estimate ``w_n_m`` [N/m] (None or not positive: none) and how far it
+        may be off by its geometry, ``spread_n_m`` [N/m] (:meth:`weight_spread`). The fix
+        uses the belief moved to within a band of the estimate, the larger of
+        ``weight_band_fraction`` of the belief (the estimate wanders on a line as designed,
+        which the belief then fixes exactly) and ``spread_n_m``; the weight used is thus
+        off the estimate by a known ``w - w_hat``, and the estimate is off the truth by
+        about ``weight_uncertainty_fraction``: the standard deviation is
         ``hypot(fraction w, w - w_hat)`` (docs/estimation.md §10)."""
         w = self.w
         frac = self.p.weight_uncertainty_fraction
         if w_n_m is None or not w_n_m > 0.0 or not math.isfinite(w_n_m):
             return w, frac * w
-        band = self.p.weight_band_fraction * w
+        band = max(self.p.weight_band_fraction * w, spread_n_m)
         off = float(w_n_m) - w
         w += math.copysign(max(abs(off) - band, 0.0), off)
         # the central differences take w -+ sigma: kept to half the weight
@@ -233,14 +340,15 @@ class TetherFixer:
                  w_n_m: float | None = None) -> tuple[Vec3, Cov3, bool]:
         """(position [m], covariance [m^2], on the ground) of the line's far end;
         ``reported_m`` [m] the UAV's position as the vehicle reports it (None: unknown),
-        used only when the line lies on the ground; ``w_n_m`` [N/m] the line's weight per
+        used when the line lies on the ground, and its height for how far the weight
+        estimate may be off (:meth:`weight_spread`); ``w_n_m`` [N/m] the line's weight per
         metre as estimated (the winder's, docs/control.md §3), used beyond
         ``weight_band_fraction`` off the belief (None: the belief)."""
-        w, sigma_w = self.weight(w_n_m)
         uav_height_m = reported_m[2] if reported_m is not None else None
         p = self.p
         L = max(length_m, 0.0)
         T = max(tension_n, 1e-3)
+        w, sigma_w = self.weight(w_n_m, self.weight_spread(L, T, uav_height_m))
         az, el = azimuth_rad, elevation_rad
         ground = el < p.ground_elevation_rad
         if ground:
@@ -294,12 +402,24 @@ class TetherFixer:
             hi, lo = at(**{kw: sigma}), at(**{kw: -sigma})
             d = (0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1]), 0.5 * (hi[2] - lo[2]))
             _outer(d, d, 1.0, acc)
-        if self.q_wind > 0.0:
+        if self.q_wind > 0.0 and ground:
             base = at()
             c, s = math.cos(az), math.sin(az)
             for wx, wy in ((c, s), (-s, c)):     # along the line's azimuth, and across
                 d = _sub(at(wind=(self.q_wind * wx, self.q_wind * wy)), base)
                 _outer(d, d, 0.5, acc)
+        elif self.q_wind > 0.0:
+            # the design wind from the four directions along and across the line's azimuth,
+            # its drag normal to the line and sheared with height (module docstring)
+            u = p.design_wind_m_s
+            c, s = math.cos(az), math.sin(az)
+            args = (L, T, az, el, w, self.ea)
+            shape = (self.drag, p.wind_reference_height_m, p.wind_shear_exponent,
+                     p.wind_min_height_m, p.wind_steps)
+            base = line_end_in_wind(*args, (0.0, 0.0), *shape)
+            for wx, wy in ((c, s), (-c, -s), (-s, c), (s, -c)):
+                d = _sub(line_end_in_wind(*args, (u * wx, u * wy), *shape), base)
+                _outer(d, d, 0.25, acc)
         floor = p.min_sigma_m ** 2
         for i in range(3):
             acc[i][i] += floor

@@ -78,6 +78,7 @@ from typing import NamedTuple
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from groundstation.lbar import floor_length_m
 from groundstation.tether_fix import TetherFix, TetherFixer, TetherFixParams
 from groundstation.winder_control import WinderCommand
 from groundstation.winder_host import WinderHost
@@ -668,6 +669,21 @@ class Winch:
             gap_ms -= 0x10000
         return abs(gap_ms) * 1e-3 <= fixer.p.max_age_s
 
+    def _floor_need_m(self) -> float:
+        """The least length [m] the slack floor asks at the winder's own fix now
+        (:func:`groundstation.lbar.floor_length_m`; -inf without a fix or with the floor
+        off): a rejoin of L-bar from a longer line stops there, since L-bar comes from the
+        reported position (an in-air start 0.9 m low on its first fixes wound a 36 m line
+        in taut before L-bar's law, which has the floor, took over)."""
+        lb = self.host.lbar
+        fix = self.measured_position_m()
+        if fix is None or not lb.p.slack_floor_m > 0.0:
+            return -math.inf
+        need = floor_length_m(fix[0], fix[1], fix[2],
+                              lb.p.slack_floor_tension_ratio * lb.a_target,
+                              lb.p.slack_floor_m)
+        return need if math.isfinite(need) else -math.inf
+
     def measured_position_m(self) -> tuple[float, float, float] | None:
         """The UAV's position [m] as the winder itself measures it (its tether fix's mean
         from length, tension and exit angles, the line taken as hanging from the exit),
@@ -848,7 +864,7 @@ class Winch:
             if uav is not None and math.isfinite(self._rejoin_m):
                 # rejoining L-bar from a longer line: wound in at rejoin_rate_m_s at most
                 # a trapezoid: speeding up and slowing down at REJOIN_ACC_M_S2
-                lbar_m = self.host.lbar.length(uav[0])[0]
+                lbar_m = max(self.host.lbar.length(uav[0])[0], self._floor_need_m())
                 dt = self.dt_s
                 left = self._rejoin_m - lbar_m
                 rate = min(self.p.rejoin_rate_m_s, self._rejoin_rate + REJOIN_ACC_M_S2 * dt,

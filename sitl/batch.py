@@ -395,6 +395,11 @@ class BatchPacker:
         self._scratch = (self._layouts, self._msgs, self._fv, self._iv, self._new_bias,
                          self._new_gm, np.zeros(6), self._f32, self._u32)
         m = plant.model
+        # HIL_SENSOR's payload: time_usec, 13 floats, fields_updated, id (sensor_values)
+        if _layout(_MESSAGES[_SENSOR]) != [16, _UNSIGNED * 16 + 8,
+                                           *[_FLOAT * 16 + 4] * 13, _UNSIGNED * 16 + 4,
+                                           _UNSIGNED * 16 + 1]:
+            raise RuntimeError("HIL_SENSOR's layout is not the one sensor_values reads")
         self._kernel = entry_point(batch_kernel, self._out, 0, False, 0.0, 0.0, 0, 0, 0,
                                    plant.x, m.p, 0.0, 0.0, 0.0, m.warm, consts, *self._state,
                                    *self._scratch)
@@ -422,6 +427,15 @@ class BatchPacker:
                     channel.refill()
         sl.count_sent(mav, 3 if gps else 2, n)
         return self._view[:n]
+
+
+    def sensor_values(self) -> tuple:
+        """HIL_SENSOR's field values in wire order as the last :meth:`pack` that returned a
+        batch wrote them (its floats as the float32 the frame carries): what unpacking
+        that frame's payload gives, without the frame."""
+        fv = self._fv[_SENSOR, 1:14].astype(np.float32).tolist()
+        iv = self._iv[_SENSOR]
+        return (int(iv[0]), *fv, int(iv[14]), int(iv[15]))
 
 
 def batch_packer(plant: Plant, sensors: SensorSuite, home: tuple[float, float, float],

@@ -32,6 +32,7 @@ array (``sitl.kernel``).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -58,9 +59,12 @@ def rk4_gain(z: complex | np.ndarray) -> np.ndarray:
     return np.abs(1.0 + z + z * z / 2.0 + z ** 3 / 6.0 + z ** 4 / 24.0)
 
 
+@functools.lru_cache(maxsize=64)
 def stable_step_s(rho_kg_m: float, ea_n: float, ba_n_s: float, segment_m: float,
                   kg: float, cg: float, mu: float, g: float, v_slip: float) -> float:
-    """The largest RK4 step [s] stable for the line's fastest node.
+    """The largest RK4 step [s] stable for the line's fastest node (a pure function of its
+    arguments, remembered: every plant built, the catenary's too, packs it, and a sweep
+    builds hundreds with the same line).
 
     That node sits between a nominal segment and the shortest exit segment
     (``MERGE l_s``). Its stiffness rate bounds every axial mode (Gershgorin):

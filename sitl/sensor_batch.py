@@ -37,6 +37,10 @@ class SensorBatches:
         self._last_gps_us: int | None = None
         #: Whether the receiver delivers fixes (False: a GNSS-loss fault, sitl.faults).
         self.gps_enabled = True
+        #: Whether the last batch was the packer's (its field values then in
+        #: :meth:`BatchPacker.sensor_values`) and whether it held a HIL_GPS.
+        self.last_packed = False
+        self.last_gps = False
 
     def reset(self) -> None:
         """A new session: the GPS schedule starts again and the recorded truth is
@@ -53,6 +57,8 @@ class SensorBatches:
             gps_dt = (self.gps_period_us if last is None else t_us - last) * 1e-6
             self._last_gps_us = t_us
         data = None if self.packer is None else self.packer.pack(t_us, gps_dt)
+        self.last_gps = gps_dt is not None
+        self.last_packed = data is not None
         return data if data is not None else self.interpreted(t_us, gps_dt)
 
     def interpreted(self, t_us: int, gps_dt: float | None) -> bytes:

@@ -29,6 +29,8 @@ from tuavdefs.params import TetherParams
 __all__ = ["Tether", "TetherForces", "tether_forces_kernel"]
 
 Vec3 = tuple[float, float, float]
+#: A record built as the tuple it is (tuple.__new__), without its Python-level constructor
+_new = tuple.__new__
 
 
 class TetherForces(NamedTuple):
@@ -124,11 +126,14 @@ class Tether:
         (computed from this tether's warm start), which becomes the next warm start."""
         (ux_n, uy_n, uz_n, ex_n, ey_n, ez_n, drum_n, top_n, H, V, HA, VA, lbot, reg, it,
          low, warm, _) = r
-        info = CatenaryInfo(H, V, HA, VA, lbot, REGIMES[reg], it, low, warm)
+        # (the records built as the tuples they are, without their Python-level
+        # constructors: this runs for every read-out)
+        info = _new(CatenaryInfo, (H, V, HA, VA, lbot, REGIMES[reg], it, low, warm))
         self._hf0 = H
         self._vf0 = V
         self.last_info = info
-        return TetherForces((ux_n, uy_n, uz_n), (ex_n, ey_n, ez_n), drum_n, top_n, info)
+        return _new(TetherForces, ((ux_n, uy_n, uz_n), (ex_n, ey_n, ez_n), drum_n, top_n,
+                                   info))
 
     def shape(self, x_m: float, y_m: float, z_m: float, length_m: float,
               n_points: int = 50) -> np.ndarray:

@@ -513,3 +513,53 @@ def test_the_answers_usual_case_is_the_general_decoding():
         want = (int(values[0]), *sl.rotor_commands_from_controls(values[2:6], values[18]),
                 sl.lockstep_flag(values[1]))
         assert repr(got) == repr(want) and got[0] == values[0]
+
+
+@pytest.mark.parametrize("gnss", ["rtk", "gnss"])
+def test_the_offline_sensor_feed_is_the_companions_decoding(gnss: str):
+    """The offline runner's sensor feed (tuav_sitl/sensor_feed.py: the frames' payloads
+    unpacked without their checksums, HIL_STATE_QUATERNION left undecoded) hands the
+    companion the same IMU sample and GNSS fix, to the bit, as its simulator-link decoder
+    reading the same batch's bytes; through a GNSS outage too."""
+    from companion.simlink_client import BatchDecoder
+    from tuav_sitl.sensor_feed import SensorFeed
+
+    params = _windy()
+    x, u = hover_trim(params, (12.0, 5.0, 20.0), 24.5)
+    plant = Plant(params, state=x)
+    home = sl.HOME_DEFAULT
+    fast = SensorFeed(plant, SensorNoise.preset(gnss, 7), home, 0.004)
+    slow = SensorFeed(plant, SensorNoise.preset(gnss, 7), home, 0.004)
+    decoder = BatchDecoder(home)
+    fixes = 0
+    for k in range(600):
+        t = k * 0.004
+        fast.batches.gps_enabled = slow.batches.gps_enabled = not 200 <= k < 300
+        got = fast.read(t)
+        (want,) = decoder.feed(bytes(slow.batches.batch(round(t * 1e6))))
+        assert got.time_usec == want.time_usec
+        assert got.imu == want.imu
+        assert got.gps == want.gps and got.gps_updated == want.gps_updated
+        fixes += got.gps_updated
+        plant.advance(u, 4)
+    assert fixes >= 8        # 5 or 10 Hz, but for the outage
+
+
+def test_the_scalar_piecewise_is_horners_to_the_bit():
+    """companion.planner.Piecewise evaluates a one-dimensional piece's four derivatives in
+    one loop (the shorter led by zeros): the same bits as _horner on each, before, inside
+    and after the pieces, degree 0 included."""
+    from companion.planner import Piecewise, _horner
+
+    rng = np.random.default_rng(5)
+    for degree in (0, 1, 3, 5, 7):
+        pieces = [(float(rng.uniform(0.1, 3.0)), rng.normal(0.0, 10.0, (1, degree + 1)))
+                  for _ in range(3)]
+        pw = Piecewise(float(rng.uniform(-5.0, 5.0)), pieces, None, 1)
+        for i in range(len(pieces)):
+            for tau in (*rng.uniform(-1.0, 4.0, 200), 0.0, -0.0, 1e-300, -1e-300):
+                got = pw._eval_piece(i, float(tau))
+                want = tuple((_horner(store[i][0], float(tau)),)
+                             for store in (pw._p, pw._v, pw._a, pw._j))
+                assert struct.pack("4d", *(v for (v,) in got)) == \
+                    struct.pack("4d", *(v for (v,) in want))

@@ -445,21 +445,3 @@ def test_draw_run_writes_the_same_figures_in_parallel_with_progress(setpoint_run
     assert f"animation frames {frames}/{frames}" in text and text.endswith("\n")
     quiet = draw_run(both, animation=False, progress=None, workers=0)
     assert [p.name for p in quiet.figures] == [p.name for p in expected]
-    # a pool forked before the run folder existed (as tuav-sitl run forks it before the
-    # simulation) draws the same bytes, its frames counted here from the workers' reports
-    from tuav_sitl.render import DrawPool
-
-    pooled = tmp_path / "pooled"
-    with DrawPool(2) as pool:
-        sh.copytree(alone, pooled)
-        sh.rmtree(pooled / "figures")
-        (pooled / "animation.gif").unlink()
-        stream = io.StringIO()
-        drawn = draw_run(pooled, progress=stream, pool=pool)
-    for a, b in zip(expected, drawn.figures, strict=True):
-        assert a.read_bytes() == b.read_bytes(), a.name
-    assert drawn.animation == [pooled / "animation.gif"]
-    assert drawn.animation[0].read_bytes() == ref_gif
-    text = stream.getvalue()
-    assert f"figures {len(expected)}/{len(expected)}" in text
-    assert f"animation frames {frames}/{frames}" in text and text.endswith("\n")

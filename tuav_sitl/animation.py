@@ -46,9 +46,9 @@ __all__ = ["ANIMATION_SIZE_PX", "FPS", "MAX_FRAMES", "frame_plan", "make_animati
 ANIMATION_SIZE_PX = (760, 600)
 _DPI = 100
 #: Playback frame rate [frames per second] and the most frames an animation has: a run up
-#: to 15 s plays in real time, a longer one faster (the 75 s circle at 5x).
+#: to 10 s plays in real time, a longer one faster (the 75 s circle at 7.5x).
 FPS = 15
-MAX_FRAMES = 225
+MAX_FRAMES = 150
 #: How long the last frame stays on screen in the GIF [s].
 _END_HOLD_S = 1.5
 #: At most this many points of the trail are drawn (the path is thinned to it).

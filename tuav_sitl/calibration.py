@@ -17,6 +17,8 @@ modelled.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from sitl.sensors import IMU_RATE_HZ, SensorNoise, SensorSuite, specific_force_flu
@@ -32,12 +34,15 @@ CALIBRATED_ACCEL_BIAS_SIGMA_M_S2 = 0.02
 FACE_TILT_SIGMA_RAD = np.radians(2.0)
 
 
+@functools.lru_cache(maxsize=32)
 def accel_calibration(noise: SensorNoise, home: tuple[float, float, float],
                       gravity_m_s2: float, seconds_per_face: float = 2.0,
                       seed: int = 0) -> Vec3:
     """The accelerometer offsets [m/s^2] (body FLU) a six-position calibration of the
     sensors ``noise`` (the plant's part, with its seed) finds, ``seconds_per_face`` [s] on
-    each face, the faces held with random tilts (``seed``)."""
+    each face, the faces held with random tilts (``seed``). A pure function of its
+    arguments (the sensors' own seeded streams), remembered: the same part calibrated again
+    in one process (repeated runs of a scenario) reads the same offsets."""
     suite = SensorSuite(noise, home)
     rng = np.random.default_rng(seed)
     dt = 1.0 / IMU_RATE_HZ

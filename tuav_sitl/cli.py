@@ -41,23 +41,21 @@ def _cmd_run(args: argparse.Namespace) -> int:
     print(f"tuav-sitl run {scenario.name}: {scenario.description}")
     progress = None if args.quiet else sys.stderr
     compile_if_cold(scenario, progress)
-    from tuav_sitl.render import DrawPool, draw_run
+    stop_reports = report_compiles(progress)
+    try:
+        result = run_scenario(scenario, out, progress=progress)
+    finally:
+        stop_reports()
+    m = result.metrics
+    print(f"wrote {out}/timeseries.npz, metrics.json, scenario.toml")
+    if not args.no_figures:
+        from tuav_sitl.render import draw_run
 
-    # the drawing workers fork now and import matplotlib while the simulation runs
-    with DrawPool(0 if args.no_figures else None) as pool:
-        stop_reports = report_compiles(progress)
-        try:
-            result = run_scenario(scenario, out, progress=progress)
-        finally:
-            stop_reports()
-        m = result.metrics
-        print(f"wrote {out}/timeseries.npz, metrics.json, scenario.toml")
-        if not args.no_figures:
-            drawn = draw_run(out, animation=not args.no_animation,
-                             progress=None if args.quiet else sys.stderr, pool=pool)
-            print(f"wrote {len(drawn.figures)} figures in {out}/figures")
-            if drawn.animation:
-                print("wrote " + ", ".join(str(a) for a in drawn.animation))
+        drawn = draw_run(out, animation=not args.no_animation,
+                         progress=None if args.quiet else sys.stderr)
+        print(f"wrote {len(drawn.figures)} figures in {out}/figures")
+        if drawn.animation:
+            print("wrote " + ", ".join(str(a) for a in drawn.animation))
     keys = ["position_rmse_m", "position_max_error_m", "attitude_rmse_rad",
             "tether_length_rmse_m", "min_tether_slack_m", "max_tension_n",
             "motor_saturation_fraction", "settling_time_s", "overshoot_percent",

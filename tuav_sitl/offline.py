@@ -30,7 +30,7 @@ from companion.mission_items import ItemRefused, nav_commands
 from companion.navigation import FlightMode, NavCommand, NavEvent, NavKind, Refusal
 from companion.onboard import Companion, OnboardInputs
 from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
-from groundstation.tether_fix import TetherFix
+from groundstation.tether_fix import TetherFix, TetherFixParams
 from groundstation.winch import CommandRequest, Winch, WinchStatusReport
 from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
@@ -193,8 +193,11 @@ _NAN3 = (math.nan,) * 3
 #: The estimate's columns (est_pos, est_vel, est_euler, est_pos_sigma) without one.
 _NO_ESTIMATE = (math.nan,) * 12
 _ORIGIN = (0.0, 0.0, 0.0)
+_new = tuple.__new__
 #: LOCAL_POSITION_NED's six position and velocity fields (float32)
 _F32 = struct.Struct("<6f")
+#: Revolutions per radian (the encoder's unit)
+_REV = 1.0 / (2.0 * math.pi)
 
 
 class GroundStation:
@@ -258,9 +261,8 @@ link brings (:meth:`uav_report`);
                 exit_angle[0], exit_angle[1], stamp, exit_angle[2]))
         w.handle_frame(t_s, self._tension_id,
                        cp.encode_winch_tension(drum_tension_n, not self.axis_enabled, stamp))
-        rev = 1.0 / (2.0 * math.pi)
         out = w.handle_frame(t_s, self._encoder_id, cp.encode_encoder_estimates(
-            drum_angle_rad * rev, drum_rate_rad_s * rev))
+            drum_angle_rad * _REV, drum_rate_rad_s * _REV))
         if out is None:
             return None
         if out.fix is not None:
@@ -273,7 +275,8 @@ link brings (:meth:`uav_report`);
                                      == cp.AxisState.CLOSED_LOOP_CONTROL)
                 if not self.axis_enabled:
                     self.torque_n_m = 0.0
-        self.notices.extend((t_s, n.text) for n in out.notices)
+        if out.notices:
+            self.notices.extend((t_s, n.text) for n in out.notices)
         return out.status
 
     def command(self, t_s: float, params: tuple[float, float, float, float]) -> int:
@@ -313,8 +316,12 @@ class OfflineRunner:
         self.n_wind = round(sc.physics_rate_hz / sc.winder_control.rate_hz)
         self.winder_host = WinderHost(sc.winder_control, sc.lbar, model.winder,
                                       model.tether, g)
+        # the winch's tether fix only for a vehicle that fuses it: one flying on the
+        # truth drops every fix (Companion.external_position), so it is not computed (it
+        # changes nothing else the winch does)
+        fix = TetherFixParams(enabled=sc.estimator.kind != "truth")
         self.ground = GroundStation(Winch(self.winder_host, model.winder, model.tether, g,
-                                          sc.winch))
+                                          sc.winch, fix_params=fix))
         start = tuple(sc.initial.position_m)
         gear = params.vehicle.gear_height_m
         self.plant = Plant(params, dt_s=self.dt)
@@ -463,7 +470,8 @@ class OfflineRunner:
         n_log = n_steps // n_ctrl + 1
         log = _Log(n_log, SERIES)
         bar = ProgressBar(sc.duration_s, progress)
-        inputs = PlantInputs()
+        # the plant's inputs (PlantInputs' fields), held between control and winder steps
+        rotor_commands, armed = PlantInputs().rotor_commands, PlantInputs().armed
         winder_torque, winder_lyap, lbar_m, lbar_rate = 0.0, 0.0, 0.0, 0.0
         winder_enabled = True
         plant_torque, plant_enabled = 0.0, True   # what the axis holds (a late bus)
@@ -473,8 +481,12 @@ class OfflineRunner:
         faults = bool(sc.faults)
         filt = companion.filter
         was_armed = False
-        advance, tether_forces = plant.advance, plant.tether_forces
-        step, add_row = companion.step, log.add
+        advance, tether_forces = plant.advance_held, plant.tether_forces
+        step = companion.step
+        # the log's rows packed here, without a method call per row (_Log.add's work: the
+        # loop makes at most n_log rows)
+        pack_row, log_buffer, row_bytes = log.pack_into, log.buffer, log.row_bytes
+        row_at = 0
         # the lumped tether's nodes (exit to attachment point) at LINE_NODES_RATE_HZ, float32,
         # padded with NaN to the most points the line can have
         lumped = plant.model.lumped
@@ -542,19 +554,20 @@ class OfflineRunner:
                     self._try_arm()
                 pos, vel, quat, rates = (tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]),
                                          tuple(x[RATES]))
-                truth = VehicleState(pos, vel, quat, rates)
+                # (the records built as the tuples they are, without their Python-level
+                # constructors: tuple.__new__)
+                truth = _new(VehicleState, (pos, vel, quat, rates))
                 if sensors is not None:
                     sim = sensors.read(t)
-                    out = step(OnboardInputs(t, truth, sim.imu,
-                                             sim.gps if sim.gps_updated else None),
+                    out = step(_new(OnboardInputs, (t, truth, sim.imu, sim.gps
+                                                    if sim.gps_updated else None)),
                                diagnostics=True)
                 else:
-                    out = step(OnboardInputs(t, truth), diagnostics=True)
+                    out = step(_new(OnboardInputs, (t, truth, None, None)), diagnostics=True)
                 state, fs, ref = out.state, out.flight, out.reference
                 if state is not None:   # LOCAL_POSITION_NED on the component link
                     ground.uav_report(t, state.pos_m, state.vel_m_s)
-                inputs = PlantInputs(out.rotor_commands, out.armed, winder_torque,
-                                     winder_enabled)
+                rotor_commands, armed = out.rotor_commands, out.armed
                 forces = tether_forces()
                 info = forces.info
                 if fs is not None:
@@ -576,12 +589,13 @@ class OfflineRunner:
                 else:
                     estimate = (*state.pos_m, *state.vel_m_s, *quat_to_euler(state.quat),
                                 *filt.position_sigma_m())
-                add_row(t, *pos, *vel, *ref_pos, *ref_vel,
-                        *quat_to_euler(quat), *control, winder_lyap, *lyap_raw,
-                        r_w * x[DRUM_ANGLE], lbar_m, lbar_rate, fresh, x[DRUM_RATE],
-                        winder_torque, forces.drum_tension_n, forces.top_tension_n,
-                        int(info.regime), info.lowest_point_height_m, *plant.wind_m_s,
-                        *forces.on_uav_n, *est, *estimate)
+                pack_row(log_buffer, row_at, t, *pos, *vel, *ref_pos, *ref_vel,
+                         *quat_to_euler(quat), *control, winder_lyap, *lyap_raw,
+                         r_w * x[DRUM_ANGLE], lbar_m, lbar_rate, fresh, x[DRUM_RATE],
+                         winder_torque, forces.drum_tension_n, forces.top_tension_n,
+                         int(info.regime), info.lowest_point_height_m, *plant.wind_m_s,
+                         *forces.on_uav_n, *est, *estimate)
+                row_at += row_bytes
                 if lumped and t >= next_nodes_t - 1e-9:
                     next_nodes_t += 1.0 / LINE_NODES_RATE_HZ
                     nodes = plant.line_nodes_m()
@@ -589,25 +603,24 @@ class OfflineRunner:
                     row[:nodes.shape[0]] = nodes
                     line_t.append(t)
                     line_nodes.append(row)
-                bar.update(t)
+                if progress is not None:
+                    bar.update(t)
                 if on_sample is not None:
                     on_sample(t)
                 if nav.armed:
                     was_armed = True
                 elif mission and was_armed and nav.landed:
                     break   # landed and disarmed: the mission is over
-            elif fresh:   # the winder's new torque, the rotors' commands held
-                inputs = PlantInputs(inputs.rotor_commands, inputs.armed, winder_torque,
-                                     winder_enabled)
             if k >= n_steps:
                 break
             # the plant runs with the inputs held up to the next control or winder step, in
             # one compiled call
             nxt = min(k - k % n_ctrl + n_ctrl, k - k % n_wind + n_wind, n_steps)
-            advance(inputs, nxt - k)
+            advance(rotor_commands, armed, winder_torque, winder_enabled, nxt - k)
             k = nxt
         wall = time.perf_counter() - wall0
         bar.close()
+        log.i = row_at // row_bytes
         series = log.arrays()
         metrics = compute_metrics(sc, series, self.reference, wall)
         if sc.faults:
@@ -639,17 +652,19 @@ class _Log:
         self.columns = columns
         self.width = sum(max(w, 1) for _, w in columns)
         packer = struct.Struct(f"{self.width}d")
-        self._pack_into = packer.pack_into
-        self._row_bytes = packer.size
+        #: ``pack_into(buffer, offset, *row)``: a row into :attr:`buffer` at ``offset``
+        #: [bytes] (rows :attr:`row_bytes` apart); set :attr:`i` to the rows written
+        self.pack_into = packer.pack_into
+        self.row_bytes = packer.size
         self._data = np.empty((n, self.width))
-        self._buffer = memoryview(self._data).cast("B")
+        self.buffer = memoryview(self._data).cast("B")
 
     def add(self, *row: Any) -> None:
         """One row: the columns' values in order, vectors flattened (bools count 0/1)."""
         i = self.i
         if i >= self.n:
             return
-        self._pack_into(self._buffer, i * self._row_bytes, *row)
+        self.pack_into(self.buffer, i * self.row_bytes, *row)
         self.i = i + 1
 
     def arrays(self) -> dict[str, np.ndarray]:

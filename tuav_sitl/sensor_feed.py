@@ -6,6 +6,16 @@ when due, HIL_STATE_QUATERNION, HIL_SENSOR, from the plant's sensor models) and 
 the companion's simulator-link client does (:class:`companion.simlink_client.BatchDecoder`):
 offline, the companion sees the same sensor messages, with their resolution, as over the
 link.
+
+Offline the bytes never cross a wire, so :meth:`SensorFeed.read` skips what guards a wire
+(the frames' checksums) and what the onboard step does not read (HIL_STATE_QUATERNION: the
+runner hands the companion the plant's state itself, which flies on it only with
+``EstimatorParams.kind`` "truth", and then no sensor feed is built): each frame's payload
+is unpacked by the link's codec and taken by the companion's decoder, as over the link. A
+period without a GNSS fix whose batch the compiled packer built skips the frames: the
+decoder takes HIL_SENSOR's field values as the packer wrote them into its frame
+(:meth:`sitl.batch.BatchPacker.sensor_values`; ``tests/test_fast_paths.py`` checks both
+against the decoder reading the batch's bytes).
 """
 
 from __future__ import annotations
@@ -15,6 +25,9 @@ from sitl.plant import Plant
 from sitl.sensor_batch import SensorBatches
 from sitl.sensors import SensorNoise, SensorSuite
 from tuavdefs import simlink as sl
+
+_TRUTH = sl.MSG_HIL_STATE_QUATERNION
+_SENSOR = sl.MSG_HIL_SENSOR
 
 
 class SensorFeed:
@@ -31,6 +44,23 @@ class SensorFeed:
 
     def read(self, t_s: float) -> SimState:
         """The period's batch at ``t_s`` [s], decoded: its IMU sample, and its GNSS fix
-        (``gps_updated`` when one came in this batch)."""
-        (state,) = self.decoder.feed(bytes(self.batches.batch(round(t_s * 1e6))))
+        (``gps_updated`` when one came in this batch); its ``truth`` is not decoded
+        (module docstring)."""
+        batches, decoder = self.batches, self.decoder
+        data = batches.batch(round(t_s * 1e6))
+        if batches.last_packed and not batches.last_gps:
+            # the usual period, compiled: HIL_SENSOR's values as its frame carries them
+            state = decoder.absorb((_SENSOR, batches.packer.sensor_values()))
+            assert state is not None
+            return state
+        data = bytes(data)
+        items = sl.whole_frames(data, sl.LINK_CODECS, check_crc=False)
+        if items is None:     # not the batch's usual frames: the general parser's
+            (state,) = decoder.feed(data)
+            return state
+        state = None
+        for item in items:
+            if item[0] != _TRUTH:
+                state = decoder.absorb(item) or state
+        assert state is not None, "a batch ends with its HIL_SENSOR"
         return state
