@@ -18,9 +18,12 @@ from tuav_sitl.offline import OfflineRunner
 from tuav_sitl.scenario import ScenarioParams
 from tuavdefs.paramspec import load_toml
 
-#: The companion's tether governor and the winder's stop lead are on by default
-#: (docs/control.md §3): the tests fly the defaults.
-_SAFETY = ""
+#: The companion's tether governor and the winder's stop lead, on (both off by default:
+#: near the vertical the governor still slows moves to 0.3-1 m/s; docs/control.md §3).
+_SAFETY = """[navigation]
+tether_governor = 1
+[lbar]
+stop_lead_acc_m_s2 = 2.5"""
 
 
 def _run(tmp_path, fault: str, goal=(8.0, 4.0, 10.0), duration_s: float = 60.0,
