@@ -128,9 +128,10 @@ class NavigationParams(Params):
                                       "which the vehicle moves towards the winder", gt=0)
     tension_step_m: float = quantity(2.0, "m", "how far towards the winder each over-"
                                      "tension move goes", gt=0, le=10)
-    tether_governor: int = quantity(0, "", "the tether governor (docs/control.md §3): 1 on, "
-                                    "0 off (off by default: its stops make the missions' "
-                                    "rotors saturate)", ge=0, le=1)
+    tether_governor: int = quantity(0, "", "the tether governor (docs/control.md §3): 1 on "
+                                    "(with the winder's stop lead), 0 off (the default: "
+                                    "near the vertical it still slows moves to 0.3-1 m/s)",
+                                    ge=0, le=1)
     tether_brake_acc_m_s2: float = quantity(
         3.0, "m/s^2", "tether governor: the deceleration it brakes at (reached at "
         "TETHER_BRAKE_JERK_M_S3) and assumes of the vehicle", gt=0, le=10)
@@ -286,10 +287,15 @@ class _VelocityRef:
         self.acc_max = acc_max
         self.omega = omega
         self.yaw_rate = 0.0
+        #: the tether governor's cap on the commanded speed [m/s] (inf: none)
+        self.cap = math.inf
 
     def step(self, dt: float) -> RefSample:
         w = self.omega
-        jerk = [w * w * (self.cmd[i] - self.vel[i]) - 2.0 * w * self.acc[i] for i in range(3)]
+        c = self.cmd
+        n = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+        k = self.cap / n if n > self.cap else 1.0
+        jerk = [w * w * (c[i] * k - self.vel[i]) - 2.0 * w * self.acc[i] for i in range(3)]
         acc = [self.acc[i] + jerk[i] * dt for i in range(3)]
         n = math.sqrt(sum(a * a for a in acc))
         if n > self.acc_max:
@@ -313,9 +319,10 @@ GOVERNOR_SIGMA_SPEED_M_S = 0.5
 #: Room [m] the governor wants between the vehicle's distance and its limit before it
 #: resumes what it stopped (or that it moves in to, when beyond).
 TETHER_RESUME_ROOM_M = 0.1
-#: The governor's slowing of a leg (its clock): the time [s] its deceleration takes to
-#: build up, added to the vehicle's latency in the speed limit.
-GOVERNOR_SLOW_RAMP_S = 0.25
+#: The governor's slowing of a leg (its clock): the time [s] its deceleration's build-up
+#: loses (a brake at tether_brake_acc_m_s2 reached at TETHER_BRAKE_JERK_M_S3, 3/20 s,
+#: loses half of it; rounded up), added to the vehicle's latency in the speed limit.
+GOVERNOR_SLOW_RAMP_S = 0.1
 #: Largest deceleration [m/s^2] and jerk [m/s^3] the slowing of a leg puts on the
 #: reference, and the acceleration [m/s^2] with which it gives the speed back.
 GOVERNOR_SLOW_ACC_M_S2 = 2.0
@@ -457,6 +464,7 @@ class Navigator:
         # ``_clock_lag`` [s] behind the vehicle's; ``_nominal`` the leg's unscaled sample
         self._s, self._sd = 1.0, 0.0
         self._clock_lag = 0.0
+        self._script_lag = 0.0                       # _clock_lag when a script began [s]
         self._nominal: RefSample | None = None
         self._slowed = False                         # said once per slowing
         #: The estimate's position standard deviation [m] (largest axis; 0 on the
@@ -790,6 +798,8 @@ class Navigator:
         self._leg, self._legs, self._vel = None, [], None
         self._brake, self._paused = None, []
         self._script = source
+        self._script_lag = self._clock_lag
+        self._s, self._sd, self._nominal = 1.0, 0.0, None
         return None
 
     def set_yaw(self, yaw_rad: float) -> Refusal | None:
@@ -911,15 +921,15 @@ class Navigator:
                 return ref
         if not self.p.tether_governor:
             return self._advance_plan(t, dt)
-        leg = self._leg
-        slow = (self._script is None and self._vel is None and leg is not None
-                and not (leg.landing or leg.takeoff))
+        leg, script = self._leg, self._script
+        slow = self._vel is None and (script is not None or (
+            leg is not None and not (leg.landing or leg.takeoff)))
         if slow:
             self._slow_clock(dt)
         elif self._s != 1.0 or self._sd != 0.0:
             self._s, self._sd = 1.0, 0.0
         ref = self._advance_plan(t, dt)
-        if slow and self._leg is leg:
+        if slow and self._leg is leg and self._script is script:
             self._nominal = ref
             ref = self._scaled(ref)
         else:
@@ -1123,7 +1133,8 @@ class Navigator:
 
     def _advance_plan(self, t: float, dt: float) -> RefSample:
         if self._script is not None:
-            ref = self._script(t, self._pos)
+            # on the script's clock: the vehicle's, less what the slowing took since it began
+            ref = self._script(t - (self._clock_lag - self._script_lag), self._pos)
             x, y, z = ref.pos_m
             reach = self.reach_m
             if not (z >= 0.0 and x * x + y * y + z * z <= reach * reach):   # NaN too
@@ -1135,6 +1146,8 @@ class Navigator:
             if t > self._vel_deadline:
                 self._vel.cmd = _ZERO3
             self._limit_velocity()
+            if self.p.tether_governor:
+                self._slow_velocity()
             return self._vel.step(dt)
         if self._leg is None:
             self._hold()
@@ -1175,6 +1188,39 @@ class Navigator:
             if not self._vel_limited:
                 self._vel_limited = True
                 self._emit(NavEvent.WARNING, "Guided velocity stopped at the tether's reach")
+
+    def _slow_velocity(self) -> None:
+        """The fence-like part of the tether governor for a velocity target: its command's
+        speed is capped (:attr:`_VelocityRef.cap`, [m/s]) at :func:`governed_speed_m_s` of
+        the room the tether leaves ahead of the reference (latency
+        :data:`GOVERNOR_SLOW_RAMP_S`, its brake's build-up) and of the vehicle (latency
+        ``tether_latency_s``), less a leg's slowing margin: the brake's own test with
+        margin (the reference approaches the cap without overshoot), so that a target
+        streamed outward slows to the line's room rather than meeting the brake."""
+        v = self._vel
+        assert v is not None
+        cmd = v.cmd
+        speed = math.sqrt(cmd[0] * cmd[0] + cmd[1] * cmd[1] + cmd[2] * cmd[2])
+        if speed < 1e-3:
+            v.cap = math.inf
+            return
+        u = (cmd[0] / speed, cmd[1] / speed, cmd[2] / speed)
+        p, pe = v.pos, self._pos
+        d = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+        v_out = speed * (u[0] * p[0] + u[1] * p[1] + u[2] * p[2]) / d if d > 0 else speed
+        lim = self.governor_limit_m - ((GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k
+                                        * self.position_sigma_m)
+                                       * min(1.0, max(v_out, 0.0) / GOVERNOR_SIGMA_SPEED_M_S))
+        ab = self.p.tether_brake_acc_m_s2
+        v_max = min(governed_speed_m_s((p[0], p[1], p[2]), u, lim, GOVERNOR_SLOW_RAMP_S, ab),
+                    governed_speed_m_s(pe, u, lim, self.p.tether_latency_s, ab))
+        v.cap = max(v_max, 0.0)
+        if v_max < speed:
+            if not self._slowed:
+                self._slowed = True
+                self._emit(NavEvent.WARNING, "Tether: slowing to the room the line gives")
+        else:
+            self._slowed = False
 
     def _leg_done(self, t: float, leg: _Leg) -> None:
         if leg.tag is LegTag.TAKEOFF:

@@ -73,6 +73,10 @@ class LBarParams(Params):
     weight_min_exit_angle_rad: float = quantity(
         math.radians(2.0), "rad", "line weight estimate: held while the measured exit "
         "angle is below this (the line may lie on the ground)", ge=0, lt=math.pi / 2)
+    weight_max_gain_1_m: float = quantity(
+        0.5, "1/m", "line weight estimate: held where its sensitivity to the tension, "
+        "2 z / (L^2 - z^2), exceeds this (near the vertical the estimate is ill-"
+        "conditioned: a tenth of a newton reads as a fifth of the weight)", gt=0)
     stop_lead_time_s: float = quantity(
         0.6, "s", "stop lead: seconds of the UAV's speed it runs on before braking, when "
         "the drum stops (its reaction, the links' delays; docs/control.md §3)", ge=0)
@@ -86,12 +90,24 @@ class LBarParams(Params):
     stop_lead_full_speed_m_s: float = quantity(
         0.5, "m/s", "stop lead: outward speed from which the margin is kept in full",
         gt=0)
+    stop_lead_min_speed_m_s: float = quantity(
+        2.0, "m/s", "stop lead: once the UAV moves (in full from stop_lead_onset_m_s, in "
+        "proportion below), its stop is allowed for at no less than this speed along its "
+        "velocity: the lead pays out ahead of an acceleration, not only behind the speed "
+        "(the vehicle's governor allows speed only with room; docs/control.md §3)", ge=0)
+    stop_lead_onset_m_s: float = quantity(
+        0.2, "m/s", "stop lead: speed from which stop_lead_min_speed_m_s holds in full",
+        gt=0)
     stop_lead_rate_m_s: float = quantity(
         4.0, "m/s", "stop lead: fastest change of the lead", gt=0)
+    stop_lead_release_m_s: float = quantity(
+        0.3, "m/s", "stop lead: fastest taking back of the lead as the UAV slows (the "
+        "ground's bound is followed at stop_lead_rate_m_s): the vehicle's governor counts "
+        "on the reported length, and a lead wound in fast braked it as it slowed", gt=0)
     stop_lead_filter_s: float = quantity(
         0.05, "s", "stop lead: time constant of the low-pass on its target", ge=0)
     stop_lead_min_exit_angle_rad: float = quantity(
-        math.radians(2.0), "rad", "stop lead: the lead is bounded so that the catenary at "
+        math.radians(4.0), "rad", "stop lead: the lead is bounded so that the catenary at "
         "the reported position leaves the winder at least this far above the ground (the "
         "line off the ground); where that leaves less room than the stopping distance, "
         "the vehicle's tether governor slows it", ge=0, lt=math.pi / 2)
@@ -319,11 +335,14 @@ def weight_estimate(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, w_n_m: 
     ``trim_s[2]`` (before its first sample: ``tension_n`` [N], the one measured now), the
     measured exit elevation, the paid-out length and the UAV's reported
     height, bounded to [1/r, r] times the model's ``w_n_m`` (r = ``trim_p[6]``), held
-    while the exit angle is below ``trim_p[7]`` or unknown (NaN). Its state is
+    while the exit angle is below ``trim_p[7]`` or unknown (NaN), or where the estimate's
+    sensitivity to the tension 2 z / (L^2 - z^2) exceeds ``trim_p[24]`` [1/m] (near the
+    vertical). Its state is
     ``trim_s[3]`` (NaN: no estimate yet); returns the weight to use [N/m] (the model's
     until there is one)."""
     r, w_hat = trim_p[6], trim_s[3]
-    if elevation_rad >= trim_p[7]:   # (not NaN)
+    den = length_m * length_m - height_m * height_m
+    if elevation_rad >= trim_p[7] and 2.0 * height_m <= trim_p[24] * den:   # (not NaN)
         t = trim_s[2] if trim_s[2] == trim_s[2] else tension_n
         w = line_weight_n_m(t, elevation_rad, length_m, height_m)
         if w == w:
@@ -388,34 +407,45 @@ def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py
 
     Should the drum stop (a snag, a brake, a lost bus) the UAV at (``px``, ``py``, ``pz``)
     [m] moving at (``vx``, ``vy``, ``vz``) [m/s] runs on ``s = v t + v^2 / 2a`` along its
-    velocity before it is stopped. The lead is what the line lacks for that: the stopping
-    point's distance from the winder, plus ``margin min(1, v_out / v_full)`` (v_out the
-    outward speed), less ``base_m`` (the slack L-bar already has counts); never negative
-    and at most ``room_m`` [m] (the longest line that stays off the ground, less
-    ``base_m``: where the room is smaller than the stop, the vehicle's governor slows it).
-    The target is low-passed (time constant ``trim_p[13]`` [s], into ``trim_s[6]``) and
-    followed at most ``trim_p[12]`` [m/s] fast. ``trim_p[8:12]`` = (t [s], a [m/s^2],
-    margin [m], v_full [m/s]); a = 0 switches it off."""
+    velocity before it is stopped, ``v`` here at least ``v_floor min(1, |v| / v_on)``
+    (``trim_p[21:23]`` [m/s]: the lead pays out ahead of the vehicle's acceleration, not
+    behind its speed). The lead is what the line lacks for that: the stopping point's
+    distance from the winder, plus ``margin min(1, v_out / v_full)`` (v_out the outward
+    speed), less ``base_m`` (the slack L-bar already has counts); never negative. That
+    target is low-passed (time constant ``trim_p[13]`` [s], into ``trim_s[6]``) and
+    followed (into ``trim_s[11]``) at most ``trim_p[12]`` [m/s] out and ``trim_p[23]``
+    [m/s] back; the lead is that, at most ``room_m`` [m] (the longest line that stays off
+    the ground, less ``base_m``: where the room is smaller than the stop, the vehicle's
+    governor slows it), followed at most ``trim_p[12]`` [m/s] fast. ``trim_p[8:12]`` =
+    (t [s], a [m/s^2], margin [m], v_full [m/s]); a = 0 switches it off."""
     t_lead, acc, margin, v_full = trim_p[8], trim_p[9], trim_p[10], trim_p[11]
     if not acc > 0.0:
-        trim_s[4], trim_s[5] = 0.0, 0.0
+        trim_s[4], trim_s[5], trim_s[11] = 0.0, 0.0, 0.0
         return
     d = math.sqrt(px * px + py * py + pz * pz)
     speed = math.sqrt(vx * vx + vy * vy + vz * vz)
     target = 0.0
     if speed > 0.0 and d > 0.0:
-        run = (speed * t_lead + speed * speed / (2.0 * acc)) / speed
+        # the speed the stop is allowed for: at least the floor once moving
+        v_eff = max(speed, trim_p[21] * min(1.0, speed / trim_p[22]))
+        run = (v_eff * t_lead + v_eff * v_eff / (2.0 * acc)) / speed
         sx, sy, sz = px + vx * run, py + vy * run, pz + vz * run
-        v_out = (px * vx + py * vy + pz * vz) / d
+        v_out = (px * vx + py * vy + pz * vz) / d * v_eff / speed
         need = (max(math.sqrt(sx * sx + sy * sy + sz * sz), d)
                 + margin * min(1.0, max(v_out, 0.0) / v_full) - base_m)
-        target = min(max(need, 0.0), max(room_m, 0.0)) if room_m == room_m else 0.0
+        target = max(need, 0.0)
     tau = trim_p[13]
     if tau > 0.0:
         trim_s[6] += (1.0 - math.exp(-dt_s / tau)) * (target - trim_s[6])
     else:
         trim_s[6] = target
-    step = trim_s[6] - trim_s[4]
+    # the lead the need asks for (trim_s[11]): out at most trim_p[12], back at most
+    # trim_p[23] [m/s]; then bounded by the ground's room (followed at trim_p[12])
+    step = trim_s[6] - trim_s[11]
+    step = min(max(step, -trim_p[23] * dt_s), trim_p[12] * dt_s)
+    trim_s[11] += step
+    bound = max(room_m, 0.0) if room_m == room_m else 0.0
+    step = min(trim_s[11], bound) - trim_s[4]
     most = trim_p[12] * dt_s
     step = min(max(step, -most), most)
     trim_s[4] += step
@@ -472,7 +502,7 @@ def initial_trim_state() -> np.ndarray:
     """The trim's, the lead's and the floor's state before the first period (see
     :attr:`LBarEstimator.trim_state`)."""
     return np.array([0.0, 0.0, math.nan, math.nan, 0.0, 0.0, 0.0, 0.0, 0.0, math.nan,
-                     0.0])
+                     0.0, 0.0])
 
 
 @njit
@@ -509,10 +539,15 @@ class LBarEstimator:
                                      params.slack_floor_filter_s,
                                      math.tan(params.stop_lead_min_exit_angle_rad),
                                      params.slack_floor_tension_ratio,
-                                     params.slack_floor_hold_s])
+                                     params.slack_floor_hold_s,
+                                     params.stop_lead_min_speed_m_s,
+                                     params.stop_lead_onset_m_s,
+                                     params.stop_lead_release_m_s,
+                                     params.weight_max_gain_1_m])
         #: (offset [m], its rate [m/s], filtered drum tension [N], line weight [N/m],
         #: stop lead [m], its rate [m/s], its filtered target [m], slack floor [m], its
-        #: rate [m/s], its filtered needed length [m], the time without a fix [s])
+        #: rate [m/s], its filtered needed length [m], the time without a fix [s], the
+        #: lead the need asks for before the ground's bound [m])
         self.trim_state = initial_trim_state()
 
     def weight_n_m(self) -> float:

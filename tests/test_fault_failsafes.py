@@ -19,7 +19,7 @@ from tuav_sitl.scenario import ScenarioParams
 from tuavdefs.paramspec import load_toml
 
 #: The companion's tether governor and the winder's stop lead, on (both off by default:
-#: the lead's slack lays the paper scenarios' line on the ground; docs/control.md §3).
+#: near the vertical the governor still slows moves to 0.3-1 m/s; docs/control.md §3).
 _SAFETY = """[navigation]
 tether_governor = 1
 [lbar]
