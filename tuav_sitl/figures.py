@@ -881,7 +881,8 @@ def save_figures(figures: Mapping[str, Figure], out_dir: Path) -> list[Path]:
     paths = []
     for name, fig in figures.items():
         path = out_dir / f"{name}.png"
-        fig.savefig(path, dpi=fig.dpi)
+        # zlib level 1: a fifth of level 6's encoding time for ~10 % more bytes
+        fig.savefig(path, dpi=fig.dpi, pil_kwargs={"compress_level": 1})
         paths.append(path)
     return paths
 
