@@ -556,6 +556,22 @@ class LBarEstimator:
         w = float(self.trim_state[3])
         return w if math.isfinite(w) else self.w
 
+    def drum_tension_n(self, measured_n: float) -> float:
+        """The drum tension [N] as the tension trim low-passes it (:func:`tension_trim`),
+        ``measured_n`` before its first sample."""
+        t = float(self.trim_state[2])
+        return t if math.isfinite(t) else measured_n
+
+    def floor_need_m(self, fix_m: tuple[float, float, float] | None) -> float:
+        """The least length [m] the slack floor asks at the winder's own fix ``fix_m``
+        [m] (:func:`floor_length_m` on the parameters :func:`winder_step
+        <groundstation.winder_host.winder_step>` gives it); NaN without a fix or with the
+        floor off."""
+        tp = self.trim_params
+        if fix_m is None or not tp[14] > 0.0:
+            return math.nan
+        return floor_length_m(fix_m[0], fix_m[1], fix_m[2], tp[19] * self.a_target, tp[14])
+
     def length(self, pos_m: tuple[float, float, float]) -> tuple[float, float]:
         """(L-bar [m], a [m]) for the UAV at ``pos_m``."""
         x, y, z = pos_m

@@ -78,7 +78,6 @@ from typing import NamedTuple
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from groundstation.lbar import floor_length_m
 from groundstation.tether_fix import TetherFix, TetherFixer, TetherFixParams
 from groundstation.winder_control import WinderCommand
 from groundstation.winder_host import WinderHost
@@ -675,13 +674,7 @@ class Winch:
         off): a rejoin of L-bar from a longer line stops there, since L-bar comes from the
         reported position (an in-air start 0.9 m low on its first fixes wound a 36 m line
         in taut before L-bar's law, which has the floor, took over)."""
-        lb = self.host.lbar
-        fix = self.measured_position_m()
-        if fix is None or not lb.p.slack_floor_m > 0.0:
-            return -math.inf
-        need = floor_length_m(fix[0], fix[1], fix[2],
-                              lb.p.slack_floor_tension_ratio * lb.a_target,
-                              lb.p.slack_floor_m)
+        need = self.host.lbar.floor_need_m(self.measured_position_m())
         return need if math.isfinite(need) else -math.inf
 
     def measured_position_m(self) -> tuple[float, float, float] | None:
@@ -696,10 +689,9 @@ class Winch:
         # the tension as the trim low-passes it: a dynamic line's axial waves and snaps
         # (0-20 N at 20-25 Hz) would otherwise swing the fix, and the floor, which pays
         # out fast and takes back slowly, would ratchet the line out onto the ground
-        filtered = self.host.lbar.trim_state[2]
-        tension = filtered if math.isfinite(filtered) else self.tension_n
-        return fixer.suspended_end(self.length_m, tension, ea[0], ea[1],
-                                   self.host.lbar.weight_n_m())
+        lb = self.host.lbar
+        return fixer.suspended_end(self.length_m, lb.drum_tension_n(self.tension_n), ea[0],
+                                   ea[1], lb.weight_n_m())
 
     def tether_fix(self) -> TetherFix | None:
         """The UAV's position from length, tension and exit angles now, or None when one

@@ -18,16 +18,11 @@ from pathlib import Path
 
 import pytest
 from gcs_util import Vehicle
+from test_mavproxy import WPL
 
 pytestmark = pytest.mark.skipif(shutil.which("mavproxy.py") is None,
                                 reason="MAVProxy is a test extra")
 
-WPL = """QGC WPL 110
-0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.5456205\t488\t1
-1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t10\t1
-2\t0\t3\t16\t0\t0\t0\t0\t47.39779\t8.5456205\t10\t1
-3\t0\t3\t21\t0\t0\t0\t0\t0\t0\t0\t1
-"""
 #: An inclusion circle of 30 m and an exclusion circle of 3 m (MAV_CMD_NAV_FENCE_CIRCLE_*).
 FENCE = """QGC WPL 110
 0\t0\t0\t5003\t30\t0\t0\t0\t47.397742\t8.5456205\t0\t1
