@@ -2,11 +2,12 @@
 
 :func:`draw_run` is what ``tuav-sitl run``, ``plot`` and ``results`` call after the
 simulation: the animation's frames are drawn in this process while forked worker processes
-draw the figures, one figure a task; once the animation is done this process takes the
-figures no worker has started. The figures and frames are those of
-:func:`tuav_sitl.figures.make_figures` and :func:`tuav_sitl.animation.make_animation`, only
-their order in time differs. :class:`DrawProgress` is the one line of progress on stderr
-(figures done, animation frames done, elapsed time).
+draw the figures, each taking the next figure when it is free (the dearest first); once the
+animation is done this process takes figures from the same queue. The figures and frames
+are those of :func:`tuav_sitl.figures.make_figures` and
+:func:`tuav_sitl.animation.make_animation`, only their order in time differs.
+:class:`DrawProgress` is the one line of progress on stderr (figures done, animation
+frames done, elapsed time).
 """
 
 from __future__ import annotations
@@ -14,11 +15,11 @@ from __future__ import annotations
 import os
 import threading
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+import traceback
 from dataclasses import dataclass, field
 from multiprocessing import current_process, get_context
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 if TYPE_CHECKING:
     from tuav_sitl.figures import RunData
@@ -105,6 +106,13 @@ class DrawResult:
     """A note for each figure the run lacks the data of."""
 
 
+#: The figures from the dearest to draw to the cheapest (CPU time on the circle, most of it
+#: the layout and the text): the drawers take them in this order, so that the last to be
+#: taken, which decide when drawing ends, are short.
+DRAW_ORDER = ("snapshots", "states", "estimate", "lyapunov", "path_3d", "errors",
+              "attitude_tracking", "tension_and_winder", "position_tracking",
+              "tether_length")
+
 #: The run folder being drawn, loaded once before the workers fork (they inherit it).
 _RUN: tuple[str, RunData] | None = None
 
@@ -127,12 +135,50 @@ def _workers(requested: int | None) -> int:
     return max(0, (os.cpu_count() or 1) - 1)
 
 
+class _Queue:
+    """The figures still to draw, shared by this process and its forked workers: each
+    drawer takes the next one when it is free (so the work balances itself whatever each
+    figure costs), and a worker sends back the files it wrote, or its error."""
+
+    def __init__(self, names: list[str]) -> None:
+        ctx = get_context("fork")
+        self.names = names
+        self._next = ctx.Value("i", 0)
+        self.results: Any = ctx.SimpleQueue()
+
+    def take(self) -> int | None:
+        """The index of the next figure to draw, None when all are taken."""
+        with self._next.get_lock():
+            i = int(self._next.value)
+            if i >= len(self.names):
+                return None
+            self._next.value = i + 1
+            return i
+
+    def drain(self, run_dir: str) -> None:
+        """A worker's life: draw figures until none is left."""
+        while (i := self.take()) is not None:
+            try:
+                paths: list[Path] | str = _figure(run_dir, self.names[i])
+            except BaseException:  # noqa: BLE001 - the error travels to the main process
+                paths = traceback.format_exc()
+            self.results.put((i, paths))
+
+
+def _worker_main(queue: _Queue, run_dir: str) -> None:
+    try:
+        queue.drain(run_dir)
+    finally:
+        os._exit(0)   # a forked child: none of the parent's exit handlers
+
+
 def draw_run(run_dir: Path, figures: bool = True, animation: bool = True,
              progress: TextIO | None = None, workers: int | None = None) -> DrawResult:
     """Draw the figures and (``animation``) the animation of the run folder ``run_dir``.
 
     ``workers`` is the number of processes forked for the figures (default: the cores but
-    one; 0 draws everything here, one after the other). Progress goes to ``progress``.
+    one; 0 draws everything here, one after the other); this process joins them once the
+    animation is drawn. Progress goes to ``progress``.
     """
     from tuav_sitl.figures import FIGURE_NAMES, load_run, missing_series
 
@@ -149,37 +195,61 @@ def draw_run(run_dir: Path, figures: bool = True, animation: bool = True,
                 out.skipped.append(f"{name}: the run has no {', '.join(lacking)}")
             else:
                 names.append(name)
+    order = sorted(names, key=lambda n: DRAW_ORDER.index(n) if n in DRAW_ORDER
+                   else len(DRAW_ORDER))
     bar = DrawProgress(progress, len(names), None if not animation else 0)
     bar.show(force=True)
-    n_workers = min(_workers(workers), len(names))
-    done: dict[str, list[Path]] = {}
-    pool = (ProcessPoolExecutor(n_workers, mp_context=get_context("fork"))
-            if n_workers > 0 else None)
+    queue = _Queue(order)
+    done: dict[int, list[Path]] = {}
+    procs = []
+    collector = None
     try:
-        futures: dict[str, Future[list[Path]]] = {}
-        if pool is not None:
-            for name in names:
-                fut = pool.submit(_figure, str(run_dir), name)
-                fut.add_done_callback(lambda f: None if f.cancelled() else bar.figure_done())
-                futures[name] = fut
+        for _ in range(min(_workers(workers), len(order))):
+            proc = get_context("fork").Process(target=_worker_main,
+                                               args=(queue, str(run_dir)), daemon=True)
+            proc.start()
+            procs.append(proc)
+        errors: list[str] = []
+        if procs:
+            def collect() -> None:
+                # the workers' results as they come (the progress line counts them while
+                # this process draws the animation); a None ends it
+                while (item := queue.results.get()) is not None:
+                    i, paths = item
+                    if isinstance(paths, str):
+                        errors.append(paths)
+                    else:
+                        done[i] = paths
+                    bar.figure_done()
+
+            collector = threading.Thread(target=collect, daemon=True)
+            collector.start()
         if animation:
             from tuav_sitl.animation import make_animation
 
             out.animation = make_animation(run_dir, on_frame=bar.frame_done, run=run)
-        # what no worker has started is drawn here, from the back of the queue (the
-        # workers take from the front)
-        for name in reversed(names):
-            fut = futures.get(name)
-            if fut is None or fut.cancel():
-                done[name] = _figure(str(run_dir), name)
+        while (i := queue.take()) is not None:
+            done[i] = _figure(str(run_dir), order[i])
+            bar.figure_done()
+        for proc in procs:
+            proc.join()
+        if collector is not None:
+            queue.results.put(None)
+            collector.join()
+        if errors:
+            raise RuntimeError("drawing a figure failed in a worker:\n" + errors[0])
+        # a worker that died (killed) leaves its figure undrawn: drawn here
+        for i, name in enumerate(order):
+            if i not in done:
+                done[i] = _figure(str(run_dir), name)
                 bar.figure_done()
-        for name, fut in futures.items():
-            if name not in done:
-                done[name] = fut.result()
     finally:
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+        for proc in procs:
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
         bar.close()
         _RUN = None
-    out.figures = [p for name in names for p in done[name]]
+    by_name = {order[i]: paths for i, paths in done.items()}
+    out.figures = [p for name in names for p in by_name[name]]
     return out
