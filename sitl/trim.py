@@ -15,7 +15,7 @@ import numpy as np
 from sitl.plant import QUAT, ROTORS, VEL, PlantInputs, PlantModel, initial_state, rhs
 from sitl.wind import WindModel, profile_factor
 from tuavdefs.airframe import Mixer
-from tuavdefs.params import SystemParams
+from tuavdefs.params import SystemParams, TetherModel
 
 
 def thrust_aligned_quaternion(direction: Sequence[float], yaw_rad: float = 0.0
@@ -57,6 +57,15 @@ def hover_trim(params: SystemParams, position_m: Sequence[float], tether_length_
     out (drum braked): thrust balances weight, the tether's pull and the steady wind's drag
     at that height (the drag's dependence on the attitude by a few fixed-point passes),
     rotors at speed."""
+    if params.tether.model != TetherModel.CATENARY.value:
+        # the line's pull at rest is the catenary's (a lumped line is then laid out and
+        # relaxed to its own static shape: within 1 % of it, tests/test_lumped.py); and
+        # the drag's passes below read the acceleration from the plant's right-hand side,
+        # in which a lumped line's pull is the one its nodes hold, none before they are
+        # laid: that took the tether's pull for thrust to spare (a 15 m hover in a 3 m/s
+        # wind trimmed 7 N short, and fell)
+        params = params.replace(tether=params.tether.replace(
+            model=TetherModel.CATENARY.value))
     model = PlantModel(params)
     tf = model.tether.forces(*position_m, tether_length_m)
     m = params.vehicle.mass_kg

@@ -25,7 +25,13 @@ from sitl.lumped import (
 from sitl.plant import Plant, PlantInputs
 from sitl.tether import Tether
 from sitl.trim import hover_trim
-from tuavdefs.params import EnvironmentParams, SystemParams, TetherParams, VehicleParams
+from tuavdefs.params import (
+    EnvironmentParams,
+    SystemParams,
+    TetherParams,
+    VehicleParams,
+    WindParams,
+)
 
 G = 9.81
 
@@ -561,6 +567,24 @@ def test_hover_trim_holds_on_the_lumped_line():
     assert nodes.shape[0] == int(plant.model.line[0]) + 2
     np.testing.assert_allclose(nodes[0], 0.0)
     np.testing.assert_allclose(nodes[-1], plant.position_m)
+
+
+def test_hover_trim_in_wind_is_the_catenary_s_and_holds_on_the_lumped_line():
+    # the trim's drag passes read the plant's acceleration; a lumped line's pull there is
+    # the one its nodes hold, none before they are laid: it was taken for spare thrust (a
+    # 15 m hover in a 3 m/s wind trimmed 7 N short and fell 1.6 m in 1.4 s)
+    wind = WindParams(steady_m_s=(3.0, 0.0, 0.0))
+    lumped = _lumped().replace(wind=wind)
+    catenary = SystemParams().replace(wind=wind)
+    start = (8.0, 4.0, 15.0)
+    x_l, u_l = hover_trim(lumped, start, 17.85)
+    x_c, u_c = hover_trim(catenary, start, 17.85)
+    np.testing.assert_array_equal(x_l, x_c)
+    assert u_l == u_c
+    plant = Plant(lumped, state=x_l)
+    plant.advance(u_l, 1000)
+    # what is left is the line's own drag (about 0.6 N at the top): centimetres in 1 s
+    assert np.linalg.norm(plant.position_m - start) < 0.15
 
 
 def test_offset_attachment_tilts_the_trim_by_the_pull_s_moment():
