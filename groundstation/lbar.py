@@ -54,7 +54,9 @@ class LBarParams(Params):
         "unit of ln(measured / expected drum tension) beyond the dead band, so the tether "
         "keeps its slack when the UAV's reported position is off (0: off)", ge=0)
     tension_trim_max_rate_m_s: float = quantity(
-        1.0, "m/s", "tension trim: fastest change of the offset", gt=0)
+        0.2, "m/s", "tension trim: fastest change of the offset (it corrects a position "
+        "error that grows over seconds; on a dynamic line, faster, it chased the load "
+        "cell's snaps into a limit cycle)", gt=0)
     tension_trim_max_m: float = quantity(
         5.0, "m", "tension trim: largest offset either way", ge=0)
     tension_trim_band: float = quantity(
