@@ -128,6 +128,10 @@ class NavigationParams(Params):
                                       "which the vehicle moves towards the winder", gt=0)
     tension_step_m: float = quantity(2.0, "m", "how far towards the winder each over-"
                                      "tension move goes", gt=0, le=10)
+    tension_time_s: float = quantity(0.5, "s", "how long every winch report must say the "
+                                     "tension is above the limit before the vehicle moves "
+                                     "(a snap of the line is not an over-tension)",
+                                     ge=0, le=10)
     tether_governor: int = quantity(0, "", "the tether governor (docs/control.md §3): 1 on "
                                     "(with the winder's stop lead), 0 off (the default: "
                                     "near the vertical it still slows moves to 0.3-1 m/s)",
@@ -455,6 +459,8 @@ class Navigator:
         self._auto_takeoff_pending = False
         self._locked_length_m: float | None = None   # the drum's length while braked
         self._tension_move_t = -math.inf             # the last over-tension move [s]
+        # since when every winch report has said the tension is above the limit [s]
+        self._tension_over_t: float | None = None
         self._vel_limited = False                    # a velocity target cut at the reach
         self._winch_length_m: float | None = None    # the last reported length [m]
         self._winch_speed_m_s = 0.0                  # and line speed [m/s]
@@ -534,17 +540,23 @@ class Navigator:
         """The winch's report: paid-out length [m], drum tension [N] (None: unknown),
         whether its drum is braked, its line speed [m/s] (None: unchanged). A braked drum
         bounds the reach; the length bounds the tether governor's stopping point (the drum
-        may stop at any moment); a tension above ``tension_limit_n`` moves the vehicle
-        towards the winder, ``tension_step_m`` at a time (again every 2 s while it lasts),
-        in GUIDED."""
+        may stop at any moment); a tension above ``tension_limit_n`` in every report for
+        ``tension_time_s`` moves the vehicle towards the winder, ``tension_step_m`` at a
+        time (again every 2 s while it lasts), in GUIDED."""
         self._locked_length_m = (float(length_m) if braked and math.isfinite(length_m)
                                  else None)
         if math.isfinite(length_m):
             self._winch_length_m = float(length_m)
         if speed_m_s is not None and math.isfinite(speed_m_s):
             self._winch_speed_m_s = float(speed_m_s)
-        if (tension_n is None or not tension_n > self.p.tension_limit_n or not self.flying
+        if tension_n is None or not tension_n > self.p.tension_limit_n:
+            self._tension_over_t = None
+            return
+        if self._tension_over_t is None:
+            self._tension_over_t = self._t
+        if (not self.flying
                 or self.mode in (FlightMode.RTL, FlightMode.LAND)   # on the way in already
+                or self._t - self._tension_over_t < self.p.tension_time_s
                 or self._t - self._tension_move_t < 2.0):
             return
         self._tension_move_t = self._t

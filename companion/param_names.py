@@ -69,6 +69,7 @@ NAV_NAMES: dict[str, str | WireName | tuple[WireName, ...]] = {
     "reach_fraction": "TUAV_TETH_REACH", "reach_slack_m": "TUAV_TETH_SLACK",
     "guided_velocity_timeout_s": "GUID_TIMEOUT",
     "tension_limit_n": "TUAV_TENS_MAX", "tension_step_m": "TUAV_TENS_STEP",
+    "tension_time_s": "TUAV_TENS_TIME",
     "tether_governor": WireName("TUAV_TETH_GOV", param_type=_I8),
     "tether_brake_acc_m_s2": "TUAV_TETH_BRK", "tether_latency_s": "TUAV_TETH_LAT",
     "tether_margin_m": "TUAV_TETH_MARG", "tether_sigma_k": "TUAV_TETH_SIGK",

@@ -2,8 +2,9 @@
 RTL climbs no higher than the tether allows whatever RTL_ALT says, a mission item without
 a position of its own is checked where it is flown, a streamed velocity target stops at the
 reach, GUID_TIMEOUT is bounded, a braked drum bounds the reach by its length, and an
-over-tension moves the vehicle towards the winder. The truth: the distance from the winder
-against the reach, and the tether never taut (distance below the paid-out length)."""
+over-tension that lasts (not a snap) moves the vehicle towards the winder. The truth: the
+distance from the winder against the reach, and the tether never taut (distance below the
+paid-out length)."""
 
 from __future__ import annotations
 
@@ -125,9 +126,32 @@ def test_over_tension_moves_the_vehicle_towards_the_winder() -> None:
     loop = flying_at((8.0, 0.0, 6.0), NavigationParams(tension_limit_n=20.0))
     nav, companion = loop.nav, loop.companion
     d0 = math.dist(loop.pos, (0.0, 0.0, 0.0))
-    companion.winch_report(loop.t, 10.0, 0.0, 80.0)         # the load cell: 8 kg
+    loop.winch_link = False             # the winch's reports are the test's from here
+
+    def over_tension() -> list[float]:
+        return [t for t, k, v in loop.events
+                if k is NavEvent.FAILSAFE and "over-tension" in str(v)]
+
+    # a snap of the line: one report at 8 kg, then the line's usual tension
+    companion.winch_report(loop.t, 10.0, 0.0, 80.0)
+    loop.run_until(lambda lp: False, 0.1)
+    companion.winch_report(loop.t, 10.0, 0.0, 5.0)
+    loop.run_until(lambda lp: False, 1.0)
+    assert not over_tension()
+    # 8 kg in every report (20 Hz): the vehicle moves once it has lasted tension_time_s
+    start = loop.t
+    clock = {"next": start}
+
+    def loaded(lp: Loop) -> bool:
+        if lp.t >= clock["next"] - 1e-9:
+            clock["next"] += 0.05
+            companion.winch_report(lp.t, 10.0, 0.0, 80.0)
+        return bool(over_tension())
+
+    assert loop.run_until(loaded, 2.0)
+    assert nav.p.tension_time_s <= over_tension()[0] - start <= nav.p.tension_time_s + 0.06
     assert nav.mode is FlightMode.GUIDED
-    assert any("over-tension" in str(v) for k, v in nav.pop_events() if k is NavEvent.FAILSAFE)
+    loop.winch_link = True
     loop.run_until(lambda lp: False, 6.0)
     d1 = math.dist(loop.pos, (0.0, 0.0, 0.0))
     assert d1 == pytest.approx(d0 - nav.p.tension_step_m, abs=0.2)
