@@ -208,8 +208,10 @@ class WinchParams(Params):
         1.0, "m/(s*N)", "the pre-tension's loop: line speed of the length reference per "
         "newton of tension off the target (paid out above it, wound in below it)", gt=0)
     ground_tension_rate_m_s: float = quantity(
-        0.2, "m/s", "the pre-tension's loop: its fastest wind-in (it pays out as fast as "
-        "the law allows)", gt=0)
+        0.05, "m/s", "the pre-tension's loop: its fastest wind-in (it pays out as fast as "
+        "the law allows); slow, since a line lying straight on the ground is stiff (EA/L: "
+        "55 kN/m at 2 m) and the drum's overshoot when the slack runs out is all stretch",
+        gt=0)
     ground_lbar_tension_ratio: float = quantity(
         2.0, "1", "a take-off goes on holding the pre-tension while L-bar at the reported "
         "position asks for more than this times its target horizontal tension", gt=1)
