@@ -189,10 +189,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         estimator = estimator.replace(kind=args.state)
     onboard = Companion(params, gains, nav_params, estimator)
     nav = onboard.nav
+    # the simulator's own state only for a vehicle told to fly on it
+    on_truth = onboard.filter is None
     if isinstance(args.sim, str):
-        client = SimLinkClient(home=tuple(args.home), unix_path=args.sim)
+        client = SimLinkClient(home=tuple(args.home), unix_path=args.sim, truth=on_truth)
     else:
-        client = SimLinkClient(*args.sim, tuple(args.home))
+        client = SimLinkClient(*args.sim, tuple(args.home), truth=on_truth)
     try:
         client.connect(timeout_s=args.connect_timeout)
     except TimeoutError as exc:

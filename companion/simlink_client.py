@@ -96,10 +96,14 @@ class BatchDecoder:
     """The simulator link's batches decoded, without a socket: the plant's bytes in, one
     :class:`SimState` per HIL_SENSOR out (the client decodes its socket's bytes with one;
     the offline runner feeds one the plant's batches). ``home`` as for
-    :class:`SimLinkClient`."""
+    :class:`SimLinkClient`; ``truth`` whether HIL_STATE_QUATERNION, the simulator's own
+    state, is decoded: a vehicle flying on its estimate takes none (``SimState.truth``
+    None), as a real one has none to take."""
 
-    def __init__(self, home: tuple[float, float, float] = sl.HOME_DEFAULT) -> None:
+    def __init__(self, home: tuple[float, float, float] = sl.HOME_DEFAULT,
+                 truth: bool = True) -> None:
         self._home_map = sl.home_map(tuple(float(v) for v in home))
+        self._decode_truth = truth
         self._parser = sl.FrameParser()
         self._truth: TruthState | None = None
         self._gps: GpsFix | None = None
@@ -134,7 +138,9 @@ class BatchDecoder:
             self._gps_new = False
             return state
         if mid == _TRUTH:
-            self._truth = _new(TruthState, (int(v[0]), *sl.truth_from_wire(v, self._home_map)))
+            if self._decode_truth:
+                self._truth = _new(TruthState,
+                                   (int(v[0]), *sl.truth_from_wire(v, self._home_map)))
         elif mid == sl.MSG_HIL_GPS:
             pos, vel, eph, epv = sl.gps_from_wire(v, self._home_map)
             self._gps = GpsFix(int(v[0]), pos, vel, v[1] * 1e-7, v[2] * 1e-7, v[3] * 1e-3,
@@ -160,13 +166,14 @@ class SimLinkClient:
     the plant's Unix-domain socket (``@NAME``: Linux's abstract namespace).
 
     ``home`` (lat deg, lon deg, alt m AMSL) is the inertial origin the plant uses, needed to
-    turn latitude/longitude back into positions. Connection problems raise
+    turn latitude/longitude back into positions; ``truth`` False leaves the simulator's
+    own state undecoded (:class:`BatchDecoder`). Connection problems raise
     :class:`ConnectionError`; waiting too long raises :class:`TimeoutError`.
     """
 
     def __init__(self, host: str = sl.SIM_HOST_DEFAULT, port: int = sl.SIM_PORT_DEFAULT,
                  home: tuple[float, float, float] = sl.HOME_DEFAULT, *,
-                 unix_path: str | None = None) -> None:
+                 unix_path: str | None = None, truth: bool = True) -> None:
         self.host = host
         self.port = port
         self.unix_path = unix_path
@@ -175,7 +182,7 @@ class SimLinkClient:
                                               else (host, port))
         self.home = tuple(float(v) for v in home)
         self._sock: socket.socket | None = None
-        self._decoder = BatchDecoder(self.home)
+        self._decoder = BatchDecoder(self.home, truth)
         self._encoder = sl.Encoder(sl.COMPANION_SYSID, sl.COMPANION_COMPID)
         #: The link's messages read and not yet absorbed: (message id, values in wire order)
         self._pending: deque[tuple[int, tuple]] = deque()

@@ -545,6 +545,25 @@ def test_the_offline_sensor_feed_is_the_companions_decoding(gnss: str):
     assert fixes >= 8        # 5 or 10 Hz, but for the outage
 
 
+def test_a_decoder_for_a_vehicle_on_its_estimate_takes_no_truth():
+    """BatchDecoder(truth=False), the companion's when it flies on its estimate: the
+    batch's HIL_STATE_QUATERNION (the simulator's own state) is not decoded, so no state
+    reaches the onboard step but the sensors'; the sensors are the same as with it."""
+    from companion.simlink_client import BatchDecoder
+    from tuav_sitl.sensor_feed import SensorFeed
+
+    params = _windy()
+    x, _ = hover_trim(params, (12.0, 5.0, 20.0), 24.5)
+    plant = Plant(params, state=x)
+    home = sl.HOME_DEFAULT
+    feed = SensorFeed(plant, SensorNoise.preset("rtk", 3), home, 0.004)
+    data = bytes(feed.batches.batch(0))
+    (seen,) = BatchDecoder(home).feed(data)
+    (blind,) = BatchDecoder(home, truth=False).feed(data)
+    assert seen.truth is not None and blind.truth is None
+    assert blind.imu == seen.imu and blind.gps == seen.gps
+
+
 def test_the_scalar_piecewise_is_horners_to_the_bit():
     """companion.planner.Piecewise evaluates a one-dimensional piece's four derivatives in
     one loop (the shorter led by zeros): the same bits as _horner on each, before, inside

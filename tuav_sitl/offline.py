@@ -557,9 +557,9 @@ class OfflineRunner:
                 # (the records built as the tuples they are, without their Python-level
                 # constructors: tuple.__new__)
                 truth = _new(VehicleState, (pos, vel, quat, rates))
-                if sensors is not None:
+                if sensors is not None:     # on its estimate: no truth onboard
                     sim = sensors.read(t)
-                    out = step(_new(OnboardInputs, (t, truth, sim.imu, sim.gps
+                    out = step(_new(OnboardInputs, (t, None, sim.imu, sim.gps
                                                     if sim.gps_updated else None)),
                                diagnostics=True)
                 else:
