@@ -128,9 +128,9 @@ class NavigationParams(Params):
                                       "which the vehicle moves towards the winder", gt=0)
     tension_step_m: float = quantity(2.0, "m", "how far towards the winder each over-"
                                      "tension move goes", gt=0, le=10)
-    tether_governor: int = quantity(0, "", "the tether governor (docs/control.md §3): 1 on "
-                                    "(with the winder's stop lead), 0 off (the default: "
-                                    "near the vertical it still slows moves to 0.3-1 m/s)",
+    tether_governor: int = quantity(1, "", "the tether governor (docs/control.md §3): 1 on "
+                                    "(the default, with the winder's stop lead; near the "
+                                    "vertical it slows moves to 0.3-1 m/s), 0 off",
                                     ge=0, le=1)
     tether_brake_acc_m_s2: float = quantity(
         3.0, "m/s^2", "tether governor: the deceleration it brakes at (reached at "

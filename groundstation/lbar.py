@@ -81,9 +81,9 @@ class LBarParams(Params):
         0.6, "s", "stop lead: seconds of the UAV's speed it runs on before braking, when "
         "the drum stops (its reaction, the links' delays; docs/control.md §3)", ge=0)
     stop_lead_acc_m_s2: float = quantity(
-        0.0, "m/s^2", "stop lead: the UAV's braking deceleration its stopping distance "
-        "v^2/2a is allowed for (0, the default: no stop lead; 2.5 with the companion's "
-        "tether governor)", ge=0)
+        2.5, "m/s^2", "stop lead: the UAV's braking deceleration its stopping distance "
+        "v^2/2a is allowed for (0: no stop lead; it works with the companion's tether "
+        "governor, TUAV_TETH_GOV)", ge=0)
     stop_lead_margin_m: float = quantity(
         0.1, "m", "stop lead: slack kept beyond the stopping point's distance once the UAV "
         "moves outward at stop_lead_full_speed_m_s (in proportion below)", ge=0)
