@@ -130,7 +130,7 @@ class NavigationParams(Params):
                                      "tension move goes", gt=0, le=10)
     tether_governor: int = quantity(1, "", "the tether governor (docs/control.md §3): 1 on "
                                     "(the default, with the winder's stop lead; near the "
-                                    "vertical it slows moves to 0.3-1 m/s), 0 off",
+                                    "vertical it slows moves to 0.3-1.4 m/s), 0 off",
                                     ge=0, le=1)
     tether_brake_acc_m_s2: float = quantity(
         3.0, "m/s^2", "tether governor: the deceleration it brakes at (reached at "
