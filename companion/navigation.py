@@ -132,9 +132,9 @@ class NavigationParams(Params):
                                      "tension is above the limit before the vehicle moves "
                                      "(a snap of the line is not an over-tension)",
                                      ge=0, le=10)
-    tether_governor: int = quantity(0, "", "the tether governor (docs/control.md §3): 1 on "
-                                    "(with the winder's stop lead), 0 off (the default: "
-                                    "near the vertical it still slows moves to 0.3-1 m/s)",
+    tether_governor: int = quantity(1, "", "the tether governor (docs/control.md §3): 1 on "
+                                    "(the default, with the winder's stop lead; near the "
+                                    "vertical it slows moves to 0.3-1.4 m/s), 0 off",
                                     ge=0, le=1)
     tether_brake_acc_m_s2: float = quantity(
         3.0, "m/s^2", "tether governor: the deceleration it brakes at (reached at "
@@ -343,17 +343,22 @@ GOVERNOR_SLOW_MARGIN_M = 0.02
 
 
 def governed_speed_m_s(pos: Vec3, direction: Vec3, limit_m: float, latency_s: float,
-                       acc_m_s2: float) -> float:
+                       acc_m_s2: float, margin_s: float = 0.0) -> float:
     """Largest speed [m/s] along the unit ``direction`` at ``pos`` [m] from which a stop
     (``latency_s`` [s] at that speed, then braking at ``acc_m_s2`` [m/s^2]) stays within
     ``limit_m`` [m] of the origin (the winder): ``v t + v^2 / 2a <= r`` with ``r`` the
     distance along ``direction`` to that sphere (ArduPilot's fence idea, sqrt(2 a r),
-    with a latency). ``math.inf`` for a motion inward from beyond it."""
+    with a latency). ``math.inf`` for a motion inward from beyond it. A margin growing
+    with the speed, the sphere ``margin_s`` [s] times ``v`` smaller, shortens ``r`` by
+    ``dr/dlimit margin_s v`` (to first order): it is that much more latency."""
     d2 = pos[0] * pos[0] + pos[1] * pos[1] + pos[2] * pos[2]
     dc = pos[0] * direction[0] + pos[1] * direction[1] + pos[2] * direction[2]
     if d2 >= limit_m * limit_m:          # on or beyond the limit
         return math.inf if dc < 0.0 else 0.0
-    r = -dc + math.sqrt(max(limit_m * limit_m - d2 + dc * dc, 0.0))
+    root = math.sqrt(max(limit_m * limit_m - d2 + dc * dc, 0.0))
+    r = -dc + root
+    if margin_s > 0.0 and root > 0.0:
+        latency_s += margin_s * limit_m / root
     return acc_m_s2 * (-latency_s + math.sqrt(latency_s * latency_s + 2.0 * r / acc_m_s2))
 
 
@@ -989,17 +994,28 @@ class Navigator:
                 lim = self.governor_limit_m
                 p, pe = nom.pos_m, self._pos
                 d = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
-                v_out = s * (v[0] * p[0] + v[1] * p[1] + v[2] * p[2]) / d if d > 0 else 0.0
                 ve = self._vel_now
                 d_e = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
+                ve_out = 0.0
                 if d_e > 0:
-                    v_out = max(v_out, (ve[0] * pe[0] + ve[1] * pe[1] + ve[2] * pe[2]) / d_e)
-                lim -= ((GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k * self.position_sigma_m)
-                        * min(1.0, max(v_out, 0.0) / GOVERNOR_SIGMA_SPEED_M_S))
+                    ve_out = max((ve[0] * pe[0] + ve[1] * pe[1] + ve[2] * pe[2]) / d_e, 0.0)
+                # the margin M min(1, v_out / v_s) (v_s = GOVERNOR_SIGMA_SPEED_M_S) at the
+                # speed v the leg is allowed (its outward part v cos, or the vehicle's):
+                # at most M, and at most M ve_out / v_s plus M cos / v_s [s] per m/s of v;
+                # the larger speed either allows (counted at the speed it has now, the
+                # margin grew as the leg sped up, faster than the slowing followed)
+                m_full = GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k * self.position_sigma_m
+                cos_out = (max((v[0] * p[0] + v[1] * p[1] + v[2] * p[2]) / (d * speed), 0.0)
+                           if d > 0 else 1.0)
+                lim_v = lim - m_full * ve_out / GOVERNOR_SIGMA_SPEED_M_S
+                m_s = m_full * cos_out / GOVERNOR_SIGMA_SPEED_M_S
+                lim -= m_full
                 lat = self.p.tether_latency_s + GOVERNOR_SLOW_RAMP_S
                 ab = self.p.tether_brake_acc_m_s2
-                v_max = min(governed_speed_m_s(p, u, lim, lat, ab),
-                            governed_speed_m_s(pe, u, lim, lat, ab))
+                v_max = max(min(governed_speed_m_s(p, u, lim, lat, ab),
+                                governed_speed_m_s(pe, u, lim, lat, ab)),
+                            min(governed_speed_m_s(p, u, lim_v, lat, ab, m_s),
+                                governed_speed_m_s(pe, u, lim_v, lat, ab, m_s)))
                 # and GOVERNOR_LOOKAHEAD_S on: the leg's speed, direction and place then
                 a, h = nom.acc_m_s2, GOVERNOR_LOOKAHEAD_S
                 ahead = speed + h * max(a[0] * u[0] + a[1] * u[1] + a[2] * u[2], 0.0)
@@ -1009,7 +1025,15 @@ class Navigator:
                 if sa > 1e-3:
                     ua = (va[0] / sa, va[1] / sa, va[2] / sa)
                     pa = (p[0] + v[0] * s * h, p[1] + v[1] * s * h, p[2] + v[2] * s * h)
-                    target = min(target, governed_speed_m_s(pa, ua, lim, lat, ab) / sa)
+                    # the limit then: the length the winch pays out meanwhile at its
+                    # reported line speed, at most what the move gains in distance (a
+                    # braked drum pays out nothing); the place then against the length
+                    # now counted the same run twice
+                    gain = math.sqrt(pa[0] * pa[0] + pa[1] * pa[1] + pa[2] * pa[2]) - d
+                    more = max(0.0, min(h * self._lookahead_winch_speed_m_s(), gain))
+                    target = min(target, max(
+                        governed_speed_m_s(pa, ua, lim + more, lat, ab),
+                        governed_speed_m_s(pa, ua, lim_v + more, lat, ab, m_s)) / sa)
         vs = max(speed, 0.1)
         w = GOVERNOR_CLOCK_OMEGA
         jm = GOVERNOR_SLOW_JERK_M_S3 / vs
@@ -1028,6 +1052,15 @@ class Navigator:
             self._slowed = False
         self._clock_lag += (1.0 - 0.5 * (s + s_new)) * dt
         self._s, self._sd = s_new, sd_new
+
+    def _lookahead_winch_speed_m_s(self) -> float:
+        """The line speed [m/s] the slowing's look-ahead counts on: the winch's reported
+        one, never paying out while the drum is braked nor beyond the whole tether."""
+        ws = self._winch_speed_m_s
+        if self._locked_length_m is not None or self._winch_length_m is None:
+            return min(ws, 0.0)
+        room = self.tether_length_m - self._winch_length_m
+        return min(ws, max(room, 0.0) / GOVERNOR_LOOKAHEAD_S)
 
     # ----- the tether governor
 

@@ -83,9 +83,9 @@ class LBarParams(Params):
         0.6, "s", "stop lead: seconds of the UAV's speed it runs on before braking, when "
         "the drum stops (its reaction, the links' delays; docs/control.md §3)", ge=0)
     stop_lead_acc_m_s2: float = quantity(
-        0.0, "m/s^2", "stop lead: the UAV's braking deceleration its stopping distance "
-        "v^2/2a is allowed for (0, the default: no stop lead; 2.5 with the companion's "
-        "tether governor)", ge=0)
+        2.5, "m/s^2", "stop lead: the UAV's braking deceleration its stopping distance "
+        "v^2/2a is allowed for (0: no stop lead; it works with the companion's tether "
+        "governor, TUAV_TETH_GOV)", ge=0)
     stop_lead_margin_m: float = quantity(
         0.1, "m", "stop lead: slack kept beyond the stopping point's distance once the UAV "
         "moves outward at stop_lead_full_speed_m_s (in proportion below)", ge=0)
@@ -401,8 +401,8 @@ def tension_trim(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, a_m: float
 
 @njit
 def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py: float,
-              pz: float, vx: float, vy: float, vz: float, base_m: float, room_m: float
-              ) -> None:
+              pz: float, vx: float, vy: float, vz: float, base_m: float, room_m: float,
+              elevation_rad: float) -> None:
     """One period of the stop lead (docs/control.md §3): the extra length ``trim_s[4]``
     [m] paid out beyond the reference ``base_m`` [m] (L-bar and the trim) while the UAV
     moves, and its rate ``trim_s[5]`` [m/s].
@@ -418,8 +418,12 @@ def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py
     followed (into ``trim_s[11]``) at most ``trim_p[12]`` [m/s] out and ``trim_p[23]``
     [m/s] back; the lead is that, at most ``room_m`` [m] (the longest line that stays off
     the ground, less ``base_m``: where the room is smaller than the stop, the vehicle's
-    governor slows it), followed at most ``trim_p[12]`` [m/s] fast. ``trim_p[8:12]`` =
-    (t [s], a [m/s^2], margin [m], v_full [m/s]); a = 0 switches it off."""
+    governor slows it), followed at most ``trim_p[12]`` [m/s] fast, and not lengthened
+    while the line's measured exit elevation ``elevation_rad`` [rad] (NaN: none) is below
+    the bound's angle ``atan(trim_p[18])`` (the room is the reported position's; near the
+    ground or the vertical a report centimetres off is the line on the ground).
+    ``trim_p[8:12]`` = (t [s], a [m/s^2], margin [m], v_full [m/s]); a = 0 switches it
+    off."""
     t_lead, acc, margin, v_full = trim_p[8], trim_p[9], trim_p[10], trim_p[11]
     if not acc > 0.0:
         trim_s[4], trim_s[5], trim_s[11] = 0.0, 0.0, 0.0
@@ -450,6 +454,8 @@ def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py
     step = min(trim_s[11], bound) - trim_s[4]
     most = trim_p[12] * dt_s
     step = min(max(step, -most), most)
+    if elevation_rad < math.atan(trim_p[18]):      # the winder's own reading (not NaN)
+        step = min(step, 0.0)
     trim_s[4] += step
     trim_s[5] = step / dt_s
 

@@ -99,7 +99,8 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     [rad]; the model's ``w_n_m`` without one), the tension trim's offset
     (:func:`tension_trim` on that weight, both advanced in place), the stop lead
     (:func:`stop_lead`, on the UAV's position and velocity, bounded by
-    :func:`lead_room_m`), the slack floor (:func:`slack_floor`, on the length
+    :func:`lead_room_m` and held while the measured exit elevation is below the bound's
+    angle), the slack floor (:func:`slack_floor`, on the length
     :func:`floor_length_m` asks at the winder's own fix, (``fix_x``, ``fix_y``,
     ``fix_z``) [m], NaN: none), then the torque law
     (:func:`winder_law`, its filter ``law_s`` advanced in place) on L-bar + offset + lead
@@ -116,7 +117,8 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     room = (lead_room_m(px, py, pz, trim_p[18], min_slack) - lbar_m
             if trim_p[9] > 0.0 else 0.0)
     # L-bar's least slack is the vehicle's governor's margin, not room to stop in
-    stop_lead(trim_p, trim_s, dt_s, px, py, pz, vx, vy, vz, lbar_m - min_slack, room)
+    stop_lead(trim_p, trim_s, dt_s, px, py, pz, vx, vy, vz, lbar_m - min_slack, room,
+              elevation_rad)
     lbar_m += trim_s[4]
     rate += trim_s[5]
     needed = floor_length_m(fix_x, fix_y, fix_z, trim_p[19] * a_target, trim_p[14])

@@ -141,7 +141,7 @@ def test_the_winder_step_is_its_components_step():
         tension_trim(tp, ts, b.dt_s, lb.a_m, *pos, est.w, tension)
         ref, rate = lb.length_m + ts[0], lb.rate_m_s + ts[1]
         room = lead_room_m(*pos, tp[18], est.p.min_slack_m) - ref
-        stop_lead(tp, ts, b.dt_s, *pos, *vel, ref, room)
+        stop_lead(tp, ts, b.dt_s, *pos, *vel, ref, room, math.nan)
         ref, rate = ref + ts[4], rate + ts[5]
         slack_floor(tp, ts, b.dt_s, ref, math.nan)     # no fix: no floor
         ref, rate = ref + ts[7], rate + ts[8]

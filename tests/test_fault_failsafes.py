@@ -18,8 +18,9 @@ from tuav_sitl.offline import OfflineRunner
 from tuav_sitl.scenario import ScenarioParams
 from tuavdefs.paramspec import load_toml
 
-#: The companion's tether governor and the winder's stop lead, on (both off by default:
-#: near the vertical the governor still slows moves to 0.3-1 m/s; docs/control.md §3).
+#: The companion's tether governor and the winder's stop lead, on (the defaults, said
+#: here so that the failsafes are tested with them whatever the defaults become;
+#: docs/control.md §3).
 _SAFETY = """[navigation]
 tether_governor = 1
 [lbar]
