@@ -38,6 +38,7 @@ from enum import Enum, IntEnum
 from companion.legs import CircleItem, GotoItem, LegFollower
 from companion.reference import Circle, RefSample
 from tuavdefs.frames import quat_to_yaw
+from tuavdefs.jit import njit
 from tuavdefs.paramspec import Params, quantity
 
 Vec3 = tuple[float, float, float]
@@ -342,6 +343,7 @@ GOVERNOR_LOOKAHEAD_S = 0.5
 GOVERNOR_SLOW_MARGIN_M = 0.02
 
 
+@njit
 def governed_speed_m_s(pos: Vec3, direction: Vec3, limit_m: float, latency_s: float,
                        acc_m_s2: float, margin_s: float = 0.0) -> float:
     """Largest speed [m/s] along the unit ``direction`` at ``pos`` [m] from which a stop
@@ -360,6 +362,65 @@ def governed_speed_m_s(pos: Vec3, direction: Vec3, limit_m: float, latency_s: fl
     if margin_s > 0.0 and root > 0.0:
         latency_s += margin_s * limit_m / root
     return acc_m_s2 * (-latency_s + math.sqrt(latency_s * latency_s + 2.0 * r / acc_m_s2))
+
+
+@njit
+def slow_target(vx: float, vy: float, vz: float, px: float, py: float, pz: float,
+                ax: float, ay: float, az: float, ex: float, ey: float, ez: float,
+                wx: float, wy: float, wz: float, s: float, limit_m: float, margin_m: float,
+                latency_s: float, acc_m_s2: float, winch_speed_m_s: float) -> float:
+    """The rate in [0, 1] the slowing asks of a leg's clock (:meth:`Navigator._slow_clock`)
+    for the leg's nominal velocity (``vx``, ``vy``, ``vz``) [m/s], position [m] and
+    acceleration [m/s^2], the vehicle's estimated position (``ex``...) [m] and velocity
+    (``wx``...) [m/s], the clock's rate ``s`` now, the governor's limit ``limit_m`` [m] and
+    its full margin ``margin_m`` [m], the latency [s] and deceleration [m/s^2] of the stop,
+    and the line speed [m/s] the look-ahead counts on (1 for a leg not moving)."""
+    v, p, a = (vx, vy, vz), (px, py, pz), (ax, ay, az)
+    pe, ve = (ex, ey, ez), (wx, wy, wz)
+    speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if not speed > 1e-3:
+        return 1.0
+    u = (v[0] / speed, v[1] / speed, v[2] / speed)
+    lim = limit_m
+    d = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+    d_e = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
+    ve_out = 0.0
+    if d_e > 0:
+        ve_out = max((ve[0] * pe[0] + ve[1] * pe[1] + ve[2] * pe[2]) / d_e, 0.0)
+    # the margin M min(1, v_out / v_s) (v_s = GOVERNOR_SIGMA_SPEED_M_S) at the speed v the
+    # leg is allowed (its outward part v cos, or the vehicle's): at most M, and at most
+    # M ve_out / v_s plus M cos / v_s [s] per m/s of v; the larger speed either allows
+    # (counted at the speed it has now, the margin grew as the leg sped up, faster than
+    # the slowing followed)
+    m_full = margin_m
+    cos_out = (max((v[0] * p[0] + v[1] * p[1] + v[2] * p[2]) / (d * speed), 0.0)
+               if d > 0 else 1.0)
+    lim_v = lim - m_full * ve_out / GOVERNOR_SIGMA_SPEED_M_S
+    m_s = m_full * cos_out / GOVERNOR_SIGMA_SPEED_M_S
+    lim -= m_full
+    lat, ab = latency_s, acc_m_s2
+    v_max = max(min(governed_speed_m_s(p, u, lim, lat, ab, 0.0),
+                    governed_speed_m_s(pe, u, lim, lat, ab, 0.0)),
+                min(governed_speed_m_s(p, u, lim_v, lat, ab, m_s),
+                    governed_speed_m_s(pe, u, lim_v, lat, ab, m_s)))
+    # and GOVERNOR_LOOKAHEAD_S on: the leg's speed, direction and place then
+    h = GOVERNOR_LOOKAHEAD_S
+    ahead = speed + h * max(a[0] * u[0] + a[1] * u[1] + a[2] * u[2], 0.0)
+    target = min(1.0, v_max / ahead)
+    va = (v[0] + a[0] * h, v[1] + a[1] * h, v[2] + a[2] * h)
+    sa = math.sqrt(va[0] * va[0] + va[1] * va[1] + va[2] * va[2])
+    if sa > 1e-3:
+        ua = (va[0] / sa, va[1] / sa, va[2] / sa)
+        pa = (p[0] + v[0] * s * h, p[1] + v[1] * s * h, p[2] + v[2] * s * h)
+        # the limit then: the length the winch pays out meanwhile at its reported line
+        # speed, at most what the move gains in distance (a braked drum pays out
+        # nothing); the place then against the length now counted the same run twice
+        gain = math.sqrt(pa[0] * pa[0] + pa[1] * pa[1] + pa[2] * pa[2]) - d
+        more = max(0.0, min(h * winch_speed_m_s, gain))
+        target = min(target, max(
+            governed_speed_m_s(pa, ua, lim + more, lat, ab, 0.0),
+            governed_speed_m_s(pa, ua, lim_v + more, lat, ab, m_s)) / sa)
+    return target
 
 
 class _BrakeRef:
@@ -990,50 +1051,13 @@ class Navigator:
             v = nom.vel_m_s
             speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
             if speed > 1e-3:
-                u = (v[0] / speed, v[1] / speed, v[2] / speed)
-                lim = self.governor_limit_m
-                p, pe = nom.pos_m, self._pos
-                d = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
-                ve = self._vel_now
-                d_e = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
-                ve_out = 0.0
-                if d_e > 0:
-                    ve_out = max((ve[0] * pe[0] + ve[1] * pe[1] + ve[2] * pe[2]) / d_e, 0.0)
-                # the margin M min(1, v_out / v_s) (v_s = GOVERNOR_SIGMA_SPEED_M_S) at the
-                # speed v the leg is allowed (its outward part v cos, or the vehicle's):
-                # at most M, and at most M ve_out / v_s plus M cos / v_s [s] per m/s of v;
-                # the larger speed either allows (counted at the speed it has now, the
-                # margin grew as the leg sped up, faster than the slowing followed)
-                m_full = GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k * self.position_sigma_m
-                cos_out = (max((v[0] * p[0] + v[1] * p[1] + v[2] * p[2]) / (d * speed), 0.0)
-                           if d > 0 else 1.0)
-                lim_v = lim - m_full * ve_out / GOVERNOR_SIGMA_SPEED_M_S
-                m_s = m_full * cos_out / GOVERNOR_SIGMA_SPEED_M_S
-                lim -= m_full
-                lat = self.p.tether_latency_s + GOVERNOR_SLOW_RAMP_S
-                ab = self.p.tether_brake_acc_m_s2
-                v_max = max(min(governed_speed_m_s(p, u, lim, lat, ab),
-                                governed_speed_m_s(pe, u, lim, lat, ab)),
-                            min(governed_speed_m_s(p, u, lim_v, lat, ab, m_s),
-                                governed_speed_m_s(pe, u, lim_v, lat, ab, m_s)))
-                # and GOVERNOR_LOOKAHEAD_S on: the leg's speed, direction and place then
-                a, h = nom.acc_m_s2, GOVERNOR_LOOKAHEAD_S
-                ahead = speed + h * max(a[0] * u[0] + a[1] * u[1] + a[2] * u[2], 0.0)
-                target = min(1.0, v_max / ahead)
-                va = (v[0] + a[0] * h, v[1] + a[1] * h, v[2] + a[2] * h)
-                sa = math.sqrt(va[0] * va[0] + va[1] * va[1] + va[2] * va[2])
-                if sa > 1e-3:
-                    ua = (va[0] / sa, va[1] / sa, va[2] / sa)
-                    pa = (p[0] + v[0] * s * h, p[1] + v[1] * s * h, p[2] + v[2] * s * h)
-                    # the limit then: the length the winch pays out meanwhile at its
-                    # reported line speed, at most what the move gains in distance (a
-                    # braked drum pays out nothing); the place then against the length
-                    # now counted the same run twice
-                    gain = math.sqrt(pa[0] * pa[0] + pa[1] * pa[1] + pa[2] * pa[2]) - d
-                    more = max(0.0, min(h * self._lookahead_winch_speed_m_s(), gain))
-                    target = min(target, max(
-                        governed_speed_m_s(pa, ua, lim + more, lat, ab),
-                        governed_speed_m_s(pa, ua, lim_v + more, lat, ab, m_s)) / sa)
+                p, a, pe, ve = nom.pos_m, nom.acc_m_s2, self._pos, self._vel_now
+                target = slow_target(
+                    v[0], v[1], v[2], p[0], p[1], p[2], a[0], a[1], a[2], pe[0], pe[1],
+                    pe[2], ve[0], ve[1], ve[2], s, self.governor_limit_m,
+                    GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k * self.position_sigma_m,
+                    self.p.tether_latency_s + GOVERNOR_SLOW_RAMP_S,
+                    self.p.tether_brake_acc_m_s2, self._lookahead_winch_speed_m_s())
         vs = max(speed, 0.1)
         w = GOVERNOR_CLOCK_OMEGA
         jm = GOVERNOR_SLOW_JERK_M_S3 / vs
