@@ -101,7 +101,9 @@ class LBarParams(Params):
         0.2, "m/s", "stop lead: speed from which stop_lead_min_speed_m_s holds in full",
         gt=0)
     stop_lead_rate_m_s: float = quantity(
-        4.0, "m/s", "stop lead: fastest change of the lead", gt=0)
+        2.0, "m/s", "stop lead: fastest change of the lead (at 4 m/s the drum overshot a "
+        "lead paid out to its bound by 0.2 m in 12-15 m/s winds, laying the line on the "
+        "ground at the exit)", gt=0)
     stop_lead_release_m_s: float = quantity(
         0.3, "m/s", "stop lead: fastest taking back of the lead as the UAV slows (the "
         "ground's bound is followed at stop_lead_rate_m_s): the vehicle's governor counts "
