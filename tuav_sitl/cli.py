@@ -110,7 +110,7 @@ def _cmd_results(args: argparse.Namespace) -> int:
     if args.sweeps:
         from tuav_sitl.results import run_sweeps
 
-        run_sweeps(Path(args.runs))
+        run_sweeps(Path(args.runs), figures=not args.no_figures)
     from tuav_sitl.scenario import load_scenario
     from tuav_sitl.warmup import compile_if_cold
 

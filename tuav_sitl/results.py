@@ -99,8 +99,10 @@ def shipped_sweeps() -> dict[str, Path]:
             if str(p).endswith(".toml")}
 
 
-def run_sweeps(runs_dir: Path, workers: int | None = None) -> None:
-    """Run every shipped sweep into ``runs_dir/sweeps/NAME`` (resuming what is there)."""
+def run_sweeps(runs_dir: Path, workers: int | None = None, figures: bool = True) -> None:
+    """Run every shipped sweep into ``runs_dir/sweeps/NAME`` (resuming what is there), and
+    draw its figures there (``figures``) as ``tuav-sitl sweep`` does: the failures'
+    figure goes into the results file."""
     import sys
 
     from tuav_sitl.sweep import load_sweep, run_sweep
@@ -108,7 +110,12 @@ def run_sweeps(runs_dir: Path, workers: int | None = None) -> None:
     for name, path in sorted(shipped_sweeps().items()):
         sweep, sc = load_sweep(path)
         print(f"tuav-sitl results: sweep {name}, {sweep.runs} runs", file=sys.stderr)
-        run_sweep(sweep, sc, runs_dir / "sweeps" / name, workers=workers)
+        out = runs_dir / "sweeps" / name
+        rows, _ = run_sweep(sweep, sc, out, workers=workers)
+        if figures:
+            from tuav_sitl.sweep_figures import make_sweep_figures
+
+            make_sweep_figures(sweep, rows, out)
 
 
 def sweep_section(runs_dir: Path, metrics: dict[str, dict[str, Any]],
