@@ -374,7 +374,7 @@ def slow_target(vx: float, vy: float, vz: float, px: float, py: float, pz: float
     acceleration [m/s^2], the vehicle's estimated position (``ex``...) [m] and velocity
     (``wx``...) [m/s], the clock's rate ``s`` now, the governor's limit ``limit_m`` [m] and
     its full margin ``margin_m`` [m], the latency [s] and deceleration [m/s^2] of the stop,
-    and the line speed [m/s] the look-ahead counts on (1 for a leg not moving)."""
+    and the line speed [m/s] the look-ahead counts on; 1 for a leg not moving."""
     v, p, a = (vx, vy, vz), (px, py, pz), (ax, ay, az)
     pe, ve = (ex, ey, ez), (wx, wy, wz)
     speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])

@@ -556,13 +556,13 @@ class OfflineRunner:
                                          tuple(x[RATES]))
                 # (the records built as the tuples they are, without their Python-level
                 # constructors: tuple.__new__)
-                truth = _new(VehicleState, (pos, vel, quat, rates))
                 if sensors is not None:     # on its estimate: no truth onboard
                     sim = sensors.read(t)
                     out = step(_new(OnboardInputs, (t, None, sim.imu, sim.gps
                                                     if sim.gps_updated else None)),
                                diagnostics=True)
                 else:
+                    truth = _new(VehicleState, (pos, vel, quat, rates))
                     out = step(_new(OnboardInputs, (t, truth, None, None)), diagnostics=True)
                 state, fs, ref = out.state, out.flight, out.reference
                 if state is not None:   # LOCAL_POSITION_NED on the component link
