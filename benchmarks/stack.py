@@ -376,8 +376,9 @@ def run_stack(work: Path, duration_s: float | None = None, flight: Flight | None
     wake: dict[str, int] = {}
     traces: dict[str, subprocess.Popen] = {}
     pin = (not real_time) if pin is None else pin
-    if spin and pin and not real_time and cpu_split() is not None:
-        # a plant on a CPU of its own spins briefly in its lockstep waits
+    if spin and not pin and not real_time:
+        # unpinned (the pinning puts the companion on the plant's CPU, where a spin would
+        # only keep it waiting): the plant spins briefly in its lockstep waits
         commands["plant"] += ["--lockstep-spin-us", repr(LOCKSTEP_SPIN_US)]
     try:
         if recorder:
@@ -509,7 +510,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--sim-link", choices=("unix", "tcp"), default=SIM_LINK_DEFAULT,
                     help="the simulator link, as up --sim-link (default: up's)")
     ap.add_argument("--spin", action="store_true",
-                    help="experiment: the pinned plant's lockstep waits spin first "
+                    help="experiment, with --no-pin: the plant's lockstep waits spin first "
                          "(python -m sitl --lockstep-spin-us)")
     ap.add_argument("--syscalls", action="store_true",
                     help="count each process's system calls over the flight (perf trace "

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from enum import Enum, IntEnum
 
 from companion.legs import CircleItem, GotoItem, LegFollower
-from companion.reference import Circle, RefSample
+from companion.reference import Circle, RefSample, _new
 from tuavdefs.frames import quat_to_yaw
 from tuavdefs.jit import njit
 from tuavdefs.paramspec import Params, quantity
@@ -1027,12 +1027,15 @@ class Navigator:
         s, sd = self._s, self._sd
         if s == 1.0 and sd == 0.0:
             return ref
-        v, a, j = ref.vel_m_s, ref.acc_m_s2, ref.jerk_m_s3
-        return RefSample(ref.pos_m, (v[0] * s, v[1] * s, v[2] * s),
-                         tuple(a[i] * s * s + v[i] * sd for i in range(3)),  # type: ignore
-                         tuple(j[i] * s * s * s + 3.0 * a[i] * s * sd  # type: ignore
-                               for i in range(3)),
-                         ref.yaw_rad, ref.yaw_rate_rad_s * s)
+        vx, vy, vz = ref.vel_m_s
+        ax, ay, az = ref.acc_m_s2
+        jx, jy, jz = ref.jerk_m_s3
+        return _new(RefSample, (
+            ref.pos_m, (vx * s, vy * s, vz * s),
+            (ax * s * s + vx * sd, ay * s * s + vy * sd, az * s * s + vz * sd),
+            (jx * s * s * s + 3.0 * ax * s * sd, jy * s * s * s + 3.0 * ay * s * sd,
+             jz * s * s * s + 3.0 * az * s * sd),
+            ref.yaw_rad, ref.yaw_rate_rad_s * s))
 
     def _slow_clock(self, dt: float) -> None:
         """The fence-like part of the tether governor: the rate s of the leg's clock
@@ -1112,7 +1115,8 @@ class Navigator:
         u = (v[0] / speed, v[1] / speed, v[2] / speed)
         ab, jerk = self.p.tether_brake_acc_m_s2, TETHER_BRAKE_JERK_M_S3
         run = brake_distance_m(speed, a[0] * u[0] + a[1] * u[1] + a[2] * u[2], ab, jerk)
-        stop = math.sqrt(sum((p[i] + u[i] * run) ** 2 for i in range(3)))
+        sx, sy, sz = p[0] + u[0] * run, p[1] + u[1] * run, p[2] + u[2] * run
+        stop = math.sqrt(sx ** 2 + sy ** 2 + sz ** 2)
         if stop <= d_ref + 1e-4:          # not outward: nothing to govern
             return ref
         v_out = (v[0] * p[0] + v[1] * p[1] + v[2] * p[2]) / d_ref if d_ref > 0 else speed
@@ -1121,8 +1125,10 @@ class Navigator:
         d_e = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
         if se > 1e-6:       # the vehicle's own stopping point, if it is outward too
             run_e = se * self.p.tether_latency_s + se * se / (2.0 * ab)
-            stop = max(stop, math.sqrt(sum((pe[i] + ve[i] / se * run_e) ** 2
-                                           for i in range(3))))
+            sx = pe[0] + ve[0] / se * run_e
+            sy = pe[1] + ve[1] / se * run_e
+            sz = pe[2] + ve[2] / se * run_e
+            stop = max(stop, math.sqrt(sx ** 2 + sy ** 2 + sz ** 2))
             if d_e > 0:
                 v_out = max(v_out, (ve[0] * pe[0] + ve[1] * pe[1] + ve[2] * pe[2]) / d_e)
         # the estimate's uncertainty as margin, in full from an outward speed of

@@ -81,7 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--lockstep-spin-us", type=float, default=0.0, metavar="US",
                     help="in lockstep, spin this long [us] waiting for the companion's "
                          "answer and the ground station's torque before sleeping (for a "
-                         "plant on a CPU of its own; 0, the default: sleep at once)")
+                         "plant with a CPU of its own, as with tuav-sitl up --no-pin on "
+                         "many CPUs; 0, the default: sleep at once)")
     ap.add_argument("--accept-timeout", type=float, default=60.0,
                     help="give up if no companion connects within [s]")
     return ap

@@ -7,9 +7,10 @@ for the wake-up of the plant's CPU (on a virtual machine an inter-processor inte
 exits to the hypervisor, and the idle CPU's return from its halt), and the plant starts
 late by the time the wake-up takes. Spinning for a short while instead, with a readiness
 check that costs a ``poll(0)``, takes both off the companion's CPU, which in lockstep on two
-CPUs is the one that sets the pace (docs/performance.md). The plant has a CPU of its own
-in lockstep (``tuav-sitl up``: :func:`tuav_sitl.realtime.cpu_split`), shared only with the
-bus recorder at idle priority, which runs whenever the plant sleeps.
+CPUs was the one that set the pace (docs/performance.md). It is for a plant with a CPU of
+its own: ``tuav-sitl up`` in lockstep now puts the companion on the plant's CPU
+(:func:`tuav_sitl.realtime.cpu_split`), where the hand-over is a context switch and a spin
+would only keep the companion waiting, so ``up`` does not spin.
 
 A spin that runs out of its budget gives up, and the next spins are skipped for 1, 2, 4 ...
 up to :data:`BACKOFF_MAX` waits while they keep missing, so that a machine on which the

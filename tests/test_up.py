@@ -27,8 +27,8 @@ def test_a_run_ends_cleanly_with_its_folder(session):
     assert n["can_decoded_torques"] > 10     # the bus recording decodes with the DBC
     assert n["truth_rows"] >= 140          # 3 s at 50 Hz
     assert n["left"] == []
-    if len(os.sched_getaffinity(0)) >= 2:   # lockstep: the plant on a CPU of its own
-        assert "scheduling: plant on CPU" in n["stdout"]
+    if len(os.sched_getaffinity(0)) >= 2:   # lockstep: the plant and the companion on a CPU
+        assert "scheduling: plant and companion on CPU" in n["stdout"]
         assert "recorder at idle priority" in n["stdout"]
         assert "ground station (nice 5)" in n["stdout"]
 

@@ -157,13 +157,13 @@ def test_the_simulator_link_per_instance():
         parse("--sim-link", "udp")
 
 
-def test_lockstep_gives_the_plant_a_cpu_of_its_own():
+def test_lockstep_puts_the_plant_and_the_companion_on_one_cpu():
     from tuav_sitl.realtime import cpu_split
 
     assert cpu_split({3}) is None
     split = cpu_split({5, 2, 7})
-    assert split == {"plant": {2}, "companion": {5, 7}, "groundstation": {5, 7},
-                     "candump": {2}}
+    assert split == {"plant": {2}, "companion": {2}, "groundstation": {5, 7},
+                     "candump": {5, 7}}
 
 
 def test_the_recorder_runs_at_idle_priority_in_lockstep():

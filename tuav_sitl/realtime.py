@@ -50,32 +50,34 @@ def set_real_time(pid: int, priority: int = RT_PRIORITY) -> str | None:
 
 
 def cpu_split(available: set[int] | None = None) -> dict[str, set[int]] | None:
-    """CPUs for the stack's processes in lockstep: the plant on a CPU of its own, the
-    companion and the ground station on the others, the bus recorder (a
-    :data:`BACKGROUND` process) on the plant's (``available``: the CPUs this process may
-    use, by default its own affinity). None with fewer than 2 CPUs.
+    """CPUs for the stack's processes in lockstep: the plant and the companion on one CPU,
+    the ground station and the bus recorder (a :data:`BACKGROUND` process) on the others
+    (``available``: the CPUs this process may use, by default its own affinity). None with
+    fewer than 2 CPUs.
 
-    In lockstep the plant is the busiest process and on the simulation's critical path;
-    with a CPU of its own it is never preempted by the ground station's or the companion's
-    wake-ups and never migrates, which on 2 CPUs cut its CPU time per period by about a
-    tenth and raised the stack's rate by about as much. The plant's CPU still idles
-    about two fifths of the time, while the plant waits for the companion's answer: the
-    recorder, at idle priority (:func:`set_background`), works in those gaps and never
-    delays the plant, which took its load off the companion's CPU and raised the rate
-    by another 5-9 % (docs/performance.md)."""
+    In lockstep the plant and the companion take turns on the simulation's critical path:
+    the plant waits for the companion's rotor commands, the companion for the plant's next
+    state. On one CPU each hands it to the other by a context switch; on two, each send
+    must wake the other's idle CPU, which on this KVM guest costs tens of microseconds a
+    period (an interrupt to a halted virtual CPU). Together they ran the mission at
+    18.6-19.4x where the plant on a CPU of its own, the companion beside the ground
+    station, ran it at 15.9-16.3x in the same hour, and each spent about a quarter less CPU
+    time per period (docs/performance.md). The ground station answers an encoder frame
+    for the next control period's physics, so it has a period of slack: it and the
+    recorder take the other CPUs."""
     cpus = sorted(available if available is not None else os.sched_getaffinity(0))
     if len(cpus) < 2:
         return None
-    plant, rest = {cpus[0]}, set(cpus[1:])
-    return {"plant": plant, "companion": rest, "groundstation": rest, "candump": plant}
+    pair, rest = {cpus[0]}, set(cpus[1:])
+    return {"plant": pair, "companion": pair, "groundstation": rest, "candump": rest}
 
 
-#: A spin for the plant's lockstep waits when it has a CPU of its own (:func:`cpu_split`)
-#: [us] (``python -m sitl --lockstep-spin-us``, :mod:`sitl.spin`; ``python -m
-#: benchmarks.stack --spin``): the senders then need not wake the plant's CPU, which took
-#: 7-15 % of the companion's CPU time per period off the CPU it shares with the ground
-#: station, but on a host busy with other work the flights were slower, so ``up`` does not
-#: pass it (docs/performance.md).
+#: A spin for the plant's lockstep waits [us] (``python -m sitl --lockstep-spin-us``,
+#: :mod:`sitl.spin`; ``python -m benchmarks.stack --no-pin --spin``): the senders then need
+#: not wake the plant's CPU. When the plant had a CPU of its own it took 7-15 % of the
+#: companion's CPU time per period, but on a host busy with other work the flights were
+#: slower; :func:`cpu_split` now puts the companion on the plant's CPU, where a spin would
+#: only keep it waiting, so ``up`` does not pass it (docs/performance.md).
 LOCKSTEP_SPIN_US = 200.0
 
 #: Processes that in lockstep only use CPU time the others leave (:func:`set_background`):
@@ -84,8 +86,8 @@ BACKGROUND = frozenset({"candump"})
 
 #: Niceness in lockstep (:func:`set_nice`): the ground station's torque answers an encoder
 #: frame for the next control period's physics, so it has a period of slack where the
-#: companion's answer has none; on the CPU they share, the companion goes first. (A
-#: higher niceness needs no privilege; measured 19.5x against 19.25x, docs/performance.md.)
+#: companion's answer has none; wherever they meet on a CPU (a mission client, a ground
+#: station's tools), it yields. (A higher niceness needs no privilege.)
 NICENESS = {"groundstation": 5}
 
 

@@ -326,7 +326,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          "default they get SCHED_FIFO where permitted)")
     ap.add_argument("--no-pin", action="store_true",
                     help="in lockstep, let the processes run on any CPU (by default the "
-                         "plant gets a CPU of its own and the others share the rest)")
+                         "plant and the companion share one, the others the rest)")
     out = ap.add_mutually_exclusive_group()
     out.add_argument("--headless", action="store_true",
                      help="print only errors and the log folder (no banner, no status)")
@@ -591,8 +591,8 @@ def run_up(args: argparse.Namespace) -> int:
 
 
 def _pin(stack: Stack) -> str:
-    """In lockstep: the plant on a CPU of its own, the companion and the ground station (at
-    a lower priority) on the rest, the recorder at idle priority on the plant's
+    """In lockstep: the plant and the companion, which take turns, on one CPU, the ground
+    station (at a lower priority) and the recorder (at idle priority) on the rest
     (:mod:`tuav_sitl.realtime`); returns the banner's words for it."""
     from tuav_sitl.realtime import (
         BACKGROUND,
@@ -616,11 +616,10 @@ def _pin(stack: Stack) -> str:
             why = set_nice(proc.pid, NICENESS[name]) or why
     if why is not None:
         return f"normal (CPU affinity: {why})"
-    plant = ",".join(map(str, sorted(split["plant"])))
-    rest = ",".join(map(str, sorted(split["companion"])))
-    return (f"plant on CPU {plant}, companion and ground station (nice "
-            f"{NICENESS['groundstation']}) on CPU {rest}, recorder at idle priority on CPU "
-            f"{plant}")
+    pair = ",".join(map(str, sorted(split["plant"])))
+    rest = ",".join(map(str, sorted(split["groundstation"])))
+    return (f"plant and companion on CPU {pair}, ground station (nice "
+            f"{NICENESS['groundstation']}) and recorder at idle priority on CPU {rest}")
 
 
 def _banner(run_dir: Path, ports: Ports, sim: tuple[str, int] | str, can: str,
