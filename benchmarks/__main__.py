@@ -294,11 +294,10 @@ def bench_offline(quick: bool) -> list[Row]:
     rtk = load_scenario("circle-rtk").replace(duration_s=duration, metrics_after_s=0.0)
     rows = []
     for label, scenario in (("circle", sc),
-                            ("circle, lumped tether", sc.replace(
-                                tether=sc.tether.replace(model="lumped"))),
+                            ("circle, lumped tether", sc.with_tether_model("lumped")),
                             ("circle-rtk, EKF", rtk),
-                            ("circle-rtk, EKF, lumped tether", rtk.replace(
-                                tether=rtk.tether.replace(model="lumped")))):
+                            ("circle-rtk, EKF, lumped tether",
+                             rtk.with_tether_model("lumped"))):
         runner = OfflineRunner(scenario)
         c0 = time.thread_time()
         t0 = time.perf_counter()

@@ -67,8 +67,8 @@ def ours_circle(duration_s: float) -> tuple[float, float]:
     from tuav_sitl.scenario import load_scenario
 
     sc = load_scenario("circle-rtk")
-    sc = sc.replace(duration_s=duration_s, metrics_after_s=min(5.0, 0.5 * duration_s),
-                    tether=sc.tether.replace(model="lumped"))
+    sc = sc.replace(duration_s=duration_s,
+                    metrics_after_s=min(5.0, 0.5 * duration_s)).with_tether_model("lumped")
     runner = OfflineRunner(sc)
     t0 = time.perf_counter()
     result = runner.run()

@@ -293,6 +293,14 @@ class ScenarioParams(Params):
         return SystemParams(environment=p.environment, vehicle=p.vehicle, tether=p.tether,
                             winder=p.winder, wind=self.wind)
 
+    def with_tether_model(self, model: str) -> Self:
+        """This scenario with the plant's tether ``model`` ("lumped" or "catenary"; the
+        truth's, ``[plant.tether] model``, and the model table's, which the TOML's
+        ``[tether] model`` sets for both)."""
+        p = self.plant
+        return self.replace(tether=self.tether.replace(model=model),
+                            plant=p.replace(tether=p.tether.replace(model=model)))
+
     def model(self) -> SystemParams:
         """The controllers' model: the system as its designers believe it (no wind: they
         do not know it)."""
