@@ -83,7 +83,7 @@ from sitl.lumped import (
     relax,
     substeps,
 )
-from sitl.tether import Tether, TetherForces, tether_forces_kernel
+from sitl.tether import Tether, TetherForces, _new, tether_forces_kernel
 from sitl.wind import WindModel, wind_kernel
 from sitl.winder import WinderModel
 from tuavdefs.airframe import command_to_rotor_speed, rotor_speed_setpoints
@@ -604,9 +604,11 @@ class Plant:
         top = (w[W_FX], w[W_FY], w[W_FZ])
         exit_ = (w[W_EX], w[W_EY], w[W_EZ])
         regime = CatenaryRegime.TOUCHDOWN if on_ground > 0.0 else CatenaryRegime.SUSPENDED
-        info = CatenaryInfo(-math.hypot(top[0], top[1]), -top[2], math.hypot(*exit_[:2]),
-                            exit_[2], on_ground, regime, 0, lowest, False)
-        return TetherForces(top, exit_, w[W_DRUM], math.hypot(*top), info)
+        # (the records built as the tuples they are: every control and winder period)
+        info = _new(CatenaryInfo, (-math.hypot(top[0], top[1]), -top[2],
+                                   math.hypot(exit_[0], exit_[1]), exit_[2], on_ground,
+                                   regime, 0, lowest, False))
+        return _new(TetherForces, (top, exit_, w[W_DRUM], math.hypot(*top), info))
 
     def lay_line(self, settle_s: float = 2.0) -> None:
         """The lumped line laid at rest on the catenary from the exit to the attachment
