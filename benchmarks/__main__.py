@@ -478,6 +478,12 @@ def bench_processes(quick: bool) -> list[Row]:
                 "  the same with the simulator link on TCP", ls["rtf_tcp"], "sim s / wall s",
                 note=f"one flight (up --sim-link tcp); the default is "
                      f"{ls['rtf'] / ls['rtf_tcp']:.2f} times as fast"))
+        if "rtf_lumped" in ls:
+            rows.append(Row(
+                "  the same on the lumped truth tether", ls["rtf_lumped"], "sim s / wall s",
+                note=f"one flight, the plant's --params [tether] model = \"lumped\"; "
+                     f"{ls['lumped_mission']}",
+                goal=f">= 20x: {'met' if ls['rtf_lumped'] >= 20.0 else 'NOT met'}"))
         for name, shares in ls["shares"].items():
             per_period_us = (ls["profiled_s"][name] / ls["profiled_sim_s"] * 1e6 / 250.0)
             rows.append(Row(

@@ -50,8 +50,8 @@ def lockstep(work: Path, quick: bool) -> dict:
     warm-up flight): speed
     and CPU of the median flight (by speed; every flight's speed listed), one flight with
     the simulator link on TCP when up's default is a Unix-domain socket (not with
-    ``quick``), then where the time goes (one more flight, every process under cProfile
-    from the flight's start to its end)."""
+    ``quick``), one on the lumped truth tether, then where the time goes (one more
+    flight, every process under cProfile from the flight's start to its end)."""
     flight = stack.mission_flight(short=quick)
     # a first flight whose outcome is not kept: the processes' compiled kernels are cached
     # by it (on a fresh clone, compiling them in the companion outlasted the mission
@@ -77,6 +77,13 @@ def lockstep(work: Path, quick: bool) -> dict:
         # one flight with the other simulator link, for comparison
         tcp = stack.run_stack(work / "lockstep-tcp", flight=flight, sim_link="tcp")
         out["rtf_tcp"] = tcp.real_time_factor
+    # one flight with the plant's truth tether the lumped line (issue 16's row)
+    params = work / "lumped.toml"
+    params.write_text('[tether]\nmodel = "lumped"\n')
+    lumped = stack.run_stack(work / "lockstep-lumped", flight=flight,
+                             plant_extra=["--params", str(params)])
+    out["rtf_lumped"] = lumped.real_time_factor
+    out["lumped_mission"] = _mission_outcome(lumped.processes["client"].log)
     prof = stack.run_stack(work / "profile", flight=flight, profile=True)
     out["profiled_rtf"] = prof.real_time_factor
     out["profiled_sim_s"] = prof.sim_s
