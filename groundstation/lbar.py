@@ -110,6 +110,13 @@ class LBarParams(Params):
         "on the reported length, and a lead wound in fast braked it as it slowed", gt=0)
     stop_lead_filter_s: float = quantity(
         0.05, "s", "stop lead: time constant of the low-pass on its target", ge=0)
+    stop_lead_rise_m_s2: float = quantity(
+        2.0, "m/s^2", "stop lead: its pay-out rate rises at most this fast from what it was "
+        "(from 0 after a wind-in; it may fall, and a wind-in stop, at once; 0: at once). "
+        "A step of its pay-out rate set the drum paying out faster than the line "
+        "took it: on the dynamic (lumped) line the exit went slack and snapped taut when "
+        "the slack ran out (circle-rtk: 69 N; the mission: 124 N, the rotors saturated "
+        "3.9 % of the flight, 0.4 % with it)", ge=0)
     stop_lead_min_exit_angle_rad: float = quantity(
         math.radians(4.0), "rad", "stop lead: the lead is bounded so that the catenary at "
         "the reported position leaves the winder at least this far above the ground (the "
@@ -420,7 +427,9 @@ def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py
     followed (into ``trim_s[11]``) at most ``trim_p[12]`` [m/s] out and ``trim_p[23]``
     [m/s] back; the lead is that, at most ``room_m`` [m] (the longest line that stays off
     the ground, less ``base_m``: where the room is smaller than the stop, the vehicle's
-    governor slows it), followed at most ``trim_p[12]`` [m/s] fast, and not lengthened
+    governor slows it), followed at most ``trim_p[12]`` [m/s] fast, its pay-out rate rising
+    at most ``trim_p[25]`` [m/s^2] from what it was, from 0 after a wind-in (0: at once;
+    it may fall at once), and not lengthened
     while the line's measured exit elevation ``elevation_rad`` [rad] (NaN: none) is below
     the bound's angle ``atan(trim_p[18])`` (the room is the reported position's; near the
     ground or the vertical a report centimetres off is the line on the ground).
@@ -458,6 +467,9 @@ def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py
     step = min(max(step, -most), most)
     if elevation_rad < math.atan(trim_p[18]):      # the winder's own reading (not NaN)
         step = min(step, 0.0)
+    if trim_p[25] > 0.0:
+        # (from a wind-in the pay-out starts at 0: stopping a wind-in is at once)
+        step = min(step, (max(trim_s[5], 0.0) + trim_p[25] * dt_s) * dt_s)
     trim_s[4] += step
     trim_s[5] = step / dt_s
 
@@ -553,7 +565,8 @@ class LBarEstimator:
                                      params.stop_lead_min_speed_m_s,
                                      params.stop_lead_onset_m_s,
                                      params.stop_lead_release_m_s,
-                                     params.weight_max_gain_1_m])
+                                     params.weight_max_gain_1_m,
+                                     params.stop_lead_rise_m_s2])
         #: (offset [m], its rate [m/s], filtered drum tension [N], line weight [N/m],
         #: stop lead [m], its rate [m/s], its filtered target [m], slack floor [m], its
         #: rate [m/s], its filtered needed length [m], the time without a fix [s], the

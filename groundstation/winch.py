@@ -115,6 +115,11 @@ class WinchMode(enum.IntEnum):
 REJOIN_MARGIN_M = 0.5
 #: How fast that wind-in speeds up and slows down [m/s^2].
 REJOIN_ACC_M_S2 = 0.5
+#: A line shorter than L-bar by more than this [m] when RELAXED begins or the UAV leaves
+#: the ground (an in-air start's first report) is paid out to it the same way: a step of
+#: the reference there set the drum paying out faster than the line took it, which lay
+#: slack at the exit and snapped taut when the drum stopped (the lumped line: 70-150 N).
+JOIN_MARGIN_M = 0.05
 #: The shortest wall time between two re-arms of an axis that disarmed itself [s].
 REARM_S = 1.0
 #: How long [s, wall] a frame from another host leaves the winch unhealthy, and the
@@ -382,6 +387,8 @@ class Winch:
         self._hold_m = math.nan
         self._rejoin_m = math.nan           # RELAXED's reference while rejoining L-bar
         self._rejoin_rate = 0.0             # its wind-in speed [m/s]
+        self._join_gap_m = 0.0              # how far short of L-bar's law a join still is
+        self._join_rate = 0.0               # how fast that closes [m/s]
         self._ground = False                # RELAXED holding the ground pre-tension
         self._ground_low = False            # ... since the UAV reported itself on the ground
         self._limit_noticed = False
@@ -837,6 +844,7 @@ class Winch:
         self.ref_rate_m_s = rate if self.ref_m < self.length_max_m else 0.0
         if self.mode == WinchMode.RELAXED:
             self._rejoin_m, self._rejoin_rate = self.ref_m, 0.0
+            self._join_gap_m = self._join_rate = 0.0
             self._hold_m = self.ref_m
         else:
             self._target_m = self.ref_m
@@ -879,9 +887,10 @@ class Winch:
             elif uav is not None:
                 pos, vel = uav
                 ea = self.exit_angle
+                gap, closing = self._join_step()
                 step = self.host.update(length, omega, tension, pos, vel,
                                         ea[1] if ea is not None and ea[3] else math.nan,
-                                        self.measured_position_m())
+                                        self.measured_position_m(), -gap, closing)
                 self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
                 command = step.command
             else:
@@ -896,6 +905,39 @@ class Winch:
         self._check_stuck(out, length)
         torque = command.torque_n_m
         return torque if math.isfinite(torque) else 0.0
+
+    def _start_rejoin(self, start_m: float, lbar_m: float) -> None:
+        """RELAXED's reference begins at the length ``start_m`` [m]: a line longer than
+        L-bar (``lbar_m`` [m], NaN: unknown) by more than :data:`REJOIN_MARGIN_M` is wound
+        in to it on a trapezoid; one shorter by more than :data:`JOIN_MARGIN_M` follows
+        L-bar's law less a gap that closes on a trapezoid (:meth:`_join_step`); else L-bar's
+        law takes it from there."""
+        self._rejoin_m, self._rejoin_rate = math.nan, 0.0
+        self._join_gap_m = self._join_rate = 0.0
+        if not (math.isfinite(start_m) and math.isfinite(lbar_m)):
+            return
+        if start_m > lbar_m + REJOIN_MARGIN_M:
+            self._rejoin_m = start_m
+        elif start_m < lbar_m - JOIN_MARGIN_M:
+            self._join_gap_m = lbar_m - start_m
+
+    def _join_step(self) -> tuple[float, float]:
+        """This period's (gap [m], its closing speed [m/s]) of a join from a line shorter
+        than L-bar: the gap closes at ``rejoin_rate_m_s`` at most, speeding up and slowing
+        down at :data:`REJOIN_ACC_M_S2`, while L-bar's law moves the reference with the
+        UAV (a climb away is paid out for at once); (0, 0) once closed."""
+        gap = self._join_gap_m
+        if gap <= 0.0:
+            return 0.0, 0.0
+        dt = self.dt_s
+        rate = min(self.p.rejoin_rate_m_s, self._join_rate + REJOIN_ACC_M_S2 * dt,
+                   math.sqrt(2.0 * REJOIN_ACC_M_S2 * gap))
+        if gap <= max(rate * dt, 1e-4):
+            gap, rate = 0.0, 0.0        # closed (the last step's at most this speed)
+        else:
+            gap -= rate * dt
+        self._join_gap_m, self._join_rate = gap, rate
+        return gap, rate
 
     def _on_ground(self, uav: UavState | None) -> bool:
         """Whether RELAXED holds the ground pre-tension now (module docstring): the UAV on
@@ -916,11 +958,10 @@ class Winch:
             ground = low or flat
         if ground and not self._ground:
             self.ref_m, self.ref_rate_m_s = self.length_m, 0.0
+            self._join_gap_m = self._join_rate = 0.0
         elif self._ground and not ground:
             lbar_m = self.host.lbar.length(uav[0])[0] if uav is not None else math.nan
-            self._rejoin_m = (self.length_m if math.isfinite(lbar_m)
-                              and self.length_m > lbar_m + REJOIN_MARGIN_M else math.nan)
-            self._rejoin_rate = 0.0
+            self._start_rejoin(self.length_m, lbar_m)
             self._hold_m = self.length_m
         self._ground = ground
         if not ground:
@@ -1182,9 +1223,7 @@ class Winch:
             # a line longer than L-bar (after a pay-out) is wound back in at a bounded rate
             uav = self.uav_now()
             lbar_m = self.host.lbar.length(uav[0])[0] if uav is not None else math.nan
-            self._rejoin_m = (start if math.isfinite(start) and math.isfinite(lbar_m)
-                              and start > lbar_m + REJOIN_MARGIN_M else math.nan)
-            self._rejoin_rate = 0.0
+            self._start_rejoin(start, lbar_m)
         elif mode == WinchMode.RELATIVE_LENGTH:
             self.ref_m, self._speed_m_s = start, speed
             target = start + length

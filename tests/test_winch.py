@@ -15,7 +15,14 @@ from pymavlink.dialects.v20 import common as mavlink2
 from groundstation import winch as wm
 from groundstation import winch_link
 from groundstation.lbar import LBarParams
-from groundstation.winch import CommandRequest, Winch, WinchMode, WinchOutput
+from groundstation.winch import (
+    JOIN_MARGIN_M,
+    REJOIN_ACC_M_S2,
+    CommandRequest,
+    Winch,
+    WinchMode,
+    WinchOutput,
+)
 from groundstation.winch_link import WinchLinkClient, local_positions
 from groundstation.winder_control import WinderControlParams
 from groundstation.winder_host import WinderHost
@@ -902,10 +909,28 @@ def test_relaxed_holds_a_ground_pre_tension_while_the_uav_is_unknown_or_on_the_g
     assert host.lbar.length(high)[1] < p.ground_lbar_tension_ratio * host.lbar.a_target
     w.set_uav((high, (0.0, 0.0, 0.5)))
     encoder(w, 30.0, floor)
-    # (L-bar, and the stop lead the climb at 0.5 m/s has begun to pay out ahead)
+    # (L-bar, and the stop lead the climb at 0.5 m/s has begun to pay out ahead) less the
+    # join's gap: the line, shorter than L-bar by more than JOIN_MARGIN_M, is paid out to
+    # it on a trapezoid, not in a step; the gap closes, its speed rising at most at
+    # REJOIN_ACC_M_S2, and L-bar's law holds once it has (the old step set the drum paying
+    # out faster than a lumped line takes it: slack at the exit, then a snap)
+    lbar_high = host.lbar.length(high)[0]
     lead = float(w.host.lbar.trim_state[4])
     assert 0.0 <= lead < 0.1
-    assert w.reference()[0] == pytest.approx(host.lbar.length(high)[0] + lead, abs=1e-5)
+    assert lbar_high - floor > JOIN_MARGIN_M
+    gap = lbar_high + lead - w.reference()[0]
+    assert 0.0 < gap <= lbar_high - floor
+    gaps = [gap]
+    for k in range(600):
+        encoder(w, 30.0 + k * DT, w.reference()[0])
+        gaps.append(lbar_high + float(w.host.lbar.trim_state[4]) - w.reference()[0])
+    closing = [(a - b) / DT for a, b in zip(gaps, gaps[1:], strict=False)]
+    assert max(closing) <= p.rejoin_rate_m_s + 1e-9
+    assert max(b - a for a, b in zip(closing, closing[1:], strict=False)) <= (
+        REJOIN_ACC_M_S2 * DT + 1e-9)      # (it slows down on sqrt(2 a gap))
+    assert gaps[1] > 0.0 and gaps[-1] == pytest.approx(0.0, abs=1e-9)
+    lead = float(w.host.lbar.trim_state[4])
+    assert w.reference()[0] == pytest.approx(lbar_high + lead, abs=1e-5)
     w.set_uav(UAV)
     encoder(w, 30.0, 13.5)
     lead = float(w.host.lbar.trim_state[4])      # the stop lead, as above
