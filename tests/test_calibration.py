@@ -36,11 +36,28 @@ def test_the_faces_tilts_do_not_enter():
                                    atol=1e-6)
 
 
+def _tilt_error_rad(series: dict, after_s: float) -> float:
+    """RMS of the roll and pitch estimates' error [rad] from ``after_s`` [s] on."""
+    t, est = series["t"], series["est_euler"]
+    w = (t >= after_s) & np.isfinite(est[:, 0])
+    e = est[w, :2] - series["euler"][w, :2]
+    return float(np.sqrt(np.mean(np.sum(e * e, axis=1))))
+
+
 def test_a_calibrated_vehicle_knows_its_attitude_to_half_a_degree():
+    """The shipped circle-gnss within the 0.5 degree target; and what the calibration is
+    for, the tilt (the heading is the magnetometer's): over four sensor seeds, from 5 s on
+    (after the in-air alignment), its error without the calibration is several times what
+    it is with it (measured 0.09-0.14 against 0.21-1.16 degrees; the whole attitude's RMSE,
+    the heading's error in it, differs by 0.8-1.4 times only)."""
     sc = load_scenario("circle-gnss")
     cal = run_scenario(sc.replace(duration_s=40.0), None, progress=None).metrics
-    raw = run_scenario(sc.replace(duration_s=40.0,
-                                  sensors=sc.sensors.replace(accel_calibration=False)),
-                       None, progress=None).metrics
     assert cal["estimate_attitude_rmse_rad"] <= math.radians(0.5)
-    assert raw["estimate_attitude_rmse_rad"] > 1.5 * cal["estimate_attitude_rmse_rad"]
+    tilt: dict[bool, list[float]] = {True: [], False: []}
+    for seed in range(4):
+        for on in (True, False):
+            s = sc.replace(duration_s=20.0,
+                           sensors=sc.sensors.replace(seed=seed, accel_calibration=on))
+            tilt[on].append(_tilt_error_rad(run_scenario(s, None, progress=None).series, 5.0))
+    assert max(tilt[True]) <= math.radians(0.25)
+    assert np.mean(tilt[False]) > 2.0 * np.mean(tilt[True])
