@@ -921,6 +921,12 @@ class Winch:
         elif start_m < lbar_m - JOIN_MARGIN_M:
             self._join_gap_m = lbar_m - start_m
 
+    @property
+    def join_gap_m(self) -> float:
+        """How far short of L-bar's law the reference still is while it joins L-bar from a
+        shorter line [m] (0: not joining)."""
+        return self._join_gap_m
+
     def _join_step(self) -> tuple[float, float]:
         """This period's (gap [m], its closing speed [m/s]) of a join from a line shorter
         than L-bar: the gap closes at ``rejoin_rate_m_s`` at most, speeding up and slowing

@@ -128,6 +128,9 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     rate += trim_s[5]
     needed = floor_length_m(fix_x, fix_y, fix_z, trim_p[19] * a_target, trim_p[14])
     slack_floor(trim_p, trim_s, dt_s, lbar_m, needed)
+    # a join's gap after the floor: it defers what the floor pays out too (on the lumped
+    # line the winder's fix, thrown by the line's motion, asked 2 m/s at an in-air start
+    # and snapped the line at 92 N); the over-tension pay-out stays the backstop
     lbar_m += trim_s[7] + offset_m
     rate += trim_s[8] + offset_rate_m_s
     cmd = winder_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, lbar_m,
