@@ -23,7 +23,13 @@ def _run(name: str) -> RunResult:
 @pytest.fixture(scope="module")
 def results() -> dict[str, RunResult]:
     with get_context("fork").Pool(2) as pool:
-        return dict(zip(NAMES, pool.map(_run, NAMES), strict=True))
+        runs = pool.map(_run, NAMES)
+        # the workers leave on their own (the pool's exit would SIGTERM them, which a
+        # handler an earlier test installed in this process catches: the forked worker
+        # then waits on the queue's lock forever, and so does the exit)
+        pool.close()
+        pool.join()
+    return dict(zip(NAMES, runs, strict=True))
 
 
 def test_the_paper_experiments_are_shipped():

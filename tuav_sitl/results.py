@@ -251,6 +251,10 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
                 progress.write(f"  [{len(metrics):2d}/{len(jobs)}] {name} done, "
                                f"{time.perf_counter() - wall:5.0f} s elapsed\n")
                 progress.flush()
+        # the workers leave on their own, not by the pool's SIGTERM (a SIGTERM handler in
+        # this process, inherited by them, would keep one waiting on the queue's lock)
+        pool.close()
+        pool.join()
     wall = time.perf_counter() - wall
     fig_dir = out_md.parent / "figures"
     if figures:
