@@ -248,6 +248,7 @@ def test_the_recorder_skips_a_datagram_no_can_frame_can_be(tmp_path, capsys):
     stderr and goes on; the valid frames before and after it are logged (on python-can's
     in-process virtual bus)."""
     import argparse
+    import signal
     import threading
     import time
 
@@ -269,7 +270,13 @@ def test_the_recorder_skips_a_datagram_no_can_frame_can_be(tmp_path, capsys):
 
     t = threading.Thread(target=send, daemon=True)
     t.start()
-    assert run_candump(args) == 0              # (the recorder in the main thread: signals)
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        assert run_candump(args) == 0          # (the recorder in the main thread: signals)
+    finally:
+        # its handlers would outlive it in this process (and in the pools forked later)
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
     t.join(timeout=10)
     sender.close()
     lines = log.read_text().splitlines()
