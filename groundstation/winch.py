@@ -869,8 +869,7 @@ class Winch:
                 lbar_m = max(self.host.lbar.length(uav[0])[0], self._floor_need_m())
                 dt = self.dt_s
                 left = self._rejoin_m - lbar_m
-                rate = min(self.p.rejoin_rate_m_s, self._rejoin_rate + REJOIN_ACC_M_S2 * dt,
-                           math.sqrt(2.0 * REJOIN_ACC_M_S2 * max(left, 0.0)))
+                rate = self._trapezoid_speed(self._rejoin_rate, max(left, 0.0))
                 if left <= max(rate * dt, 1e-3):
                     self._rejoin_m = math.nan      # there: L-bar's own law from now on
                 else:
@@ -921,6 +920,13 @@ class Winch:
         elif start_m < lbar_m - JOIN_MARGIN_M:
             self._join_gap_m = lbar_m - start_m
 
+    def _trapezoid_speed(self, speed_m_s: float, left_m: float) -> float:
+        """This period's speed [m/s] of a rejoin or a join moving at ``speed_m_s`` with
+        ``left_m`` [m] to go: at most ``rejoin_rate_m_s``, speeding up at
+        :data:`REJOIN_ACC_M_S2`, and no faster than stops in what is left at it."""
+        return min(self.p.rejoin_rate_m_s, speed_m_s + REJOIN_ACC_M_S2 * self.dt_s,
+                   math.sqrt(2.0 * REJOIN_ACC_M_S2 * left_m))
+
     @property
     def join_gap_m(self) -> float:
         """How far short of L-bar's law the reference still is while it joins L-bar from a
@@ -936,8 +942,7 @@ class Winch:
         if gap <= 0.0:
             return 0.0, 0.0
         dt = self.dt_s
-        rate = min(self.p.rejoin_rate_m_s, self._join_rate + REJOIN_ACC_M_S2 * dt,
-                   math.sqrt(2.0 * REJOIN_ACC_M_S2 * gap))
+        rate = self._trapezoid_speed(self._join_rate, gap)
         if gap <= max(rate * dt, 1e-4):
             gap, rate = 0.0, 0.0        # closed (the last step's at most this speed)
         else:

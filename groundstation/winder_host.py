@@ -69,13 +69,13 @@ class WinderHost:
                uav_pos_m: tuple[float, float, float],
                uav_vel_m_s: tuple[float, float, float],
                exit_elevation_rad: float = math.nan,
-               fix_m: tuple[float, float, float] | None = None, offset_m: float = 0.0,
-               offset_rate_m_s: float = 0.0) -> WinderStep:
+               fix_m: tuple[float, float, float] | None = None, join_m: float = 0.0,
+               join_rate_m_s: float = 0.0) -> WinderStep:
         """Torque request [N m] for the measured length [m], drum rate [rad/s] and drum
         tension [N], the UAV's position [m] and velocity [m/s], the line's measured
         exit elevation [rad] (NaN: none; the tension trim then uses the model's weight)
         and the UAV's position [m] as the winder's own tether fix places it (None: none
-        now; the slack floor is taken back); ``offset_m`` [m] and its rate [m/s] are
+        now; the slack floor is taken back); ``join_m`` [m] and its rate [m/s] are
         added to the reference (a join's gap)."""
         lb, ctl = self.lbar, self.controller
         px, py, pz = uav_pos_m
@@ -84,8 +84,8 @@ class WinderHost:
             px, py, pz, vx, vy, vz, lb.a_target, lb._tan_min, lb.p.min_slack_m, lb._root,
             ctl.params(), ctl.state, self.dt_s, length_m, omega_rad_s, drum_tension_n, lb.w,
             lb.trim_params, lb.trim_state, exit_elevation_rad,
-            *(fix_m if fix_m is not None else (math.nan, math.nan, math.nan)), offset_m,
-            offset_rate_m_s)
+            *(fix_m if fix_m is not None else (math.nan, math.nan, math.nan)), join_m,
+            join_rate_m_s)
         return WinderStep(cmd[0], lbar_m, rate, _command(cmd))
 
 
@@ -95,8 +95,8 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
                 law_p: np.ndarray, law_s: np.ndarray, dt_s: float, length_m: float,
                 omega_rad_s: float, drum_tension_n: float, w_n_m: float,
                 trim_p: np.ndarray, trim_s: np.ndarray, elevation_rad: float,
-                fix_x: float, fix_y: float, fix_z: float, offset_m: float,
-                offset_rate_m_s: float
+                fix_x: float, fix_y: float, fix_z: float, join_m: float,
+                join_rate_m_s: float
                 ) -> tuple[float, float, float, tuple[float, float, float, float, float, bool]]:
     """:meth:`WinderHost.update` in scalars: L-bar and its rate (:func:`lbar_kernel`), the
     line's weight (:func:`weight_estimate`, from the exit elevation ``elevation_rad``
@@ -106,10 +106,10 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     :func:`lead_room_m` and held while the measured exit elevation is below the bound's
     angle), the slack floor (:func:`slack_floor`, on the length
     :func:`floor_length_m` asks at the winder's own fix, (``fix_x``, ``fix_y``,
-    ``fix_z``) [m], NaN: none), plus ``offset_m`` [m] moving at ``offset_rate_m_s``
+    ``fix_z``) [m], NaN: none), plus ``join_m`` [m] moving at ``join_rate_m_s``
     [m/s] (a join's gap), then the torque law
     (:func:`winder_law`, its filter ``law_s`` advanced in place) on L-bar + offset + lead
-    + floor. Returns
+    + floor + join. Returns
     (the length reference, its rate, the exit-angle root for next time, the WinderCommand's
     fields)."""
     lbar_m, rate, a, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
@@ -131,8 +131,8 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     # a join's gap after the floor: it defers what the floor pays out too (on the lumped
     # line the winder's fix, thrown by the line's motion, asked 2 m/s at an in-air start
     # and snapped the line at 92 N); the over-tension pay-out stays the backstop
-    lbar_m += trim_s[7] + offset_m
-    rate += trim_s[8] + offset_rate_m_s
+    lbar_m += trim_s[7] + join_m
+    rate += trim_s[8] + join_rate_m_s
     cmd = winder_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, lbar_m,
                      rate)
     return lbar_m, rate, root, cmd
