@@ -524,7 +524,7 @@ def initial_trim_state() -> np.ndarray:
     """The trim's, the lead's and the floor's state before the first period (see
     :attr:`LBarEstimator.trim_state`)."""
     return np.array([0.0, 0.0, math.nan, math.nan, 0.0, 0.0, 0.0, 0.0, 0.0, math.nan,
-                     0.0, 0.0])
+                     0.0, 0.0, math.nan])
 
 
 @njit
@@ -533,7 +533,21 @@ def lead_room_m(px: float, py: float, pz: float, tan_min: float, min_slack: floa
     whose catenary still leaves the winder at least ``tan_min`` (tangent) above the ground:
     the most the stop lead may pay out to (``chord + min_slack`` where the chord itself is
     flatter, or vertical)."""
-    return _length(px, py, pz, 1e-3, tan_min, min_slack, math.nan)[0]
+    return lead_room_from(px, py, pz, tan_min, min_slack, math.nan)[0]
+
+
+@njit
+def lead_room_from(px: float, py: float, pz: float, tan_min: float, min_slack: float,
+                   guess: float) -> tuple[float, float]:
+    """:func:`lead_room_m` with its exit-angle root's Newton iteration started at
+    ``guess`` (NaN: none): (the room [m], the root, for the next call's guess). From the
+    last period's root it converges in a few steps."""
+    if not guess == guess:
+        # not from 2 mm: Newton crawls up sinh's exponential flank from there and gives
+        # up after its 100 steps (bisection then finds the bound, at about 8 us)
+        guess = max(math.hypot(px, py), 2e-3)
+    room, _, root = _length(px, py, pz, 1e-3, tan_min, min_slack, guess)
+    return room, root
 
 
 class LBarEstimator:
@@ -570,7 +584,8 @@ class LBarEstimator:
         #: (offset [m], its rate [m/s], filtered drum tension [N], line weight [N/m],
         #: stop lead [m], its rate [m/s], its filtered target [m], slack floor [m], its
         #: rate [m/s], its filtered needed length [m], the time without a fix [s], the
-        #: lead the need asks for before the ground's bound [m])
+        #: lead the need asks for before the ground's bound [m], the stop lead's room's
+        #: exit-angle root [m]: where its Newton iteration starts next period)
         self.trim_state = initial_trim_state()
 
     def weight_n_m(self) -> float:

@@ -20,7 +20,7 @@ from groundstation.lbar import (
     floor_length_m,
     initial_trim_state,
     lbar_kernel,
-    lead_room_m,
+    lead_room_from,
     slack_floor,
     stop_lead,
     tension_trim,
@@ -103,7 +103,7 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     [rad]; the model's ``w_n_m`` without one), the tension trim's offset
     (:func:`tension_trim` on that weight, both advanced in place), the stop lead
     (:func:`stop_lead`, on the UAV's position and velocity, bounded by
-    :func:`lead_room_m` and held while the measured exit elevation is below the bound's
+    :func:`lead_room_m <groundstation.lbar.lead_room_m>` and held while the measured exit elevation is below the bound's
     angle), the slack floor (:func:`slack_floor`, on the length
     :func:`floor_length_m` asks at the winder's own fix, (``fix_x``, ``fix_y``,
     ``fix_z``) [m], NaN: none), plus ``join_m`` [m] moving at ``join_rate_m_s``
@@ -119,8 +119,10 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     tension_trim(trim_p, trim_s, dt_s, a, px, py, pz, w, drum_tension_n)
     lbar_m += trim_s[0]
     rate += trim_s[1]
-    room = (lead_room_m(px, py, pz, trim_p[18], min_slack) - lbar_m
-            if trim_p[9] > 0.0 else 0.0)
+    room = 0.0
+    if trim_p[9] > 0.0:
+        room, trim_s[12] = lead_room_from(px, py, pz, trim_p[18], min_slack, trim_s[12])
+        room -= lbar_m
     # L-bar's least slack is the vehicle's governor's margin, not room to stop in
     stop_lead(trim_p, trim_s, dt_s, px, py, pz, vx, vy, vz, lbar_m - min_slack, room,
               elevation_rad)
