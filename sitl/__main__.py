@@ -28,7 +28,7 @@ from tuavdefs import simlink as sl
 from tuavdefs.canbus import CanBusError, CanLink
 from tuavdefs.frames import quat_multiply
 from tuavdefs.params import SystemParams
-from tuavdefs.paramspec import load_option
+from tuavdefs.paramspec import ParameterError, load_option
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -106,6 +106,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     faults = load_option(FaultsFile, args.faults, "plant").faults
     pos = tuple(args.position)
     gear = params.vehicle.gear_height_m
+    try:
+        Plant(params)      # a line the plant cannot integrate is refused before it starts
+    except ParameterError as exc:
+        print(f"plant: bad parameter: {exc}", file=sys.stderr)
+        return 2
     if pos[2] <= gear:
         # resting on its gear, rotors stopped, the tether lying out to it with a little slack
         pos = (pos[0], pos[1], gear)

@@ -74,6 +74,7 @@ from sitl.kernel import (
     tether_pull,
 )
 from sitl.lumped import (
+    L_HMAX,
     L_LS,
     lay_line,
     line_energy_j,
@@ -90,8 +91,13 @@ from tuavdefs.airframe import command_to_rotor_speed, rotor_speed_setpoints
 from tuavdefs.frames import euler_to_quat, quat_rotate, quat_to_euler
 from tuavdefs.jit import entry_point
 from tuavdefs.params import SystemParams, TetherModel, WindParams
+from tuavdefs.paramspec import ParameterError
 
 N_STATES = 19
+#: The most RK4 sub-steps a plant step may take on the lumped line (it is 1 on the paper's
+#: line at 1 kHz); a line needing more is refused when the plant is built.
+MAX_LUMPED_SUBSTEPS = 64
+
 #: Time constant of the critically damped fade of the lumped line's exit allowance
 #: (:func:`sitl.lumped.manage_nodes`) [s].
 ALLOWANCE_TAU_S = 0.1
@@ -387,6 +393,16 @@ class Plant:
         self._wind = np.zeros(6)   # at the UAV, then the part the same at every height
         self._wind[:3] = self.wind_m_s
         self._n_sub = substeps(dt_s, self.model.lp)
+        if self.model.lumped and self._n_sub > MAX_LUMPED_SUBSTEPS:
+            # (an extremely light or stiff line: its sub-steps would stall the plant)
+            t = self.params.tether
+            raise ParameterError(
+                "TetherParams.model",
+                f"the lumped line ({t.linear_density_kg_m:g} kg/m, EA "
+                f"{t.axial_stiffness_n:g} N, {t.segment_length_m:g} m segments) is stable only "
+                f"at RK4 steps of {self.model.lp[L_HMAX] * 1e6:.3g} us: {self._n_sub} "
+                f"sub-steps a plant step, at most {MAX_LUMPED_SUBSTEPS}; use the "
+                "catenary, more segments' mass or less stiffness")
         self._segment_m = float(self.model.lp[L_LS])
         self._speed_min = self.params.vehicle.rotor_speed_min_rad_s
         self._speed_max = self.params.vehicle.rotor_speed_max_rad_s

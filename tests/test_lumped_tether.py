@@ -32,6 +32,7 @@ from tuavdefs.params import (
     VehicleParams,
     WindParams,
 )
+from tuavdefs.paramspec import ParameterError
 
 G = 9.81
 
@@ -664,3 +665,25 @@ def test_a_split_while_paying_out_keeps_the_segment_s_strain_rate():
     upper = (u @ (v - w)) / (np.linalg.norm(u) * ls_m)
     assert lower == pytest.approx(before, rel=1e-9)
     assert upper == pytest.approx(before, rel=1e-9)
+
+
+def test_a_line_too_light_to_integrate_is_refused_with_its_field(tmp_path: Path) -> None:
+    """A lumped line whose stable RK4 step is far below the plant's (1e-12 kg/m: 0.1 ns,
+    billions of sub-steps) is refused when the plant is built, naming the field, instead of
+    stalling it; the plant process says so and exits 2, as for any bad parameter. The
+    paper's line takes one sub-step."""
+    import subprocess
+    import sys
+
+    feather = TetherParams(model="lumped", linear_density_kg_m=1e-12, total_length_m=500.0)
+    with pytest.raises(ParameterError, match=r"TetherParams\.model.*sub-steps"):
+        Plant(SystemParams().replace(tether=feather), dt_s=1e-3)
+    assert Plant(SystemParams().replace(tether=TetherParams(model="lumped")),
+                 dt_s=1e-3)._n_sub == 1
+    path = tmp_path / "feather.toml"
+    path.write_text('[tether]\nmodel = "lumped"\nlinear_density_kg_m = 1e-12\n'
+                    'total_length_m = 500.0\n')
+    run = subprocess.run([sys.executable, "-m", "sitl", "--params", str(path)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2
+    assert "plant: bad parameter: TetherParams.model" in run.stderr
