@@ -17,6 +17,7 @@ from groundstation.lbar import (
     LBarParams,
     _a_for_exit_slope,
     _exit_slope_root,
+    lead_room_from,
     lead_room_m,
     slack_floor,
     stop_lead,
@@ -97,6 +98,29 @@ def test_the_bisection_with_a_newton_root_is_the_bisection():
             checked += 1
             guess = root
     assert checked > 2500
+
+
+def test_the_stop_leads_room_does_not_depend_on_where_its_newton_starts():
+    """The stop lead's room from the last period's root (the winder step's) is the room
+    from no guess, to the bit, along a path of small steps and across jumps; and from the
+    last root Newton converges (a finite root), which from no guess it does not far out."""
+    lp = LBarParams()
+    tan_min = math.tan(lp.stop_lead_min_exit_angle_rad)
+    guess, converged, n = math.nan, 0, 0
+    x, y, z = 20.0, 5.0, 15.0
+    for k in range(3000):
+        if k % 500 == 0:            # a jump elsewhere
+            x, y, z = (float(RNG.uniform(-40, 40)), float(RNG.uniform(-40, 40)),
+                       float(RNG.uniform(0.5, 40)))
+        x, y, z = x + float(RNG.normal(0, 0.05)), y + float(RNG.normal(0, 0.05)), max(
+            z + float(RNG.normal(0, 0.05)), 0.3)
+        room, root = lead_room_from(x, y, z, tan_min, lp.min_slack_m, guess)
+        assert room == lead_room_m(x, y, z, tan_min, lp.min_slack_m), (x, y, z)
+        if math.hypot(x, y) > 1e-6 and z / math.hypot(x, y) > tan_min:
+            n += 1
+            converged += math.isfinite(root)
+        guess = root
+    assert converged > 0.99 * n
 
 
 SCRIPT = """
