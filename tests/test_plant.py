@@ -29,12 +29,16 @@ from tuavdefs.params import (
     WinderParams,
 )
 
-#: A tether too light to matter, for tests that need the UAV on its own.
-FEATHER = TetherParams(linear_density_kg_m=1e-12, total_length_m=500.0)
+#: A tether too light to matter, for tests that need the UAV on its own (the catenary: a
+#: lumped line this light is refused, its stable step being a fraction of a nanosecond).
+FEATHER = TetherParams(model="catenary", linear_density_kg_m=1e-12, total_length_m=500.0)
 
 
 def _params(**groups) -> SystemParams:
-    return SystemParams().replace(**groups)
+    """The defaults with ``groups`` replaced, on the quasi-static catenary unless ``tether``
+    says otherwise (these tests hold its equilibria; the lumped line has its own,
+    tests/test_lumped_tether.py)."""
+    return SystemParams().replace(**{"tether": TetherParams(model="catenary"), **groups})
 
 
 def _hover_state(params: SystemParams, position, tether_length):
@@ -46,7 +50,7 @@ def _hover_state(params: SystemParams, position, tether_length):
 
 @pytest.mark.parametrize("with_tether", [False, True])
 def test_hover_equilibrium(with_tether):
-    params = SystemParams() if with_tether else _params(tether=FEATHER)
+    params = _params() if with_tether else _params(tether=FEATHER)
     # 30 m of tether for a UAV at (12, 5, 20): suspended, pulling down and toward the winder;
     # the feather tether is given slack so it hangs with no tension at all
     length = 30.0 if with_tether else 40.0
@@ -61,7 +65,7 @@ def test_hover_equilibrium(with_tether):
 
 
 def test_hover_stays_put_for_a_while():
-    model, x, u, _ = _hover_state(SystemParams(), (12.0, 5.0, 20.0), 30.0)
+    model, x, u, _ = _hover_state(_params(), (12.0, 5.0, 20.0), 30.0)
     plant = Plant(model.params, state=x)
     for _ in range(200):
         plant.step(u)
@@ -232,7 +236,7 @@ def test_rotor_limits_sized_for_the_full_tether():
 
 # ---------------------------------------------------------------- winder
 def test_length_angle_relation_and_inertia():
-    params = SystemParams()
+    params = _params()
     model = PlantModel(params)
     w, t = params.winder, params.tether
     assert model.winder.length_m(model.winder.theta_rad(12.5)) == pytest.approx(12.5)
@@ -268,7 +272,8 @@ def test_spin_down_with_changing_inertia_matches_ode_solution():
     from scipy.integrate import solve_ivp
 
     # a heavy tether on a light drum, so the inertia changes a lot as it pays out
-    params = _params(tether=TetherParams(linear_density_kg_m=1.0, total_length_m=40.0),
+    params = _params(tether=TetherParams(model="catenary", linear_density_kg_m=1.0,
+                                        total_length_m=40.0),
                      winder=WinderParams(drum_mass_kg=0.1))
     model = PlantModel(params)
     x = initial_state(model, position_m=(0.5, 0.0, params.vehicle.gear_height_m),
@@ -292,7 +297,7 @@ def test_spin_down_with_changing_inertia_matches_ode_solution():
 
 
 def test_brake_holds_against_tension():
-    model, x, u, tf = _hover_state(SystemParams(), (12.0, 5.0, 20.0), 24.2)
+    model, x, u, tf = _hover_state(_params(), (12.0, 5.0, 20.0), 24.2)
     assert tf.drum_tension_n * SystemParams().winder.drum_radius_m > 0.1
     plant = Plant(model.params, state=x)
     for _ in range(300):
@@ -312,7 +317,7 @@ def test_weak_brake_slips_under_tension():
 
 
 def test_motor_torque_limit_and_speed_cutback():
-    model = PlantModel(SystemParams())
+    model = PlantModel(_params())
     w = model.winder
     p = SystemParams().winder
     assert w.motor_torque_n_m(100.0, 0.0, True) == p.motor_torque_limit_n_m
@@ -343,7 +348,7 @@ def test_hard_stop_at_full_drum():
 
 
 def test_hard_stop_at_empty_drum():
-    params = SystemParams()
+    params = _params()
     plant = Plant(params, state=initial_state(
         PlantModel(params), position_m=(1.0, 0.0, params.vehicle.gear_height_m),
         tether_length_m=49.0))
