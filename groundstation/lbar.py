@@ -542,7 +542,7 @@ def lead_room_from(px: float, py: float, pz: float, tan_min: float, min_slack: f
     """:func:`lead_room_m` with its exit-angle root's Newton iteration started at
     ``guess`` (NaN: none): (the room [m], the root, for the next call's guess). From the
     last period's root it converges in a few steps."""
-    if not guess == guess:
+    if math.isnan(guess):
         # not from 2 mm: Newton crawls up sinh's exponential flank from there and gives
         # up after its 100 steps (bisection then finds the bound, at about 8 us)
         guess = max(math.hypot(px, py), 2e-3)

@@ -103,7 +103,8 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     [rad]; the model's ``w_n_m`` without one), the tension trim's offset
     (:func:`tension_trim` on that weight, both advanced in place), the stop lead
     (:func:`stop_lead`, on the UAV's position and velocity, bounded by
-    :func:`lead_room_m <groundstation.lbar.lead_room_m>` and held while the measured exit elevation is below the bound's
+    :func:`lead_room_m <groundstation.lbar.lead_room_m>` (from the last period's root,
+    ``trim_s[12]``) and held while the measured exit elevation is below the bound's
     angle), the slack floor (:func:`slack_floor`, on the length
     :func:`floor_length_m` asks at the winder's own fix, (``fix_x``, ``fix_y``,
     ``fix_z``) [m], NaN: none), plus ``join_m`` [m] moving at ``join_rate_m_s``
