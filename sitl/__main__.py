@@ -106,22 +106,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     faults = load_option(FaultsFile, args.faults, "plant").faults
     pos = tuple(args.position)
     gear = params.vehicle.gear_height_m
-    try:
-        Plant(params)      # a line the plant cannot integrate is refused before it starts
+    try:        # (a line the plant cannot integrate is refused as it is built)
+        if pos[2] <= gear:
+            # resting on its gear, rotors stopped, the tether lying out to it with a little
+            # slack
+            pos = (pos[0], pos[1], gear)
+            length = args.tether_length or math.dist(pos, (0.0, 0.0, 0.0)) + 0.1
+            plant = Plant(params)
+            plant.x[:] = initial_state(plant.model, pos, tether_length_m=length)
+            plant.lay_line()    # a lumped tether laid out to it
+        else:
+            length = args.tether_length or 1.15 * math.dist(pos, (0.0, 0.0, 0.0))
+            x0, _ = hover_trim(params, pos, length)
+            plant = Plant(params, state=x0)
     except ParameterError as exc:
         print(f"plant: bad parameter: {exc}", file=sys.stderr)
         return 2
-    if pos[2] <= gear:
-        # resting on its gear, rotors stopped, the tether lying out to it with a little slack
-        pos = (pos[0], pos[1], gear)
-        length = args.tether_length or math.dist(pos, (0.0, 0.0, 0.0)) + 0.1
-        plant = Plant(params)
-        plant.x[:] = initial_state(plant.model, pos, tether_length_m=length)
-        plant.lay_line()    # a lumped tether laid out to it
-    else:
-        length = args.tether_length or 1.15 * math.dist(pos, (0.0, 0.0, 0.0))
-        x0, _ = hover_trim(params, pos, length)
-        plant = Plant(params, state=x0)
     if args.heading is not None and math.isfinite(args.heading):
         # the start's attitude turned about z-up to the heading (yaw-symmetric otherwise)
         yaw = math.radians(90.0 - args.heading)

@@ -402,7 +402,7 @@ class Plant:
                 f"{t.axial_stiffness_n:g} N, {t.segment_length_m:g} m segments) is stable only "
                 f"at RK4 steps of {self.model.lp[L_HMAX] * 1e6:.3g} us: {self._n_sub} "
                 f"sub-steps a plant step, at most {MAX_LUMPED_SUBSTEPS}; use the "
-                "catenary, more segments' mass or less stiffness")
+                "catenary, or a heavier, less stiff or more coarsely segmented line")
         self._segment_m = float(self.model.lp[L_LS])
         self._speed_min = self.params.vehicle.rotor_speed_min_rad_s
         self._speed_max = self.params.vehicle.rotor_speed_max_rad_s
