@@ -131,6 +131,11 @@ class EstimatorParams(Params):
         0.2, "s", "the alignment's averaging when the first GNSS fix finds the vehicle in "
         "the air (a simulation started in hover): it hovers open loop meanwhile", gt=0,
         le=60)
+    gyro_calibration_at_rest: bool = quantity(
+        True, "", "the gyro biases set at a still alignment on the ground to the mean rate "
+        "read meanwhile (ArduPilot's INS_GYR_CAL 1, a gyro calibration at start-up; the "
+        "filter then holds them to within the mean's noise); false: they start at 0 with "
+        "gyro_bias_sigma_rad_s")
     align_max_accel_std_m_s2: float = quantity(
         1.0, "m/s^2", "alignment restarts while the specific force varies more than this "
         "(standard deviation of its magnitude): the vehicle is not still enough", gt=0)
@@ -1008,6 +1013,8 @@ class NavFilter:
         self.align_time_s = p.align_time_s
         self._aligned = False
         self._acc_sum = np.zeros(3)
+        self._gyro_sum = np.zeros(3)
+        self._gyro_sq_sum = np.zeros(3)
         self._acc_norm_sq = 0.0
         self._acc_norm = 0.0
         self._acc_n = 0
@@ -1141,6 +1148,8 @@ class NavFilter:
         ax, ay, az = ax - ox, ay - oy, az - oz
         if not self._aligned:
             self._rates[0:3] = (gx, gy, gz)
+            self._gyro_sum += (gx, gy, gz)
+            self._gyro_sq_sum += (gx * gx, gy * gy, gz * gz)
             self._align_sample(t_s, ax, ay, az)
             self._t_last = t_s
             return
@@ -1439,6 +1448,8 @@ class NavFilter:
         self._align_t0 = t_s
         self._align_vels.clear()
         self._acc_sum[:] = 0.0
+        self._gyro_sum[:] = 0.0
+        self._gyro_sq_sum[:] = 0.0
         self._acc_norm = self._acc_norm_sq = 0.0
         self._acc_n = 0
         self._mag_n = 0
@@ -1503,9 +1514,23 @@ class NavFilter:
             var_v = float(c[2, 2])
             var_vel = p.tether_align_vel_sigma_m_s ** 2
         x[_X_Q:_X_Q + 4] = q
+        var_bg = p.gyro_bias_sigma_rad_s ** 2
+        if p.gyro_calibration_at_rest and not self._in_air:
+            # still on the ground: the mean rate is the bias, known to the mean's noise
+            # (the rate's density over the averaging time) and the walk meanwhile; rates
+            # that spread beyond three times the noise of a sample are a vehicle moving,
+            # and leave the biases to the filter
+            t_avg = max(t_s - self._align_t0, 1.0 / p.imu_rate_hz)
+            bias = self._gyro_sum / n
+            spread = self._gyro_sq_sum / n - bias * bias
+            sample_var = p.gyro_noise_rad_s_sqrt_hz ** 2 * p.imu_rate_hz
+            if float(np.max(spread)) <= 9.0 * sample_var:
+                x[_X_BG:_X_BG + 3] = bias
+                var_bg = min(var_bg, p.gyro_noise_rad_s_sqrt_hz ** 2 / t_avg
+                             + p.gyro_bias_walk_rad_s_sqrt_s ** 2 * t_avg)
         for i in range(3):
             P[IDX_V + i, IDX_V + i] = var_vel
-            P[IDX_BG + i, IDX_BG + i] = p.gyro_bias_sigma_rad_s ** 2
+            P[IDX_BG + i, IDX_BG + i] = var_bg
             P[IDX_BA + i, IDX_BA + i] = p.accel_bias_sigma_m_s2 ** 2
             P[IDX_BM + i, IDX_BM + i] = p.mag_bias_sigma_gauss ** 2
         P[IDX_TH, IDX_TH] = P[IDX_TH + 1, IDX_TH + 1] = p.tilt_sigma_rad ** 2

@@ -112,6 +112,11 @@ class TetherFixParams(Params):
         "ground pre-tension) is taken as the line lying straight along the ground, the fix "
         "its end; a slacker line may lie in curves: the fix is then the reported distance "
         "held below that end", ge=0)
+    suspended_min_tension_n: float = quantity(
+        0.05, "N", "a line leaving the exit above the ground needs at least this tension "
+        "for a fix (the load cell's noise: a pull it cannot tell from nothing says nothing "
+        "of the shape, which the model would take for a line hanging straight down from a "
+        "vehicle above the winder)", ge=0)
     reported_height_sigma_m: float = quantity(
         1.0, "m", "line on the ground: the uncertainty of the UAV's height as the vehicle "
         "reports it", gt=0)

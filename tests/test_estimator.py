@@ -23,6 +23,7 @@ from ekf_harness import (
 from jit_util import run_script
 
 from companion.estimator import (
+    IDX_BG,
     IDX_BP,
     N_ERR,
     EstimatorFlags,
@@ -272,6 +273,47 @@ def test_initialisation_needs_samples_a_fix_and_the_field():
         EstimatorParams(gnss_delay_s=-0.1)
     with pytest.raises(ValueError):
         NavFilter(EstimatorParams(), G, (0.0, 0.0, -0.45))
+
+
+def _align_still(seed: int, rates=lambda k: (0.0, 0.0, 0.0), **params):
+    """A filter aligned on the ground after 2 s of samples with the body ``rates(k)``
+    [rad/s] read (attitude level), and the sensors it read."""
+    noise = rtk_noise(seed)
+    suite = SensorSuite(noise=noise)
+    filt = NavFilter(params_for(noise).replace(**params), G, suite.earth_field_enu_gauss)
+    q = (1.0, 0.0, 0.0, 0.0)
+    for k in range(500):
+        imu = suite.imu((0.0, 0.0, G), rates(k), q, 1 / IMU_HZ)
+        filt.predict(k / IMU_HZ, imu.gyro_flu_rad_s, imu.accel_flu_m_s2)
+        filt.fuse_mag(k / IMU_HZ, imu.mag_flu_gauss)
+    filt.fuse_gnss(2.0, (1.0, 2.0, 3.0), (0.0, 0.0, 0.0), 0.02, 0.03)
+    assert filt.aligned
+    return filt, suite
+
+
+@pytest.mark.parametrize("seed", [8, 9, 10])
+def test_a_still_alignment_calibrates_the_gyros(seed):
+    """ArduPilot's start-up gyro calibration (INS_GYR_CAL 1): aligned at rest, the filter
+    starts from the mean rate, which is the turn-on bias (0.5 deg/s a sigma) to within the
+    mean's noise, with a variance to match; without it the biases start at 0."""
+    filt, suite = _align_still(seed)
+    true_bias = np.array(suite.gyro.bias) + np.array(suite.gyro.gauss_markov_error)
+    assert np.abs(true_bias).max() > 1e-3      # a bias worth calibrating
+    np.testing.assert_allclose(filt.gyro_bias_rad_s, true_bias, atol=2e-4)
+    sig = np.sqrt(np.diag(filt.covariance)[IDX_BG:IDX_BG + 3])
+    assert (sig < 1e-3).all() and (np.abs(filt.gyro_bias_rad_s - true_bias) < 3 * sig).all()
+    off, _ = _align_still(seed, gyro_calibration_at_rest=False)
+    assert off.gyro_bias_rad_s == (0.0, 0.0, 0.0)
+    sig_off = np.sqrt(np.diag(off.covariance)[IDX_BG:IDX_BG + 3])
+    np.testing.assert_allclose(sig_off, off.params.gyro_bias_sigma_rad_s)
+
+
+def test_a_vehicle_rocking_through_its_alignment_leaves_the_gyro_biases_to_the_filter():
+    """Rates that spread far beyond a still gyro's noise (rocked at 0.05 rad/s, 2 Hz) are
+    not a bias: the biases start at 0 with their prior."""
+    filt, _ = _align_still(8, rates=lambda k: (0.05 * math.sin(2 * math.pi * 2 * k / IMU_HZ),
+                                                0.0, 0.0))
+    assert filt.gyro_bias_rad_s == (0.0, 0.0, 0.0)
 
 
 def test_gnss_loss_makes_it_unhealthy_then_constant_position():

@@ -116,6 +116,45 @@ def test_the_winch_fixes_the_uav_from_its_frames(db, hovering):
     assert [f.sample_time_ms for f in fixes] == [90 + 100 * i for i in range(10)]
 
 
+def _fixes_from(db, length_m: float, tension_n: float, elevation_rad: float) -> list:
+    """The fixes of 1 s of the winch's frames: a line of ``length_m`` leaving the exit at
+    ``elevation_rad`` (azimuth 0) with the load cell reading ``tension_n``."""
+    params = SystemParams()
+    g = params.environment.gravity_m_s2
+    host = WinderHost(WinderControlParams(), LBarParams(), params.winder, params.tether, g)
+    winch = Winch(host, params.winder, params.tether, g)
+    rev = length_m / params.winder.drum_radius_m / (2 * math.pi)
+    fixes = []
+    for k in range(100):
+        t = k * 0.01
+        stamp = round(t * 1000) & 0xFFFF
+        for name, values in (
+                ("Winch_Exit_Angle", {"Azimuth": 0.0, "Elevation": elevation_rad,
+                                      "Sample_Time": stamp, "Valid": 1}),
+                ("Winch_Tension", {"Tension": tension_n, "Brake_Engaged": 0,
+                                   "Sample_Time": stamp})):
+            m = db.get_message_by_name(name)
+            winch.handle_frame(t, m.frame_id, m.encode(values))
+        m = db.get_message_by_name("Get_Encoder_Estimates")
+        out = winch.handle_frame(t, m.frame_id, m.encode({"Pos_Estimate": rev,
+                                                           "Vel_Estimate": 0.0}))
+        if out is not None and out.fix is not None:
+            fixes.append(out.fix)
+    return fixes
+
+
+def test_a_line_off_the_ground_pulling_nothing_gives_no_fix(db):
+    """A line leaving the exit upward with a load cell reading nothing (within its noise:
+    a dynamic line's slack lying on the ground past the exit, the guide arm still
+    reading): the model would place the vehicle straight above the winder, L up, so no fix
+    is sent; with a pull the load cell can tell, or a line flat on the ground, there is."""
+    el = math.radians(35.0)
+    assert _fixes_from(db, 2.4, 0.0, el) == []
+    assert _fixes_from(db, 2.4, 0.04, el) == []
+    assert len(_fixes_from(db, 2.4, 0.06, el)) == 10
+    assert len(_fixes_from(db, 2.4, 0.0, 0.0)) == 10      # flat: the ground model's
+
+
 def test_odometry_through_pymavlink_keeps_position_covariance_and_time():
     """ODOMETRY packed on the winch's link and parsed by pymavlink on the vehicle's: local
     NED as MAVLink defines it, the covariance's position block, the stamp."""
