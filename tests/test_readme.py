@@ -58,6 +58,12 @@ def test_readme_has_the_three_snippets_the_session_runs():
     assert "import mavsdk_grpc as mavsdk" in blocks[2]
 
 
+def _failure(out: dict) -> str:
+    """A snippet's failure as the assertion says it: its output, up's, the processes' logs."""
+    logs = "".join(f"\n--- {name}\n{text}" for name, text in out.get("logs", {}).items())
+    return out["stdout"] + out["stderr"] + "\n--- up\n" + out["up_stderr"] + logs
+
+
 @needs_netns
 def test_pymavlink_snippet_addresses_the_autopilot_on_every_connection(snippets):
     """The winch (1/169) beats on the same link: the snippet must lock on component 1 and
@@ -73,7 +79,8 @@ def test_pymavlink_snippet_addresses_the_autopilot_on_every_connection(snippets)
 @needs_netns
 def test_pymavlink_snippet_takes_off_flies_and_reads_the_winch(snippets):
     full = snippets["pymavlink"]["full"]
-    assert full["rc"] == 0, full["stdout"] + full["stderr"]
+    assert full["rc"] == 0, _failure({**full, "up_stderr": snippets["pymavlink"]["up_stderr"],
+                                      "logs": snippets["pymavlink"].get("logs", {})})
     m = re.search(r"tether paid out: ([\d.]+) m, tension ([\d.-]+) kg", full["stdout"])
     assert m is not None
     # just after the climb to 10 m beside the winder (2 m east): about the distance, paid
@@ -85,7 +92,7 @@ def test_pymavlink_snippet_takes_off_flies_and_reads_the_winch(snippets):
 @needs_netns
 def test_mavsdk_native_snippet_sets_rtl_altitude_and_finishes_its_mission(snippets):
     out = snippets["native"]
-    assert out["rc"] == 0, out["stdout"] + out["stderr"]
+    assert out["rc"] == 0, _failure(out)
     assert "RTL altitude: 12.0 m" in out["stdout"]
     assert "mission finished" in out["stdout"]
     assert "Mission: complete" in out["stderr"]       # MAVSDK's log of the STATUSTEXT
@@ -95,6 +102,6 @@ def test_mavsdk_native_snippet_sets_rtl_altitude_and_finishes_its_mission(snippe
 @needs_netns
 def test_mavsdk_grpc_snippet_flies_its_mission_to_the_end(snippets):
     out = snippets["grpc"]
-    assert out["rc"] == 0, out["stdout"] + out["stderr"]
+    assert out["rc"] == 0, _failure(out)
     assert "mission finished" in out["stdout"]
     assert out["up_rc"] == 0 and out["left"] == []

@@ -56,6 +56,12 @@ def with_stack(logdir: Path, fn) -> dict:
     out["banner"] = banner
     out["up_rc"], out["up_stderr"] = p.returncode, se[-2000:]
     out["left"] = processes_mentioning(str(logdir))
+    rc = out["rc"] if "rc" in out else out["full"]["rc"]
+    if rc != 0:
+        # a snippet that failed or hung: what each process said last (a rare hang of the
+        # gRPC snippet left nothing else to go on)
+        out["logs"] = {f.name: f.read_text(errors="replace")[-1500:]
+                       for f in sorted(logdir.glob("up-*/*.log")) if f.name != "can.log"}
     return out
 
 
