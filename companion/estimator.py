@@ -1148,9 +1148,7 @@ class NavFilter:
         ax, ay, az = ax - ox, ay - oy, az - oz
         if not self._aligned:
             self._rates[0:3] = (gx, gy, gz)
-            self._gyro_sum += (gx, gy, gz)
-            self._gyro_sq_sum += (gx * gx, gy * gy, gz * gz)
-            self._align_sample(t_s, ax, ay, az)
+            self._align_sample(t_s, gx, gy, gz, ax, ay, az)
             self._t_last = t_s
             return
         t_last = self._t_last if self._t_last is not None else t_s
@@ -1413,9 +1411,12 @@ class NavFilter:
         return False
 
     # ----- alignment
-    def _align_sample(self, t_s: float, ax: float, ay: float, az: float) -> None:
+    def _align_sample(self, t_s: float, gx: float, gy: float, gz: float, ax: float,
+                      ay: float, az: float) -> None:
         if self._align_t0 is None:
             self._align_t0 = t_s
+        self._gyro_sum += (gx, gy, gz)
+        self._gyro_sq_sum += (gx * gx, gy * gy, gz * gz)
         self._acc_sum += (ax, ay, az)
         norm = math.sqrt(ax * ax + ay * ay + az * az)
         self._acc_norm += norm

@@ -340,6 +340,17 @@ class TetherFixer:
                         max(elevation_rad, 0.0), (0.0, 0.0, -self.weight_n_m(w_n_m)),
                         self.ea)
 
+    def on_ground(self, elevation_rad: float) -> bool:
+        """Whether an exit elevation [rad] is taken as the line lying on the ground at the
+        exit (``ground_elevation_rad``): the fix's ground regime."""
+        return elevation_rad < self.p.ground_elevation_rad
+
+    def readable(self, tension_n: float, elevation_rad: float) -> bool:
+        """Whether a fix can be made of a tension [N] and exit elevation [rad]: a line on
+        the ground always, a suspended one only with at least ``suspended_min_tension_n``
+        (NaN: no)."""
+        return self.on_ground(elevation_rad) or tension_n >= self.p.suspended_min_tension_n
+
     def position(self, length_m: float, tension_n: float, azimuth_rad: float,
                  elevation_rad: float, reported_m: Vec3 | None = None,
                  w_n_m: float | None = None) -> tuple[Vec3, Cov3, bool]:
@@ -355,7 +366,7 @@ class TetherFixer:
         T = max(tension_n, 1e-3)
         w, sigma_w = self.weight(w_n_m, self.weight_spread(L, T, uav_height_m))
         az, el = azimuth_rad, elevation_rad
-        ground = el < p.ground_elevation_rad
+        ground = self.on_ground(el)
         if ground:
             el = 0.0
         acc = [[0.0] * 3 for _ in range(3)]

@@ -710,10 +710,9 @@ class Winch:
             return None
         assert fixer is not None and ea is not None
         az, el, stamp, _ = ea
-        reported = self.uav[0] if self.uav is not None else None
-        if (el >= fixer.p.ground_elevation_rad
-                and not self.tension_n >= fixer.p.suspended_min_tension_n):
+        if not fixer.readable(self.tension_n, el):
             return None
+        reported = self.uav[0] if self.uav is not None else None
         pos, cov, ground = fixer.position(self.length_m, self.tension_n, az, el, reported,
                                           self.host.lbar.weight_n_m())
         self.fixes += 1

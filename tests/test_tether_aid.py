@@ -78,26 +78,25 @@ def test_exit_angle_frames_decode_with_cantools_to_the_truth(db, hovering):
         assert abs(d["Elevation"] - true_el) < bound
 
 
-def test_the_winch_fixes_the_uav_from_its_frames(db, hovering):
-    """The ground station's Winch fed the frames of the bus (built by cantools) finds the
-    UAV where the plant has it, and sends the fix at its rate."""
-    params, plant = hovering
+def _winch_fixes(db, params: SystemParams, length_m: float, tension_n: float,
+                 exit_angle) -> list:
+    """The fixes of 1 s of the frames a winch of ``params`` reads (built by cantools, as
+    on the bus): a line of ``length_m`` standing still, the load cell reading
+    ``tension_n``, the guide arm ``exit_angle()`` (azimuth, elevation [rad], valid) each
+    frame."""
     g = params.environment.gravity_m_s2
     host = WinderHost(WinderControlParams(), LBarParams(), params.winder, params.tether, g)
     winch = Winch(host, params.winder, params.tether, g)
-    tf = plant.tether_forces()
-    arm = ExitAngleSensor()
-    length = plant.tether_length_m
-    rev = length / params.winder.drum_radius_m / (2 * math.pi)
+    rev = length_m / params.winder.drum_radius_m / (2 * math.pi)
     fixes = []
     for k in range(100):                      # 1 s of encoder frames
         t = k * 0.01
         stamp = round(t * 1000) & 0xFFFF
-        az, el, valid = arm.read(tf.on_exit_n)
+        az, el, valid = exit_angle()
         for name, values in (
                 ("Winch_Exit_Angle", {"Azimuth": az, "Elevation": el, "Sample_Time": stamp,
                                       "Valid": int(valid)}),
-                ("Winch_Tension", {"Tension": tf.drum_tension_n, "Brake_Engaged": 0,
+                ("Winch_Tension", {"Tension": tension_n, "Brake_Engaged": 0,
                                    "Sample_Time": stamp})):
             m = db.get_message_by_name(name)
             winch.handle_frame(t, m.frame_id, m.encode(values))
@@ -106,6 +105,17 @@ def test_the_winch_fixes_the_uav_from_its_frames(db, hovering):
                                                            "Vel_Estimate": 0.0}))
         if out is not None and out.fix is not None:
             fixes.append(out.fix)
+    return fixes
+
+
+def test_the_winch_fixes_the_uav_from_its_frames(db, hovering):
+    """The ground station's Winch fed the frames of the bus (built by cantools) finds the
+    UAV where the plant has it, and sends the fix at its rate."""
+    params, plant = hovering
+    tf = plant.tether_forces()
+    arm = ExitAngleSensor()
+    fixes = _winch_fixes(db, params, plant.tether_length_m, tf.drum_tension_n,
+                         lambda: arm.read(tf.on_exit_n))
     assert len(fixes) == 10                   # 10 Hz
     for f in fixes:
         cov = np.array(f.cov_m2)
@@ -119,28 +129,8 @@ def test_the_winch_fixes_the_uav_from_its_frames(db, hovering):
 def _fixes_from(db, length_m: float, tension_n: float, elevation_rad: float) -> list:
     """The fixes of 1 s of the winch's frames: a line of ``length_m`` leaving the exit at
     ``elevation_rad`` (azimuth 0) with the load cell reading ``tension_n``."""
-    params = SystemParams()
-    g = params.environment.gravity_m_s2
-    host = WinderHost(WinderControlParams(), LBarParams(), params.winder, params.tether, g)
-    winch = Winch(host, params.winder, params.tether, g)
-    rev = length_m / params.winder.drum_radius_m / (2 * math.pi)
-    fixes = []
-    for k in range(100):
-        t = k * 0.01
-        stamp = round(t * 1000) & 0xFFFF
-        for name, values in (
-                ("Winch_Exit_Angle", {"Azimuth": 0.0, "Elevation": elevation_rad,
-                                      "Sample_Time": stamp, "Valid": 1}),
-                ("Winch_Tension", {"Tension": tension_n, "Brake_Engaged": 0,
-                                   "Sample_Time": stamp})):
-            m = db.get_message_by_name(name)
-            winch.handle_frame(t, m.frame_id, m.encode(values))
-        m = db.get_message_by_name("Get_Encoder_Estimates")
-        out = winch.handle_frame(t, m.frame_id, m.encode({"Pos_Estimate": rev,
-                                                           "Vel_Estimate": 0.0}))
-        if out is not None and out.fix is not None:
-            fixes.append(out.fix)
-    return fixes
+    return _winch_fixes(db, SystemParams(), length_m, tension_n,
+                        lambda: (0.0, elevation_rad, True))
 
 
 def test_a_line_off_the_ground_pulling_nothing_gives_no_fix(db):
