@@ -975,6 +975,8 @@ class NavFilter:
         self._x = np.zeros(NX)
         self._x[_X_Q] = 1.0
         self._P = np.zeros((N_ERR, N_ERR))
+        #: the position variances [m^2] on P's diagonal (a view)
+        self._pos_var = self._P.reshape(-1)[:2 * N_ERR + 3:N_ERR + 1]
         self._dx = np.zeros(N_ERR)
         self._diag = np.zeros(_N_DIAG)
         self._delayed_pv = np.zeros(6)
@@ -1117,9 +1119,8 @@ class NavFilter:
 
     def position_sigma_m(self) -> Vec3:
         """Standard deviations of the position estimate [m] (east, north, up)."""
-        P = self._P
-        return (math.sqrt(max(P[0, 0], 0.0)), math.sqrt(max(P[1, 1], 0.0)),
-                math.sqrt(max(P[2, 2], 0.0)))
+        a, b, c = self._pos_var.tolist()
+        return (math.sqrt(max(a, 0.0)), math.sqrt(max(b, 0.0)), math.sqrt(max(c, 0.0)))
 
     @property
     def baro_offset_m(self) -> float:

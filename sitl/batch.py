@@ -382,6 +382,8 @@ class BatchPacker:
             self._msgs[m] = (cls.id, cls.crc_extra)
         self._fv = np.zeros((3, _MAX_FIELDS))
         self._iv = np.zeros((3, _MAX_FIELDS), dtype=np.int64)
+        #: HIL_SENSOR's rows of those (views, for :meth:`sensor_values`)
+        self._sensor_fv, self._sensor_iv = self._fv[_SENSOR, 1:14], self._iv[_SENSOR]
         self._new_bias = np.zeros((7, 3))
         self._new_gm = np.zeros((7, 3))
         self._f32 = np.zeros(1, dtype=np.float32)
@@ -433,9 +435,9 @@ class BatchPacker:
         """HIL_SENSOR's field values in wire order as the last :meth:`pack` that returned a
         batch wrote them (its floats as the float32 the frame carries): what unpacking
         that frame's payload gives, without the frame."""
-        fv = self._fv[_SENSOR, 1:14].astype(np.float32).tolist()
-        iv = self._iv[_SENSOR]
-        return (int(iv[0]), *fv, int(iv[14]), int(iv[15]))
+        fv = self._sensor_fv.astype(np.float32).tolist()
+        iv = self._sensor_iv.tolist()
+        return (iv[0], *fv, iv[14], iv[15])
 
 
 def batch_packer(plant: Plant, sensors: SensorSuite, home: tuple[float, float, float],

@@ -412,6 +412,9 @@ class Plant:
         #: The velocity [m/s] (ENU) the ground has taken from the UAV on touching down since
         #: the IMU last read it (:meth:`take_contact_impulse`).
         self.contact_dv = np.zeros(3)
+        #: whether the accelerometer has a contact impulse to take, or its last one to
+        #: clear from the model (False: :meth:`take_contact_impulse` has nothing to do)
+        self._contact_live = False
         # load (or compile) the kernels' machine code now, not in the first step, and call
         # it without numba's dispatch (the arguments' types never change)
         m = self.model
@@ -505,10 +508,13 @@ class Plant:
         took from the UAV since the last (the projection of a touchdown, which the state
         derivative does not see) becomes the average acceleration over the sample that the
         accelerometer adds (:func:`specific_force_kernel`), and is forgotten; 0 without."""
+        if not self._contact_live:
+            return
         p = self.model.p
         dv = self.contact_dv
         k = 1.0 / sample_s if sample_s > 0.0 else 0.0
         p[P_CONTACT_X], p[P_CONTACT_Y], p[P_CONTACT_Z] = dv[0] * k, dv[1] * k, dv[2] * k
+        self._contact_live = bool(dv.any())    # (if so, the next sample clears it)
         dv[:] = 0.0
 
     def _ground(self, x: np.ndarray) -> None:
@@ -517,6 +523,7 @@ class Plant:
         v_before = x[3:6].copy()
         self._project_ground(x)
         self.contact_dv += x[3:6] - v_before
+        self._contact_live = True
 
     def _project_ground(self, x: np.ndarray) -> None:
         m = self.model
