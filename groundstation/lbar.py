@@ -98,7 +98,7 @@ class LBarParams(Params):
         "velocity: the lead pays out ahead of an acceleration, not only behind the speed "
         "(the vehicle's governor allows speed only with room; docs/control.md §3)", ge=0)
     stop_lead_onset_m_s: float = quantity(
-        0.2, "m/s", "stop lead: speed from which stop_lead_min_speed_m_s holds in full",
+        1.0, "m/s", "stop lead: speed from which stop_lead_min_speed_m_s holds in full",
         gt=0)
     stop_lead_rate_m_s: float = quantity(
         2.0, "m/s", "stop lead: fastest change of the lead (at 4 m/s the drum overshot a "
