@@ -524,7 +524,7 @@ def initial_trim_state() -> np.ndarray:
     """The trim's, the lead's and the floor's state before the first period (see
     :attr:`LBarEstimator.trim_state`)."""
     return np.array([0.0, 0.0, math.nan, math.nan, 0.0, 0.0, 0.0, 0.0, 0.0, math.nan,
-                     0.0, 0.0, math.nan])
+                     0.0, 0.0, math.nan, 0.0])
 
 
 @njit
@@ -585,7 +585,8 @@ class LBarEstimator:
         #: stop lead [m], its rate [m/s], its filtered target [m], slack floor [m], its
         #: rate [m/s], its filtered needed length [m], the time without a fix [s], the
         #: lead the need asks for before the ground's bound [m], the stop lead's room's
-        #: exit-angle root [m]: where its Newton iteration starts next period)
+        #: exit-angle root [m]: where its Newton iteration starts next period, the join's
+        #: gap as the last period took it [m] (groundstation.winder_host.winder_step))
         self.trim_state = initial_trim_state()
 
     def weight_n_m(self) -> float:

@@ -893,6 +893,9 @@ class Winch:
                                         ea[1] if ea is not None and ea[3] else math.nan,
                                         self.measured_position_m(), -gap, closing)
                 self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
+                if gap > 0.0:       # the law's reference fell into the gap: it took that
+                    self._join_gap_m = min(self._join_gap_m,
+                                           float(self.host.lbar.trim_state[13]))
                 command = step.command
             else:
                 self.ref_m, self.ref_rate_m_s = self._hold_m, 0.0
@@ -939,7 +942,10 @@ class Winch:
         """This period's (gap [m], its closing speed [m/s]) of a join from a line shorter
         than L-bar: the gap closes at ``rejoin_rate_m_s`` at most, speeding up and slowing
         down at :data:`REJOIN_ACC_M_S2`, while L-bar's law moves the reference with the
-        UAV (a climb away is paid out for at once); (0, 0) once closed."""
+        UAV (a climb away is paid out for at once); (0, 0) once closed. The gap defers a
+        pay-out and never winds the line in: where the law's reference falls below the
+        measured length plus the gap, it takes the gap with it (:func:`winder_step
+        <groundstation.winder_host.winder_step>`)."""
         gap = self._join_gap_m
         if gap <= 0.0:
             return 0.0, 0.0

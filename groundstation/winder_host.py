@@ -110,7 +110,8 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     ``fix_z``) [m], NaN: none), plus ``join_m`` [m] moving at ``join_rate_m_s``
     [m/s] (a join's gap), then the torque law
     (:func:`winder_law`, its filter ``law_s`` advanced in place) on L-bar + offset + lead
-    + floor + join. Returns
+    + floor + join (the join's gap at most what that asks beyond ``length_m``, written to
+    ``trim_s[13]``). Returns
     (the length reference, its rate, the exit-angle root for next time, the WinderCommand's
     fields)."""
     lbar_m, rate, a, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
@@ -134,8 +135,17 @@ def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float
     # a join's gap after the floor: it defers what the floor pays out too (on the lumped
     # line the winder's fix, thrown by the line's motion, asked 2 m/s at an in-air start
     # and snapped the line at 92 N); the over-tension pay-out stays the backstop
-    lbar_m += trim_s[7] + join_m
-    rate += trim_s[8] + join_rate_m_s
+    lbar_m += trim_s[7]
+    rate += trim_s[8]
+    # the join's gap defers a pay-out and never winds the line in: a reference falling
+    # into it (a first estimate settling lower) takes it, the measured length held
+    gap = -join_m
+    if gap > 0.0 and lbar_m - length_m < gap:
+        gap = max(lbar_m - length_m, 0.0)
+        join_rate_m_s = -rate if gap > 0.0 else 0.0
+    trim_s[13] = max(gap, 0.0)
+    lbar_m -= gap
+    rate += join_rate_m_s
     cmd = winder_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, lbar_m,
                      rate)
     return lbar_m, rate, root, cmd

@@ -942,6 +942,32 @@ def test_relaxed_holds_a_ground_pre_tension_while_the_uav_is_unknown_or_on_the_g
     assert track(w2, 50)[-1] == (pytest.approx(5.0, abs=1e-6), 0.0)
 
 
+def test_a_join_never_winds_the_line_in():
+    """A join's gap defers a pay-out; it never winds the line in. A vehicle found in the
+    air first reports a height 2.5 m too high (a just-aligned estimate on a consumer
+    receiver), which opens a gap; as its reports settle 3 m lower over a second, L-bar's
+    law falls into the gap: the reference holds the line it has until L-bar's law is
+    below it, then follows the law (before, it followed the law down with the whole gap
+    still open, a metre short of the true distance: the line taut)."""
+    w = make_winch()
+    host = w.host
+    high = (20.0, 0.0, 22.0)
+    lbar_high = host.lbar.length(high)[0]
+    start = lbar_high - 2.0                   # the line the winder has: the true one's
+    tension(w, 0.0, 3.0)                      # an in-air pull, no position yet
+    encoder(w, 0.0, start)
+    for k in range(101):                      # 1 s of reports sinking at 3 m/s
+        pos = (high[0], high[1], high[2] - 3.0 * k * DT)
+        w.set_uav((pos, (0.0, 0.0, -3.0 if k < 100 else 0.0)))
+        encoder(w, 0.01 + k * DT, w.reference()[0] if k else start)
+        lbar = host.lbar.length(pos)[0]
+        ref = w.reference()[0]
+        assert ref >= min(start, lbar) - 1e-6, (k, ref, start, lbar)
+    assert lbar < start - 0.1 and w.join_gap_m == 0.0
+    lead = float(host.lbar.trim_state[4])
+    assert ref == pytest.approx(lbar + lead, abs=1e-6)
+
+
 def test_the_sensor_clock_unwraps_the_sample_time_and_serves_as_the_winchs_time():
     """Winch_Tension's 16-bit Sample_Time unwrapped into the sensor node's clock; handed
     that as its time (a lockstep plant), the winch brakes on an encoder silent for 0.1 s
