@@ -893,9 +893,8 @@ class Winch:
                                         ea[1] if ea is not None and ea[3] else math.nan,
                                         self.measured_position_m(), -gap, closing)
                 self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
-                if gap > 0.0:       # the law's reference fell into the gap: it took that
-                    self._join_gap_m = min(self._join_gap_m,
-                                           float(self.host.lbar.trim_state[13]))
+                if gap > 0.0:       # what the step left of it (less, where L-bar fell into it)
+                    self._join_gap_m = float(self.host.lbar.trim_state[13])
                 command = step.command
             else:
                 self.ref_m, self.ref_rate_m_s = self._hold_m, 0.0
