@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 
 from companion.reference import (
@@ -202,6 +202,27 @@ class LegFollower:
         self.reached_t_s = None
         self._begin(float(t), traj.sample(t), traj.yaw_acc_rad_s2(t))
         return self.trajectory.sample(t)
+
+    def remaining_item(self, t: float) -> MissionItem:
+        """What is left of the item at ``t`` [s], to resume it after a pause: a circle
+        being flown keeps the turns it has not flown yet (started again from the point
+        nearest the vehicle, as its lead-in is flown again), or is a goto to its end point
+        once less than the acceptance radius of arc is left; anything else is the whole
+        item (a goto leg flies to its point from wherever it resumes)."""
+        item, traj = self.item, self._traj
+        if item is None:
+            raise RuntimeError("LegFollower.start() has not been called")
+        if not (self._phase is LegPhase.CIRCLE and isinstance(item, CircleItem)
+                and isinstance(traj, Circle)):
+            return item
+        if math.isinf(item.turns):
+            return replace(item, start_angle_rad=None)
+        left_m = item.turns * 2.0 * math.pi * item.radius_m - traj.arc_m(t)
+        if left_m < self.acceptance_radius_m or traj.final_pos_m is None:
+            final = traj.final_pos_m or traj.sample(t).pos_m
+            return GotoItem(final, traj.final_yaw_rad)
+        return replace(item, turns=left_m / (2.0 * math.pi * item.radius_m),
+                       start_angle_rad=None)
 
     # -- internals --
 

@@ -1150,6 +1150,10 @@ class Navigator:
                 self._vel_limited = True
                 self._emit(NavEvent.WARNING, "Guided velocity stopped at the tether's reach")
         elif self._leg is not None:
+            # a circle resumes with the turns it has left (ArduCopter's circle continues
+            # after a pause), not from its first again: a circle braked once a turn would
+            # otherwise never end
+            self._leg.item = self._leg.follower.remaining_item(self._leg_clock)
             paused = [self._leg, *self._legs]
         self._emit(NavEvent.WARNING, f"Tether: braking {lim:.2f} m from the winder "
                    "(the reported length)")

@@ -466,6 +466,11 @@ class Circle(Trajectory):
             return 0.0
         return self._sgn * self._arc.eval(t_s)[2][0] / self.radius_m
 
+    def arc_m(self, t_s: float) -> float:
+        """The arc [m] flown from the start at ``t_s`` [s] (0 before it, the whole arc
+        after its end)."""
+        return float(self._arc.eval(t_s)[0][0])
+
 
 class Sequence(Trajectory):
     """Trajectories flown one after the other; each must start when and where (position,
