@@ -258,6 +258,18 @@ class EstimatorParams(Params):
         "the ground without GNSS: the estimate does not drift)", gt=0)
     stationary_interval_s: float = quantity(
         0.1, "s", "the stationary constraint's interval", gt=0)
+    arming_settle_s: float = quantity(
+        2.0, "s", "arming is refused (PreArm: EKF settling) until the filter has been "
+        "aligned this long: on the ground its first second takes in the gear's height and "
+        "the tether's fix, which correct a consumer receiver's first fix by a metre (armed "
+        "at once, such a vehicle took off from the wrong place and pulled a 2 m line "
+        "taut); ArduPilot's EKF waits for 10 s of good GNSS", ge=0)
+    ground_height_noise_m: float = quantity(
+        0.05, "m", "on the ground and disarmed: the height the gear puts the vehicle at (the "
+        "ground flat and level with the winder's, as the navigator's land detector takes "
+        "it) is fused with the zero velocity, with this noise (0: not fused). A consumer "
+        "receiver's height is metres off: without it a vehicle on the ground took itself "
+        "to be 1.2 m up", ge=0)
     tether_align_vel_sigma_m_s: float = quantity(
         0.5, "m/s", "velocity standard deviation when the filter aligns on a tether fix "
         "(no GNSS velocity): the vehicle is taken to be near rest", gt=0)
@@ -859,12 +871,16 @@ def fuse_position_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np
 @njit
 def fuse_zero_velocity_kernel(x: np.ndarray, P: np.ndarray, buf: np.ndarray,
                               meta: np.ndarray, dx: np.ndarray, var_min: float,
-                              r: float) -> bool:
-    """A zero velocity of now on each axis with noise variance ``r`` [m^2/s^2], ungated
-    (the stationary constraint of a vehicle at rest on its gear)."""
+                              r: float, height_m: float, r_height: float) -> bool:
+    """A zero velocity of now on each axis with noise variance ``r`` [m^2/s^2], and with
+    ``r_height`` > 0 the height ``height_m`` [m] with that variance [m^2], ungated (the
+    stationary constraint of a vehicle at rest on its gear)."""
     ok = True
     for i in range(3):
         ok = scalar_update(P, dx, var_min, -x[3 + i], r, 3 + i, 1.0, -1, 0.0, -1,
+                           0.0) and ok
+    if r_height > 0.0:
+        ok = scalar_update(P, dx, var_min, height_m - x[2], r_height, 2, 1.0, -1, 0.0, -1,
                            0.0) and ok
     inject(x, dx, buf, meta)
     return ok
@@ -1079,7 +1095,7 @@ class NavFilter:
         self._pos_k = entry_point(fuse_position_kernel, x, P, buf, meta, dx, 0.0, 0.0, 0.0,
                                   0.0)
         self._zero_vel_k = entry_point(fuse_zero_velocity_kernel, x, P, buf, meta, dx, 0.0,
-                                       0.0)
+                                       0.0, 0.0, 0.0)
         self._tether_k = (entry_point(fuse_tether_kernel, x, P, buf, meta, dx, diag, dl, 0.0,
                                       0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
                                       0.0) if self.params.tether_aid else None)
@@ -1220,17 +1236,21 @@ class NavFilter:
                 accepted = True
         return accepted
 
-    def fuse_stationary(self, t_s: float) -> bool:
+    def fuse_stationary(self, t_s: float, height_m: float | None = None) -> bool:
         """The vehicle is at rest on its gear at ``t_s`` [s] (the caller knows: landed and
-        disarmed): a zero velocity fused, every ``stationary_interval_s``. Returns whether
-        it was fused."""
+        disarmed): a zero velocity fused, and the height ``height_m`` [m] it rests at
+        (None: not known) with ``ground_height_noise_m``, every ``stationary_interval_s``.
+        Returns whether it was fused."""
         p = self.params
         if not self._aligned or t_s - self._t_stationary < p.stationary_interval_s:
             return False
         self._t_stationary = t_s
         before = self._x[0:6].copy()
+        use_height = height_m is not None and math.isfinite(height_m)
         ok = self._zero_vel_k(self._x, self._P, self._buf, self._meta, self._dx,
-                              self._var_min, p.stationary_vel_noise_m_s ** 2)
+                              self._var_min, p.stationary_vel_noise_m_s ** 2,
+                              float(height_m) if use_height else 0.0,
+                              p.ground_height_noise_m ** 2 if use_height else 0.0)
         self._lag_correction(before)
         if not ok:
             self._numeric_refusals += 1

@@ -708,13 +708,17 @@ class Navigator:
 
     # ----- commands (return None when done, else the reason it was refused)
 
-    def start(self, t: float, pos: Vec3, vel: Vec3, quat: tuple[float, ...]) -> None:
+    def start(self, t: float, pos: Vec3, vel: Vec3, quat: tuple[float, ...],
+              airborne: bool | None = None) -> None:
         """Initialise from the first state: on the ground (disarmed) or in the air (armed,
-        GUIDED, holding where it is, as when a simulation starts airborne)."""
+        GUIDED, holding where it is, as when a simulation starts airborne). ``airborne``
+        says which (the onboard step's decision, which knows the state's accuracy); None:
+        in the air when the state is more than 0.3 m above the gear's height."""
         self._t, self._pos, self._vel_now, self._quat = t, pos, vel, quat
         yaw = self._yaw
-        self.landed = pos[2] <= self.gear_height_m + 0.3
-        self.home_m = pos if self.landed else (pos[0], pos[1], self.gear_height_m)
+        self.landed = (not airborne if airborne is not None
+                       else pos[2] <= self.gear_height_m + 0.3)
+        self.home_m = (pos[0], pos[1], self.gear_height_m)
         if not self.landed:
             self.armed = True
             self.mode = FlightMode.GUIDED

@@ -45,6 +45,26 @@ from tuavdefs.params import SystemParams
 _STOPPED = (0.0, 0.0, 0.0, 0.0)
 #: A record built as the tuple it is (tuple.__new__), without its Python-level constructor
 _new = tuple.__new__
+#: A vehicle its first GNSS fix puts more than this above its gear's height, plus
+#: AIRBORNE_SIGMAS times the fix's vertical accuracy, starts in the air [m] (a simulation
+#: started in hover); else on the ground, disarmed. A consumer receiver's first fix is a
+#: metre off: taken at 0.3 m alone, three of ten such starts on the ground took off.
+AIRBORNE_MARGIN_M = 0.3
+AIRBORNE_SIGMAS = 3.0
+
+
+def air_start_threshold_m(gear_height_m: float, epv_m: float) -> float:
+    """The height [m] above which a first GNSS fix of vertical accuracy ``epv_m`` [m] has
+    the vehicle take itself to be in the air at boot."""
+    return gear_height_m + AIRBORNE_MARGIN_M + AIRBORNE_SIGMAS * epv_m
+
+
+def air_start_min_height_m(gear_height_m: float, epv_m: float) -> float:
+    """The least height [m] a simulation may start a vehicle in the air at on its estimate
+    with a receiver of vertical accuracy ``epv_m`` [m]: its first fix, as many standard
+    deviations again below it, is still above :func:`air_start_threshold_m`."""
+    return air_start_threshold_m(gear_height_m, epv_m) + AIRBORNE_SIGMAS * epv_m
+
 #: An unhealthy navigation filter for this long in flight triggers the EKF failsafe [s]
 #: (ArduCopter checks its EKF's variances at 10 Hz and acts after about 1 s).
 EKF_FAILSAFE_S = 1.0
@@ -111,6 +131,8 @@ class Companion:
         self._healthy = self.filter is None
         self._health_t_s = -math.inf
         self._status: FilterStatus | None = None
+        self._t_s = -math.inf               # the last period's time [s]
+        self._aligned_at_s: float | None = None   # when the filter first had a state [s]
         self.flight = FlightController(gains, veh, params.tether, g)
         self.nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m,
                              on_event=on_event)
@@ -166,6 +188,7 @@ class Companion:
         self._healthy = self.filter is None
         self._health_t_s = -math.inf
         self._status = None
+        self._aligned_at_s = None
         self.nav.reboot()
         self.started = False
         self._was_flying = False
@@ -271,10 +294,16 @@ class Companion:
             self._announce_sources(st.sources)
 
     def _prearm(self) -> Refusal | None:
-        """ArduCopter's pre-arm check of the estimator (skipped with ARMING_CHECK 0)."""
-        if self.navigation_healthy or self.arming_check == 0:
+        """ArduCopter's pre-arm check of the estimator (skipped with ARMING_CHECK 0): a
+        healthy filter, aligned for ``arming_settle_s``."""
+        if self.arming_check == 0 or self.filter is None:
             return None
-        return Refusal(Reason.PREARM, "PreArm: EKF not healthy")
+        if not self.navigation_healthy:
+            return Refusal(Reason.PREARM, "PreArm: EKF not healthy")
+        since = self._aligned_at_s
+        if since is None or self._t_s - since < self.estimator_params.arming_settle_s:
+            return Refusal(Reason.PREARM, "PreArm: EKF settling")
+        return None
 
     def estimate(self, inputs: OnboardInputs) -> VehicleState | None:
         """The period's sensors into the filter; the state to fly on (None while the
@@ -285,26 +314,33 @@ class Companion:
         if gps is not None:
             self.gps = gps
         f = self.filter
+        t = self._t_s = inputs.t_s
         if f is None:
             return inputs.truth
-        t = inputs.t_s
         if imu is not None:
             f.predict(t, imu.gyro_flu_rad_s, imu.accel_flu_m_s2)
             f.fuse_baro(t, imu.pressure_alt_m)
             f.fuse_mag(t, imu.mag_flu_gauss)
         if self.started and self.nav.landed and not self.nav.armed:
-            f.fuse_stationary(t)     # at rest on its gear: no drift without GNSS
+            # at rest on its gear: no drift without GNSS, and the gear's height
+            f.fuse_stationary(t, self.params.vehicle.gear_height_m)
         if self._external:
             self._fuse_external(t)
         self._check_health(t)
         if gps is not None:
             if self._airborne_at_boot is None:
-                self._airborne_at_boot = (gps.position_enu_m[2]
-                                          > self.params.vehicle.gear_height_m + 0.3)
+                # (an accuracy not given is taken as large: on the ground, never a launch)
+                epv = gps.epv_m if gps.epv_m >= 0.0 and math.isfinite(gps.epv_m) else math.inf
+                self._airborne_at_boot = (gps.position_enu_m[2] > air_start_threshold_m(
+                    self.params.vehicle.gear_height_m, epv))
                 if self._airborne_at_boot:   # flying open loop: align sooner
                     f.start_in_air()
             f.fuse_gnss(t, gps.position_enu_m, gps.velocity_enu_m_s, gps.eph_m, gps.epv_m)
-        return f.state() if f.aligned else None
+        if not f.aligned:
+            return None
+        if self._aligned_at_s is None:
+            self._aligned_at_s = t
+        return f.state()
 
     def _ekf_failsafe(self, t_s: float) -> None:
         """ArduCopter's EKF failsafe: an unhealthy filter for ``EKF_FAILSAFE_S`` in flight
@@ -323,7 +359,8 @@ class Companion:
         """Initialise from the first state: on the ground (disarmed) or in the air (armed,
         GUIDED, holding where it is). :meth:`step` calls it with the first state."""
         self.started = True
-        self.nav.start(t_s, state.pos_m, state.vel_m_s, state.quat)
+        self.nav.start(t_s, state.pos_m, state.vel_m_s, state.quat,
+                       airborne=self._airborne_at_boot)
         if self.nav.flying:
             self.flight.reset(state, (self.hover_speed_rad_s,) * 4)
             self._was_flying = True

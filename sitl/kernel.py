@@ -38,8 +38,12 @@ N_WARM = 12
 GROUND_EPS_M = 1e-6
 #: Horizontal speeds below this count as stopped for static friction [m/s].
 STICK_SPEED_M_S = 1e-3
-#: Time constant with which the landing gear kills body rates on the ground [s].
+#: Time constant with which the landing gear brings body rates on the ground to the
+#: levelling rate [s].
 GEAR_RATE_DAMPING_S = 0.02
+#: Time constant with which a vehicle resting on its gear returns to level [s]: four times
+#: the rates' (critically damped); it rotates back, at body rates its gyroscope sees.
+GEAR_LEVEL_S = 4.0 * GEAR_RATE_DAMPING_S
 #: Drum rates below this [rad/s] count as stopped for the brake and the hard stops.
 STOPPED_RAD_S = 1e-6
 #: Relative Newton step at which the tether solve stops inside the kernel.
@@ -313,8 +317,13 @@ def uav_rhs_into(dx: np.ndarray, x: np.ndarray, p: np.ndarray, setpoints: np.nda
     # rotational dynamics: J domega = tau - c omega - omega x J omega
     ixx, iyy, izz = p[P_IXX], p[P_IYY], p[P_IZZ]
     if landed:
-        dx[10] = -wx / GEAR_RATE_DAMPING_S
-        dx[11] = -wy / GEAR_RATE_DAMPING_S
+        # the gear rotates a tilted vehicle back to level about the horizontal axis b3 x e3
+        # (b3 the body's z axis, R e3): the rates toward (b3 x e3) / GEAR_LEVEL_S in body
+        # axes, yaw held
+        lx = (r00 * r12 - r10 * r02) / GEAR_LEVEL_S
+        ly = (r01 * r12 - r11 * r02) / GEAR_LEVEL_S
+        dx[10] = (lx - wx) / GEAR_RATE_DAMPING_S
+        dx[11] = (ly - wy) / GEAR_RATE_DAMPING_S
         dx[12] = -wz / GEAR_RATE_DAMPING_S
     else:
         c = p[P_ROT_DAMP]

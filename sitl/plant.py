@@ -531,13 +531,10 @@ class Plant:
         if x[5] < 0.0:
             x[5] = 0.0
         fz_up = self._vertical_force_n(x)
-        if fz_up <= 0.0:
-            # resting on the gear: level, no body rates, no creeping below stick speed
-            _, _, yaw = quat_to_euler(tuple(x[QUAT]))
-            x[QUAT] = euler_to_quat(0.0, 0.0, yaw)
-            x[RATES] = 0.0
-            if math.hypot(x[3], x[4]) < STICK_SPEED_M_S:
-                x[3] = x[4] = 0.0
+        if fz_up <= 0.0 and math.hypot(x[3], x[4]) < STICK_SPEED_M_S:
+            # resting on the gear: no creeping below stick speed (the gear levels a tilted
+            # vehicle in the dynamics, at rates the gyroscope sees: sitl.kernel)
+            x[3] = x[4] = 0.0
 
     def _vertical_force_n(self, x: np.ndarray) -> float:
         """Net upward force on the UAV from rotors, gravity and tether [N] (no drag)."""

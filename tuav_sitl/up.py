@@ -438,6 +438,17 @@ def run_up(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         print(f"tuav-sitl up: bad parameter: {exc}", file=sys.stderr)
         return 2
+    if args.state == "ekf":
+        from companion.onboard import air_start_min_height_m
+        from sitl.sensors import SensorNoise
+
+        z, gear = args.position[2], truth.vehicle.gear_height_m
+        need = air_start_min_height_m(gear, SensorNoise.preset(args.gnss, 0).gps_epv_m)
+        if gear < z < need:
+            print(f"tuav-sitl up: --position: a start in the air with --gnss {args.gnss} "
+                  f"needs Z >= {need:.2f} m (the vehicle's first fix decides whether it is "
+                  "in the air); start on the ground (Z = 0) or higher", file=sys.stderr)
+            return 2
     try:
         key = signing_key(args)
     except sg.SigningError as exc:
