@@ -113,10 +113,13 @@ def command(m: mavutil.mavfile, cmd: int, *params: float, target_component: int 
 
 def arm(m: mavutil.mavfile, timeout: float = 30.0) -> Any:
     """Arm as a ground-station user does: again until the vehicle accepts (its navigation
-    filter must be healthy first: "PreArm: EKF not healthy"); the accepting COMMAND_ACK,
-    or the last refusal after ``timeout`` [s wall]."""
+    filter must be healthy and settled first: "PreArm: EKF not healthy", "PreArm: EKF
+    settling"), its HEARTBEAT going out meanwhile as a ground station's does (a vehicle
+    with FS_GCS_ENABLE would otherwise take the wait for a lost ground station); the
+    accepting COMMAND_ACK, or the last refusal after ``timeout`` [s wall]."""
     end = time.monotonic() + timeout
     while True:
+        m.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
         ack = command(m, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
         if ack is not None and ack.result == M.MAV_RESULT_ACCEPTED or time.monotonic() > end:
             return ack
