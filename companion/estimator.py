@@ -1030,6 +1030,8 @@ class NavFilter:
         #: air, see :meth:`companion.onboard.Companion.estimate`)
         self.align_time_s = p.align_time_s
         self._aligned = False
+        #: when the filter aligned [s] (None: not yet)
+        self.aligned_at_s: float | None = None
         self._acc_sum = np.zeros(3)
         self._gyro_sum = np.zeros(3)
         self._gyro_sq_sum = np.zeros(3)
@@ -1569,6 +1571,7 @@ class NavFilter:
             self._baro_ref_m = self._baro_sum / self._baro_n - float(x[2])
         self._meta[:] = 0
         self._aligned = True
+        self.aligned_at_s = t_s
         self._t_last = t_s
         if gnss:
             self._t_gnss_pos = self._t_gnss_vel = self._t_gnss_hgt = t_s

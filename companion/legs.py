@@ -218,9 +218,9 @@ class LegFollower:
         if math.isinf(item.turns):
             return replace(item, start_angle_rad=None)
         left_m = item.turns * 2.0 * math.pi * item.radius_m - traj.arc_m(t)
-        if left_m < self.acceptance_radius_m or traj.final_pos_m is None:
-            final = traj.final_pos_m or traj.sample(t).pos_m
-            return GotoItem(final, traj.final_yaw_rad)
+        if left_m < self.acceptance_radius_m:
+            assert traj.final_pos_m is not None     # (a finite circle has an end)
+            return GotoItem(traj.final_pos_m, traj.final_yaw_rad)
         return replace(item, turns=left_m / (2.0 * math.pi * item.radius_m),
                        start_angle_rad=None)
 

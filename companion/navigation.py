@@ -423,6 +423,30 @@ def slow_target(vx: float, vy: float, vz: float, px: float, py: float, pz: float
     return target
 
 
+#: A vehicle whose first state (or, on its estimate, first GNSS fix) puts it more than
+#: this above its gear's height, plus AIRBORNE_SIGMAS times the fix's vertical accuracy,
+#: starts in the air [m] (a simulation started in hover); else on the ground, disarmed. A
+#: consumer receiver's first fix is a metre off: taken at 0.3 m alone, three of ten such
+#: starts on the ground took off.
+AIRBORNE_MARGIN_M = 0.3
+AIRBORNE_SIGMAS = 3.0
+
+
+def air_start_threshold_m(gear_height_m: float, epv_m: float = 0.0) -> float:
+    """The height [m] above which a first position of vertical accuracy ``epv_m`` [m] (0:
+    the exact state) has the vehicle take itself to be in the air at boot."""
+    return gear_height_m + AIRBORNE_MARGIN_M + AIRBORNE_SIGMAS * epv_m
+
+
+def air_start_too_low_m(z_m: float, gear_height_m: float, epv_m: float) -> float | None:
+    """For a simulation that starts the vehicle at height ``z_m`` [m] on its estimate with
+    a receiver of vertical accuracy ``epv_m`` [m]: the least height [m] a start in the air
+    needs (its first fix, as many standard deviations again below it, still above
+    :func:`air_start_threshold_m`) when ``z_m`` is in the air but lower, else None."""
+    need = air_start_threshold_m(gear_height_m, epv_m) + AIRBORNE_SIGMAS * epv_m
+    return need if gear_height_m < z_m < need else None
+
+
 class _BrakeRef:
     """The tether governor's stop: the reference's speed brought to rest along its
     direction, the deceleration ``acc`` [m/s^2] reached at ``jerk`` [m/s^3] from the
@@ -713,11 +737,11 @@ class Navigator:
         """Initialise from the first state: on the ground (disarmed) or in the air (armed,
         GUIDED, holding where it is, as when a simulation starts airborne). ``airborne``
         says which (the onboard step's decision, which knows the state's accuracy); None:
-        in the air when the state is more than 0.3 m above the gear's height."""
+        in the air above :func:`air_start_threshold_m` of an exact state."""
         self._t, self._pos, self._vel_now, self._quat = t, pos, vel, quat
         yaw = self._yaw
         self.landed = (not airborne if airborne is not None
-                       else pos[2] <= self.gear_height_m + 0.3)
+                       else pos[2] <= air_start_threshold_m(self.gear_height_m))
         self.home_m = (pos[0], pos[1], self.gear_height_m)
         if not self.landed:
             self.armed = True

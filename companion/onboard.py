@@ -34,6 +34,7 @@ from companion.navigation import (
     Navigator,
     Reason,
     Refusal,
+    air_start_threshold_m,
 )
 from companion.reference import RefSample
 from companion.simlink_client import GpsFix, ImuSample
@@ -45,26 +46,6 @@ from tuavdefs.params import SystemParams
 _STOPPED = (0.0, 0.0, 0.0, 0.0)
 #: A record built as the tuple it is (tuple.__new__), without its Python-level constructor
 _new = tuple.__new__
-#: A vehicle its first GNSS fix puts more than this above its gear's height, plus
-#: AIRBORNE_SIGMAS times the fix's vertical accuracy, starts in the air [m] (a simulation
-#: started in hover); else on the ground, disarmed. A consumer receiver's first fix is a
-#: metre off: taken at 0.3 m alone, three of ten such starts on the ground took off.
-AIRBORNE_MARGIN_M = 0.3
-AIRBORNE_SIGMAS = 3.0
-
-
-def air_start_threshold_m(gear_height_m: float, epv_m: float) -> float:
-    """The height [m] above which a first GNSS fix of vertical accuracy ``epv_m`` [m] has
-    the vehicle take itself to be in the air at boot."""
-    return gear_height_m + AIRBORNE_MARGIN_M + AIRBORNE_SIGMAS * epv_m
-
-
-def air_start_min_height_m(gear_height_m: float, epv_m: float) -> float:
-    """The least height [m] a simulation may start a vehicle in the air at on its estimate
-    with a receiver of vertical accuracy ``epv_m`` [m]: its first fix, as many standard
-    deviations again below it, is still above :func:`air_start_threshold_m`."""
-    return air_start_threshold_m(gear_height_m, epv_m) + AIRBORNE_SIGMAS * epv_m
-
 #: An unhealthy navigation filter for this long in flight triggers the EKF failsafe [s]
 #: (ArduCopter checks its EKF's variances at 10 Hz and acts after about 1 s).
 EKF_FAILSAFE_S = 1.0
@@ -132,7 +113,6 @@ class Companion:
         self._health_t_s = -math.inf
         self._status: FilterStatus | None = None
         self._t_s = -math.inf               # the last period's time [s]
-        self._aligned_at_s: float | None = None   # when the filter first had a state [s]
         self.flight = FlightController(gains, veh, params.tether, g)
         self.nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m,
                              on_event=on_event)
@@ -188,7 +168,6 @@ class Companion:
         self._healthy = self.filter is None
         self._health_t_s = -math.inf
         self._status = None
-        self._aligned_at_s = None
         self.nav.reboot()
         self.started = False
         self._was_flying = False
@@ -300,7 +279,7 @@ class Companion:
             return None
         if not self.navigation_healthy:
             return Refusal(Reason.PREARM, "PreArm: EKF not healthy")
-        since = self._aligned_at_s
+        since = self.filter.aligned_at_s
         if since is None or self._t_s - since < self.estimator_params.arming_settle_s:
             return Refusal(Reason.PREARM, "PreArm: EKF settling")
         return None
@@ -336,11 +315,7 @@ class Companion:
                 if self._airborne_at_boot:   # flying open loop: align sooner
                     f.start_in_air()
             f.fuse_gnss(t, gps.position_enu_m, gps.velocity_enu_m_s, gps.eph_m, gps.epv_m)
-        if not f.aligned:
-            return None
-        if self._aligned_at_s is None:
-            self._aligned_at_s = t
-        return f.state()
+        return f.state() if f.aligned else None
 
     def _ekf_failsafe(self, t_s: float) -> None:
         """ArduCopter's EKF failsafe: an unhealthy filter for ``EKF_FAILSAFE_S`` in flight

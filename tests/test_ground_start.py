@@ -16,7 +16,7 @@ from companion.navigation import Reason
 from sitl.plant import QUAT, RATES, Plant, PlantInputs, initial_state
 from tuav_sitl.offline import OfflineRunner
 from tuav_sitl.scenario import load_scenario
-from tuavdefs.frames import quat_to_euler
+from tuavdefs.frames import quat_multiply, quat_normalize, quat_to_euler
 from tuavdefs.params import SystemParams
 
 
@@ -27,7 +27,7 @@ def test_the_gear_levels_a_tipped_vehicle_at_rates_the_gyro_sees() -> None:
     u = PlantInputs()
     # the body's rotation from its rates alone (the gyroscope's view), integrated as a
     # quaternion at the plant's step
-    q = np.array(plant.x[QUAT])
+    q = tuple(plant.x[QUAT].tolist())
     for _ in range(round(1.0 / plant.dt_s)):
         w0 = np.array(plant.x[RATES])
         plant.step(u)
@@ -35,17 +35,15 @@ def test_the_gear_levels_a_tipped_vehicle_at_rates_the_gyro_sees() -> None:
         angle = float(np.linalg.norm(w)) * plant.dt_s
         if angle > 0.0:
             ax = w / np.linalg.norm(w)
-            dq = np.array([math.cos(angle / 2), *(math.sin(angle / 2) * ax)])
-            qw, qv = q[0], q[1:]
-            q = np.array([qw * dq[0] - qv @ dq[1:],
-                          *(qw * dq[1:] + dq[0] * qv + np.cross(qv, dq[1:]))])
+            dq = (math.cos(angle / 2), *(math.sin(angle / 2) * ax).tolist())
+            q = quat_multiply(q, dq)
     roll, pitch, yaw = quat_to_euler(tuple(plant.x[QUAT]))
     assert abs(roll) < math.radians(0.01) and abs(pitch) < math.radians(0.01)
     # no yaw rate: the heading moves only as much as a rotation about a horizontal axis
     # moves a tilted body's Z-Y-X yaw
     assert yaw == pytest.approx(yaw0, abs=0.01)
     # what the rates integrate to is where the body is: no rotation the gyro missed
-    gyro_roll, gyro_pitch, _ = quat_to_euler(tuple(q / np.linalg.norm(q)))
+    gyro_roll, gyro_pitch, _ = quat_to_euler(quat_normalize(q))
     assert gyro_roll == pytest.approx(roll, abs=math.radians(0.05))
     assert gyro_pitch == pytest.approx(pitch, abs=math.radians(0.05))
 
@@ -86,12 +84,12 @@ def test_a_start_in_the_air_too_low_for_its_receiver_is_refused(tmp_path) -> Non
     """Below the height its first fix needs to be taken for the air (6.57 m with the
     consumer receiver, 0.63 m with RTK), a start in the air on the estimate would drop
     the vehicle: the scenario and ``up`` refuse it, naming the field."""
-    from companion.onboard import air_start_min_height_m
+    from companion.navigation import air_start_too_low_m
     from tuavdefs.paramspec import ParameterError
 
     sc = load_scenario("circle-gnss")
     gear = sc.plant.vehicle.gear_height_m
-    need = air_start_min_height_m(gear, sc.sensors.noise_model().gps_epv_m)
+    need = air_start_too_low_m(1.0, gear, sc.sensors.noise_model().gps_epv_m)
     assert need == pytest.approx(6.57, abs=0.01)
     with pytest.raises(ParameterError, match="initial.position_m: a start in the air"):
         sc.replace(initial=replace(sc.initial, position_m=(5.0, 0.0, need - 0.1)))

@@ -32,8 +32,7 @@ from companion import mission_file
 from companion.estimator import EstimatorParams
 from companion.gains import FlightControlParams
 from companion.mission_protocol import MissionItem, degrees_to_e7, home_item
-from companion.navigation import NavigationParams
-from companion.onboard import air_start_min_height_m
+from companion.navigation import NavigationParams, air_start_too_low_m
 from groundstation.lbar import LBarParams
 from groundstation.winch import WinchParams
 from groundstation.winder_control import WinderControlParams
@@ -272,9 +271,10 @@ class ScenarioParams(Params):
         if not math.isfinite(self.duration_s * self.physics_rate_hz):
             raise ValueError("duration_s: too long")
         if self.estimator.kind == "ekf" and self.initial.position_m:
-            z, gear = self.initial.position_m[2], self.plant.vehicle.gear_height_m
-            need = air_start_min_height_m(gear, self.sensors.noise_model().gps_epv_m)
-            if gear < z < need:
+            need = air_start_too_low_m(self.initial.position_m[2],
+                                       self.plant.vehicle.gear_height_m,
+                                       self.sensors.noise_model().gps_epv_m)
+            if need is not None:
                 raise ValueError(
                     f"initial.position_m: a start in the air on the estimate with the "
                     f"{self.sensors.gnss} receiver needs z >= {need:.2f} m (its first fix "

@@ -439,12 +439,12 @@ def run_up(args: argparse.Namespace) -> int:
         print(f"tuav-sitl up: bad parameter: {exc}", file=sys.stderr)
         return 2
     if args.state == "ekf":
-        from companion.onboard import air_start_min_height_m
+        from companion.navigation import air_start_too_low_m
         from sitl.sensors import SensorNoise
 
-        z, gear = args.position[2], truth.vehicle.gear_height_m
-        need = air_start_min_height_m(gear, SensorNoise.preset(args.gnss, 0).gps_epv_m)
-        if gear < z < need:
+        need = air_start_too_low_m(args.position[2], truth.vehicle.gear_height_m,
+                                   SensorNoise.preset(args.gnss, 0).gps_epv_m)
+        if need is not None:
             print(f"tuav-sitl up: --position: a start in the air with --gnss {args.gnss} "
                   f"needs Z >= {need:.2f} m (the vehicle's first fix decides whether it is "
                   "in the air); start on the ground (Z = 0) or higher", file=sys.stderr)
