@@ -252,6 +252,13 @@ class Companion:
         return self._status
 
     @property
+    def ekf_failsafe(self) -> bool:
+        """Whether the EKF failsafe holds now: the filter unhealthy in flight for
+        :data:`EKF_FAILSAFE_S` (what the onboard log records as its ERR)."""
+        since = self._unhealthy_since
+        return since is not None and self._t_s - since >= EKF_FAILSAFE_S
+
+    @property
     def navigation_healthy(self) -> bool:
         """Whether what the vehicle flies on is usable (arming needs it): the filter's
         health as last checked (:data:`HEALTH_CHECK_S`)."""
