@@ -43,7 +43,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     compile_if_cold(scenario, progress)
     stop_reports = report_compiles(progress)
     try:
-        result = run_scenario(scenario, out, progress=progress)
+        result = run_scenario(scenario, out, progress=progress, recording=True)
     finally:
         stop_reports()
     m = result.metrics
@@ -56,6 +56,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(f"wrote {len(drawn.figures)} figures in {out}/figures")
         if drawn.animation:
             print("wrote " + ", ".join(str(a) for a in drawn.animation))
+    _report_recording(result.recording, out)
     keys = ["position_rmse_m", "position_max_error_m", "attitude_rmse_rad",
             "tether_length_rmse_m", "min_tether_slack_m", "max_tension_n",
             "motor_saturation_fraction", "settling_time_s", "overshoot_percent",
@@ -64,6 +65,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
         v = m.get(k)
         print(f"  {k:28s} {v:.6g}" if isinstance(v, float) else f"  {k:28s} {v}")
     return 0
+
+
+def _report_recording(job, out: Path) -> None:
+    """Wait for a run's recording.rrd (written beside the figures) and say where it is."""
+    from tuav_sitl.view import INSTALL_HINT
+
+    if job is None:
+        print(f"  no recording.rrd: {INSTALL_HINT}")
+    elif job.wait():
+        print(f"wrote {job.path} (tuav-sitl view {out})")
+    else:
+        print(f"tuav-sitl: the recording {job.path} could not be written", file=sys.stderr)
+
+
+def _cmd_view(args: argparse.Namespace) -> int:
+    from tuav_sitl.view.open import open_run
+
+    return open_run(Path(args.run_dir), web=args.web, web_port=args.web_port,
+                    grpc_port=args.grpc_port)
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
@@ -224,6 +244,22 @@ def build_parser() -> argparse.ArgumentParser:
                     "the main figures next to the results file and write the metrics table "
                     "against the targets.")
     res.add_argument("--out", default="docs/results.md", help="the Markdown file to write")
+    view = sub.add_parser(
+        "view", help="open a run folder's recording.rrd in Rerun's viewer",
+        description="Open the recording of a run folder (recording.rrd, written by "
+                    "'tuav-sitl run', 'tuav-sitl up' and the runs a sweep keeps) in Rerun's "
+                    "native viewer, or with --web serve Rerun's web viewer on a localhost "
+                    "URL it prints (until Ctrl-C). A 'tuav-sitl run' folder without one "
+                    "gets it written first. Needs the optional extra 'view' (rerun-sdk).")
+    view.add_argument("run_dir", help="a run folder (or a .rrd file)")
+    view.add_argument("--web", action="store_true",
+                      help="serve the web viewer on http://127.0.0.1:PORT instead")
+    view.add_argument("--web-port", type=int, default=9090,
+                      help="the web viewer's HTTP port (with --web; default 9090)")
+    view.add_argument("--grpc-port", type=int, default=9876,
+                      help="the port the recording is served on to the viewer (default 9876)")
+    view.set_defaults(func=_cmd_view)
+
     res.add_argument("--runs", default="runs", help="folder for the run folders")
     res.add_argument("--no-figures", action="store_true", help="metrics only")
     res.add_argument("--quiet", action="store_true", help="no progress")

@@ -126,6 +126,9 @@ class RunResult:
     metrics: dict[str, Any]
     events: list[tuple[NavEvent, object, float]] = field(default_factory=list)
     """The navigator's events: (kind, value, time [s])."""
+    recording: Any = None
+    """The job writing the run folder's ``recording.rrd`` in the background
+    (:class:`tuav_sitl.view.recording.RecordingJob`; its ``wait()``), if one was asked."""
 
 
 class Reference:
@@ -833,11 +836,17 @@ def _toml_value(v: Any) -> str:
 
 
 def run_scenario(scenario: ScenarioParams, out_dir: Path | None = None,
-                 progress: TextIO | None = sys.stderr) -> RunResult:
-    """Run ``scenario`` and, if ``out_dir`` is given, write its outputs there."""
+                 progress: TextIO | None = sys.stderr, recording: bool = False) -> RunResult:
+    """Run ``scenario`` and, if ``out_dir`` is given, write its outputs there; with
+    ``recording`` (and rerun-sdk installed) also its ``recording.rrd``, written by a
+    background process (``result.recording``)."""
     result = OfflineRunner(scenario).run(progress=progress)
     if out_dir is not None:
         write_outputs(result, out_dir)
+        if recording:
+            from tuav_sitl.view.recording import start_run_recording
+
+            result.recording = start_run_recording(result, out_dir)
     return result
 
 
