@@ -327,6 +327,12 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--no-pin", action="store_true",
                     help="in lockstep, let the processes run on any CPU (by default the "
                          "plant and the companion share one, the others the rest)")
+    ap.add_argument("--view", nargs="?", const="auto", choices=("auto", "native", "web"),
+                    default=None,
+                    help="a live 3-D view in Rerun (the optional extra 'view'): its native "
+                         "viewer where there is a display (auto, the default), else or with "
+                         "'web' its web viewer on a localhost URL the banner prints; every "
+                         "run records recording.rrd in its folder with or without it")
     out = ap.add_mutually_exclusive_group()
     out.add_argument("--headless", action="store_true",
                      help="print only errors and the log folder (no banner, no status)")
@@ -348,7 +354,7 @@ def _system_params(args: argparse.Namespace) -> SystemParams:
                 stem = Path(path).stem
                 field = (name + exc.field[len(stem):] if exc.field.startswith(stem + ".")
                          else f"{name}: {exc.field}")
-                raise ParameterError(field, str(exc).split(": ", 1)[-1]) from None
+                raise ParameterError(field, exc.reason, source=exc.source, line=exc.line) from None
     if args.wind is not None:
         speed, from_deg, turb = args.wind
         to = math.radians(from_deg + 180.0)   # the air moves towards the opposite bearing
@@ -454,6 +460,11 @@ def run_up(args: argparse.Namespace) -> int:
     except sg.SigningError as exc:
         print(f"tuav-sitl up: {exc}", file=sys.stderr)
         return 2
+    from tuav_sitl.view import INSTALL_HINT, available
+
+    if args.view is not None and not available():
+        print(f"tuav-sitl up: --view: {INSTALL_HINT}", file=sys.stderr)
+        return 2
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     run_dir = Path(args.logdir) / f"up-{stamp}-{args.instance}"
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -545,6 +556,9 @@ def run_up(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     code = 0
+    from tuav_sitl.view.live import start_live_view, stop_live_view
+
+    live = start_live_view(run_dir, args.view, args.instance, h) if available() else None
     try:
         stack.start_recorder("candump", ["-m", "tuav_sitl", "candump", "-s", "2", "--can", can,
                                          "--interval", repr(RECORDER_INTERVAL_S),
@@ -565,6 +579,8 @@ def run_up(args: argparse.Namespace) -> int:
             sched = _pin(stack)
         if not args.headless:
             print(_banner(run_dir, ports, sim, can, args, speedup, sched, key), flush=True)
+            if live is not None:
+                print(f"  {live.banner}", flush=True)
         while stopping["signal"] is None:
             stack.echo_new()
             ended = stack.first_exit()
@@ -595,6 +611,8 @@ def run_up(args: argparse.Namespace) -> int:
         code = 1
     finally:
         stack.stop()
+        if live is not None:
+            stop_live_view(live)
     if stopping["signal"] is not None and not args.headless:
         print("tuav-sitl up: stopped", flush=True)
     print(f"tuav-sitl up: logs in {run_dir}", flush=True)

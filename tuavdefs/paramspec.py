@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import sys
 import tomllib
 import typing
@@ -22,18 +23,30 @@ from pathlib import Path
 from typing import Any, Self
 
 __all__ = ["ParameterError", "Params", "quantity", "load_toml", "load_option", "to_dict",
-           "describe"]
+           "describe", "toml_line"]
 
 
 class ParameterError(ValueError):
     """A parameter is missing, unknown, of the wrong type or out of bounds.
 
-    ``field`` holds the dotted name of the offending field.
+    ``field`` holds the dotted name of the offending field and ``reason`` what is wrong with
+    it; ``source`` and ``line`` (1-based), where known, the file and the line it was read
+    from (the message then starts ``FILE:LINE:``, as compilers say it).
     """
 
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(f"{field}: {message}")
+    def __init__(self, field: str, message: str, *, source: str | None = None,
+                 line: int | None = None) -> None:
+        where = ("" if source is None else f"{source}:{line}: " if line is not None
+                 else f"{source}: ")
+        super().__init__(f"{where}{field}: {message}")
         self.field = field
+        self.reason = message
+        self.source = source
+        self.line = line
+
+    def located(self, source: str, line: int | None) -> ParameterError:
+        """The same error, said as read from ``source`` at ``line`` (None: unknown)."""
+        return ParameterError(self.field, self.reason, source=source, line=line)
 
 
 def quantity(
@@ -178,15 +191,90 @@ def load_toml(cls: type[Params], path: str | Path, table: str | None = None) -> 
     """
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text())
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParameterError(str(path), f"cannot read it: {exc}") from None
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ParameterError(str(path), f"not valid TOML: {exc}") from None
+        where = _TOML_AT.search(str(exc))
+        line = (int(where.group(1)) if where else
+                max(len(text.splitlines()), 1) if "end of document" in str(exc) else None)
+        raise ParameterError("(syntax)", f"not valid TOML: {exc}", source=str(path),
+                             line=line) from None
     prefix = table or path.stem
     if table is not None:
         if table not in data:
-            raise ParameterError(table, f"table missing from {path}")
+            raise ParameterError(table, "table missing", source=str(path))
         data = data[table]
-    return cls.from_dict(data, prefix=prefix)
+    try:
+        return cls.from_dict(data, prefix=prefix)
+    except ParameterError as exc:
+        keys = _field_keys(exc.field, prefix)
+        if table is not None:
+            keys = (table, *keys)
+        raise exc.located(str(path), toml_line(text, keys)) from None
+
+
+#: Where tomllib says a syntax error is: "(at line 3, column 7)".
+_TOML_AT = re.compile(r"at line (\d+)")
+#: A TOML table header: ``[a.b]`` or ``[[a.b]]``.
+_HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
+#: The key of a ``key = value`` line (bare, dotted or quoted).
+_KEY = re.compile(r"""^\s*((?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*')"""
+                  r"""(?:\s*\.\s*(?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*'))*)\s*=""")
+
+
+def _split_key(key: str) -> list[str]:
+    """The parts of a dotted TOML key, quotes removed."""
+    parts = re.findall(r"""[A-Za-z0-9_-]+|"[^"]*"|'[^']*'""", key)
+    return [p[1:-1] if p[:1] in "\"'" else p for p in parts]
+
+
+def _field_keys(field: str, prefix: str) -> tuple[str, ...]:
+    """A ParameterError's dotted field (``stem.a.b[2].c``) as TOML key parts
+    (``("a", "b[2]", "c")``), the loader's prefix removed."""
+    rest = field[len(prefix) + 1:] if field.startswith(prefix + ".") else field
+    return tuple(p for p in rest.split(".") if p)
+
+
+def toml_line(text: str, keys: tuple[str, ...]) -> int | None:
+    """The 1-based line of ``text`` (a TOML document) that sets the key ``keys`` (parts as
+    :class:`ParameterError` names them: an array of tables' entries as ``name[i]``), or of
+    the nearest enclosing key or table that appears in the text; None if nothing does.
+
+    A line scanner, not a parser: it follows table headers and ``key =`` lines, which is
+    what a file's author reads; a key inside an inline table or a multi-line value is found
+    through the line of the key that holds it."""
+    lines: dict[tuple[str, ...], int] = {}
+    counts: dict[tuple[str, ...], int] = {}
+    table: tuple[str, ...] = ()
+    for n, raw in enumerate(text.splitlines(), start=1):
+        header = _HEADER.match(raw)
+        if header:
+            parts = _split_key(header.group(2))
+            resolved: list[str] = []
+            for i, part in enumerate(parts):
+                plain = (*[r.split("[")[0] for r in resolved], part)
+                if i < len(parts) - 1 and plain in counts:
+                    part = f"{part}[{counts[plain] - 1}]"
+                resolved.append(part)
+            if header.group(1) == "[[":
+                plain = tuple(r.split("[")[0] for r in resolved)
+                counts[plain] = counts.get(plain, 0) + 1
+                resolved[-1] = f"{resolved[-1]}[{counts[plain] - 1}]"
+            table = tuple(resolved)
+            lines.setdefault(table, n)
+            continue
+        key = _KEY.match(raw)
+        if key:
+            lines.setdefault((*table, *_split_key(key.group(1))), n)
+    for k in range(len(keys), 0, -1):
+        head = keys[:k]
+        for candidate in (head, (*head[:-1], head[-1].split("[")[0])):
+            if candidate in lines:
+                return lines[candidate]
+    return None
 
 
 def load_option(cls: type[Params], path: str | None, prog: str) -> Params:
