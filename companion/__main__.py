@@ -34,7 +34,7 @@ from companion.autopilot import Autopilot
 from companion.component_server import ComponentServer
 from companion.estimator import ESTIMATOR_KINDS, EstimatorParams
 from companion.flight_controller import VehicleState
-from companion.flight_log import FlightLog
+from companion.flight_log import FlightLog, LogClock
 from companion.gains import FlightControlParams
 from companion.geofence import FenceParams
 from companion.log_protocol import LogProtocol
@@ -236,6 +236,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     autopilot.on_gcs_heartbeat(lambda: onboard.gcs_heard(last_t[0]))
     autopilot.on_external_position(onboard.external_position)
     autopilot.streams.wind_source = onboard.wind_estimate
+    autopilot.streams.estimator_ready = onboard.estimator_ready
 
     def reboot() -> None:
         """The onboard state restarted; ground stations see the new state at once."""
@@ -247,11 +248,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     autopilot.commands.reboot = reboot
 
+    log_clock = LogClock()     # the real time of the simulated clock, for every boot's log
+
     def new_log() -> None:
         """This boot's onboard log, its parameters first."""
         if autopilot.flight_log is not None:
             autopilot.flight_log.close()
-        autopilot.flight_log = fl = FlightLog(Path(args.log_dir), tuple(args.home))
+        autopilot.flight_log = fl = FlightLog(Path(args.log_dir), tuple(args.home),
+                                              log_clock)
         for d in defs:
             fl.param(d.name, d.get())
 
@@ -322,6 +326,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             out = onboard.step(inputs)
             cmds, armed, state = out.rotor_commands, out.armed, out.state
             client.send_actuators(sim.time_usec, cmds, armed=armed)
+            if autopilot.flight_log is not None:   # its sensors, filter and events
+                autopilot.flight_log.period(inputs, out, onboard)
             # the answer is out (in lockstep the plant waits for it); now the ground
             # stations and the winch: what they ask applies from the next period
             if len(ready) > 1:

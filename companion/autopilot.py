@@ -545,6 +545,8 @@ class Autopilot:
 
     def _home_changed(self) -> None:
         """The navigator's home moved: the mission's item 0 follows, HOME_POSITION to
-        every link."""
+        every link (once the estimate is ready: until then home is not reported, and the
+        streams announce it when it is)."""
         self._update_mission_home()
-        self.io.send(self.streams.home_position())
+        if self.streams.home_set():
+            self.io.send(self.streams.home_position())

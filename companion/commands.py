@@ -182,7 +182,7 @@ class CommandHandler:
         elif cmd == M.MAV_CMD_CONDITION_YAW:
             why, result = self._condition_yaw(p)
         elif cmd == M.MAV_CMD_GET_HOME_POSITION:
-            if nav.home_m is None:
+            if not self.streams.home_set():
                 result = M.MAV_RESULT_TEMPORARILY_REJECTED
             else:
                 self.io.send(self.streams.home_position(), peer)

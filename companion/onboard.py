@@ -279,17 +279,30 @@ class Companion:
             self.nav.position_sigma_m = sig if math.isfinite(sig) else 0.0
             self._announce_sources(st.sources)
 
-    def _prearm(self) -> Refusal | None:
-        """ArduCopter's pre-arm check of the estimator (skipped with ARMING_CHECK 0): a
-        healthy filter, aligned for ``arming_settle_s``."""
-        if self.arming_check == 0 or self.filter is None:
+    def estimator_check(self) -> Refusal | None:
+        """Whether the estimate is ready to arm on now: None when it is (flying on the
+        simulator's state, or a filter healthy as last checked and aligned for
+        ``arming_settle_s``), else why not. The one source of readiness: the estimator's
+        pre-arm check and what telemetry reports as ready (EKF_STATUS_REPORT's flags,
+        SYS_STATUS's AHRS, GPS and pre-arm bits, HOME_POSITION) both ask it, as
+        ArduPilot's EKF is not healthy, and says so, until it has settled."""
+        f = self.filter
+        if f is None:
             return None
         if not self.navigation_healthy:
             return Refusal(Reason.PREARM, "PreArm: EKF not healthy")
-        since = self.filter.aligned_at_s
+        since = f.aligned_at_s
         if since is None or self._t_s - since < self.estimator_params.arming_settle_s:
             return Refusal(Reason.PREARM, "PreArm: EKF settling")
         return None
+
+    def estimator_ready(self) -> bool:
+        """:meth:`estimator_check` passes."""
+        return self.estimator_check() is None
+
+    def _prearm(self) -> Refusal | None:
+        """ArduCopter's pre-arm check of the estimator (skipped with ARMING_CHECK 0)."""
+        return None if self.arming_check == 0 else self.estimator_check()
 
     def estimate(self, inputs: OnboardInputs) -> VehicleState | None:
         """The period's sensors into the filter; the state to fly on (None while the

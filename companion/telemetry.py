@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -56,15 +57,24 @@ CAPABILITIES = (M.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | M.MAV_PROTOCOL_CAPABIL
 
 #: Standard gravity: the milli-g of RAW_IMU / SCALED_IMU [m/s^2].
 _G0_M_S2 = 9.80665
-_SENSORS = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-            | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-            | M.MAV_SYS_STATUS_SENSOR_GPS | M.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
-            | M.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-            | M.MAV_SYS_STATUS_SENSOR_YAW_POSITION
-            | M.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
-            | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
-            | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | M.MAV_SYS_STATUS_AHRS
-            | M.MAV_SYS_STATUS_SENSOR_BATTERY | M.MAV_SYS_STATUS_PREARM_CHECK)
+#: SYS_STATUS: the inertial sensors, the magnetometer and the barometer, present and
+#: enabled always, healthy while their samples arrive (ArduPilot: calibrated, not
+#: calibrating, healthy; MAVSDK's is_*_calibration_ok read them).
+_INERTIAL = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+             | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE)
+#: SYS_STATUS: the control loops, the motor outputs and the tether's supply, always
+#: present, enabled and healthy.
+_ALWAYS = (M.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+           | M.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+           | M.MAV_SYS_STATUS_SENSOR_YAW_POSITION
+           | M.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+           | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+           | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | M.MAV_SYS_STATUS_SENSOR_BATTERY)
+#: SYS_STATUS: what says the vehicle is ready: the attitude and heading reference (the
+#: estimate), the GNSS (MAVSDK's is_global_position_ok and is_local_position_ok) and the
+#: pre-arm checks (MAVSDK's is_armable). Present and enabled always.
+_READINESS = (M.MAV_SYS_STATUS_AHRS | M.MAV_SYS_STATUS_SENSOR_GPS
+              | M.MAV_SYS_STATUS_PREARM_CHECK)
 
 
 #: Default telemetry: message name -> rate [Hz of simulated time].
@@ -98,7 +108,8 @@ STREAM_GROUPS: dict[int, tuple[str, ...]] = {
 }
 _MSG_IDS = {name: getattr(APM, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_RATES_HZ}
 #: EKF_STATUS_REPORT's flags (ArduPilot's EKF_STATUS_FLAGS) of the estimator's flags
-#: (MAVLink's ESTIMATOR_STATUS_FLAGS): the same bits up to PRED_POS_HORIZ_ABS.
+#: (MAVLink's ESTIMATOR_STATUS_FLAGS): the same bits up to PRED_POS_HORIZ_ABS, each of
+#: which EKF3 sets only while it is healthy (and so not in its first second).
 _EKF_FLAG_BITS = 0x3FF
 _MSG_NAMES = {v: k for k, v in _MSG_IDS.items()}
 
@@ -175,10 +186,31 @@ class TelemetryStreams:
         """FENCE_ENABLE (SYS_STATUS's geofence bits)."""
         self.fence_breached = False
         """A fence is breached now."""
+        self.estimator_ready: Callable[[], bool] | None = None
+        """``f()`` -> whether the estimate is ready to arm on now (the onboard step's
+        :meth:`~companion.onboard.Companion.estimator_ready`, which the pre-arm check asks
+        too), asked whenever readiness is reported; None: the last filter status's
+        health."""
+        self._home_reported = False   # HOME_POSITION was reportable at the last send_due
 
     def position(self) -> Vec3:
         """The latest position [m] (the winder's exit before the first period)."""
         return self.telem.pos_m if self.telem is not None else (0.0, 0.0, 0.0)
+
+    def ready(self) -> bool:
+        """Whether the estimate is ready to arm on now (:attr:`estimator_ready`); always
+        when flying on the simulator's state, never before the first period."""
+        if self.estimator_ready is not None:
+            return self.estimator_ready()
+        tm = self.telem
+        return tm is not None and (tm.ekf is None or tm.ekf.healthy)
+
+    def home_set(self) -> bool:
+        """Whether home is set as ArduPilot reports it (HOME_POSITION sent, streamed and
+        on request): the navigator has one and the estimate it came from is ready to arm
+        on. ArduCopter sets home from its EKF's position, which EKF3 gives only once it is
+        healthy, and then sends HOME_POSITION at once (:meth:`send_due`)."""
+        return self.nav.home_m is not None and self.ready()
 
     def forget(self, peer: Peer) -> None:
         """Drop the schedule of a link that closed."""
@@ -206,16 +238,20 @@ class TelemetryStreams:
         links = io.links()
         built: dict[str, bytes] = {}
         next_due = math.inf
+        home = self.home_set()
+        newly_home, self._home_reported = home and not self._home_reported, home
         for peer in links:
             st = self._link(peer)
             frames: list[bytes] = []
+            if newly_home and st.schedule["HOME_POSITION"][0] > 0.0:
+                st.schedule["HOME_POSITION"][1] = t    # home just set: said at once
             for name, entry in st.schedule.items():
                 interval, due = entry
                 if interval <= 0.0 or name in FORWARDED:
                     continue
                 if t >= due - DUE_TOLERANCE_S:
                     entry[1] = max(due + interval, t) if t - due < interval else t + interval
-                    if not (name == "HOME_POSITION" and self.nav.home_m is None):
+                    if not (name == "HOME_POSITION" and not home):
                         data = built.get(name)
                         if data is None:
                             data = built[name] = io.pack(self.build(name, self.telem))
@@ -302,7 +338,7 @@ class TelemetryStreams:
         if mid == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             self.io.send(self.autopilot_version(), peer)
         elif mid == M.MAVLINK_MSG_ID_HOME_POSITION:
-            if self.nav.home_m is None:
+            if not self.home_set():
                 return M.MAV_RESULT_TEMPORARILY_REJECTED
             self.io.send(self.home_position(), peer)
         elif _MSG_NAMES.get(mid) in FORWARDED:
@@ -358,19 +394,7 @@ class TelemetryStreams:
                                               round(100 * tm.throttle),
                                               self.origin[2] + tm.pos_m[2], -vn[2])
         if name == "SYS_STATUS":
-            # the fence (the tether's reach at least) is present, enabled with FENCE_ENABLE,
-            # healthy while not breached; the pre-arm bit only while the pre-arm checks
-            # pass (MAVSDK's is_armable)
-            prearm = self.nav.prearm
-            fence = M.MAV_SYS_STATUS_GEOFENCE
-            health = _SENSORS | (0 if self.fence_breached else fence)
-            if prearm is not None and prearm() is not None:
-                health &= ~M.MAV_SYS_STATUS_PREARM_CHECK
-            return M.MAVLink_sys_status_message(_SENSORS | fence,
-                                                _SENSORS | (fence if self.fence_enabled else 0),
-                                                health, 100, 48000,
-                                                round(100 * 100 * tm.throttle), 100, 0, 0, 0,
-                                                0, 0, 0)
+            return self._sys_status(tm)
         if name == "BATTERY_STATUS":
             # powered through the tether: a steady supply, never discharging
             cells = [48000] + [65535] * 9
@@ -428,12 +452,48 @@ class TelemetryStreams:
         return M.MAVLink_nav_controller_output_message(
             math.degrees(roll), math.degrees(pitch), b, b, dist, alt_err, 0.0, xtrack)
 
+    def _sys_status(self, tm: Telemetry) -> Any:
+        """SYS_STATUS, its bits as ArduPilot sets them (GCS::update_sensor_status_flags):
+        the inertial sensors healthy while their samples arrive; the AHRS healthy while
+        the estimate is ready to arm on (EKF3 is not healthy until it has settled); the
+        GNSS present once the receiver has spoken, healthy with a 3D fix that the
+        estimate is ready to fly on; the pre-arm bit healthy when armed or when the
+        pre-arm checks pass (the same check arming runs); the fence (the tether's reach
+        at least) present, enabled with FENCE_ENABLE, healthy while not breached."""
+        nav = self.nav
+        fence = M.MAV_SYS_STATUS_GEOFENCE
+        present = _INERTIAL | _ALWAYS | _READINESS | fence
+        enabled = _INERTIAL | _ALWAYS | _READINESS | (fence if self.fence_enabled else 0)
+        health = _ALWAYS | (0 if self.fence_breached else fence)
+        if tm.imu is not None:
+            health |= _INERTIAL
+        ready = self.ready()
+        if ready:
+            health |= M.MAV_SYS_STATUS_AHRS
+        if tm.gps is None:
+            present &= ~M.MAV_SYS_STATUS_SENSOR_GPS
+            enabled &= ~M.MAV_SYS_STATUS_SENSOR_GPS
+        elif ready and self._fix_current(tm) and tm.gps.fix_type >= M.GPS_FIX_TYPE_3D_FIX:
+            health |= M.MAV_SYS_STATUS_SENSOR_GPS
+        prearm = nav.prearm
+        if nav.armed or prearm is None or prearm() is None:
+            health |= M.MAV_SYS_STATUS_PREARM_CHECK
+        return M.MAVLink_sys_status_message(present, enabled, health, 100, 48000,
+                                            round(100 * 100 * tm.throttle), 100, 0, 0, 0,
+                                            0, 0, 0)
+
+    @staticmethod
+    def _fix_current(tm: Telemetry) -> bool:
+        """The receiver's last fix is younger than ``GPS_TIMEOUT_S``."""
+        g = tm.gps
+        return g is not None and int(tm.t_s * 1e6) - g.time_usec <= GPS_TIMEOUT_S * 1e6
+
     def _gps_raw(self, tm: Telemetry) -> Any:
         """GPS_RAW_INT of the receiver's last fix (no fix before the first; no GPS once
         the last is ``GPS_TIMEOUT_S`` old, as ArduPilot's driver times out)."""
         g = tm.gps
         t_us = int(tm.t_s * 1e6)
-        if g is None or t_us - g.time_usec > GPS_TIMEOUT_S * 1e6:
+        if g is None or not self._fix_current(tm):
             fix = M.GPS_FIX_TYPE_NO_FIX if g is None else M.GPS_FIX_TYPE_NO_GPS
             return M.MAVLink_gps_raw_int_message(t_us, fix, 0, 0, 0, 65535,
                                                  65535, 65535, 65535, 0)
@@ -448,7 +508,11 @@ class TelemetryStreams:
 
     def _ekf_status(self, tm: Telemetry) -> Any:
         """EKF_STATUS_REPORT as ArduPilot fills it: flags, and each measurement's test
-        ratio as its variance (1.0 at the gate)."""
+        ratio as its variance (1.0 at the gate). As EKF3 reports itself, every estimate
+        flag is clear while the estimate is not ready to arm on (unhealthy, or not yet
+        settled), and UNINITIALIZED is set until it first becomes ready (initialising,
+        converging or settling): PRED_POS_HORIZ_ABS, which scripts wait for, says an arm
+        would be accepted."""
         e = tm.ekf
         if e is None:   # flying on the simulator's state: everything good
             flags = (APM.EKF_ATTITUDE | APM.EKF_VELOCITY_HORIZ | APM.EKF_VELOCITY_VERT
@@ -456,12 +520,12 @@ class TelemetryStreams:
                      | APM.EKF_PRED_POS_HORIZ_REL | APM.EKF_PRED_POS_HORIZ_ABS)
             return APM.MAVLink_ekf_status_report_message(flags, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         flags = int(e.flags) & _EKF_FLAG_BITS
-        if not e.healthy:   # the bits ArduPilot's pre-arm checks read: not ready to arm
-            flags &= ~(APM.EKF_PRED_POS_HORIZ_REL | APM.EKF_PRED_POS_HORIZ_ABS)
+        if not self.ready():
+            flags = 0
+            if e.health is not FilterHealth.UNHEALTHY:
+                flags |= APM.EKF_UNINITIALIZED
         if e.flags & EstimatorFlags.GPS_GLITCH:
             flags |= APM.EKF_GPS_GLITCHING
-        if e.health in (FilterHealth.INITIALISING,):
-            flags |= APM.EKF_UNINITIALIZED
         return APM.MAVLink_ekf_status_report_message(
             flags, e.velocity_variance, e.pos_horiz_variance, e.pos_vert_variance,
             e.compass_variance, e.terrain_alt_variance, 0.0)

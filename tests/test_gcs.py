@@ -91,8 +91,9 @@ def test_heartbeat_identifies_an_arducopter_on_the_ground(flight):
     lp = m.messages["LOCAL_POSITION_NED"]
     assert (lp.x, lp.y) == pytest.approx((0.0, 2.0), abs=0.01)   # NED: 2 m east of winder
     assert m.messages["EXTENDED_SYS_STATE"].landed_state == M.MAV_LANDED_STATE_ON_GROUND
-    sys_status = m.messages["SYS_STATUS"]
-    assert sys_status.onboard_control_sensors_health & M.MAV_SYS_STATUS_SENSOR_GPS
+    # the receiver's fix is healthy once the estimate it feeds is ready to arm on
+    assert wait_msg(m, "SYS_STATUS", lambda s: s.onboard_control_sensors_health
+                    & M.MAV_SYS_STATUS_SENSOR_GPS, 20)
 
 
 def test_set_a_parameter_and_read_it_back(flight):
