@@ -334,3 +334,68 @@ def test_results_show_a_shipped_sweeps_summary_or_how_to_run_it(small_sweep, tmp
     shutil.copytree(out, tmp_path / "sweeps" / "robustness")
     text = "\n".join(sweep_section(tmp_path, {}))
     assert f"### sweep small over circle: {summary['runs']} runs" in text
+
+
+def test_shipped_sweeps_by_name_from_any_folder_and_a_refusal_naming_them(
+        tmp_path, monkeypatch, capsys):
+    from tuav_sitl.cli import build_parser
+
+    names = sorted(sw.shipped_sweeps())
+    assert "robustness" in names
+    monkeypatch.chdir(tmp_path)        # no sweep files here: the names are the package's
+    for name in names:
+        by_name, sc = sw.load_sweep(name)
+        by_path, sc_path = sw.load_sweep(str(sw.shipped_sweeps()[name]))
+        assert by_name == by_path and sc == sc_path
+    # a file path still works, and a file whose stem is not a shipped name is a file
+    path = _write(tmp_path, SMALL)
+    assert sw.load_sweep(path)[0].name == "small"
+    assert sw.load_sweep("small.toml")[0].name == "small"
+    args = build_parser().parse_args(["sweep", "robustness", "--runs", "3"])
+    assert args.sweep == "robustness" and args.runs == 3
+    # a name that is neither: refused with every shipped name
+    assert main(["sweep", "robustnes", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "robustnes: no such sweep" in err
+    for name in names:
+        assert name in err
+    assert not (tmp_path / "o").exists()
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["sweep", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    for name in names:
+        assert name in help_text.replace("- ", "-")
+
+
+def test_results_writes_where_it_says_whatever_the_current_folder(
+        tmp_path, monkeypatch, capsys):
+    import tuav_sitl.results as res
+    import tuav_sitl.warmup as warmup
+    from tuav_sitl.cli import build_parser
+
+    repo = Path(__file__).resolve().parent.parent
+    monkeypatch.chdir(tmp_path)
+    # run from this checkout (an editable install): its docs/results.md, not ./docs
+    assert res.checkout_results_path() == repo / "docs" / "results.md"
+    args = build_parser().parse_args(["results"])
+    assert args.out is None and args.runs == "runs"
+    # the run of every scenario (minutes) is not what this checks: where it goes is
+    written: list[tuple[Path, Path]] = []
+    monkeypatch.setattr(res, "write_results",
+                        lambda out, runs, **kw: written.append((out, runs)) or {})
+    monkeypatch.setattr(warmup, "compile_if_cold", lambda *a, **kw: None)
+    assert main(["results", "--quiet", "--no-figures"]) == 0
+    assert written == [(repo / "docs" / "results.md", tmp_path / "runs")]
+    assert f"writing {repo / 'docs' / 'results.md'}" in capsys.readouterr().out
+    written.clear()
+    assert main(["results", "--quiet", "--no-figures", "--out", "r/results.md"]) == 0
+    out = capsys.readouterr().out
+    assert written == [(tmp_path / "r" / "results.md", tmp_path / "runs")]
+    assert f"writing {tmp_path / 'r' / 'results.md'}" in out
+    assert f"wrote {tmp_path / 'r' / 'results.md'}" in out
+    # an installed package (no checkout): --out is required, said, nothing written
+    monkeypatch.setattr(res, "checkout_results_path", lambda: None)
+    written.clear()
+    assert main(["results", "--quiet"]) == 2
+    assert "give --out FILE" in capsys.readouterr().err
+    assert written == [] and not (tmp_path / "docs").exists()

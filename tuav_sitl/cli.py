@@ -40,7 +40,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("runs") / scenario.name
     print(f"tuav-sitl run {scenario.name}: {scenario.description}")
     progress = None if args.quiet else sys.stderr
-    compile_if_cold(scenario, progress)
+    compile_if_cold(progress)
     stop_reports = report_compiles(progress)
     try:
         result = run_scenario(scenario, out, progress=progress, recording=True)
@@ -124,21 +124,26 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 
 def _cmd_results(args: argparse.Namespace) -> int:
-    from tuav_sitl.results import write_results
+    from tuav_sitl.results import checkout_results_path, write_results
 
-    out = Path(args.out)
+    out = Path(args.out) if args.out is not None else checkout_results_path()
+    if out is None:
+        print("tuav-sitl results: give --out FILE: this package is installed, not run from "
+              "a source checkout, so it has no docs/results.md to write", file=sys.stderr)
+        return 2
+    out, runs = out.resolve(), Path(args.runs).resolve()
+    print(f"tuav-sitl results: writing {out} (figures in {out.parent / 'figures'}), the run "
+          f"folders in {runs}")
     if args.sweeps:
         from tuav_sitl.results import run_sweeps
 
-        run_sweeps(Path(args.runs), figures=not args.no_figures)
-    from tuav_sitl.scenario import load_scenario
+        run_sweeps(runs, figures=not args.no_figures)
     from tuav_sitl.warmup import compile_if_cold
 
     progress = None if args.quiet else sys.stderr
-    compile_if_cold(load_scenario("circle"), progress)   # here, not in each pool process
-    metrics = write_results(out, Path(args.runs), figures=not args.no_figures,
-                            progress=progress)
-    print(f"wrote {out} from {len(metrics)} runs in {args.runs}")
+    compile_if_cold(progress)   # here, not in each pool process
+    metrics = write_results(out, runs, figures=not args.no_figures, progress=progress)
+    print(f"wrote {out} from {len(metrics)} runs in {runs}")
     return 0
 
 
@@ -238,12 +243,6 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_argument("--quiet", action="store_true", help="no progress")
     plot.set_defaults(func=_cmd_plot)
 
-    res = sub.add_parser(
-        "results", help="run every shipped experiment and write docs/results.md",
-        description="Run all shipped scenarios in parallel, write their run folders, copy "
-                    "the main figures next to the results file and write the metrics table "
-                    "against the targets.")
-    res.add_argument("--out", default="docs/results.md", help="the Markdown file to write")
     view = sub.add_parser(
         "view", help="open a run folder's recording.rrd in Rerun's viewer",
         description="Open the recording of a run folder (recording.rrd, written by "
@@ -260,13 +259,31 @@ def build_parser() -> argparse.ArgumentParser:
                       help="the port the recording is served on to the viewer (default 9876)")
     view.set_defaults(func=_cmd_view)
 
-    res.add_argument("--runs", default="runs", help="folder for the run folders")
+    from tuav_sitl.results import checkout_results_path
+
+    checkout = checkout_results_path()
+    res = sub.add_parser(
+        "results", help="run every shipped experiment and write the results file "
+                        "(docs/results.md of the source checkout)",
+        description="Run all shipped scenarios in parallel, write their run folders, copy "
+                    "the main figures next to the results file and write the metrics table "
+                    "against the targets. It says where it writes before it starts.")
+    res.add_argument("--out", default=None,
+                     help="the Markdown file to write (default: "
+                          + (f"{checkout}, the source checkout's, wherever this is run)"
+                             if checkout is not None else
+                             "none: this package is installed, not run from a source "
+                             "checkout; required)"))
+    res.add_argument("--runs", default="runs",
+                     help="folder for the run folders (default: runs, in the current folder)")
     res.add_argument("--no-figures", action="store_true", help="metrics only")
     res.add_argument("--quiet", action="store_true", help="no progress")
     res.add_argument("--sweeps", action="store_true",
                      help="also run the shipped sweeps (tuav-sitl sweep; long) into "
                           "RUNS/sweeps; without, the summaries found there are included")
     res.set_defaults(func=_cmd_results)
+
+    from tuav_sitl.sweep import shipped_sweeps
 
     sweep = sub.add_parser(
         "sweep", help="Monte Carlo over a scenario on Dask (drawn truth, wind, sensors)",
@@ -275,8 +292,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "the table of drawn values and metrics (runs.csv as runs finish, "
                     "runs.json) and the summary (failure rate against the targets, "
                     "percentiles, what the failures correlate with). An interrupted sweep "
-                    "resumes where it stopped (docs/usage.md#tuav-sitl-sweep).")
-    sweep.add_argument("sweep", help="a sweep TOML file")
+                    "resumes where it stopped (docs/usage.md#tuav-sitl-sweep). Shipped "
+                    "sweeps: " + ", ".join(sorted(shipped_sweeps())) + ".")
+    sweep.add_argument("sweep", help="a shipped sweep name or a sweep TOML file")
     sweep.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
                        help="an existing Dask cluster's scheduler (default: a LocalCluster)")
     sweep.add_argument("--workers", type=int, default=None,

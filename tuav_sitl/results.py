@@ -1,4 +1,5 @@
-"""``tuav-sitl results``: run every shipped experiment and write docs/results.md.
+"""``tuav-sitl results``: run every shipped experiment and write the results file (by
+default the source checkout's docs/results.md, :func:`checkout_results_path`).
 
 Runs the scenarios in parallel (one process per core), writes each run folder (time series,
 metrics, figures, animation) under ``--runs``, copies a selection of figures next to the
@@ -18,6 +19,7 @@ from typing import Any, TextIO
 
 from tuav_sitl.offline import run_scenario
 from tuav_sitl.scenario import load_scenario, shipped_scenarios
+from tuav_sitl.sweep import shipped_sweeps
 
 #: (scenario, metric, comparison, limit, description) — the targets of the issue.
 TARGETS: list[tuple[str, str, str, float, str]] = [
@@ -104,13 +106,18 @@ def _check(value: Any, op: str, limit: float) -> bool:
     return value is not None and (value <= limit if op == "<=" else value >= limit)
 
 
-def shipped_sweeps() -> dict[str, Path]:
-    """Name -> path of the sweep files shipped with the package."""
-    from importlib import resources
-
-    folder = resources.files("tuav_sitl") / "sweeps"
-    return {Path(str(p)).stem: Path(str(p)) for p in folder.iterdir()
-            if str(p).endswith(".toml")}
+def checkout_results_path() -> Path | None:
+    """``docs/results.md`` of the source checkout this package runs from (an editable
+    install or a clone on the path: the folder above ``tuav_sitl/`` holds this project's
+    ``pyproject.toml`` and ``docs/``), wherever the command is run; None for an installed
+    package, which has no docs to write into."""
+    root = Path(__file__).resolve().parent.parent
+    project = root / "pyproject.toml"
+    try:
+        ours = project.is_file() and 'name = "tuav-sitl"' in project.read_text()
+    except OSError:
+        return None
+    return root / "docs" / "results.md" if ours and (root / "docs").is_dir() else None
 
 
 def run_sweeps(runs_dir: Path, workers: int | None = None, figures: bool = True) -> None:
@@ -164,7 +171,7 @@ def sweep_section(runs_dir: Path, metrics: dict[str, dict[str, Any]],
         took = (f", about {sweep.runs * wall / cores / 60:.0f} min on {cores} cores (a "
                 f"nominal run's {wall:.1f} s; failing runs take longer)" if wall else "")
         lines += ["", f"### sweep {name}: not run", "",
-                  f"`tuav-sitl sweep {path.name} --out {runs_dir}/sweeps/{name}`: "
+                  f"`tuav-sitl sweep {name} --out {runs_dir}/sweeps/{name}`: "
                   f"{sweep.runs} runs of {sc.name}{took}."]
     return lines
 

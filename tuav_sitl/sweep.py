@@ -26,6 +26,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -257,12 +258,32 @@ class SweepParams(Params):
             seen.add(v.parameter)
 
 
-def load_sweep(path: str | Path) -> tuple[SweepParams, ScenarioParams]:
-    """The sweep file and its scenario (with the sweep's duration). ParameterError names
-    the bad field (``robustness.vary[0].high: ...``)."""
-    path = Path(path)
+def shipped_sweeps() -> dict[str, Path]:
+    """Name -> path of the sweep files shipped with the package (``tuav_sitl/sweeps``)."""
+    folder = resources.files("tuav_sitl") / "sweeps"
+    return {Path(str(p)).stem: Path(str(p)) for p in folder.iterdir()
+            if str(p).endswith(".toml")}
+
+
+def sweep_path(name_or_path: str | Path) -> Path:
+    """The file of a shipped sweep by name (``robustness``), or a sweep TOML file by path,
+    as :func:`tuav_sitl.scenario.load_scenario` takes scenarios. ParameterError for neither,
+    naming the shipped sweeps."""
+    shipped = shipped_sweeps()
+    if str(name_or_path) in shipped:
+        return shipped[str(name_or_path)]
+    path = Path(name_or_path)
     if not path.is_file():
-        raise ParameterError(str(path), "no such sweep file")
+        raise ParameterError(str(name_or_path), "no such sweep: give a sweep file or one of "
+                             + ", ".join(sorted(shipped)))
+    return path
+
+
+def load_sweep(name_or_path: str | Path) -> tuple[SweepParams, ScenarioParams]:
+    """A shipped sweep by name, or a sweep file by path, and its scenario (with the
+    sweep's duration). ParameterError names the bad field (``robustness.vary[0].high:
+    ...``), or the shipped sweeps for a name that is neither."""
+    path = sweep_path(name_or_path)
     sweep = load_toml(SweepParams, path)
     name = sweep.scenario
     candidate = path.parent / name
