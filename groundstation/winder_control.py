@@ -1,4 +1,5 @@
-"""Backstepping winder-torque control: track the desired tether length L-bar.
+"""Backstepping winder-torque control: track the desired tether length L-bar (the paper's
+law), or hold the line's tension (``law = "tension"``: :mod:`groundstation.tension_law`).
 
 Model (docs/control.md §4), drum angle positive paying out, L = r_w theta:
 
@@ -20,21 +21,34 @@ limited to the motor's, and alpha to the speed limit.
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 
+from groundstation import tension_law as tl
 from tuavdefs.jit import JIT, njit
 from tuavdefs.params import TetherParams, WinderParams
 from tuavdefs.paramspec import Params, quantity
 
 
+class WinderLaw(enum.Enum):
+    """Which law the winder runs while it follows the UAV (RELAXED in flight)."""
+
+    PAPER = "paper"         #: track L-bar's length (docs/control.md §4)
+    TENSION = "tension"     #: hold the line's tension (docs/control.md §8)
+
+
 @dataclass(frozen=True)
 class WinderControlParams(Params):
-    """Gains and limits of the winder torque law."""
+    """Gains and limits of the winder torque laws."""
 
+    law: str = quantity(
+        "paper", "1", "the law that follows the UAV: the paper's length law or the "
+        "tension-regulating law (docs/control.md §8)",
+        choices=tuple(m.value for m in WinderLaw))
     rate_hz: float = quantity(100.0, "Hz", "control rate (the encoder frames' rate)", gt=0)
     k_length_1_s: float = quantity(6.0, "1/s", "length error gain k_L", gt=0)
     k_rate_n_m_s: float = quantity(0.6, "N*m*s/rad", "drum-rate error gain k_w", gt=0)
@@ -46,6 +60,46 @@ class WinderControlParams(Params):
         0.9, "1", "share of the motor's speed limit the law may ask for", gt=0, le=1)
     torque_margin: float = quantity(
         1.0, "1", "share of the motor's torque limit the law may ask for", gt=0, le=1)
+    tension_floor_n: float = quantity(
+        1.0, "N", "tension law: the slack floor, the least tension set-point (a line "
+        "held at it is off the ground at the exit)", gt=0)
+    tension_setpoint_max_n: float = quantity(
+        8.0, "N", "tension law: the most the set-point may ask (near the vertical L-bar's "
+        "catenary asks for tens of newtons; the length bound holds the line there)", gt=0)
+    tension_margin: float = quantity(
+        1.2, "1", "tension law: the set-point over the exit tension of L-bar's catenary "
+        "(which leaves the winder at min_exit_angle_rad at least)", ge=1)
+    tension_ceiling_n: float = quantity(
+        12.0, "N", "tension law: the snap ceiling: above it the drum pays out at "
+        "tension_ceiling_gain_m_s_n more per newton, whatever the length bounds say", gt=0)
+    tension_gain_m_s_n: float = quantity(
+        0.15, "m/(s*N)", "tension law: line speed per newton off the set-point (g_T)", gt=0)
+    tension_ceiling_gain_m_s_n: float = quantity(
+        0.5, "m/(s*N)", "tension law: line speed per newton above the ceiling (g_c)", ge=0)
+    tension_filter_s: float = quantity(
+        0.1, "s", "tension law: time constant of its low-pass on the load cell (the "
+        "dynamic line's axial waves; 0: none)", ge=0)
+    tension_setpoint_filter_s: float = quantity(
+        0.5, "s", "tension law: time constant of the low-pass on the set-point (it moves "
+        "with the reported position)", gt=0)
+    line_acc_max_m_s2: float = quantity(
+        8.0, "m/s^2", "tension law: the line speed set-point's acceleration limit (the "
+        "drum's torque gives about 15 m/s^2)", gt=0)
+    speed_filter_s: float = quantity(
+        0.3, "s", "tension law: time constant of the command filter on the line speed "
+        "set-point's feedback part (faster, its derivative's feed-forward shook the drum "
+        "and the dynamic line at 8 Hz)", gt=0)
+    k_speed_n_m_s: float = quantity(
+        0.15, "N*m*s/rad", "tension law: drum-rate error gain k_w of its speed loop (low: "
+        "the drum renders to a snap before the force loop sees it)", gt=0)
+    length_bound_gain_1_s: float = quantity(
+        4.0, "1/s", "tension law: the length bounds' loop gain", gt=0)
+    length_bound_m: float = quantity(
+        3.0, "m", "tension law: the most line beyond L-bar (or the longest line off the "
+        "ground) it pays out", gt=0)
+    line_stiffness_n_m: float = quantity(
+        10.0, "N/m", "tension law: the line's stiffness kappa its Lyapunov function is "
+        "reported with (the law does not use it)", gt=0)
 
 
 class WinderCommand(NamedTuple):
@@ -58,6 +112,10 @@ class WinderCommand(NamedTuple):
     lyapunov: float
     saturated: bool
 
+
+#: Time constant [s] of the leak on the tension law's record of how far the drum lags its
+#: speed set-point (what the winch's stuck check reads as the reference's lead).
+LAG_TIME_S = 0.5
 
 # indices of the packed parameters (WinderController._pack) and of the filter's state
 (P_K_L, P_K_W, P_C, P_RATE_FILTER, P_R_W, P_BETA, P_TAU_MAX, P_OMEGA_MAX, P_M_BAR, P_RHO,
@@ -87,6 +145,12 @@ class WinderController:
         self._pack()
         # the reference filter: started?, filtered dL_c/dt, its derivative d2L_c/dt2
         self.state = np.zeros(3)
+        #: the law that follows the UAV
+        self.law = WinderLaw(gains.law)
+        #: the tension law's state (groundstation.tension_law: started?, filtered tension
+        #: [N], filtered set-point [N], line speed set-point [m/s], its rate [m/s^2], the
+        #: drum's lag behind it [m], the set-point before its filter [m/s])
+        self.tension_state = np.zeros(tl.N_TENSION_STATE)
         if JIT:  # load (or compile) the law's machine code now, not at the first update
             winder_law(self._p, self.state.copy(), 0.01, 10.0, 0.0, 1.0, 10.0, 0.0)
 
@@ -101,6 +165,30 @@ class WinderController:
             self.r_w, self.beta, self.tau_max, self.omega_max, self._m_bar, self._rho,
             self._lt, self._r2, self._i_rotor], dtype=float)
         self._packed_from = self._sources()
+        self._tension_from: tuple[Any, ...] | None = None
+
+    def tension_params(self) -> np.ndarray:
+        """The tension law's gains and drum model packed for
+        :func:`groundstation.tension_law.tension_law`."""
+        self.params()
+        if self._tension_from is not self._packed_from:
+            g = self.g
+            q = np.zeros(tl.N_TENSION_PARAMS)
+            q[tl.Q_R_W], q[tl.Q_BETA], q[tl.Q_TAU_MAX] = self.r_w, self.beta, self.tau_max
+            q[tl.Q_V_MAX] = self.omega_max * self.r_w
+            q[tl.Q_M_BAR], q[tl.Q_RHO], q[tl.Q_L_T] = self._m_bar, self._rho, self._lt
+            q[tl.Q_R2], q[tl.Q_I_ROTOR] = self._r2, self._i_rotor
+            q[tl.Q_FILTER], q[tl.Q_SP_FILTER] = g.tension_filter_s, g.tension_setpoint_filter_s
+            q[tl.Q_GAIN], q[tl.Q_CEIL] = g.tension_gain_m_s_n, g.tension_ceiling_n
+            q[tl.Q_CEIL_GAIN], q[tl.Q_ACC_MAX] = g.tension_ceiling_gain_m_s_n, g.line_acc_max_m_s2
+            q[tl.Q_CMD_FILTER], q[tl.Q_K_W] = g.speed_filter_s, g.k_speed_n_m_s
+            q[tl.Q_K_BOUND], q[tl.Q_STIFFNESS] = g.length_bound_gain_1_s, g.line_stiffness_n_m
+            q[tl.Q_FLOOR], q[tl.Q_SP_MAX] = g.tension_floor_n, g.tension_setpoint_max_n
+            q[tl.Q_MARGIN], q[tl.Q_BOUND_M] = g.tension_margin, g.length_bound_m
+            q[tl.Q_LAG_S] = LAG_TIME_S
+            self._q = q
+            self._tension_from = self._packed_from
+        return self._q
 
     def params(self) -> np.ndarray:
         """The gains and drum model packed for :func:`winder_law`."""
@@ -117,12 +205,27 @@ class WinderController:
         return drum_inertia_model(self.params(), length_m)
 
     def reset(self) -> None:
-        """Forget the reference filter."""
+        """Forget the reference filter and the tension law's state."""
         self.state[:] = 0.0
+        self.tension_state[:] = 0.0
+
+    def update_tension(self, dt_s: float, length_m: float, omega_rad_s: float,
+                       tension_n: float, setpoint_n: float, ff_rate_m_s: float,
+                       low_m: float, low_rate_m_s: float, high_m: float) -> WinderCommand:
+        """Torque request [N m] of the tension law (:func:`groundstation.tension_law.
+        tension_law`) for the measured length [m], drum rate [rad/s] and tension [N], the
+        set-point [N], the line speed's feed-forward [m/s] and the length bounds [m]
+        (the lower moving at ``low_rate_m_s``); the length law's filter is forgotten."""
+        self.state[:] = 0.0
+        return WinderCommand(*tl.tension_law(
+            self.tension_params(), self.tension_state, dt_s, length_m, omega_rad_s,
+            tension_n, setpoint_n, ff_rate_m_s, low_m, low_rate_m_s, high_m))
 
     def update(self, dt_s: float, length_m: float, omega_rad_s: float, drum_tension_n: float,
                ref_length_m: float, ref_rate_m_s: float) -> WinderCommand:
-        """Torque request [N m] for the measured length, drum rate and tension."""
+        """Torque request [N m] of the length law for the measured length, drum rate and
+        tension (the tension law, not running meanwhile, starts afresh when it next runs)."""
+        self.tension_state[tl.Z_STARTED] = 0.0
         return WinderCommand(*winder_law(self.params(), self.state, dt_s, length_m,
                                          omega_rad_s, drum_tension_n, ref_length_m,
                                          ref_rate_m_s))

@@ -4,7 +4,9 @@ telemetry to the motor's torque request.
 What the ground-station process runs for every encoder frame it receives, and what the
 offline runner runs in-process: L-bar and its rate from the UAV's position and velocity
 (`groundstation.lbar`), then the backstepping torque law (`groundstation.winder_control`),
-in one compiled call (:func:`winder_step`) through the same kernels.
+in one compiled call (:func:`winder_step`) through the same kernels; or, with
+``law = "tension"``, the tension-regulating law (:func:`groundstation.tension_law.
+tension_step`), L-bar its feed-forward and bound.
 """
 
 from __future__ import annotations
@@ -26,10 +28,12 @@ from groundstation.lbar import (
     tension_trim,
     weight_estimate,
 )
+from groundstation.tension_law import Z_STARTED, tension_step
 from groundstation.winder_control import (
     WinderCommand,
     WinderController,
     WinderControlParams,
+    WinderLaw,
     winder_law,
 )
 from tuavdefs.jit import entry_point, njit
@@ -64,6 +68,14 @@ class WinderHost:
                                  ctl.state, self.dt_s, 10.0, 0.0, 1.0, lb.w, lb.trim_params,
                                  initial_trim_state(), 0.1, math.nan, math.nan,
                                  math.nan, 0.0, 0.0)
+        self._tension = None
+        if ctl.law is WinderLaw.TENSION:
+            state = ctl.tension_state.copy()
+            self._tension = entry_point(tension_step, 1.0, 0.0, 10.0, 0.0, 0.0, 0.0,
+                                        lb.a_target, lb._tan_min, lb.p.min_slack_m, math.nan,
+                                        ctl.tension_params(), state, self.dt_s, 10.0, 0.0,
+                                        1.0, lb.w, lb.trim_params, initial_trim_state(),
+                                        math.nan)
 
     def update(self, length_m: float, omega_rad_s: float, drum_tension_n: float,
                uav_pos_m: tuple[float, float, float],
@@ -80,6 +92,17 @@ class WinderHost:
         lb, ctl = self.lbar, self.controller
         px, py, pz = uav_pos_m
         vx, vy, vz = uav_vel_m_s
+        if self._tension is not None:
+            # the tension law: the join's gap, the trim, the lead and the fix's floor are
+            # the length law's; the paper's law's filter starts afresh when it next runs
+            ctl.state[:] = 0.0
+            ref_m, rate, lb._root, cmd = self._tension(
+                px, py, pz, vx, vy, vz, lb.a_target, lb._tan_min, lb.p.min_slack_m,
+                lb._root, ctl.tension_params(), ctl.tension_state, self.dt_s, length_m,
+                omega_rad_s, drum_tension_n, lb.w, lb.trim_params, lb.trim_state,
+                exit_elevation_rad)
+            return WinderStep(cmd[0], ref_m, rate, _command(cmd))
+        ctl.tension_state[Z_STARTED] = 0.0
         lbar_m, rate, lb._root, cmd = self._step(
             px, py, pz, vx, vy, vz, lb.a_target, lb._tan_min, lb.p.min_slack_m, lb._root,
             ctl.params(), ctl.state, self.dt_s, length_m, omega_rad_s, drum_tension_n, lb.w,

@@ -1,0 +1,209 @@
+"""The tension-regulating winder law: the drum holds the line's pull at a set-point.
+
+A constant-tension winch as tether and mooring stations run one: a force loop gives the
+drum a line-speed set-point (pay out above the set tension, wind in below it), a command
+filter limits that set-point's speed and acceleration, and a backstepping speed loop on
+the drum, whose inertia changes with the wound length, tracks it. Derivation, Lyapunov
+function, proof and where it fails: docs/control.md §8.
+
+Model of the design (the drum as in :mod:`groundstation.winder_control`, the line as a
+spring of stiffness kappa between the drum and the line length ``ell`` the UAV's position
+asks for at the set tension):
+
+    dL/dt = r_w omega
+    I_w(L) d(omega)/dt = tau + r_w T - beta_w omega
+    dT/dt = -kappa (r_w omega - d(ell)/dt)
+
+Errors: ``e = T - T*``, ``e_w = omega - v_c / r_w`` with ``v_c`` the filtered line-speed
+set-point. Virtual control (a line speed) ``v0 = d(ell)/dt + sigma(T)``,
+``sigma = g_T e + g_c max(T - T_ceil, 0)``, between the length bounds. Law:
+
+    tau = -r_w T* + beta_w omega + I_w dv_c/dt / r_w - 1/2 dI_w/dt e_w - k_w e_w
+
+(the measured tension's feed-forward and the backstepping cross term ``+r_w e`` add up to
+the set-point's: the drum renders to the line's true pull by itself). Lyapunov function
+``V = e^2 / (2 kappa) + 1/2 I_w e_w^2`` [J], with
+
+    dV/dt = -e sigma(T) - k_w e_w^2 - e (v_c - v0)
+
+(the last term is the command filter's lag and the bounds: zero while neither acts).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from groundstation.lbar import (
+    expected_drum_tension_n,
+    lbar_kernel,
+    lead_room_from,
+    weight_estimate,
+)
+from tuavdefs.jit import njit
+
+# indices of the packed parameters (WinderController.tension_params)
+(Q_R_W, Q_BETA, Q_TAU_MAX, Q_V_MAX, Q_M_BAR, Q_RHO, Q_L_T, Q_R2, Q_I_ROTOR, Q_FILTER,
+ Q_SP_FILTER, Q_GAIN, Q_CEIL, Q_CEIL_GAIN, Q_ACC_MAX, Q_CMD_FILTER, Q_K_W, Q_K_BOUND,
+ Q_STIFFNESS, Q_FLOOR, Q_SP_MAX, Q_MARGIN, Q_BOUND_M, Q_LAG_S) = range(24)
+N_TENSION_PARAMS = 24
+# indices of its state
+(Z_STARTED, Z_TENSION, Z_SETPOINT, Z_SPEED, Z_ACC, Z_LAG, Z_SPEED_RAW, Z_FEEDBACK,
+ Z_FF) = range(9)
+N_TENSION_STATE = 9
+
+
+#: Time constant [s] of the low-pass on the line speed's feed-forward (dL-bar/dt from the
+#: UAV's reported velocity, at the telemetry's 100 Hz).
+FF_FILTER_S = 0.03
+
+
+@njit
+def _inertia(p: np.ndarray, length_m: float) -> float:
+    """The law's model of the drum inertia at a paid-out length [kg m^2]."""
+    m_w = p[Q_M_BAR] + max(p[Q_L_T] - length_m, 0.0) * p[Q_RHO]
+    return 0.5 * m_w * p[Q_R2] + p[Q_I_ROTOR]
+
+
+@njit
+def tension_speed(p: np.ndarray, tension_n: float, setpoint_n: float,
+                  ff_rate_m_s: float) -> float:
+    """The force loops' line speed [m/s] (positive paying out): the feed-forward
+    ``ff_rate_m_s`` plus ``sigma(T)`` (the set-point loop, and the snap ceiling's steeper
+    pay-out above ``T_ceil``)."""
+    sigma = p[Q_GAIN] * (tension_n - setpoint_n)
+    over = tension_n - p[Q_CEIL]
+    if over > 0.0:
+        sigma += p[Q_CEIL_GAIN] * over
+    return ff_rate_m_s + sigma
+
+
+@njit
+def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
+                omega_rad_s: float, tension_n: float, setpoint_n: float,
+                ff_rate_m_s: float, low_m: float, low_rate_m_s: float, high_m: float
+                ) -> tuple[float, float, float, float, float, bool]:
+    """One step of the tension law (module docstring) on the packed parameters ``p``,
+    its state ``s`` advanced in place: the load cell's ``tension_n`` [N] and the
+    set-point ``setpoint_n`` [N] low-passed, the force loops' speed bounded by the length
+    bounds ``low_m`` (moving at ``low_rate_m_s``) and ``high_m`` [m] and by the ceiling,
+    the speed set-point filtered with its acceleration limit, then the backstepping
+    torque. Returns the fields of a :class:`~groundstation.winder_control.WinderCommand`
+    (torque [N m], tension error [N] in the length error's place, e_w [rad/s], the drum
+    rate set-point [rad/s], V [J], saturated)."""
+    r = p[Q_R_W]
+    v_max = p[Q_V_MAX]
+    if not s[Z_STARTED]:
+        s[Z_STARTED] = 1.0
+        s[Z_TENSION] = tension_n
+        s[Z_SETPOINT] = setpoint_n
+        s[Z_SPEED] = min(max(r * omega_rad_s, -v_max), v_max)
+        s[Z_ACC] = 0.0
+        s[Z_LAG] = 0.0
+        s[Z_FF] = ff_rate_m_s
+        s[Z_FEEDBACK] = s[Z_SPEED] - ff_rate_m_s
+    if p[Q_FILTER] > 0.0:
+        s[Z_TENSION] += (1.0 - math.exp(-dt_s / p[Q_FILTER])) * (tension_n - s[Z_TENSION])
+    else:
+        s[Z_TENSION] = tension_n
+    s[Z_SETPOINT] += (1.0 - math.exp(-dt_s / p[Q_SP_FILTER])) * (setpoint_n - s[Z_SETPOINT])
+    t_f, t_sp = s[Z_TENSION], s[Z_SETPOINT]
+    v0 = tension_speed(p, t_f, t_sp, ff_rate_m_s)
+    k_b = p[Q_K_BOUND]
+    # the length bounds: never shorter than the taut floor's low_m (a length loop takes
+    # over there), never longer than high_m; the snap ceiling beats both
+    v = max(v0, low_rate_m_s - k_b * (length_m - low_m))
+    v = min(v, ff_rate_m_s + k_b * (high_m - length_m))
+    if t_f > p[Q_CEIL]:
+        v = max(v, v0)
+    saturated = False
+    if abs(v) > v_max:
+        v = math.copysign(v_max, v)
+        saturated = True
+    s[Z_SPEED_RAW] = v
+    # command filter: the feedback part (all but the feed-forward) first order, the
+    # feed-forward (the UAV's reported motion: smooth) on a light low-pass, their sum
+    # acceleration limited
+    s[Z_FEEDBACK] += (1.0 - math.exp(-dt_s / p[Q_CMD_FILTER])) * (
+        v - ff_rate_m_s - s[Z_FEEDBACK])
+    s[Z_FF] += (1.0 - math.exp(-dt_s / FF_FILTER_S)) * (ff_rate_m_s - s[Z_FF])
+    acc = (s[Z_FF] + s[Z_FEEDBACK] - s[Z_SPEED]) / dt_s
+    a_max = p[Q_ACC_MAX]
+    if abs(acc) > a_max:
+        acc = math.copysign(a_max, acc)
+        saturated = True
+    s[Z_ACC] = acc
+    s[Z_SPEED] += acc * dt_s
+    v_c = s[Z_SPEED]
+    alpha = v_c / r
+    alpha_dot = acc / r
+    e_w = omega_rad_s - alpha
+    inertia = _inertia(p, length_m)
+    inertia_dot = -0.5 * p[Q_RHO] * p[Q_R2] * r * omega_rad_s
+    tau = (-r * t_sp + p[Q_BETA] * omega_rad_s + inertia * alpha_dot
+           - 0.5 * inertia_dot * e_w - p[Q_K_W] * e_w)
+    tau_max = p[Q_TAU_MAX]
+    tau_limited = min(max(tau, -tau_max), tau_max)
+    # how far the drum is behind the speed it is asked (a snag: the winch's stuck check)
+    s[Z_LAG] += dt_s * (v_c - r * omega_rad_s - s[Z_LAG] / p[Q_LAG_S])
+    e = t_f - t_sp
+    lyap = 0.5 * e * e / p[Q_STIFFNESS] + 0.5 * inertia * e_w * e_w
+    return tau_limited, e, e_w, alpha, lyap, saturated or tau_limited != tau
+
+
+@njit
+def tension_setpoint_n(p: np.ndarray, a_m: float, h_m: float, v_m: float,
+                       w_n_m: float) -> float:
+    """The tension set-point [N]: the exit tension of L-bar's catenary (parameter ``a_m``
+    [m], spanning ``h_m`` across and ``v_m`` up, weighing ``w_n_m`` [N/m]) times the
+    margin, between the slack floor and the set-point's cap (the floor where that
+    catenary is degenerate: the UAV above the winder, or low and far)."""
+    t_hat = expected_drum_tension_n(a_m, h_m, v_m, w_n_m)
+    if not math.isfinite(t_hat):
+        return p[Q_FLOOR]
+    return min(max(p[Q_MARGIN] * t_hat, p[Q_FLOOR]), p[Q_SP_MAX])
+
+
+@njit
+def tension_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float,
+                 a_target: float, tan_min: float, min_slack: float, root_guess: float,
+                 law_p: np.ndarray, law_s: np.ndarray, dt_s: float, length_m: float,
+                 omega_rad_s: float, drum_tension_n: float, w_n_m: float,
+                 trim_p: np.ndarray, trim_s: np.ndarray, elevation_rad: float
+                 ) -> tuple[float, float, float, tuple[float, float, float, float, float, bool]]:
+    """The tension law's winder step (:func:`groundstation.winder_host.winder_step`'s
+    place): L-bar and its rate at the UAV's reported position and velocity (the rate is
+    the feed-forward), the line's weight estimate, the set-point
+    (:func:`tension_setpoint_n`), the length bounds (below: the straight distance plus
+    ``min_slack`` plus the UAV's stopping distance along its outward radial speed, at most
+    the longest line still off the ground; above: L-bar or that line, plus
+    ``length_bound_m``), then :func:`tension_law`. Returns (the length the drum is asked
+    to be at: the measured length plus its lag behind the speed set-point, the speed
+    set-point [m/s], the exit-angle root for next time, the WinderCommand's fields)."""
+    lbar_m, rate, a, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
+                                        min_slack, root_guess)
+    # the drum tension as the tension trim low-passes it (the weight estimate's and the
+    # winch's tether fix's input)
+    if trim_s[2] == trim_s[2] and trim_p[4] > 0.0:
+        trim_s[2] += (1.0 - math.exp(-dt_s / trim_p[4])) * (drum_tension_n - trim_s[2])
+    else:
+        trim_s[2] = drum_tension_n
+    w = weight_estimate(trim_p, trim_s, dt_s, w_n_m, drum_tension_n, elevation_rad,
+                        length_m, pz)
+    h = math.hypot(px, py)
+    v = max(pz, 0.0)
+    setpoint = tension_setpoint_n(law_p, a, h, v, w)
+    dist = math.sqrt(px * px + py * py + pz * pz)
+    radial = (px * vx + py * vy + pz * vz) / dist if dist > 1e-6 else 0.0
+    out = max(radial, 0.0)
+    stop = 0.0
+    if trim_p[9] > 0.0:         # the stop lead's reaction time and braking
+        stop = out * trim_p[8] + out * out / (2.0 * trim_p[9])
+    room, trim_s[12] = lead_room_from(px, py, pz, trim_p[18], min_slack, trim_s[12])
+    low = dist + min_slack + min(stop, max(room - dist - min_slack, 0.0))
+    high = max(lbar_m, room) + law_p[Q_BOUND_M]
+    trim_s[13] = 0.0            # no join: the law has no length reference to jump
+    cmd = tension_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, setpoint,
+                      rate, low, radial, high)
+    return length_m + law_s[Z_LAG], law_s[Z_SPEED], root, cmd
