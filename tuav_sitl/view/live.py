@@ -1,0 +1,386 @@
+"""The live view of ``tuav-sitl up``: a process beside the stack that follows what the
+processes already write into the run folder and logs it to Rerun.
+
+It reads, as they grow, the plant's truth (``truth.csv``, :mod:`sitl.truth_log`: the
+vehicle's pose, the paid-out length, the rotor commands; the tether's shape and tensions
+and L-bar computed from them as ``tuav-sitl plot`` imports an up run,
+:func:`tuav_sitl.up_series.build_series`) and the companion's ``flight.tlog`` (its
+estimate in ``LOCAL_POSITION_NED``, the receiver's fix in ``GPS_RAW_INT`` with its
+accuracy, ``STATUSTEXT``). Nothing in the stack waits for it: the processes write their
+files whatever it does, and when it falls behind it takes what has accumulated in one
+chunk. Its sinks are always the run folder's ``recording.rrd``, and with ``--viewer
+native`` Rerun's native viewer (spawned), with ``--viewer web`` a gRPC server on
+127.0.0.1 and Rerun's web viewer on a localhost URL. SIGTERM (or SIGINT) ends it after a
+last read of both files.
+
+``python -m tuav_sitl.view.live RUN_DIR [--viewer none|native|web] ...``
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import signal
+import struct
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tuav_sitl.view import RECORDING_NAME, ViewUnavailableError, rerun_module
+
+#: How often the files are read [s of wall time].
+POLL_S = 0.1
+#: Truth rows handed to the logger at most at once (a backlog is logged in such chunks).
+MAX_CHUNK_ROWS = 2000
+#: The STATUSTEXT severities (MAV_SEVERITY) at or below which a message is an error, a
+#: warning.
+_SEVERITY_ERROR, _SEVERITY_WARNING, _SEVERITY_DEBUG = 3, 4, 7
+_TLOG_STAMP = struct.Struct(">Q")
+_MAGIC_V2, _MAGIC_V1 = 0xFD, 0xFE
+
+
+class TruthTail:
+    """The rows of a growing ``truth.csv`` (:data:`sitl.truth_log.TRUTH_COLUMNS`), read
+    line by line as they are completed."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._file: Any = None
+        self._partial = ""
+        self.header: list[str] | None = None
+
+    def read(self, max_rows: int = MAX_CHUNK_ROWS) -> dict[str, np.ndarray] | None:
+        """The columns of the complete rows written since the last call (at most
+        ``max_rows``; None if there are none yet)."""
+        if self._file is None:
+            try:
+                self._file = open(self.path)  # noqa: SIM115 - followed for the run's life
+            except OSError:
+                return None
+        rows: list[list[float]] = []
+        while len(rows) < max_rows:
+            line = self._file.readline()
+            if not line:
+                break
+            line = self._partial + line
+            if not line.endswith("\n"):
+                self._partial = line
+                break
+            self._partial = ""
+            parts = line.strip().split(",")
+            if self.header is None:
+                self.header = parts
+                continue
+            if len(parts) != len(self.header):
+                continue
+            try:
+                rows.append([float(p) for p in parts])
+            except ValueError:
+                continue
+        if not rows or self.header is None:
+            return None
+        data = np.array(rows, dtype=float)
+        return {name: np.ascontiguousarray(data[:, i]) for i, name in enumerate(self.header)}
+
+    def close(self) -> None:
+        """Stop following the file."""
+        if self._file is not None:
+            self._file.close()
+
+
+class TlogTail:
+    """The messages of a growing ``.tlog`` (each frame after its 8-byte big-endian
+    microsecond stamp), decoded by pymavlink as they are completed."""
+
+    def __init__(self, path: Path) -> None:
+        from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+        self.path = path
+        self._file: Any = None
+        self._buf = bytearray()
+        self._mav = mavlink.MAVLink(None)
+        self._mav.robust_parsing = True
+
+    def read(self) -> list[Any]:
+        """The messages completed since the last call."""
+        if self._file is None:
+            try:
+                self._file = open(self.path, "rb")  # noqa: SIM115
+            except OSError:
+                return []
+        self._buf += self._file.read()
+        out: list[Any] = []
+        buf = self._buf
+        i = 0
+        while len(buf) - i >= 8 + 3:
+            magic = buf[i + 8]
+            if magic == _MAGIC_V2:
+                if len(buf) - i < 8 + 3:
+                    break
+                n = 12 + buf[i + 9] + (13 if buf[i + 10] & 0x01 else 0)
+            elif magic == _MAGIC_V1:
+                n = 8 + buf[i + 9]
+            else:
+                i += 1           # lost the framing: look for the next frame
+                continue
+            if len(buf) - i < 8 + n:
+                break
+            frame = bytes(buf[i + 8:i + 8 + n])
+            i += 8 + n
+            try:
+                msg = self._mav.decode(bytearray(frame))
+            except Exception:   # a corrupt frame: skipped as a ground station would
+                continue
+            if msg is not None:
+                out.append(msg)
+        del buf[:i]
+        return out
+
+    def close(self) -> None:
+        """Stop following the file."""
+        if self._file is not None:
+            self._file.close()
+
+
+class LiveView:
+    """Follows a run folder and logs it (:class:`tuav_sitl.view.recording.SceneLogger`)
+    to the recording stream ``rec``. ``params``: the plant's truth parameters (the run's
+    ``params.toml``); ``home``: the winder's (latitude deg, longitude deg, altitude m)."""
+
+    def __init__(self, rec: Any, run_dir: Path, params: Any,
+                 home: tuple[float, float, float]) -> None:
+        from tuav_sitl.view.recording import SceneLogger
+
+        self.params = params
+        self.home = home
+        self.logger = SceneLogger(rec, params, ground_half_m=_ground_half_m(params))
+        self.truth = TruthTail(run_dir / "truth.csv")
+        self.tlog = TlogTail(run_dir / "flight.tlog")
+        self.t_s = 0.0            # the latest simulated time seen [s]
+        self.rows = 0
+        self.vehicle_system = 1
+        self._last_stamp: dict[str, int] = {}
+        self._recent_texts: list[tuple[int, bytes]] = []
+
+    def poll(self) -> int:
+        """Log what the files hold beyond the last call; returns the truth rows logged."""
+        from tuav_sitl.up_series import build_series
+
+        logged = 0
+        while True:
+            chunk = self.truth.read()
+            if chunk is None:
+                break
+            series = build_series(chunk, self.params)
+            self.logger.log_series(series)
+            self.t_s = float(series["t"][-1])
+            logged += len(series["t"])
+            if len(series["t"]) < MAX_CHUNK_ROWS:
+                break
+        self.rows += logged
+        self._messages(self.tlog.read())
+        return logged
+
+    def _messages(self, msgs: list[Any]) -> None:
+        from tuav_sitl.view.recording import Entity, LogLevel
+        from tuavdefs.frames import global_to_local_enu
+
+        est_t: list[float] = []
+        est: list[tuple[float, float, float]] = []
+        fix_t: list[float] = []
+        fix: list[tuple[float, float, float]] = []
+        acc: list[tuple[float, float, float]] = []
+        for msg in msgs:
+            kind = msg.get_type()
+            if msg.get_srcSystem() != self.vehicle_system:
+                continue      # what ground stations sent
+            boot = getattr(msg, "time_boot_ms", None)
+            # the tlog holds a copy of each message for every link it went out on
+            stamp = (boot if boot is not None else getattr(msg, "time_usec", None))
+            if stamp is not None:
+                if stamp <= self._last_stamp.get(kind, -1):
+                    continue
+                self._last_stamp[kind] = stamp
+            if kind == "LOCAL_POSITION_NED" and msg.get_srcComponent() == 1:
+                est_t.append(boot * 1e-3)
+                est.append((msg.y, msg.x, -msg.z))      # NED to the z-up frame
+            elif kind == "GPS_RAW_INT" and msg.fix_type >= 3:
+                t = msg.time_usec * 1e-6 or self.t_s     # simulated time [us]
+                fix_t.append(t)
+                fix.append(global_to_local_enu(msg.lat * 1e-7, msg.lon * 1e-7,
+                                               msg.alt * 1e-3, self.home))
+                h = getattr(msg, "h_acc", 0) * 1e-3
+                v = getattr(msg, "v_acc", 0) * 1e-3
+                acc.append((h, h, v))
+            elif kind == "STATUSTEXT":
+                key = (msg.get_srcComponent(), bytes(msg.get_payload()))
+                if key in self._recent_texts:
+                    continue
+                self._recent_texts = [*self._recent_texts[-15:], key]
+                sev = int(msg.severity)
+                level = (LogLevel.ERROR if sev <= _SEVERITY_ERROR else
+                         LogLevel.WARN if sev == _SEVERITY_WARNING else
+                         LogLevel.DEBUG if sev >= _SEVERITY_DEBUG else LogLevel.INFO)
+                text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode(
+                    "utf-8", "replace")
+                self.logger.log_text(self.t_s, text.rstrip("\x00"), level)
+            if boot is not None and kind != "STATUSTEXT":
+                self.t_s = max(self.t_s, boot * 1e-3)
+        if est:
+            self.logger.log_series({"t": np.array(est_t), "est_pos": np.array(est)})
+        if fix:
+            self.logger.log_fixes(Entity.GNSS_FIX, np.array(fix_t), np.array(fix),
+                                  accuracy_m=np.array(acc))
+
+    def close(self) -> None:
+        """Stop following the files."""
+        self.truth.close()
+        self.tlog.close()
+
+
+def _ground_half_m(params: Any) -> float:
+    """The ground grid's half-width [m]: the tether's longest length, within 10-100 m."""
+    return float(min(max(params.tether.total_length_m, 10.0), 100.0))
+
+
+#: The live viewer's ports of instance 0 (rerun's defaults); each instance adds
+#: :data:`tuavdefs.gcs.INSTANCE_PORT_STEP` times its number.
+GRPC_PORT_DEFAULT, WEB_PORT_DEFAULT = 9876, 9090
+#: How long the live view gets, after the stack has stopped, for its last read [s].
+STOP_TIMEOUT_S = 5.0
+
+
+@dataclass
+class LiveProcess:
+    """The running live view: its process and the banner's line about it."""
+
+    process: subprocess.Popen
+    banner: str
+    log: Any
+
+
+def viewer_kind(view: str | None) -> str:
+    """``up --view``'s value as the live view's ``--viewer``: none without the option,
+    ``auto`` the native viewer where there is a display, else the web viewer."""
+    from tuav_sitl.view.open import has_display
+
+    if view is None:
+        return "none"
+    if view == "auto":
+        return "native" if has_display() else "web"
+    return view
+
+
+def start_live_view(run_dir: Path, view: str | None, instance: int,
+                    home: Any) -> LiveProcess:
+    """Start the live view of ``up``'s run folder (``view``: ``--view``'s value, None
+    without it: the recording only), its log in ``RUN/view.log``."""
+    from tuav_sitl.view.open import grpc_proxy_url, web_viewer_url
+    from tuavdefs.gcs import INSTANCE_PORT_STEP
+
+    grpc = GRPC_PORT_DEFAULT + INSTANCE_PORT_STEP * instance
+    web = WEB_PORT_DEFAULT + INSTANCE_PORT_STEP * instance
+    kind = viewer_kind(view)
+    log = open(run_dir / "view.log", "w")  # noqa: SIM115 - kept open for the process's life
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tuav_sitl.view.live", str(run_dir), "--viewer", kind,
+         "--grpc-port", str(grpc), "--web-port", str(web),
+         "--home", repr(home.lat_deg), repr(home.lon_deg), repr(home.alt_m)],
+        stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    rrd = run_dir / RECORDING_NAME
+    banner = (f"live view (Rerun's web viewer): {web_viewer_url(web, grpc_proxy_url(grpc))}"
+              if kind == "web" else
+              f"live view: Rerun's native viewer (recording {rrd})" if kind == "native" else
+              f"recording: {rrd} (tuav-sitl view {run_dir}; up --view for a live view)")
+    return LiveProcess(proc, banner, log)
+
+
+def stop_live_view(live: LiveProcess) -> None:
+    """End the live view after its last read (SIGTERM, then SIGKILL after
+    :data:`STOP_TIMEOUT_S`)."""
+    proc = live.process
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=5)
+    live.log.close()
+
+
+def _idle() -> None:
+    """This process (and the threads and viewer it starts after) at idle priority."""
+    if hasattr(os, "SCHED_IDLE"):
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Follow a run folder until SIGTERM/SIGINT; returns the exit code."""
+    ap = argparse.ArgumentParser(prog="python -m tuav_sitl.view.live", description=__doc__)
+    ap.add_argument("run_dir", help="the up run folder to follow")
+    ap.add_argument("--viewer", choices=("none", "native", "web"), default="none",
+                    help="besides recording.rrd: Rerun's native viewer, or its web viewer")
+    ap.add_argument("--grpc-port", type=int, default=9876,
+                    help="the gRPC port the viewer connects to")
+    ap.add_argument("--web-port", type=int, default=9090, help="the web viewer's port")
+    ap.add_argument("--home", type=float, nargs=3, required=True,
+                    metavar=("LAT", "LON", "ALT"), help="the winder's global position")
+    args = ap.parse_args(argv)
+    run_dir = Path(args.run_dir)
+    stop = {"now": False}
+
+    def on_signal(_signum: int, _frame: object) -> None:
+        stop["now"] = True
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    _idle()
+    try:
+        rr = rerun_module()
+    except ViewUnavailableError as exc:
+        print(f"live view: {exc}", file=sys.stderr, flush=True)
+        return 2
+    from tuav_sitl.view.open import grpc_proxy_url, web_viewer_url
+    from tuav_sitl.view.recording import blueprint, new_stream
+    from tuavdefs.params import SystemParams
+    from tuavdefs.paramspec import load_toml
+
+    params = load_toml(SystemParams, run_dir / "params.toml")
+    rec = new_stream(f"tuav-sitl up {run_dir.name}")
+    sinks: list[Any] = [rr.FileSink(str(run_dir / RECORDING_NAME))]
+    url = grpc_proxy_url(args.grpc_port)
+    if args.viewer == "native":
+        rec.spawn(port=args.grpc_port, connect=False, hide_welcome_screen=True)
+        sinks.append(rr.GrpcSink(url))
+    elif args.viewer == "web":
+        sinks.append(rr.GrpcServerSink(bind_ip="127.0.0.1", port=args.grpc_port))
+        rr.serve_web_viewer(web_port=args.web_port, open_browser=False, connect_to=url)
+    rec.set_sinks(*sinks, default_blueprint=blueprint())
+    view = LiveView(rec, run_dir, params, tuple(args.home))
+    where = (web_viewer_url(args.web_port, url) if args.viewer == "web" else
+             "the native viewer" if args.viewer == "native" else "no viewer")
+    print(f"live view: recording {run_dir / RECORDING_NAME}; {where}", flush=True)
+    while not stop["now"]:
+        view.poll()
+        time.sleep(POLL_S)
+    time.sleep(POLL_S)            # the processes' last writes
+    view.poll()
+    view.close()
+    rec.flush()
+    print(f"live view: {view.rows} truth rows up to {view.t_s:.2f} s recorded", flush=True)
+    if args.viewer == "web":
+        with contextlib.suppress(Exception):
+            rec.disconnect()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
