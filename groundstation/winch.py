@@ -66,6 +66,12 @@ the axis is sent IDLE (the brake holds), a CRITICAL ``STATUSTEXT`` says so, and
 ``WINCH_STATUS`` drops HEALTHY and sets CLUTCH_ENGAGED. The first frame back re-arms the
 axis (unless the mode is LOCK or HOLD), a ``STATUSTEXT`` says so, and the active mode
 resumes where its reference stood (it did not advance without frames).
+
+Another host commanding the axis (a host-to-axis frame this process did not send): said,
+and the drum braked against it at once (IDLE, answered again to each of its frames that
+could re-arm the axis), reported braked and not HEALTHY, until ``FOREIGN_NOTICE_S`` pass
+without one or an operator's ``DO_WINCH`` (docs/protocols.md: what an unauthenticated bus
+still allows).
 """
 
 from __future__ import annotations
@@ -122,9 +128,13 @@ REJOIN_ACC_M_S2 = 0.5
 JOIN_MARGIN_M = 0.05
 #: The shortest wall time between two re-arms of an axis that disarmed itself [s].
 REARM_S = 1.0
-#: How long [s, wall] a frame from another host leaves the winch unhealthy, and the
-#: shortest time between two STATUSTEXTs about it.
+#: How long [s, wall] a frame from another host leaves the winch unhealthy and its drum
+#: braked, and the shortest time between two STATUSTEXTs about it.
 FOREIGN_NOTICE_S = 5.0
+#: Another host's frames that can take the axis out of IDLE (or prepare it to be): each
+#: is answered at once with ``Set_Axis_State`` IDLE while the drum is braked against it.
+REARMING_COMMANDS = frozenset({cp.Cmd.SET_AXIS_STATE, cp.Cmd.SET_CONTROLLER_MODE,
+                               cp.Cmd.CLEAR_ERRORS})
 #: Host-to-axis commands: heard on the bus, another host sent them.
 HOST_COMMANDS = (cp.Cmd.ESTOP, cp.Cmd.SET_AXIS_STATE, cp.Cmd.SET_CONTROLLER_MODE,
                  cp.Cmd.SET_INPUT_TORQUE, cp.Cmd.SET_LIMITS, cp.Cmd.CLEAR_ERRORS)
@@ -423,6 +433,9 @@ class Winch:
         """Host-to-axis frames on the axis's ids this process did not send."""
         self._foreign_wall = -math.inf      # the last one [s]
         self._foreign_said_wall = -math.inf
+        #: Whether the drum is braked against another host commanding the axis (from its
+        #: first frame until FOREIGN_NOTICE_S without one, or an operator's DO_WINCH).
+        self.foreign_brake = False
         # reporting
         self._frames_since_status = 0
         self._last_status_wall: float | None = None
@@ -497,8 +510,9 @@ class Winch:
 
     @property
     def braked(self) -> bool:
-        """The winch keeps the axis IDLE (brake engaged): LOCK, HOLD or encoder lost."""
-        return self.mode in BRAKED_MODES or self.lost or self.bus_degraded
+        """The winch keeps the axis IDLE (brake engaged): LOCK, HOLD, encoder lost, the
+        bus degraded, or another host commanding the axis."""
+        return self.mode in BRAKED_MODES or self.lost or self.bus_degraded or self.foreign_brake
 
     def taut_floor(self) -> tuple[float, float]:
         """(shortest safe length [m], its rate [m/s]): the straight-line distance to the
@@ -550,14 +564,63 @@ class Winch:
 
     def _foreign_command(self, wall_s: float, cmd: cp.Cmd) -> WinchOutput | None:
         """A host-to-axis frame another host sent: counted, said at most every
-        :data:`FOREIGN_NOTICE_S`, and the winch unhealthy for as long."""
+        :data:`FOREIGN_NOTICE_S`, and the winch unhealthy for as long. The drum is braked
+        at once (``Set_Axis_State`` IDLE: the axis applies no torque, whoever sends it)
+        and stays braked until :data:`FOREIGN_NOTICE_S` pass without such a frame
+        (:meth:`_foreign_quiet`) or an operator's ``DO_WINCH`` re-arms it; a frame that
+        could take the axis out of IDLE is answered with IDLE at once."""
         self.foreign_commands += 1
         self._foreign_wall = wall_s
+        out = None
+        if not self.foreign_brake or cmd in REARMING_COMMANDS:
+            out = WinchOutput(frames=[self._idle_frame()])
+        if not self.foreign_brake:
+            self.foreign_brake = True
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_CRITICAL,
+                                       "winch: drum braked against another CAN host"))
         if wall_s - self._foreign_said_wall < FOREIGN_NOTICE_S:
-            return None
+            return out
         self._foreign_said_wall = wall_s
-        return WinchOutput(notices=[_notice(
-            mavlink2.MAV_SEVERITY_CRITICAL, f"winch: another CAN host sends {cmd.name}")])
+        out = out or WinchOutput()
+        out.notices.insert(0, _notice(mavlink2.MAV_SEVERITY_CRITICAL,
+                                      f"winch: another CAN host sends {cmd.name}"))
+        return out
+
+    def _foreign_quiet(self, wall_s: float, out: WinchOutput) -> None:
+        """End the brake against another host once it has sent nothing to the axis for
+        :data:`FOREIGN_NOTICE_S`: the axis is re-armed and the mode resumes from the length
+        the drum holds (RELAXED rejoins L-bar as after a pay-out)."""
+        if self.foreign_brake and wall_s - self._foreign_wall >= FOREIGN_NOTICE_S:
+            text = f"winch: no other CAN host for {FOREIGN_NOTICE_S:.0f} s"
+            if self._end_foreign_brake():
+                text += ", re-armed"
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE, text))
+
+    def _end_foreign_brake(self) -> bool:
+        """The drum released after the brake against another host: re-armed unless the
+        winch brakes it for another reason or the axis was estopped (the operator's
+        DO_WINCH re-arms that), the reference from the measured length. Returns whether
+        it re-arms."""
+        self.foreign_brake = False
+        if (self.braked or not math.isfinite(self.length_m)
+                or (self.axis_error or 0) & cp.ODriveError.ESTOP_REQUESTED):
+            return False
+        self._arm_pending = True
+        self._resume_from(self.length_m)
+        return True
+
+    def _resume_from(self, length_m: float) -> None:
+        """The active mode's reference taken up from ``length_m`` [m] after the drum was
+        held: RELAXED rejoins L-bar (wound in on a trapezoid, or joined with a gap), the
+        others ramp on from there."""
+        if self.mode == WinchMode.RELAXED:
+            self._hold_m = length_m
+            self._ground = False
+            uav = self.uav_now()
+            lbar_m = self.host.lbar.length(uav[0])[0] if uav is not None else math.nan
+            self._start_rejoin(length_m, lbar_m)
+        else:
+            self.ref_m, self.ref_rate_m_s = length_m, 0.0
 
     def _bus_voltage_current_frame(self, wall_s: float, data: bytes) -> None:
         self.voltage_v, self.current_a = cp.decode_bus_voltage_current(data)
@@ -783,7 +846,8 @@ class Winch:
             self._arm_pending = True
             out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE, "winch: encoder back"))
         self._bus_notice(out)
-        if self.mode in BRAKED_MODES or self.bus_degraded:
+        self._foreign_quiet(wall_s, out)
+        if self.mode in BRAKED_MODES or self.bus_degraded or self.foreign_brake:
             out.frames.append(self._idle_frame())
             self._check_locked(out)
         else:
@@ -1224,6 +1288,11 @@ class Winch:
             if abs(speed) > self.max_rate_m_s:
                 speed = math.copysign(self.max_rate_m_s, speed)
                 notices.append(_notice(sev_warn, f"winch: rate clamped to {speed:.2f} m/s"))
+        if self.foreign_brake and mode not in BRAKED_MODES:
+            # the operator's act releases the brake against another host (the next frame
+            # of that host, if it goes on, brakes the drum again)
+            self.foreign_brake = False
+            self._arm_pending = not self.lost
         disarmed = (self.axis_state is not None
                     and self.axis_state != cp.AxisState.CLOSED_LOOP_CONTROL)
         if mode not in BRAKED_MODES and not self.lost and (self.mode in BRAKED_MODES

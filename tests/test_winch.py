@@ -621,30 +621,82 @@ def test_an_axis_that_disarmed_itself_is_re_armed_and_reported_truthfully():
     assert b.length == pytest.approx(lbar, abs=0.02)   # back on L-bar
 
 
-def test_an_estop_from_another_host_is_said_and_only_a_command_re_arms():
+@pytest.mark.parametrize("quiet_first", [False, True])
+def test_an_estop_from_another_host_is_said_and_only_a_command_re_arms(quiet_first):
     b = Bench(14.0)
     b.run(2.0)
     b.other_host(cp.Cmd.ESTOP, b"")
     b.run(1.5)
     assert not b.axis.enabled                            # not re-armed by itself
     assert any("another CAN host sends ESTOP" in n for n in b.notices)
-    assert any("estopped" in n for n in b.notices)
     assert not any(b.healthy(b.t - 1.0))
+    if quiet_first:     # the other host silent long enough: still the operator's to undo
+        b.run(wm.FOREIGN_NOTICE_S)
+        assert not b.axis.enabled and not b.winch.foreign_brake
+        assert any("estopped" in n for n in b.notices)
     assert b.command(request(mavlink2.WINCH_RELAXED)).result == ACK
     b.run(0.5)
     assert b.axis.enabled
 
 
-def test_a_second_host_sending_torque_is_noticed():
+def test_a_second_host_sending_torque_is_noticed_and_the_drum_braked_against_it():
+    """+/-4 N m from another host (the attack of issue 34): said once, the drum braked at
+    once and held (the axis applies no torque in IDLE, whoever sends it), WINCH_STATUS
+    braked and not HEALTHY; FOREIGN_NOTICE_S without such a frame re-arm the axis and
+    the line goes back to L-bar."""
     b = Bench(14.0)
     b.run(2.0)
+    held = b.length
+    lengths = []
     for k in range(50):     # +/-4 N m at 50 Hz for a second, as the attack did
         b.other_host(cp.Cmd.SET_INPUT_TORQUE, cp.encode_set_input_torque(4.0 * (-1) ** k))
+        assert not b.axis.enabled                       # IDLE from its first frame on
         b.run(0.02)
+        lengths.append(b.length)
     assert b.winch.foreign_commands == 50
     said = [n for n in b.notices if "another CAN host sends SET_INPUT_TORQUE" in n]
     assert len(said) == 1                                # once per 5 s, not per frame
+    assert b.notices.count("winch: drum braked against another CAN host") == 1
     assert not any(b.healthy(b.t - 0.9))
+    assert max(abs(x - held) for x in lengths) < 1e-3   # the brake holds the line
+    assert all(st.flags & wm.FLAG_CLUTCH_ENGAGED for t, st in b.statuses if t > 2.05)
+    b.run(wm.FOREIGN_NOTICE_S - 0.5)
+    assert not b.axis.enabled                            # quiet for less than 5 s
+    b.run(1.0)
+    assert b.axis.enabled and "winch: no other CAN host for 5 s, re-armed" in b.notices
+    b.run(3.0)
+    assert all(b.healthy(b.t - 1.0))
+    assert b.length == pytest.approx(b.winch.host.lbar.length(UAV[0])[0], abs=0.02)
+
+
+def test_another_host_re_arming_the_axis_is_answered_with_idle():
+    """A second host that arms the axis before each torque (Clear_Errors, closed loop, a
+    wind-in of 4 N m) is answered with IDLE after each of its arming frames: its torque
+    finds the axis idle, and the drum does not move."""
+    b = Bench(14.0)
+    b.run(2.0)
+    held = b.length
+    for _ in range(100):
+        b.other_host(cp.Cmd.CLEAR_ERRORS, cp.encode_clear_errors())
+        b.other_host(cp.Cmd.SET_AXIS_STATE,
+                     cp.encode_set_axis_state(cp.AxisState.CLOSED_LOOP_CONTROL))
+        b.other_host(cp.Cmd.SET_INPUT_TORQUE, cp.encode_set_input_torque(-4.0))
+        assert not b.axis.enabled
+        b.run(0.01)
+        assert abs(b.length - held) < 1e-3
+
+
+def test_an_operators_do_winch_releases_the_brake_against_another_host():
+    b = Bench(14.0)
+    b.run(2.0)
+    b.other_host(cp.Cmd.SET_INPUT_TORQUE, cp.encode_set_input_torque(4.0))
+    b.run(0.5)
+    assert not b.axis.enabled and b.winch.foreign_brake
+    assert b.command(request(mavlink2.WINCH_RELAXED)).result == ACK
+    b.run(0.1)
+    assert b.axis.enabled and not b.winch.foreign_brake
+    b.other_host(cp.Cmd.SET_INPUT_TORQUE, cp.encode_set_input_torque(4.0))  # it goes on
+    assert not b.axis.enabled and b.winch.foreign_brake
 
 
 def test_closed_loop_on_the_plants_axis_and_drum():
