@@ -22,6 +22,7 @@ import time
 
 from sitl.exit_angle import ExitAngleSensor
 from sitl.faults import CanChannel, CanFaults
+from sitl.load_cell import LoadCell
 from sitl.odrive_axis import OdriveAxis, WinchSensors
 from sitl.plant import Plant
 from sitl.spin import SpinWait
@@ -69,6 +70,8 @@ class WinderCanNode:
         self.sensors = WinchSensors(sensor_node_id)
         #: the guide arm's encoders at the fairlead (Winch_Exit_Angle)
         self.exit_sensor = ExitAngleSensor()
+        #: the load cell at the fairlead (Winch_Tension)
+        self.load_cell = LoadCell()
         self.frames_received = 0
         self.frames_sent = 0
         #: The bus's faults now (sitl.faults: lost frames, delayed frames).
@@ -186,7 +189,8 @@ class WinderCanNode:
             # with it
             enabled = axis.enabled      # after the tick, which may have disarmed the axis
             sensor_frames = self.sensors.tick(
-                t_s, length, omega * self._drum_radius, tf.drum_tension_n, not enabled,
+                t_s, length, omega * self._drum_radius,
+                self.load_cell.read(t_s, tf.drum_tension_n), not enabled,
                 theta <= self._theta_min, theta >= self._theta_max)
         if self.sensors.exit_angle_due(t_s):
             az, el, valid = self.exit_sensor.read(tf.on_exit_n)

@@ -36,6 +36,7 @@ from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
 from sitl.exit_angle import ExitAngleSensor
 from sitl.faults import CanChannel, FaultSchedule
+from sitl.load_cell import LoadCell
 from sitl.lumped import L_MAXN
 from sitl.plant import (
     DRUM_ANGLE,
@@ -389,6 +390,8 @@ class OfflineRunner:
         #: the winch's guide-arm encoders (Winch_Exit_Angle every 20 ms, as the plant's
         #: winch node sends it)
         self.exit_sensor = ExitAngleSensor()
+        #: the winch's load cell (Winch_Tension, as the plant's winch node reads it)
+        self.load_cell = LoadCell()
         self._exit_every = max(1, round(0.02 * sc.winder_control.rate_hz))
         #: the plant's faults (scenario [[faults]])
         self.faults = FaultSchedule(sc.faults, self.plant,
@@ -519,8 +522,8 @@ class OfflineRunner:
                 else:
                     exit_angle = (self.exit_sensor.read(tf.on_exit_n)
                                   if (k // n_wind) % self._exit_every == 0 else None)
-                    status = ground.period(t, x[DRUM_ANGLE], x[DRUM_RATE], drum_tension,
-                                           exit_angle)
+                    status = ground.period(t, x[DRUM_ANGLE], x[DRUM_RATE],
+                                           self.load_cell.read(t, drum_tension), exit_angle)
                     fix = ground.fix
                     if fix is not None:     # ODOMETRY reaches the companion
                         ground.fix = None
