@@ -21,10 +21,10 @@ from companion.failsafes import FailsafeParams
 from companion.gains import FlightControlParams
 from companion.geofence import FenceParams
 from companion.navigation import NavigationParams
-from companion.param_protocol import ParamDef, WireName, params_to_defs
+from companion.param_protocol import ParamDef, WireName, apply_parm_text, params_to_defs
 
 __all__ = ["ARMING_CHECK_ALL", "FAILSAFE_NAMES", "FENCE_NAMES", "GAIN_NAMES", "NAV_NAMES",
-           "arming_check_def", "build_defs"]
+           "arming_check_def", "build_defs", "check_parm_text"]
 
 M = mavlink2
 _CM = 100.0
@@ -138,3 +138,19 @@ def build_defs(gains: FlightControlParams, nav: NavigationParams,
     defs += params_to_defs(failsafes if failsafes is not None else FailsafeParams(),
                            FAILSAFE_NAMES, set_failsafes)
     return defs
+
+
+def check_parm_text(text: str, source: str) -> list[str]:
+    """What a parameter file (.parm) would not apply on a companion with the default
+    parameters and the simulator's ``SIM_*``: a ``SOURCE:LINE: ...`` warning per line
+    (:func:`companion.param_protocol.apply_parm_text`), nothing if every line applies.
+    Checked on copies of the defaults, so that a start (``tuav-sitl up --parm``) can refuse
+    a bad file before anything runs."""
+    from companion.sim_params import sim_param_defs
+
+    arming = [1]
+    defs = build_defs(FlightControlParams(), NavigationParams(), lambda _g: None,
+                      lambda _n: None, lambda: arming[0],
+                      lambda v: arming.__setitem__(0, v))
+    defs += sim_param_defs({}, lambda _name, _value: None)
+    return apply_parm_text(defs, text, source)

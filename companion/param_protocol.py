@@ -87,7 +87,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from tuavdefs.paramspec import ParameterError, Params
 
-__all__ = ["ParamDef", "ParamProtocol", "WireName", "params_to_defs", "FTP_HEADER",
+__all__ = ["ParamDef", "ParamProtocol", "WireName", "apply_parm_text", "apply_value",
+           "params_to_defs", "FTP_HEADER",
            "FTP_MAX_DATA"]
 
 log = logging.getLogger(__name__)
@@ -330,40 +331,16 @@ class ParamProtocol:
     # --- persistence -------------------------------------------------------------------
 
     def load(self) -> list[str]:
-        """Apply ``persist_path`` if it exists; return a warning per line not applied.
-
-        Lines are ``NAME VALUE`` or ``NAME,VALUE``; ``#`` starts a comment. Nothing is sent.
-        """
+        """Apply ``persist_path`` if it exists; return a warning per line not applied
+        (:func:`apply_parm_text`). Nothing is sent."""
         if self.persist_path is None or not self.persist_path.exists():
             return []
-        warnings: list[str] = []
         try:
             text = self.persist_path.read_text(encoding="utf-8", errors="replace")
         except OSError as exc:
-            warnings.append(f"{self.persist_path}: {exc}")
+            warnings = [f"{self.persist_path}: {exc}"]
         else:
-            for lineno, raw in enumerate(text.splitlines(), start=1):
-                line = raw.split("#", 1)[0].strip()
-                if not line:
-                    continue
-                where = f"{self.persist_path.name}:{lineno}"
-                fields = line.replace(",", " ").split()
-                if len(fields) != 2:
-                    warnings.append(f"{where}: expected NAME VALUE, got {raw.strip()!r}")
-                    continue
-                name, text_value = fields
-                index = self._by_name.get(name)
-                if index is None:
-                    warnings.append(f"{where}: unknown parameter {name}")
-                    continue
-                try:
-                    value = float(text_value)
-                except ValueError:
-                    warnings.append(f"{where}: {name}: not a number: {text_value!r}")
-                    continue
-                error = self._apply(self.defs[index], value)
-                if error is not None:
-                    warnings.append(f"{where}: {name}: {error}")
+            warnings = apply_parm_text(self.defs, text, self.persist_path.name)
         for w in warnings:
             log.warning("parameter file: %s", w)
         return warnings
@@ -472,17 +449,54 @@ class ParamProtocol:
 
     def _apply(self, d: ParamDef, value: float) -> str | None:
         """Set ``d`` to ``value``: None if applied, else the reason it was not."""
-        if not math.isfinite(value):
-            return f"{value} rejected"
-        if d.param_type in _INT_RANGES:
-            lo, hi = _INT_RANGES[d.param_type]
-            value = float(round(value))
-            if not lo <= value <= hi:
-                return f"{value:g} outside {lo}..{hi}"
+        return apply_value(d, value)
+
+
+def apply_value(d: ParamDef, value: float) -> str | None:
+    """Set ``d`` to ``value`` as a PARAM_SET would: None if applied, else the reason it was
+    not (not finite, outside the integer type's range, refused by the setter)."""
+    if not math.isfinite(value):
+        return f"{value} rejected"
+    if d.param_type in _INT_RANGES:
+        lo, hi = _INT_RANGES[d.param_type]
+        value = float(round(value))
+        if not lo <= value <= hi:
+            return f"{value:g} outside {lo}..{hi}"
+    try:
+        return d.set(value)
+    except Exception as exc:  # a setter failing on an odd value refuses it
+        return str(exc) or type(exc).__name__
+
+
+def apply_parm_text(defs: list[ParamDef], text: str, source: str) -> list[str]:
+    """Apply a parameter file's ``text`` (ArduPilot's .parm: lines ``NAME VALUE`` or
+    ``NAME,VALUE``, ``#`` starts a comment) to ``defs`` in order; returns a warning per line
+    not applied, each ``SOURCE:LINE: ...`` naming the parameter where there is one."""
+    by_name = {d.name: d for d in defs}
+    warnings: list[str] = []
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        where = f"{source}:{lineno}"
+        fields = line.replace(",", " ").split()
+        if len(fields) != 2:
+            warnings.append(f"{where}: expected NAME VALUE, got {_printable(raw.strip())!r}")
+            continue
+        name, text_value = fields
+        d = by_name.get(name)
+        if d is None:
+            warnings.append(f"{where}: unknown parameter {_printable(name)}")
+            continue
         try:
-            return d.set(value)
-        except Exception as exc:  # a setter failing on an odd value refuses it
-            return str(exc) or type(exc).__name__
+            value = float(text_value)
+        except ValueError:
+            warnings.append(f"{where}: {name}: not a number: {_printable(text_value)!r}")
+            continue
+        error = apply_value(d, value)
+        if error is not None:
+            warnings.append(f"{where}: {name}: {error}")
+    return warnings
 
 
 def _source(msg: Any) -> tuple[int, int]:

@@ -216,3 +216,56 @@ def test_a_mutated_scenario_that_loads_runs_or_is_refused_by_field(data, tmp_pat
         run_scenario(sc.replace(duration_s=0.1, metrics_after_s=0.0), None, progress=None)
     except ParameterError as exc:
         assert exc.field and exc.reason, (what, str(exc))
+
+
+# ----- parameter files (.parm) and fault files through `tuav-sitl up`
+
+def _default_parm() -> str:
+    """A .parm file of every companion parameter at its default, as MAVProxy saves one."""
+    from companion.param_names import build_defs
+    from companion.gains import FlightControlParams
+    from companion.navigation import NavigationParams
+
+    defs = build_defs(FlightControlParams(), NavigationParams(), lambda _g: None,
+                      lambda _n: None, lambda: 1, lambda _v: None)
+    return "".join(f"{d.name},{d.get():.9g}\n" for d in defs)
+
+
+@given(data=st.data())
+@settings(max_examples=40, deadline=None, derandomize=True)
+def test_a_mutated_parm_file_names_the_line_it_refuses(data):
+    from companion.param_names import check_parm_text
+
+    lines = _default_parm().splitlines()
+    assert not check_parm_text("\n".join(lines), "p.parm")   # the defaults all apply
+    i = data.draw(st.integers(0, len(lines) - 1))
+    name = lines[i].split(",")[0]
+    kind = data.draw(st.sampled_from(["value", "name", "garbage"]))
+    if kind == "value":
+        lines[i] = f"{name},{data.draw(st.sampled_from(['nan', 'inf', '-1e30', '1e30', 'x', '']))}"
+    elif kind == "name":
+        lines[i] = f"{name}X,1"
+    else:
+        lines[i] = data.draw(st.sampled_from(["%%%", "A B C", ",,", "\x00\x01"]))
+    problems = check_parm_text("\n".join(lines), "p.parm")
+    assert all(p.startswith("p.parm:") for p in problems), problems
+    assert [int(p.split(":")[1]) for p in problems] in ([], [i + 1]), problems
+    if kind in ("name", "garbage") or lines[i].endswith((",nan", ",inf", ",x", ",")):
+        assert problems, lines[i]   # a value no parameter can take is always refused
+
+
+def test_up_refuses_a_bad_parm_or_fault_file_before_it_makes_anything(tmp_path, capsys):
+    parm = tmp_path / "bad.parm"
+    parm.write_text(_default_parm() + "WPNAV_SPEED,nan\nNOT_A_PARAM 3\n")
+    n = len(_default_parm().splitlines())
+    logdir = tmp_path / "runs"
+    assert main(["up", "--parm", str(parm), "--logdir", str(logdir), "--instance", "37"]) == 2
+    err = capsys.readouterr().err
+    assert f"{parm}:{n + 1}: WPNAV_SPEED" in err and f"{parm}:{n + 2}: unknown" in err
+    faults = tmp_path / "faults.toml"
+    faults.write_text('[[faults]]\nkind = "gnss_loss"\nstart_s = 5.0\nend_s = -1.0\n')
+    assert main(["up", "--faults", str(faults), "--logdir", str(logdir),
+                 "--instance", "37"]) == 2
+    err = capsys.readouterr().err
+    assert f"{faults}:" in err and "--faults" in err
+    assert not logdir.exists()

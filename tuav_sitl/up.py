@@ -465,6 +465,29 @@ def run_up(args: argparse.Namespace) -> int:
     if args.view is not None and not available():
         print(f"tuav-sitl up: --view: {INSTALL_HINT}", file=sys.stderr)
         return 2
+    # the files given are checked before anything is made or started
+    parm_text = faults = None
+    if args.parm is not None:
+        from companion.param_names import check_parm_text
+
+        try:
+            parm_text = Path(args.parm).read_text(encoding="utf-8", errors="replace")
+        except OSError as exc:
+            print(f"tuav-sitl up: --parm: {exc}", file=sys.stderr)
+            return 2
+        problems = check_parm_text(parm_text, args.parm)
+        if problems:
+            print("".join(f"tuav-sitl up: --parm: {p}\n" for p in problems), end="",
+                  file=sys.stderr)
+            return 2
+    if args.faults is not None:
+        from sitl.faults import FaultsFile
+
+        try:
+            faults = load_toml(FaultsFile, Path(args.faults))
+        except ParameterError as exc:
+            print(f"tuav-sitl up: --faults: {exc}", file=sys.stderr)
+            return 2
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     run_dir = Path(args.logdir) / f"up-{stamp}-{args.instance}"
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -473,21 +496,10 @@ def run_up(args: argparse.Namespace) -> int:
     # the plant's truth (params.toml, what `plot` imports) and the controllers' model
     (run_dir / "params.toml").write_text(_to_toml(to_dict(truth)))
     (run_dir / "model.toml").write_text(_to_toml(to_dict(params)))
-    if args.parm is not None:
-        try:
-            (run_dir / "companion.parm").write_text(Path(args.parm).read_text())
-        except OSError as exc:
-            print(f"tuav-sitl up: --parm: {exc}", file=sys.stderr)
-            return 2
+    if parm_text is not None:
+        (run_dir / "companion.parm").write_text(parm_text)
     faults_args: list[str] = []
-    if args.faults is not None:
-        from sitl.faults import FaultsFile
-
-        try:
-            faults = load_toml(FaultsFile, Path(args.faults))
-        except (ParameterError, OSError) as exc:
-            print(f"tuav-sitl up: --faults: {exc}", file=sys.stderr)
-            return 2
+    if faults is not None:
         (run_dir / "faults.toml").write_text(_to_toml(to_dict(faults)))
         faults_args = ["--faults", str(run_dir / "faults.toml")]
     key_file = run_dir / "signing.key"   # the vehicle's key, set here or by SETUP_SIGNING
