@@ -328,8 +328,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             client.send_actuators(sim.time_usec, cmds, armed=armed)
             if autopilot.flight_log is not None:   # its sensors, filter and events
                 autopilot.flight_log.period(inputs, out, onboard)
-            if autopilot.flight_log is not None:   # its sensors, filter and events
-                autopilot.flight_log.period(inputs, out, onboard)
             # the answer is out (in lockstep the plant waits for it); now the ground
             # stations and the winch: what they ask applies from the next period
             if len(ready) > 1:
