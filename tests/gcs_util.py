@@ -25,10 +25,13 @@ def free_port(kind: int = socket.SOCK_STREAM) -> int:
 
 
 class Vehicle:
-    """Plant (on the ground, a long slack tether, winder braked) + companion processes."""
+    """Plant (on the ground, a long slack tether, winder braked) + companion processes.
+    ``sim_relay(plant_port)``, if given, returns the port the companion's simulator link
+    connects to instead (a tap between the two)."""
 
     def __init__(self, tmp: Path, *, speedup: str = "max", extra: tuple[str, ...] = (),
-                 udp_port: int | None = None, tether_length_m: float = 40.0) -> None:
+                 udp_port: int | None = None, tether_length_m: float = 40.0,
+                 sim_relay: Any = None) -> None:
         self.tmp = tmp
         sim_port = free_port()
         self.plant_log = tmp / "plant.log"
@@ -44,6 +47,8 @@ class Vehicle:
             self.plant = subprocess.Popen(plant_args, cwd=ROOT, stdout=out,
                                           stderr=subprocess.STDOUT)
         udp = ["--gcs-udp", f"127.0.0.1:{udp_port}"] if udp_port else ["--gcs-udp", "none"]
+        if sim_relay is not None:
+            sim_port = sim_relay(sim_port)
         with open(self.comp_log, "w") as out:
             self.comp = subprocess.Popen(
                 [sys.executable, "-m", "companion", "--sim", f"127.0.0.1:{sim_port}",
