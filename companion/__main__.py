@@ -55,6 +55,7 @@ from companion.telemetry import Telemetry
 from tuavdefs import component_link as cl
 from tuavdefs import signing as sg
 from tuavdefs import simlink as sl
+from tuavdefs.jit import load_kernels, watch_compiles
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
 
@@ -164,6 +165,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     gains = load_option(FlightControlParams, args.gains, "companion")
     nav_params = load_option(NavigationParams, args.nav, "companion")
     estimator = load_option(EstimatorParams, args.estimator, "companion")
+    # every kernel it calls made machine code now, not in its loop (docs/architecture.md)
+    load_kernels(("companion", "tuavdefs"), sys.stdout, "companion")
     udp = ([] if args.gcs_udp == ["none"] else
            [_address(a) for a in args.gcs_udp] if args.gcs_udp else
            [("127.0.0.1", UDP_GCS_PORT_DEFAULT), ("127.0.0.1", UDP_API_PORT_DEFAULT)])
@@ -278,6 +281,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGINT, lambda s, _f: stop.update(signal=s))
     udp_text = ", ".join(f"udp:{h}:{p}" for h, p in udp) or "no udp"
     tcp_text = f"tcp:127.0.0.1:{endpoints.tcp_port}" if endpoints.tcp_port else "no tcp"
+    watch_compiles("companion", sys.stdout)
     print(f"companion: connected to the plant at {client.address}; MAVLink on {tcp_text}, "
           f"{udp_text}"
           + (f"; component link on tcp:127.0.0.1:{components.port}" if components else "")

@@ -43,6 +43,7 @@ from tuavdefs import can_protocol as cp
 from tuavdefs import signing as sg
 from tuavdefs.canbus import CanBusError, CanLink
 from tuavdefs.component_link import COMPONENT_PORT_DEFAULT
+from tuavdefs.jit import load_kernels, watch_compiles
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
 
@@ -78,6 +79,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the ground-station process; returns the exit code."""
     args = build_parser().parse_args(argv)
     params = load_option(SystemParams, args.params, "groundstation")
+    # every kernel it calls made machine code now, not in its loop (docs/architecture.md)
+    load_kernels(("groundstation", "tuavdefs"), sys.stdout, "groundstation")
     try:
         key = sg.read_key_file(args.signing_key_file) if args.signing_key_file else None
     except sg.SigningError as exc:
@@ -95,6 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
+    watch_compiles("groundstation", sys.stdout)
     print(f"groundstation: CAN {link.description}, axis node {args.node}, "
           f"MAVLink {args.mavlink}", flush=True)
 

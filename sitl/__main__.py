@@ -27,6 +27,7 @@ from sitl.winder_node import WinderCanNode
 from tuavdefs import simlink as sl
 from tuavdefs.canbus import CanBusError, CanLink
 from tuavdefs.frames import quat_multiply
+from tuavdefs.jit import load_kernels, watch_compiles
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import ParameterError, load_option
 
@@ -104,6 +105,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     params = load_option(SystemParams, args.params, "plant")
     faults = load_option(FaultsFile, args.faults, "plant").faults
+    # every kernel it calls made machine code now, not in its loop (docs/architecture.md)
+    load_kernels(("sitl", "tuavdefs"), sys.stdout, "plant")
     pos = tuple(args.position)
     gear = params.vehicle.gear_height_m
     try:        # (a line the plant cannot integrate is refused as it is built)
@@ -170,6 +173,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     gnss_text = ("exact sensors" if args.no_noise else
                  f"GNSS {args.gnss} at {noise.gps_rate_hz:g} Hz, "
                  f"{noise.gps_latency_s * 1e3:g} ms late, sensor seed {args.sensor_seed}")
+    watch_compiles("plant", sys.stdout)
     print(f"plant: listening on {server.address} "
           f"({loop.pacing.replace('-', ' ')}{can_text}; {gnss_text})", flush=True)
     # the start-up's objects (numpy, numba, pymavlink and their modules: most of the heap)

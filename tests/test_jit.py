@@ -2,6 +2,7 @@
 another module changes, and its key is the same in every process (else nothing would ever
 be served from the cache)."""
 
+import json
 import os
 import subprocess
 import sys
@@ -89,8 +90,6 @@ print(json.dumps([jit.JIT, before, jit.is_cached(scaled), names, value]))
 
 
 def _report(here: Path, **env_extra: str) -> list:
-    import json
-
     env = dict(os.environ, **env_extra)
     env.pop("TUAV_NO_JIT", None)
     res = subprocess.run([sys.executable, "-c", REPORT.format(root=str(ROOT), here=str(here))],
@@ -116,3 +115,112 @@ def test_an_interpreted_package_stays_python_and_jit_says_so(tmp_path):
     assert _report(tmp_path, TUAV_JIT_INTERPRET="callee") == [False, True, True, [], 4.0]
     assert not (tmp_path / "__pycache__").is_dir() or not any(
         p.suffix == ".nbi" for p in (tmp_path / "__pycache__").iterdir())
+
+
+# --- the manifest of the argument types kernels are called with, and loading it ----------
+
+def test_every_entry_of_the_manifest_is_a_kernel_with_its_argument_count():
+    """Each name of tuavdefs/kernel_signatures.py is a kernel made by njit (in a module
+    that imports), each signature parses back to the text it was written as and has as
+    many types as the function has parameters."""
+    import inspect
+
+    entries = jit.manifest()
+    assert {name.partition(".")[0] for name in entries} >= {"sitl", "companion",
+                                                           "groundstation"}
+    for name, sigs in entries.items():
+        kernel = jit.find_kernel(name)
+        assert kernel is not None, f"{name}: no such kernel (python -m tuav_sitl.kernel_manifest)"
+        params = inspect.signature(kernel.py_func).parameters
+        assert sigs, name
+        for texts in sigs:
+            assert len(texts) == len(params), (name, texts)
+            assert jit.signature_text(jit.parse_signature(texts)) == texts
+
+
+def test_type_texts_read_back_as_the_types():
+    import numpy as np
+    from numba.core.typing.typeof import Purpose, typeof
+
+    ro = np.zeros(3)
+    ro.flags.writeable = False
+    for value in (1.0, 3, True, np.float32(1.0), np.zeros(4), np.zeros((2, 3)),
+                  np.zeros((4, 3))[:, 0], np.zeros((2, 3)).T, np.zeros(2, np.uint8), ro,
+                  (1.0, 2.0), (1.0, np.zeros(3), False)):
+        ty = typeof(value, Purpose.argument)
+        assert jit.parse_type(jit.type_text(ty)) == ty
+    assert jit.type_text(typeof(np.zeros((2, 3)), Purpose.argument)) == "float64[:, ::1]"
+
+
+CALLER_OF_TWO = """
+from tuavdefs.jit import njit
+from callee import scaled
+@njit
+def caller(x):
+    return scaled(x) + scaled(2 * x)
+"""
+RECORD = """
+import sys
+sys.path[:0] = [{root!r}, {here!r}]
+from caller import caller
+from callee import scaled
+caller(1.5)
+scaled(3)
+"""
+
+
+def test_recording_keeps_the_calls_from_python_not_those_from_kernels(tmp_path):
+    """TUAV_JIT_RECORD: caller(float64) and scaled(int64) were called from Python;
+    scaled(float64) only from inside caller's machine code, which brings it along."""
+    (tmp_path / "callee.py").write_text(textwrap.dedent(CALLEE.format(gain=2.0)))
+    (tmp_path / "caller.py").write_text(textwrap.dedent(CALLER_OF_TWO))
+    env = dict(os.environ, TUAV_JIT_RECORD=str(tmp_path / "rec"),
+               NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    env.pop("TUAV_NO_JIT", None)
+    subprocess.run([sys.executable, "-c", RECORD.format(root=str(ROOT), here=str(tmp_path))],
+                   env=env, capture_output=True, text=True, timeout=300, check=True)
+    (record,) = (tmp_path / "rec").glob("*.json")
+    assert json.loads(record.read_text()) == {"callee.scaled": [["int64"]],
+                                              "caller.caller": [["float64"]]}
+
+
+LOAD = """
+import json, sys
+sys.path[:0] = [{root!r}, {here!r}]
+from tuavdefs import jit
+report = jit.load_kernels(["callee", "caller"], sys.stdout, "proc", signatures={{
+    "caller.caller": [["float64"]], "callee.scaled": [["int64"]],
+    "callee.gone": [["float64"]], "callee.scaled_": [["float64", "float64"]]}})
+jit.watch_compiles("proc", sys.stdout)
+from caller import caller
+from callee import scaled
+caller(1.5), scaled(3)          # loaded: nothing compiles
+scaled(True)                    # a type the manifest lacks: compiles, after start-up
+print(json.dumps([report.signatures, report.compiled, len(report.failures)]))
+"""
+
+
+def test_load_kernels_compiles_then_loads_and_late_compiles_are_told(tmp_path):
+    """On an empty cache load_kernels compiles the manifest's signatures and says so; in the
+    next process it loads them silently; a call with types the manifest lacks compiles
+    after watch_compiles and is logged; unknown names and a wrong argument count are
+    failures, not errors."""
+    (tmp_path / "callee.py").write_text(textwrap.dedent(CALLEE.format(gain=2.0)))
+    (tmp_path / "caller.py").write_text(textwrap.dedent(CALLER_OF_TWO))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    env.pop("TUAV_NO_JIT", None)
+    script = LOAD.format(root=str(ROOT), here=str(tmp_path))
+
+    def run() -> list[str]:
+        return subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                              text=True, timeout=300, check=True).stdout.splitlines()
+
+    first = run()
+    assert first[0].startswith("proc: compiling the numba kernels missing from the cache")
+    assert first[1].startswith("proc: compiled ")
+    assert [ln for ln in first if jit.LATE_COMPILE in ln] == [
+        ln for ln in first if ln.startswith(f"proc: numba {jit.LATE_COMPILE}: callee.scaled")]
+    assert len([ln for ln in first if jit.LATE_COMPILE in ln]) == 1
+    assert json.loads(first[-1])[0] == 2 and json.loads(first[-1])[2] == 2
+    second = run()      # (the bool call too is in the cache now)
+    assert len(second) == 1 and json.loads(second[-1]) == [2, 0, 2], second

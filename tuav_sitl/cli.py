@@ -40,7 +40,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("runs") / scenario.name
     print(f"tuav-sitl run {scenario.name}: {scenario.description}")
     progress = None if args.quiet else sys.stderr
-    compile_if_cold(scenario, progress)
+    compile_if_cold(progress)
     stop_reports = report_compiles(progress)
     try:
         result = run_scenario(scenario, out, progress=progress, recording=True)
@@ -138,11 +138,10 @@ def _cmd_results(args: argparse.Namespace) -> int:
         from tuav_sitl.results import run_sweeps
 
         run_sweeps(runs, figures=not args.no_figures)
-    from tuav_sitl.scenario import load_scenario
     from tuav_sitl.warmup import compile_if_cold
 
     progress = None if args.quiet else sys.stderr
-    compile_if_cold(load_scenario("circle"), progress)   # here, not in each pool process
+    compile_if_cold(progress)   # here, not in each pool process
     metrics = write_results(out, runs, figures=not args.no_figures, progress=progress)
     print(f"wrote {out} from {len(metrics)} runs in {runs}")
     return 0

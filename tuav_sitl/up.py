@@ -559,6 +559,16 @@ def run_up(args: argparse.Namespace) -> int:
     if speedup != 1.0:
         # in lockstep the winch runs on the plant's time: a stall is no lost encoder
         gs_args += ["--clock", "frames"]
+    from tuav_sitl.warmup import compile_if_cold
+
+    # a cold numba cache compiled here, said and shown, before the processes load it (a
+    # SIGTERM meanwhile stops it as Ctrl-C does)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        compile_if_cold(None if args.headless else sys.stderr)
+    except KeyboardInterrupt:
+        print(f"tuav-sitl up: stopped while compiling; logs in {run_dir}", file=sys.stderr)
+        return 130
     stack = Stack(run_dir, echo=args.verbose)
     stopping = {"signal": None}
 

@@ -1,22 +1,25 @@
 """Compiling the numba kernels of a cold cache, two halves at once, with progress.
 
-On the first run after an install (or after a change to a kernel) every kernel compiles
-before the first control period, one after the other in one process. :func:`warm_up` instead
-starts two processes that each fly the scenario for a few control periods, one with the
-plant's kernels compiled and the controllers' interpreted, the other the reverse
-(``TUAV_JIT_INTERPRET``, :mod:`tuavdefs.jit`); each writes what it compiled to numba's
-cache, and the run proper then loads it all. The shared ``tuavdefs`` kernels compile in
-both. Each finished compilation is reported on the progress stream.
+On the first run after an install (or after a change to a kernel) every kernel would
+compile when first called, one after the other in one process (and, in ``tuav-sitl up``'s
+processes, inside a real-time loop). :func:`warm_up` instead starts two processes that
+each compile the kernels of the manifest (:mod:`tuavdefs.kernel_signatures`: every
+kernel the processes call from Python, with the argument types they call it with) for its
+half of the packages, the plant's in one and the controllers' in the other, with the other
+half's kernels interpreted (``TUAV_JIT_INTERPRET``, :mod:`tuavdefs.jit`); each writes what
+it compiled to numba's cache, and the processes then load it all before they say they are
+ready (:func:`tuavdefs.jit.load_kernels`). The shared ``tuavdefs`` kernels compile in the
+controllers' half (and wherever the other half's kernels call them). Each finished
+compilation is reported on the progress stream.
 
-:func:`needs_warm_up` decides, from the cache's index, whether the kernels every run calls
-are already there; a kernel that only some scenarios call and that is still cold compiles
-in the run itself, reported by :func:`report_compiles`.
+:func:`needs_warm_up` decides, from the cache's index, whether every kernel of the
+manifest is there for each of its argument types; a kernel that a run calls with types the
+manifest lacks compiles in the run itself, reported by :func:`report_compiles`.
 """
 
 from __future__ import annotations
 
 import os
-import pickle
 import subprocess
 import sys
 import tempfile
@@ -25,37 +28,24 @@ import time
 from pathlib import Path
 from typing import TextIO
 
-from tuav_sitl.scenario import ScenarioParams
-
 __all__ = ["HALVES", "compile_if_cold", "needs_warm_up", "report_compiles", "warm_up"]
 
-#: The two warm-up processes: the packages each leaves interpreted (so compiles the rest).
-HALVES: tuple[tuple[str, str], ...] = (
-    ("the plant's kernels", "companion,groundstation"),
-    ("the controllers' kernels", "sitl"),
+#: The two warm-up processes: a label, the packages each leaves interpreted, and those
+#: whose kernels of the manifest it compiles.
+HALVES: tuple[tuple[str, str, str], ...] = (
+    ("the plant's kernels", "companion,groundstation", "sitl"),
+    ("the controllers' kernels", "sitl", "companion,groundstation,tuavdefs"),
 )
-#: Simulated time each warm-up process flies [s]: enough control periods for every
-#: kernel of a run's first seconds to be called once.
-_WARM_UP_S = 0.2
 #: A warm-up process that takes longer than this is abandoned [s].
 _TIMEOUT_S = 600.0
 
 
-def _sentinels() -> list[object]:
-    """The kernels every offline run calls (plant step, flight control, winder law)."""
-    from companion.flight_controller import flight_step
-    from groundstation.winder_host import winder_step
-    from sitl.plant import advance_kernel
-    from sitl.tether import tether_forces_kernel
-
-    return [advance_kernel, tether_forces_kernel, flight_step, winder_step]
-
-
 def needs_warm_up() -> bool:
-    """Whether numba is on and one of the kernels every run calls is not in the cache."""
-    from tuavdefs.jit import JIT, is_cached
+    """Whether numba is on and a kernel of the manifest is not in the cache for one of the
+    argument types it lists."""
+    from tuavdefs.jit import JIT, missing_from_cache
 
-    return JIT and not all(is_cached(k) for k in _sentinels())
+    return JIT and bool(missing_from_cache())
 
 
 def report_compiles(stream: TextIO | None):
@@ -74,46 +64,43 @@ def report_compiles(stream: TextIO | None):
 
 
 _CHILD = """
-import pickle, sys
-from tuavdefs.jit import on_compile
-from tuav_sitl.offline import run_scenario
+import sys
+from tuavdefs.jit import load_kernels, on_compile
 on_compile(lambda name, s: print(f"{name} {s:.2f}", flush=True))
-with open(sys.argv[1], "rb") as f:
-    run_scenario(pickle.load(f), None, progress=None)
+report = load_kernels(sys.argv[1].split(","))
+for failure in report.failures:
+    print(failure, file=sys.stderr)
 """
 
 
-def warm_up(scenario: ScenarioParams, stream: TextIO | None) -> float:
-    """Compile the kernels ``scenario`` calls, in two processes at once (:data:`HALVES`),
-    into numba's cache; progress on ``stream``. Returns the wall time [s]. A warm-up
-    process that fails only costs its time: the run compiles what is missing itself."""
+def warm_up(stream: TextIO | None) -> float:
+    """Compile the manifest's kernels into numba's cache in two processes at once
+    (:data:`HALVES`); progress on ``stream``. Returns the wall time [s]. A warm-up process
+    that fails only costs its time: the processes compile what is missing themselves."""
     start = time.perf_counter()
-    short = scenario.replace(duration_s=_WARM_UP_S, metrics_after_s=0.0)
     root = Path(__file__).resolve().parents[1]
     lock = threading.Lock()
-    counts = {label: 0 for label, _ in HALVES}
+    counts = {label: 0 for label, _, _ in HALVES}
     finished: dict[str, bool] = {}
 
     def line(note: str) -> None:
         if stream is None:
             return
         parts = [f"{label.split()[1].rstrip('s').rstrip(chr(39))} {counts[label]}"
-                 + (" done" if label in finished else "") for label, _ in HALVES]
+                 + (" done" if label in finished else "") for label, _, _ in HALVES]
         stream.write(f"\rcompiling: {', '.join(parts)}, {time.perf_counter() - start:5.1f} s"
                      f"  {note[:24]:24s}")
         stream.flush()
 
     with tempfile.TemporaryDirectory(prefix="tuav-warmup-") as tmp:
-        scenario_file = Path(tmp) / "scenario.pickle"
-        scenario_file.write_bytes(pickle.dumps(short))
         procs = []
-        for label, interpreted in HALVES:
+        for label, interpreted, packages in HALVES:
             env = dict(os.environ, TUAV_JIT_INTERPRET=interpreted)
             env["PYTHONPATH"] = os.pathsep.join(
                 p for p in (str(root), env.get("PYTHONPATH", "")) if p)
             err = open(Path(tmp) / f"{len(procs)}.err", "w+")  # noqa: SIM115 - closed below
             procs.append((label, subprocess.Popen(
-                [sys.executable, "-c", _CHILD, str(scenario_file)], env=env, text=True,
+                [sys.executable, "-c", _CHILD, packages], env=env, text=True,
                 stdout=subprocess.PIPE, stderr=err), err))
 
         def follow(label: str, proc: subprocess.Popen[str]) -> None:
@@ -133,18 +120,28 @@ def warm_up(scenario: ScenarioParams, stream: TextIO | None) -> float:
             t.start()
         with lock:
             line("")
-        for (_, proc, _), t in zip(procs, threads, strict=True):
-            t.join(_TIMEOUT_S)
-            if t.is_alive():
-                proc.kill()
-                t.join()
+        try:
+            for (_, proc, _), t in zip(procs, threads, strict=True):
+                t.join(_TIMEOUT_S)
+                if t.is_alive():
+                    proc.kill()
+                    t.join()
+        finally:    # (stopped by Ctrl-C: no warm-up process is left behind)
+            for _, proc, _ in procs:
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.wait()
         notes = []
         for label, _, err in procs:
             err.seek(0)
+            said = err.read().strip().splitlines()
             if not finished.get(label):
-                last = err.read().strip().splitlines()[-1:] or ["killed"]
+                last = said[-1:] or ["killed"]
                 notes.append(f"  the warm-up of {label} failed (the run compiles them "
                              f"itself): {last[0][:200]}\n")
+            elif said:      # entries of the manifest that no longer fit their kernel
+                notes.append(f"  the warm-up of {label}: {len(said)} stale entries of "
+                             f"tuavdefs/kernel_signatures.py, e.g. {said[0][:200]}\n")
             err.close()
     wall = time.perf_counter() - start
     if stream is not None:
@@ -153,9 +150,9 @@ def warm_up(scenario: ScenarioParams, stream: TextIO | None) -> float:
     return wall
 
 
-def compile_if_cold(scenario: ScenarioParams, stream: TextIO | None) -> bool:
-    """If :func:`needs_warm_up`: say so on ``stream`` and :func:`warm_up` for ``scenario``.
-    Returns whether it did."""
+def compile_if_cold(stream: TextIO | None) -> bool:
+    """If :func:`needs_warm_up`: say so on ``stream`` and :func:`warm_up`. Returns whether
+    it did."""
     if not needs_warm_up():
         return False
     if stream is not None:
@@ -163,5 +160,5 @@ def compile_if_cold(scenario: ScenarioParams, stream: TextIO | None) -> bool:
                      "change to a kernel; cached for the next runs), the plant's and the "
                      "controllers' at once\n")
         stream.flush()
-    warm_up(scenario, stream)
+    warm_up(stream)
     return True
