@@ -1,0 +1,226 @@
+"""The tension-regulating winder law (groundstation/tension_law.py, docs/control.md §8)
+against independent truths: its Lyapunov identity on the drum and line model it was derived
+on, the dynamic (lumped) line's pull in the snap cases, MoorPy's catenary at the regulated
+tension in a steady hover; and the plant's load cell against its own definition."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from groundstation import tension_law as tl
+from groundstation.winder_control import WinderController, WinderControlParams, WinderLaw
+from sitl.load_cell import LoadCell, LoadCellParams
+from sitl.winder import WinderModel
+from tuav_sitl.offline import OfflineRunner, run_scenario
+from tuav_sitl.scenario import load_scenario
+from tuavdefs.params import TetherParams, WinderParams
+
+try:
+    from moorpy.Catenary import catenary as moorpy_catenary
+except ImportError:  # pragma: no cover - the test extras install it
+    moorpy_catenary = None
+
+
+# ---------------------------------------------------------------- the design model
+@pytest.mark.parametrize("ell_rate", [0.0, 0.6, -0.8])
+def test_tension_law_lyapunov_identity_on_the_drum_and_line_model(ell_rate):
+    """On the model it was derived for (the drum with its varying inertia, the line a spring
+    of stiffness kappa towards the length the UAV asks, moving at ``ell_rate``, fed forward
+    exactly), V = e^2/(2 kappa) + I_w e_w^2/2 changes as
+    dV/dt = -e sigma(T) - k_w e_w^2 - e (v_c - v0), to the accuracy of the 10 ms hold, and
+    the tension settles on the set-point."""
+    kappa = 8.0
+    wp, tp = WinderParams(), TetherParams()
+    gains = WinderControlParams(law="tension", tension_filter_s=0.0, line_stiffness_n_m=kappa)
+    ctl = WinderController(gains, wp, tp)
+    p = ctl.tension_params()
+    drum = WinderModel(wp, tp)
+    r = wp.drum_radius_m
+    dt_c, n_fine = 0.01, 20
+    dt = dt_c / n_fine
+    theta, omega = drum.theta_rad(20.0), 0.0
+    setpoint = 4.0
+    tension = 1.5                       # a slack line to start from
+    ell = 20.0 - 0.3
+    values, rates, scale = [], [], []
+    for _ in range(800):
+        length = drum.length_m(theta)
+        cmd = ctl.update_tension(dt_c, length, omega, tension, setpoint, ell_rate,
+                                 0.0, 0.0, 1e3)
+        s = ctl.tension_state
+        e = tension - setpoint
+        v0 = tl.tension_speed(p, tension, setpoint, ell_rate)
+        values.append(cmd.lyapunov)
+        terms = (-e * (v0 - ell_rate), -gains.k_speed_n_m_s * cmd.e_rate_rad_s ** 2,
+                 -e * (s[tl.Z_SPEED] - v0))
+        rates.append(sum(terms))
+        scale.append(sum(abs(x) for x in terms))
+        assert not cmd.saturated
+        for _ in range(n_fine):        # the drum and the line, integrated finely
+            acc = drum.acceleration(theta, omega, cmd.torque_n_m, tension, braked=False)
+            tension += -kappa * (r * omega - ell_rate) * dt
+            omega += acc * dt
+            theta += omega * dt
+            ell += ell_rate * dt
+    values, rates, scale = np.array(values), np.array(rates), np.array(scale)
+    num = np.diff(values)
+    pred = 0.5 * (rates[1:] + rates[:-1]) * dt_c
+    size = 0.5 * (scale[1:] + scale[:-1]) * dt_c      # the terms' magnitudes (they cancel)
+    sig = size > 1e-3 * values[:-1]                   # a change the 10 ms hold can resolve
+    assert sig.sum() > 400
+    assert np.all(np.abs(num[sig] - pred[sig]) <= 0.1 * size[sig])
+    assert abs(tension - setpoint) < 1e-3
+    assert values[-1] < 1e-6 * values[0]
+
+
+def test_tension_law_renders_to_a_snap_at_once():
+    """The torque holds the set-point, not the measured tension: a pull far above it (a
+    snap) accelerates the drum paying out before any filter has seen it."""
+    wp, tp = WinderParams(), TetherParams()
+    ctl = WinderController(WinderControlParams(law="tension"), wp, tp)
+    cmd = ctl.update_tension(0.01, 20.0, 0.0, 3.0, 3.0, 0.0, 0.0, 0.0, 1e3)
+    drum = WinderModel(wp, tp)
+    theta = drum.theta_rad(20.0)
+    acc_snap = drum.acceleration(theta, 0.0, cmd.torque_n_m, 30.0, braked=False)
+    # the line's 27 N over the set-point, on the drum's inertia alone
+    assert acc_snap * wp.drum_radius_m == pytest.approx(
+        27.0 * wp.drum_radius_m ** 2 / ctl.inertia_kg_m2(20.0), rel=0.05)
+
+
+# ---------------------------------------------------------------- the lumped line
+_TAIL = """
+[tether]
+model = "lumped"
+[winch]
+status_rate_hz = 100.0
+[estimator]
+kind = "truth"
+[winder_control]
+law = "{law}"
+"""
+
+
+def _radial(start, goal, speed, acc, duration, extra=""):
+    return f"""name = "snap"
+description = "a snap case"
+duration_s = {duration}
+metrics_after_s = 1.0
+[initial]
+position_m = [{start[0]}, {start[1]}, {start[2]}]
+[trajectory]
+kind = "line"
+start_s = 4.0
+goal_m = [{goal[0]}, {goal[1]}, {goal[2]}]
+speed_m_s = {speed}
+max_acc_m_s2 = {acc}
+{extra}"""
+
+
+SNAP_CASES = {
+    # a step of the UAV's radial speed (0 -> +-2 m/s at 8 m/s^2, 10 m along the radius)
+    "radial-out": (_radial((9.0, 0.0, 12.0), (15.0, 0.0, 20.0), 2.0, 8.0, 14.0), 3.0),
+    "radial-in": (_radial((15.0, 0.0, 20.0), (9.0, 0.0, 12.0), 2.0, 8.0, 14.0), 3.0),
+    # the drum stalled (snagged) during an outward move at 1 m/s, released 2 s later:
+    # the peak counted from the release
+    "stall-released": (_radial((9.0, 0.0, 12.0), (15.0, 0.0, 20.0), 1.0, 2.0, 16.0, """
+[[faults]]
+kind = "tether_snag"
+start_s = 4.0
+end_s = 6.0
+"""), 6.0),
+}
+
+
+def _peak_ratio(series, from_s):
+    t, top = series["t"], series["top_tension"]
+    before = np.median(top[(t > 1.0) & (t < 3.0)])
+    after = np.median(top[t > t[-1] - 3.0])
+    return top[t >= from_s].max() / max(before, after)
+
+
+@pytest.mark.parametrize("case", sorted(SNAP_CASES))
+def test_no_snap_on_the_lumped_line(case, tmp_path):
+    """The pull at the UAV peaks at most 1.5 times its steady value (before or after)."""
+    text, from_s = SNAP_CASES[case]
+    path = tmp_path / "snap.toml"
+    path.write_text(text + _TAIL.format(law="tension"))
+    res = run_scenario(load_scenario(str(path)), None, progress=None)
+    assert _peak_ratio(res.series, from_s) <= 1.5
+    assert res.metrics["min_tether_slack_m"] > 0.0
+
+
+def test_the_paper_law_snaps_where_the_tension_law_does_not(tmp_path):
+    """The check can fail: the paper's length law on the radial step out (53.7 N)."""
+    text, from_s = SNAP_CASES["radial-out"]
+    path = tmp_path / "snap.toml"
+    path.write_text(text + _TAIL.format(law="paper"))
+    res = run_scenario(load_scenario(str(path)), None, progress=None)
+    assert _peak_ratio(res.series, from_s) > 1.5
+
+
+def test_no_snap_in_a_crosswind_gust_on_the_lumped_line():
+    """gust-lumped (25 m up, a 6 m/s gust across the line) on the tension law."""
+    sc = load_scenario("gust-lumped")
+    sc = sc.replace(winder_control=sc.winder_control.replace(law="tension"))
+    res = run_scenario(sc, None, progress=None)
+    assert _peak_ratio(res.series, 4.0) <= 1.5
+
+
+# ---------------------------------------------------------------- a steady hover
+@pytest.mark.skipif(moorpy_catenary is None, reason="MoorPy is not installed")
+def test_steady_hover_holds_the_set_point_and_moorpy_agrees_on_the_exit_angle():
+    """hover (12 m out, 20 m up, catenary truth) on the tension law: the drum's tension
+    equals the law's set-point within the load cell's noise, and MoorPy's catenary through
+    the UAV at that exit tension leaves the winder at the angle the guide arm measures."""
+    sc = load_scenario("hover")
+    sc = sc.replace(duration_s=25.0,
+                    winder_control=sc.winder_control.replace(law="tension"))
+    runner = OfflineRunner(sc)
+    assert runner.winder_host.controller.law is WinderLaw.TENSION
+    res = runner.run(progress=None)
+    winch = runner.ground.winch
+    setpoint = float(winch.host.controller.tension_state[tl.Z_SETPOINT])
+    t, drum = res.series["t"], res.series["drum_tension"]
+    held = drum[t > t[-1] - 5.0]
+    noise = LoadCellParams().noise_n
+    assert abs(held.mean() - setpoint) <= 3.0 * noise
+    assert held.std() <= 3.0 * noise
+    # MoorPy's catenary with that exit tension through the UAV's (true) position
+    x, y, z = res.series["pos"][-1]
+    h = math.hypot(x, y)
+    ea = TetherParams().axial_stiffness_n
+    w = TetherParams().weight_per_length_n_m(sc.model().environment.gravity_m_s2)
+
+    def exit_tension(length):
+        f = moorpy_catenary(h, z, length, ea, w, CB=0)
+        return math.hypot(f[0], f[1]) - setpoint
+
+    chord = math.hypot(h, z)
+    length = brentq(exit_tension, chord * 1.0001, chord * 1.2)
+    f = moorpy_catenary(h, z, length, ea, w, CB=0)
+    elevation = math.atan2(f[1], f[0])
+    measured = winch.exit_angle[1]
+    assert measured == pytest.approx(elevation, abs=0.01)   # the arm's bias is 2 mrad (1 sigma)
+    assert elevation > sc.lbar.min_exit_angle_rad            # suspended, with margin
+    assert winch.length_m == pytest.approx(length, abs=0.01)
+
+
+# ---------------------------------------------------------------- the load cell
+def test_load_cell_lags_filters_and_is_noisy_as_specified():
+    """A step of tension read at 100 Hz: the reading is the step through the first-order
+    low-pass, ``latency_s`` late; the noise's spread is ``noise_n``."""
+    p = LoadCellParams(noise_n=0.0, filter_s=0.05, latency_s=0.02)
+    cell = LoadCell(p)
+    got = [cell.read(k * 0.01, 0.0 if k < 10 else 10.0) for k in range(60)]
+    for k in range(60):
+        lagged = k - 2                   # 20 ms late
+        want = 0.0 if lagged < 10 else 10.0 * (1.0 - math.exp(-(lagged - 9) * 0.01 / 0.05))
+        assert got[k] == pytest.approx(want, abs=1e-9)
+    noisy = LoadCell(LoadCellParams(noise_n=0.2))
+    reads = np.array([noisy.read(k * 0.01, 5.0) for k in range(4000)])
+    assert reads[100:].mean() == pytest.approx(5.0, abs=0.02)
+    assert reads[100:].std() == pytest.approx(0.2, rel=0.1)
