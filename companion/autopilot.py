@@ -39,6 +39,7 @@ everything is the inertial z-up frame (``tuavdefs.frames`` converts).
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -145,6 +146,10 @@ class Autopilot:
         self.flight_log: Any = None
         """This boot's onboard log (``companion.flight_log.FlightLog``) or None."""
         self._logged_mode: Any = None
+        #: Logs that ended (a full disk, a lost file, a cap) and are still to be said.
+        self._logs_ended: list[str] = []
+        if endpoints.tlog is not None:
+            endpoints.tlog.on_end = self.log_ended
 
     # ----- sending helpers
 
@@ -222,6 +227,8 @@ class Autopilot:
         self.params.tick(now_wall)
         if self.logs is not None:
             self.logs.tick()
+        if self._logs_ended:
+            self._say_logs_ended()
         fl = self.flight_log
         if fl is not None and telem is not None:
             nav = self.nav
@@ -253,6 +260,17 @@ class Autopilot:
             io.flush()
         if self.component is not None and self.component.backlogged:
             self.component.flush()
+
+    def log_ended(self, why: str) -> None:
+        """A log of the vehicle's ended (``why``: which and what happened); said with the
+        next :meth:`service` (not here: the failing write may be inside a send)."""
+        self._logs_ended.append(why)
+
+    def _say_logs_ended(self) -> None:
+        texts, self._logs_ended = self._logs_ended, []
+        for why in texts:
+            print(f"companion: {why}; flying on", file=sys.stderr, flush=True)
+            self.statustext(M.MAV_SEVERITY_ERROR, f"Logging: {why}")
 
     def send_heartbeat(self) -> None:
         """A HEARTBEAT now (after a mode or arming change)."""

@@ -26,12 +26,13 @@ import struct
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink2
 
 from tuavdefs import gcs
 from tuavdefs.gcs import GCS_TCP_PORT_DEFAULT, UDP_API_PORT_DEFAULT, UDP_GCS_PORT_DEFAULT
+from tuavdefs.logfile import LogFile
 from tuavdefs.signing import SigningMavlink
 
 Peer = tuple[Any, ...]
@@ -53,25 +54,33 @@ _TCP_BACKLOG_BYTES = 1 << 20
 
 
 class TelemetryLog:
-    """A ``.tlog``: timestamped raw frames, flushed at least once a second."""
+    """A ``.tlog``: timestamped raw frames, flushed at least once a second. A write that
+    fails (a full disk, a lost file) or would pass ``max_bytes`` ends the log, not the
+    process (:class:`tuavdefs.logfile.LogFile`): ``on_end(why)`` is called once (the
+    autopilot sets it to say so)."""
 
-    def __init__(self, path: Path | str) -> None:
+    def __init__(self, path: Path | str, max_bytes: int | None = None) -> None:
         self.path = Path(path)
-        self._file: BinaryIO = open(self.path, "ab")  # noqa: SIM115 - lives with the process
-        self._flushed = time.monotonic()
+        self.on_end: Callable[[str], None] | None = None
+        self._file = LogFile(self.path, append=True, max_bytes=max_bytes,
+                             on_end=self._ended, flush_s=_TLOG_FLUSH_S)
+
+    @property
+    def ended(self) -> str | None:
+        """Why the log ended (None while it is written)."""
+        return self._file.ended
+
+    def _ended(self, why: str) -> None:
+        if self.on_end is not None:
+            self.on_end(why)
 
     def write(self, data: bytes) -> None:
         """Record one frame (or several back to back) with the current wall time."""
         self._file.write(_TLOG_STAMP.pack(int(time.time() * 1e6)) + data)
-        now = time.monotonic()
-        if now - self._flushed >= _TLOG_FLUSH_S:
-            self._file.flush()
-            self._flushed = now
 
     def flush(self) -> None:
         """Write out what is buffered."""
         self._file.flush()
-        self._flushed = time.monotonic()
 
     def close(self) -> None:
         """Flush and close."""

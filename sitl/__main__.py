@@ -28,6 +28,7 @@ from tuavdefs import simlink as sl
 from tuavdefs.canbus import CanBusError, CanLink
 from tuavdefs.frames import quat_multiply
 from tuavdefs.jit import load_kernels, watch_compiles
+from tuavdefs.logfile import LogFile, guard_stdio, mb_to_bytes
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import ParameterError, load_option
 
@@ -76,6 +77,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="seed of the sensors' noise and biases (>= 0)")
     ap.add_argument("--truth-log", default=None, help="CSV of the plant's truth")
     ap.add_argument("--log-every", type=int, default=5, help="log every N control periods")
+    ap.add_argument("--log-max-mb", type=float, default=None, metavar="MB",
+                    help="end the truth log when it reaches this size (default: no cap); "
+                         "a full disk ends it too, and the simulation goes on")
     ap.add_argument("--can", default=None, metavar="SPEC",
                     help="CAN bus of the winder: auto, socketcan:IFACE, udp_multicast[:GROUP] "
                          "(default: none, the winder stays braked)")
@@ -89,9 +93,15 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _log_ended(why: str) -> None:
+    """A log of the plant's ended (full disk, lost file, cap): said; the plant flies on."""
+    print(f"plant: {why}; the simulation goes on", file=sys.stderr, flush=True)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the plant process; returns the exit code."""
     args = build_parser().parse_args(argv)
+    guard_stdio()   # a process log on a full disk loses lines, not the plant
     real_time = args.real_time or args.speedup == 1.0
     if not args.lockstep_spin_us >= 0.0:
         print("plant: --lockstep-spin-us must be >= 0", file=sys.stderr)
@@ -139,7 +149,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         except CanBusError as exc:
             print(f"plant: {exc}", file=sys.stderr)
             return 1
-    log = (TruthLog(open(args.truth_log, "w"), args.log_every)  # noqa: SIM115
+    log = (TruthLog(LogFile(args.truth_log, text=True, max_bytes=mb_to_bytes(args.log_max_mb),
+                            on_end=_log_ended), args.log_every)
            if args.truth_log else None)
     try:
         server = SimLinkServer(plant, control_rate_hz=args.control_rate,

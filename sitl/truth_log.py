@@ -14,7 +14,7 @@ turbulence and gusts, as the last physics step sampled it).
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Protocol
 
 from sitl.plant import DRUM_RATE, POS, QUAT, VEL
 from tuavdefs.frames import quat_to_euler
@@ -31,12 +31,21 @@ TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "roll
 _ROW = ",".join(["%r"] * len(TRUTH_COLUMNS)) + "\n"
 
 
+class TextSink(Protocol):
+    """Where the rows go: a text file, or a :class:`tuavdefs.logfile.LogFile` (which ends
+    the log, not the plant, when the disk fills)."""
+
+    def write(self, text: str, /) -> object: ...
+    def flush(self) -> object: ...
+    def close(self) -> object: ...
+
+
 class TruthLog:
     """The plant's truth as CSV on ``stream`` (the header written at once), a row every
     ``every_periods`` control periods (at least 1), flushed at least once a wall-clock
     second."""
 
-    def __init__(self, stream: TextIO, every_periods: int) -> None:
+    def __init__(self, stream: TextSink, every_periods: int) -> None:
         self.stream = stream
         self.every = max(1, every_periods)
         self._count = 0

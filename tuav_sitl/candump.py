@@ -28,6 +28,7 @@ from typing import TextIO
 from tuav_sitl.candump_format import format_default, format_log
 from tuavdefs.can_protocol import dbc_path
 from tuavdefs.canbus import CanBusError, CanLink
+from tuavdefs.logfile import LogFile, mb_to_bytes
 
 #: The interface name printed for a udp_multicast bus (candump needs a name).
 MULTICAST_IFACE = "udpmc0"
@@ -43,6 +44,8 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--can", default="auto", metavar="SPEC",
                     help="auto, socketcan:IFACE, udp_multicast[:GROUP]")
     ap.add_argument("--log", default=None, help="also write -L lines to this file")
+    ap.add_argument("--log-max-mb", type=float, default=None, metavar="MB",
+                    help="end --log's file when it reaches this size (default: no cap)")
     ap.add_argument("--count", type=int, default=None, help="stop after N frames")
     ap.add_argument("--timeout", type=float, default=None,
                     help="stop after this many seconds without a frame")
@@ -69,20 +72,24 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         import cantools
 
         db = cantools.database.load_file(str(dbc_path()), strict=True)
-    log_file = open(args.log, "a") if args.log else None  # noqa: SIM115
+    def log_ended(why: str) -> None:
+        print(f"tuav-sitl candump: {why}; the bus is still printed", file=sys.stderr,
+              flush=True)
+
+    log_file = (LogFile(args.log, text=True, append=True,
+                        max_bytes=mb_to_bytes(args.log_max_mb), on_end=log_ended)
+                if args.log else None)
     stop = {"now": False}
     signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
     show = args.silent == 0
     n = 0
     bad = 0
     last_rx = time.monotonic()
-    last_flush = last_rx
     counted = {"done": False}
 
     def take(frames: list) -> None:
-        """Print and log a burst of frames (and flush the log at most once a second)."""
-        nonlocal n, bad, last_flush
-        now = time.monotonic()
+        """Print and log a burst of frames (the log flushed at most once a second)."""
+        nonlocal n, bad
         lines: list[str] = []
         logged: list[str] = []
         for f in frames:
@@ -115,9 +122,6 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             out.flush()
         if log_file is not None and logged:
             log_file.write("\n".join(logged) + "\n")
-            if now - last_flush >= 1.0:
-                log_file.flush()
-                last_flush = now
 
     try:
         while not stop["now"]:
