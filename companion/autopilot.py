@@ -41,6 +41,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -143,11 +144,10 @@ class Autopilot:
         self._watch_comp: Any = None
         self.logs: Any = None
         """The onboard-log service (``companion.log_protocol.LogProtocol``) or None."""
-        self.flight_log: Any = None
-        """This boot's onboard log (``companion.flight_log.FlightLog``) or None."""
+        self._flight_log: Any = None
         self._logged_mode: Any = None
         #: Logs that ended (a full disk, a lost file, a cap) and are still to be said.
-        self._logs_ended: list[str] = []
+        self._logs_ended: deque[str] = deque()   # appended from the log writer's thread
         if endpoints.tlog is not None:
             endpoints.tlog.on_end = self.log_ended
 
@@ -261,14 +261,26 @@ class Autopilot:
         if self.component is not None and self.component.backlogged:
             self.component.flush()
 
+    @property
+    def flight_log(self) -> Any:
+        """This boot's onboard log (``companion.flight_log.FlightLog``) or None; its end (a
+        full disk, a cap) is said as any log's (:meth:`log_ended`)."""
+        return self._flight_log
+
+    @flight_log.setter
+    def flight_log(self, log: Any) -> None:
+        self._flight_log = log
+        if log is not None:
+            log.writer.on_end = self.log_ended
+
     def log_ended(self, why: str) -> None:
         """A log of the vehicle's ended (``why``: which and what happened); said with the
         next :meth:`service` (not here: the failing write may be inside a send)."""
         self._logs_ended.append(why)
 
     def _say_logs_ended(self) -> None:
-        texts, self._logs_ended = self._logs_ended, []
-        for why in texts:
+        while self._logs_ended:
+            why = self._logs_ended.popleft()
             print(f"companion: {why}; flying on", file=sys.stderr, flush=True)
             self.statustext(M.MAV_SEVERITY_ERROR, f"Logging: {why}")
 
