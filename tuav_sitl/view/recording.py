@@ -117,7 +117,7 @@ def blueprint() -> Any:
             ),
             column_shares=[3, 2],
         ),
-        rrb.TimePanel(timeline=TIMELINE, state="expanded"),
+        rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
         collapse_panels=True,
     )
 
@@ -213,7 +213,7 @@ class SceneLogger:
             radii=rr.Radius.ui_points(2.5)), static=True)
         rec.log(Entity.ROTORS, rr.Cylinders3D(
             lengths=[0.02 * arm] * 4, radii=[0.45 * arm] * 4, centers=centres,
-            labels=[str(i + 1) for i in range(4)], colors=[(120, 120, 120)] * 4),
+            colors=[(120, 120, 120)] * 4),
             static=True)
         names = {Entity.TENSION_TOP: ("at the vehicle", (214, 39, 40)),
                  Entity.TENSION_DRUM: ("at the drum", (31, 119, 180)),
@@ -366,17 +366,28 @@ class SceneLogger:
                                                    radii=rr.Radius.ui_points(2.0)),
                     rr.Points3D(pts, colors=_TETHER_COLOR, radii=rr.Radius.ui_points(3.0)))
 
-    def log_fixes(self, path: str, t: np.ndarray, pos: np.ndarray) -> None:
+    def log_fixes(self, path: str, t: np.ndarray, pos: np.ndarray,
+                  accuracy_m: np.ndarray | None = None) -> None:
         """Position fixes (``Entity.GNSS_FIX`` or ``Entity.TETHER_FIX``): times [s] and
-        positions [m]."""
+        positions [m]; with ``accuracy_m`` (their 1-sigma along x, y, z [m]) also their
+        3-sigma ellipsoids (``PATH/accuracy``)."""
         pos = np.asarray(pos, float).reshape(-1, 3)
+        t = np.asarray(t, float)
         ok = _finite_rows(pos)
-        if ok.any():
-            color = (255, 127, 14) if path == Entity.GNSS_FIX else (148, 103, 189)
-            self.rec.send_columns(path, indexes=self._time(np.asarray(t, float)[ok]),
-                                  columns=self.rr.Points3D.columns(
-                                      positions=pos[ok], colors=np.tile(color, (int(ok.sum()),
-                                                                                1))))
+        if not ok.any():
+            return
+        color = (255, 127, 14) if path == Entity.GNSS_FIX else (148, 103, 189)
+        n = int(ok.sum())
+        self.rec.send_columns(path, indexes=self._time(t[ok]),
+                              columns=self.rr.Points3D.columns(
+                                  positions=pos[ok], colors=np.tile(color, (n, 1))))
+        if accuracy_m is not None:
+            acc = np.asarray(accuracy_m, float).reshape(-1, 3)
+            ok &= _finite_rows(acc) & (acc > 0).all(axis=1)
+            if ok.any():
+                self.rec.send_columns(f"{path}/accuracy", indexes=self._time(t[ok]),
+                                      columns=self.rr.Ellipsoids3D.columns(
+                                          centers=pos[ok], half_sizes=3.0 * acc[ok]))
 
     def log_text(self, t_s: float, text: str, level: LogLevel = LogLevel.INFO) -> None:
         """A message at simulated time ``t_s`` [s]."""
