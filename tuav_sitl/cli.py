@@ -43,7 +43,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     compile_if_cold(progress)
     stop_reports = report_compiles(progress)
     try:
-        result = run_scenario(scenario, out, progress=progress, recording=True)
+        result = run_scenario(scenario, out, progress=progress,
+                              recording=not args.no_recording)
     finally:
         stop_reports()
     m = result.metrics
@@ -56,7 +57,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(f"wrote {len(drawn.figures)} figures in {out}/figures")
         if drawn.animation:
             print("wrote " + ", ".join(str(a) for a in drawn.animation))
-    _report_recording(result.recording, out)
+    if not args.no_recording:
+        _report_recording(result.recording, out)
     keys = ["position_rmse_m", "position_max_error_m", "attitude_rmse_rad",
             "tether_length_rmse_m", "min_tether_slack_m", "max_tension_n",
             "motor_saturation_fraction", "settling_time_s", "overshoot_percent",
@@ -227,6 +229,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="override the scenario's simulated time [s]")
     run.add_argument("--no-figures", action="store_true", help="skip figures and animation")
     run.add_argument("--no-animation", action="store_true", help="skip the animation")
+    run.add_argument("--no-recording", action="store_true",
+                     help="skip recording.rrd (the Rerun recording 'tuav-sitl view' opens)")
     run.add_argument("--quiet", action="store_true",
                      help="no progress (simulation, figures, animation frames)")
     run.set_defaults(func=_cmd_run)
