@@ -56,6 +56,7 @@ from tuavdefs import component_link as cl
 from tuavdefs import signing as sg
 from tuavdefs import simlink as sl
 from tuavdefs.jit import load_kernels, watch_compiles
+from tuavdefs.logfile import guard_stdio, mb_to_bytes
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
 
@@ -138,6 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="push MAVLink by UDP here (repeatable; default 127.0.0.1:14550 and "
                          "127.0.0.1:14540; 'none' for none)")
     ap.add_argument("--tlog", default=None, help="telemetry log of all ground-station traffic")
+    ap.add_argument("--log-max-mb", type=float, default=None, metavar="MB",
+                    help="end the telemetry log when it reaches this size (default: no "
+                         "cap); a full disk ends it too, and the vehicle flies on")
     ap.add_argument("--telemetry-batch", type=float, default=0.0, metavar="S",
                     help="write what a TCP ground station did not ask for (telemetry, "
                          "broadcasts) at most every S seconds of wall time, replies at once "
@@ -161,6 +165,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the companion process; returns the exit code."""
     args = build_parser().parse_args(argv)
+    guard_stdio()   # a process log on a full disk loses lines, not the vehicle
     params = load_option(SystemParams, args.params, "companion")
     gains = load_option(FlightControlParams, args.gains, "companion")
     nav_params = load_option(NavigationParams, args.nav, "companion")
@@ -180,7 +185,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         components = (ComponentServer(args.component_port, signing=signing.component)
                       if args.component_port else None)
         endpoints = MavlinkEndpoints(None if args.gcs_tcp < 0 else args.gcs_tcp, udp,
-                                     tlog=TelemetryLog(args.tlog) if args.tlog else None,
+                                     tlog=(TelemetryLog(args.tlog, mb_to_bytes(args.log_max_mb))
+                                           if args.tlog else None),
                                      batch_s=max(args.telemetry_batch, 0.0),
                                      signing=signing.gcs)
     except OSError as exc:

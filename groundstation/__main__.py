@@ -44,6 +44,7 @@ from tuavdefs import signing as sg
 from tuavdefs.canbus import CanBusError, CanLink
 from tuavdefs.component_link import COMPONENT_PORT_DEFAULT
 from tuavdefs.jit import load_kernels, watch_compiles
+from tuavdefs.logfile import guard_stdio
 from tuavdefs.params import SystemParams
 from tuavdefs.paramspec import load_option
 
@@ -78,6 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ground-station process; returns the exit code."""
     args = build_parser().parse_args(argv)
+    guard_stdio()   # a process log on a full disk loses lines, not the winder's control
     params = load_option(SystemParams, args.params, "groundstation")
     # every kernel it calls made machine code now, not in its loop (docs/architecture.md)
     load_kernels(("groundstation", "tuavdefs"), sys.stdout, "groundstation")

@@ -28,7 +28,7 @@ from typing import TextIO
 from tuav_sitl.candump_format import format_default, format_log
 from tuavdefs.can_protocol import dbc_path
 from tuavdefs.canbus import CanBusError, CanLink
-from tuavdefs.logfile import LogFile, mb_to_bytes
+from tuavdefs.logfile import LogFile, guard_stdio, mb_to_bytes
 
 #: The interface name printed for a udp_multicast bus (candump needs a name).
 MULTICAST_IFACE = "udpmc0"
@@ -66,6 +66,8 @@ def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         return 1
     if args.interval > 0.0:
         link.set_receive_buffer(RECORDER_BUFFER_BYTES)
+    if args.silent == 2:
+        guard_stdio()   # a recorder: its stderr (a file in the run folder) may fill up
     iface = link.channel if link.interface == "socketcan" else MULTICAST_IFACE
     db = None
     if args.decode:

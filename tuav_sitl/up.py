@@ -15,6 +15,7 @@ import dataclasses
 import datetime as _dt
 import math
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -109,6 +110,38 @@ def _can_spec(spec: str, instance: int) -> str:
         base, last = DEFAULT_GROUP.rsplit(".", 1)
         return f"udp_multicast:{base}.{int(last) + instance}"
     return f"{interface}:{channel}"
+
+
+class DiskWatch:
+    """Says once on stderr when the run folder's disk is full (every log there ends, each
+    process says which, the stack flies on), and again if it fills after having room."""
+
+    #: Free space below which the disk counts as full [bytes].
+    FULL_BYTES = 64 * 1024
+    #: Wall time between two looks [s].
+    EVERY_S = 1.0
+
+    def __init__(self, run_dir: Path) -> None:
+        self.run_dir = run_dir
+        self.full = False
+        self._next = 0.0
+
+    def check(self) -> None:
+        """Look at the disk if it is time to."""
+        now = time.monotonic()
+        if now < self._next:
+            return
+        self._next = now + self.EVERY_S
+        try:
+            free = shutil.disk_usage(self.run_dir).free
+        except OSError:
+            return
+        full = free < self.FULL_BYTES
+        if full and not self.full:
+            print(f"tuav-sitl up: the disk of {self.run_dir} is full ({free} bytes free): "
+                  "the run's logs end there; the stack flies on", file=sys.stderr,
+                  flush=True)
+        self.full = full
 
 
 class Stack:
@@ -311,6 +344,10 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                      help="MAVLink 2 signing on from the start with this key (64 "
                           "hexadecimal digits)")
     ap.add_argument("--logdir", default="runs", help="where run folders go")
+    ap.add_argument("--log-max-mb", type=float, default=None, metavar="MB",
+                    help="end each log of the run (truth.csv, flight.tlog, can.log) when it "
+                         "reaches this size [MB]; a full disk ends them too, and the stack "
+                         "flies on (docs/usage.md: the logs' volume)")
     ap.add_argument("--out", type=_out, action="append", default=[],
                     metavar="udp:HOST:PORT",
                     help="also push MAVLink by UDP here (repeatable, as MAVProxy's --out)")
@@ -531,11 +568,12 @@ def run_up(args: argparse.Namespace) -> int:
                                                  params.environment.gravity_m_s2),
             accel_bias_sigma_m_s2=CALIBRATED_ACCEL_BIAS_SIGMA_M_S2)
     (run_dir / "estimator.toml").write_text(_to_toml(to_dict(estimator)))
+    log_cap = ["--log-max-mb", repr(args.log_max_mb)] if args.log_max_mb else []
     plant_args = ["-m", "sitl", *plant_listen_args(sim), "--can", can, "--home", *home,
                   "--gnss", args.gnss, "--position", *map(str, args.position),
                   *(["--heading", repr(h.heading_deg)] if h.heading_deg is not None else []),
                   "--truth-log", str(run_dir / "truth.csv"), *faults_args,
-                  "--params", str(run_dir / "params.toml")]
+                  "--params", str(run_dir / "params.toml"), *log_cap]
     if math.isfinite(speedup):
         plant_args += ["--speedup", repr(speedup)]
     if args.duration is not None:
@@ -545,7 +583,7 @@ def run_up(args: argparse.Namespace) -> int:
                  "--gcs-udp", f"127.0.0.1:{ports.udp_gcs}",
                  "--gcs-udp", f"127.0.0.1:{ports.udp_api}",
                  *[a for host, port in args.out for a in ("--gcs-udp", f"{host}:{port}")],
-                 "--tlog", str(run_dir / "flight.tlog"),
+                 "--tlog", str(run_dir / "flight.tlog"), *log_cap,
                  "--param-file", str(run_dir / "companion.parm"),
                  "--log-dir", str(run_dir / "logs"),
                  "--estimator", str(run_dir / "estimator.toml"),
@@ -584,7 +622,7 @@ def run_up(args: argparse.Namespace) -> int:
     try:
         stack.start_recorder("candump", ["-m", "tuav_sitl", "candump", "-s", "2", "--can", can,
                                          "--interval", repr(RECORDER_INTERVAL_S),
-                                         "--log", str(run_dir / "can.log")])
+                                         "--log", str(run_dir / "can.log"), *log_cap])
         stack.start("plant", plant_args, "listening on")
         stack.start("groundstation", gs_args, "groundstation: CAN")
         stack.start("companion", comp_args, "companion: connected")
@@ -603,8 +641,10 @@ def run_up(args: argparse.Namespace) -> int:
             print(_banner(run_dir, ports, sim, can, args, speedup, sched, key), flush=True)
             if live is not None:
                 print(f"  {live.banner}", flush=True)
+        disk = DiskWatch(run_dir)
         while stopping["signal"] is None:
             stack.echo_new()
+            disk.check()
             ended = stack.first_exit()
             if ended is not None:
                 name, rc = ended
