@@ -316,7 +316,7 @@ class FlightLog:
 
     def tether(self, t_s: float, length_m: float, speed_m_s: float, tension_n: float
                ) -> None:
-        self.writer.write("TETH", int(t_s * 1e6), length_m, speed_m_s, tension_n)
+        self.writer.write("TETH", round(t_s * 1e6), length_m, speed_m_s, tension_n)
 
     def event(self, event: LogEvent) -> None:
         """An ``EV`` record now."""
@@ -333,7 +333,7 @@ class FlightLog:
         """The records of one control period: ``inputs`` what the simulator link delivered,
         ``out`` what ``onboard`` (the companion's onboard step) made of them."""
         t = inputs.t_s
-        self._t_us = t_us = int(t * 1e6)
+        self._t_us = t_us = round(t * 1e6)
         if not self._started:
             self._start(t)
         w = self.writer
@@ -377,11 +377,13 @@ class FlightLog:
         """``EV`` and ``ERR`` for what changed since the last period."""
         was = self._events_state
         self._events_state = now
-        armed, landed, home, gcs_lost, winch_lost, ekf_bad, ekf_failsafe = now
-        if armed != was[0]:
-            self.event(LogEvent.ARMED if armed else LogEvent.DISARMED)
-        if landed != was[1]:
+        armed, landed, home = now[:3]
+        if armed and not was[0]:
+            self.event(LogEvent.ARMED)
+        if landed != was[1]:        # (after arming, before the disarming it brings)
             self.event(LogEvent.LAND_COMPLETE if landed else LogEvent.NOT_LANDED)
+        if was[0] and not armed:
+            self.event(LogEvent.DISARMED)
         if home != was[2] and home is not None:
             self.event(LogEvent.SET_HOME)
         for i, subsystem, bad in ((3, ErrorSubsystem.FAILSAFE_GCS, ErrorCode.OCCURRED),
@@ -500,7 +502,7 @@ class FlightLog:
         """The periodic records of telemetry ``tm`` (companion.telemetry.Telemetry) when
         due; ``ref`` the navigator's reference (None when not flying), ``home_m`` its home
         (None: unknown)."""
-        self._t_us = t_us = int(tm.t_s * 1e6)
+        self._t_us = t_us = round(tm.t_s * 1e6)
         if not self._started:
             self._start(tm.t_s)
         if not self._telemetry.due(tm.t_s):
