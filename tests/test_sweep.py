@@ -4,7 +4,9 @@ and interval against scipy, and bad sweep files refused by field."""
 
 from __future__ import annotations
 
+import json
 import math
+import sys
 import textwrap
 from pathlib import Path
 
@@ -399,3 +401,35 @@ def test_results_writes_where_it_says_whatever_the_current_folder(
     assert main(["results", "--quiet"]) == 2
     assert "give --out FILE" in capsys.readouterr().err
     assert written == [] and not (tmp_path / "docs").exists()
+
+
+def test_a_sweep_meeting_a_run_that_cannot_fly_records_it_and_goes_on(tmp_path, capsys):
+    """A drawn system no rotor can hold (a 1000 m/s wind: no hover trim) used to end the
+    sweep with its exception; it is a failed row (kind "error", why in runs.json and on the
+    progress stream) and the other runs fly."""
+    sweep, sc = sw.load_sweep(_write(tmp_path, """\
+        name = "gale"
+        scenario = "hover"
+        runs = 2
+        seed = 1
+        duration_s = 11.0
+
+        [[vary]]
+        parameter = "wind_speed_m_s"
+        distribution = "choice"
+        values = [1000.0, 0.0]
+        """, "gale.toml"))
+    out = tmp_path / "out"
+    rows, summary = sw.run_sweep(sweep, sc, out, workers=1, progress=sys.stderr)
+    by_wind = {r["wind_speed_m_s"]: r for r in rows}
+    assert set(by_wind) == {0.0, 1000.0}
+    bad, good = by_wind[1000.0], by_wind[0.0]
+    assert bad["failed"] and bad["failures"] == "error"
+    assert "cannot hold" in bad["error"] and bad["position_rmse_m"] is None
+    assert good["position_rmse_m"] is not None and good["position_rmse_m"] < 0.1
+    assert summary["failures_by_kind"]["error"] == 1 and summary["runs"] == 2
+    assert "did not fly: ValueError" in capsys.readouterr().err
+    again = sw.read_table(out / "runs.csv", sweep)          # the table holds both rows
+    assert sorted(r["index"] for r in again) == [0, 1]
+    kept = json.loads((out / "runs.json").read_text())
+    assert any("cannot hold" in (r.get("error") or "") for r in kept)

@@ -35,7 +35,7 @@ import numpy as np
 from sitl.faults import NEVER_S, FaultParams
 from tuav_sitl.scenario import ScenarioParams, load_scenario
 from tuavdefs.params import GustParams
-from tuavdefs.paramspec import ParameterError, Params, load_toml, quantity
+from tuavdefs.paramspec import ParameterError, Params, load_toml, quantity, toml_line
 
 
 class Quantity(enum.Enum):
@@ -91,6 +91,8 @@ class FailureKind(enum.Enum):
     DIVERGED = "diverged"                #: the position error grew beyond bounds
     CRASHED = "crashed"                  #: the vehicle came down to the ground in flight
     TRACKING = "tracking"                #: the position RMSE is above its target
+    REFUSED = "refused"                  #: its drawn system was refused (a bad parameter)
+    ERROR = "error"                      #: the run raised (e.g. no hover trim exists)
 
 
 @dataclass(frozen=True)
@@ -291,7 +293,8 @@ def load_sweep(name_or_path: str | Path) -> tuple[SweepParams, ScenarioParams]:
     if sweep.duration_s > 0:
         if sc.metrics_after_s >= sweep.duration_s:
             raise ParameterError(f"{path.stem}.duration_s", "must be above the scenario's "
-                                 f"metrics_after_s ({sc.metrics_after_s} s)")
+                                 f"metrics_after_s ({sc.metrics_after_s} s)", source=str(path),
+                                 line=toml_line(path.read_text(), ("duration_s",)))
         sc = sc.replace(duration_s=sweep.duration_s)
     return sweep, sc
 
@@ -423,9 +426,25 @@ def run_one(sweep: SweepParams, sc: ScenarioParams, index: int) -> dict[str, Any
     from tuav_sitl.offline import run_scenario
 
     seed, drawn = draw(sweep, index)
-    result = run_scenario(apply(sc, seed if sweep.seeds else None, drawn, sweep.faults),
-                          progress=None)
+    try:
+        result = run_scenario(apply(sc, seed if sweep.seeds else None, drawn, sweep.faults),
+                              progress=None)
+    except ParameterError as exc:   # a drawn system the plant or a controller refuses
+        return failed_row(sweep, index, seed, drawn, FailureKind.REFUSED, str(exc))
+    except Exception as exc:  # noqa: BLE001 - one run's fault must not end the sweep
+        return failed_row(sweep, index, seed, drawn, FailureKind.ERROR,
+                          f"{type(exc).__name__}: {exc}")
     return row_of(sweep, sc, index, seed, drawn, result.metrics, result.series)
+
+
+def failed_row(sweep: SweepParams, index: int, seed: int,
+               drawn: dict[str, float | str | None], kind: FailureKind, why: str
+               ) -> dict[str, Any]:
+    """The row of a run that did not fly: no metrics, failed with ``kind``; ``error`` says
+    why (kept in runs.json, said by the sweep's progress)."""
+    return {"index": index, "seed": seed, **{c: drawn[c] for c in drawn_columns(sweep)},
+            **dict.fromkeys(METRIC_COLUMNS), "failed": True, "failures": kind.value,
+            "error": why}
 
 
 def row_of(sweep: SweepParams, sc: ScenarioParams, index: int, seed: int,
@@ -663,6 +682,9 @@ def run_sweep(sweep: SweepParams, sc: ScenarioParams, out_dir: Path, *,
                 rows[row["index"]] = row
                 writer.add(row)
                 bar.add(row["failed"])
+                if row.get("error") and progress is not None:
+                    progress.write(f"\nrun {row['index']} (seed {row['seed']}) did not fly: "
+                                   f"{row['error']}\n")
                 if on_row is not None:
                     on_row(row)
         finally:
