@@ -224,3 +224,19 @@ def test_load_kernels_compiles_then_loads_and_late_compiles_are_told(tmp_path):
     assert json.loads(first[-1])[0] == 2 and json.loads(first[-1])[2] == 2
     second = run()      # (the bool call too is in the cache now)
     assert len(second) == 1 and json.loads(second[-1]) == [2, 0, 2], second
+
+
+#: Scenarios whose flights call every kernel the others do and more (the lumped line in a
+#: gust, a mission on the tether fix without GNSS, a hover through a GNSS loss).
+MANIFEST_SCENARIOS = ("gust-lumped", "mission-gnss-denied", "hover-gnss-loss")
+
+
+def test_the_manifest_has_every_signature_these_scenarios_call():
+    """Flown to their ends with TUAV_JIT_RECORD, these scenarios call no kernel with types
+    missing from tuavdefs/kernel_signatures.py (python -m tuav_sitl.kernel_manifest
+    regenerates it from all shipped scenarios)."""
+    from tuav_sitl import kernel_manifest
+
+    recorded = kernel_manifest.fly(MANIFEST_SCENARIOS)
+    assert {n.partition(".")[0] for n in recorded} >= {"sitl", "companion", "groundstation"}
+    assert kernel_manifest.missing(recorded, jit.manifest()) == []

@@ -36,8 +36,9 @@ HALVES: tuple[tuple[str, str, str], ...] = (
     ("the plant's kernels", "companion,groundstation", "sitl"),
     ("the controllers' kernels", "sitl", "companion,groundstation,tuavdefs"),
 )
-#: A warm-up process that takes longer than this is abandoned [s].
-_TIMEOUT_S = 600.0
+#: A warm-up process that finishes no compilation for this long is abandoned [s] (one
+#: kernel takes seconds, a minute on a machine loaded twenty times over).
+_SILENT_S = 300.0
 
 
 def needs_warm_up() -> bool:
@@ -103,9 +104,12 @@ def warm_up(stream: TextIO | None) -> float:
                 [sys.executable, "-c", _CHILD, packages], env=env, text=True,
                 stdout=subprocess.PIPE, stderr=err), err))
 
+        heard = {label: time.monotonic() for label, _, _ in procs}
+
         def follow(label: str, proc: subprocess.Popen[str]) -> None:
             assert proc.stdout is not None
             for out in proc.stdout:
+                heard[label] = time.monotonic()
                 with lock:
                     counts[label] += 1
                     line(out.split()[0].rsplit(".", 1)[-1] if out.strip() else "")
@@ -121,11 +125,11 @@ def warm_up(stream: TextIO | None) -> float:
         with lock:
             line("")
         try:
-            for (_, proc, _), t in zip(procs, threads, strict=True):
-                t.join(_TIMEOUT_S)
-                if t.is_alive():
-                    proc.kill()
-                    t.join()
+            for (label, proc, _), t in zip(procs, threads, strict=True):
+                while t.is_alive():
+                    t.join(1.0)
+                    if t.is_alive() and time.monotonic() - heard[label] > _SILENT_S:
+                        proc.kill()     # stuck: the processes compile what is missing
         finally:    # (stopped by Ctrl-C: no warm-up process is left behind)
             for _, proc, _ in procs:
                 if proc.poll() is None:
