@@ -295,6 +295,7 @@ class FlightLog:
         self._started = False
         self._events_state = _POWER_ON
         self._status: FilterStatus | None = None
+        self._healthy_once = False
         self._glitch = False
         self._gps_ms: int | None = None          # the last fix's time [ms]
         self._gps_bad_hacc = False
@@ -361,8 +362,13 @@ class FlightLog:
             self._checks(t_us, status, onboard)
         nav, fs = onboard.nav, onboard.failsafes
         armed = nav.armed
+        healthy = onboard.navigation_healthy
+        if healthy:
+            self._healthy_once = True
+        # (the EKF check from the filter's first health: not while a vehicle started in the
+        # air flies open loop until it aligns)
         now = (armed, nav.landed, nav.home_m, fs.gcs_lost, fs.winch_lost,
-               armed and not onboard.navigation_healthy, onboard.ekf_failsafe)
+               armed and self._healthy_once and not healthy, onboard.ekf_failsafe)
         if now != self._events_state:
             self._events(now)
 
