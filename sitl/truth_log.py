@@ -9,6 +9,13 @@ paid-out ``tether_length_m`` [m], the drum's rate ``drum_rate_rad_s`` [rad/s], `
 (1.0 or 0.0), the held rotor commands ``rotor1`` .. ``rotor4`` (normalised, [0, 1]) and
 the wind at the UAV ``wind_x_m_s, wind_y_m_s, wind_z_m_s`` [m/s] (the air's velocity: mean,
 turbulence and gusts, as the last physics step sampled it).
+
+With the lumped tether (``[tether] model = "lumped"``) and a log that is a file
+(:class:`tuavdefs.logfile.LogFile`), the line's nodes are logged beside it, to
+``tether_nodes.csv`` in the same folder, every 1/:data:`NODES_RATE_HZ` s of simulated time
+(on the logged periods): a row ``t_s,n,x0,y0,z0,...`` of the ``n`` points from the
+winder's exit to the attachment point [m, to 0.1 mm] (``n`` changes as nodes are added and
+removed at the drum).
 """
 
 from __future__ import annotations
@@ -29,6 +36,10 @@ TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "roll
                  "wind_z_m_s")
 #: A row of the truth log: the columns' values (floats) as their repr.
 _ROW = ",".join(["%r"] * len(TRUTH_COLUMNS)) + "\n"
+#: The lumped line's nodes beside the truth log: the file's name, its rate [Hz of
+#: simulated time].
+NODES_NAME = "tether_nodes.csv"
+NODES_RATE_HZ = 15.0
 
 
 class TextSink(Protocol):
@@ -51,6 +62,9 @@ class TruthLog:
         self._count = 0
         self._flushed = time.monotonic()
         stream.write(",".join(TRUTH_COLUMNS) + "\n")
+        self._nodes: TextSink | None = None
+        self._nodes_next_s = 0.0
+        self._nodes_checked = False
 
     def record(self, server: SimLinkServer) -> None:
         """Called after each control period: the row of the state ``server.plant`` has
@@ -66,11 +80,32 @@ class TruthLog:
                                   float(p.tether_length_m), x[DRUM_RATE],
                                   1.0 if server.armed else 0.0, float(c0), float(c1),
                                   float(c2), float(c3), *p.wind_m_s))
+        if not self._nodes_checked:
+            self._nodes_checked = True
+            self._nodes = self._nodes_log(p.model.lumped)
+        if self._nodes is not None and p.t_s >= self._nodes_next_s - 1e-9:
+            self._nodes_next_s += 1.0 / NODES_RATE_HZ
+            nodes = p.line_nodes_m().ravel().tolist()
+            self._nodes.write(f"{float(p.t_s)!r},{len(nodes) // 3}," + ",".join(
+                [f"{v:.4f}" for v in nodes]) + "\n")
         now = time.monotonic()
         if now - self._flushed >= 1.0:
             self.stream.flush()
+            if self._nodes is not None:
+                self._nodes.flush()
             self._flushed = now
+
+    def _nodes_log(self, lumped: bool) -> TextSink | None:
+        """The nodes' log beside a truth log that is a file, on the lumped line."""
+        from tuavdefs.logfile import LogFile
+
+        if not lumped or not isinstance(self.stream, LogFile):
+            return None
+        return LogFile(self.stream.path.with_name(NODES_NAME), text=True,
+                       max_bytes=self.stream.max_bytes)
 
     def close(self) -> None:
         """Close the stream (what is buffered is written first)."""
         self.stream.close()
+        if self._nodes is not None:
+            self._nodes.close()

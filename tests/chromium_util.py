@@ -103,7 +103,8 @@ def screenshot(url: str, out: Path, size: tuple[int, int] = (1600, 900),
                     ("Runtime.evaluate", {"expression": "document.body ? "
                                           "document.body.innerText : ''",
                                           "returnByValue": True}),
-                    ("Page.captureScreenshot", {"format": "png"})], 240.0)
+                    ("Page.captureScreenshot", {"format": "png",
+                                                "optimizeForSpeed": True})], 240.0)
                 shot = base64.b64decode(res[1]["data"])
                 if loading_text in str(res[0].get("result", {}).get("value", "")):
                     last, last_change = b"", time.monotonic()

@@ -2,9 +2,10 @@
 processes already write into the run folder and logs it to Rerun.
 
 It reads, as they grow, the plant's truth (``truth.csv``, :mod:`sitl.truth_log`: the
-vehicle's pose, the paid-out length, the rotor commands; the tether's shape and tensions
-and L-bar computed from them as ``tuav-sitl plot`` imports an up run,
-:func:`tuav_sitl.up_series.build_series`) and the companion's ``flight.tlog`` (its
+vehicle's pose, the paid-out length, the rotor commands; the tether's tensions and L-bar
+computed from them as ``tuav-sitl plot`` imports an up run,
+:func:`tuav_sitl.up_series.build_series`; the tether's shape the lumped line's nodes of
+``tether_nodes.csv``, or the plant's catenary) and the companion's ``flight.tlog`` (its
 estimate in ``LOCAL_POSITION_NED``, the receiver's fix in ``GPS_RAW_INT`` with its
 accuracy, ``STATUSTEXT``). Nothing in the stack waits for it: the processes write their
 files whatever it does, and when it falls behind it takes what has accumulated in one
@@ -94,6 +95,56 @@ class TruthTail:
             self._file.close()
 
 
+class NodesTail:
+    """The lumped line's nodes of a growing ``tether_nodes.csv``
+    (:data:`sitl.truth_log.NODES_NAME`: rows ``t_s,n,x0,y0,z0,...``)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._file: Any = None
+        self._partial = ""
+
+    def read(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(times [s], nodes (rows, most points, 3) [m], NaN-padded) of the complete rows
+        written since the last call; None if there are none."""
+        if self._file is None:
+            try:
+                self._file = open(self.path)  # noqa: SIM115 - followed for the run's life
+            except OSError:
+                return None
+        times: list[float] = []
+        rows: list[np.ndarray] = []
+        while True:
+            line = self._file.readline()
+            if not line:
+                break
+            line = self._partial + line
+            if not line.endswith("\n"):
+                self._partial = line
+                break
+            self._partial = ""
+            try:
+                values = [float(v) for v in line.split(",")]
+                n = int(values[1])
+                pts = np.array(values[2:2 + 3 * n]).reshape(n, 3)
+            except (ValueError, IndexError):
+                continue
+            times.append(values[0])
+            rows.append(pts)
+        if not rows:
+            return None
+        most = max(r.shape[0] for r in rows)
+        nodes = np.full((len(rows), most, 3), np.nan)
+        for i, r in enumerate(rows):
+            nodes[i, :r.shape[0]] = r
+        return np.array(times), nodes
+
+    def close(self) -> None:
+        """Stop following the file."""
+        if self._file is not None:
+            self._file.close()
+
+
 class TlogTail:
     """The messages of a growing ``.tlog`` (each frame after its 8-byte big-endian
     microsecond stamp), decoded by pymavlink as they are completed."""
@@ -155,12 +206,17 @@ class LiveView:
 
     def __init__(self, rec: Any, run_dir: Path, params: Any,
                  home: tuple[float, float, float]) -> None:
+        from sitl.truth_log import NODES_NAME
         from tuav_sitl.view.recording import SceneLogger
+        from tuavdefs.params import TetherModel
 
         self.params = params
         self.home = home
-        self.logger = SceneLogger(rec, params, ground_half_m=_ground_half_m(params))
+        lumped = params.tether.kind == TetherModel.LUMPED
+        self.logger = SceneLogger(rec, params, lumped=lumped,
+                                  ground_half_m=_ground_half_m(params))
         self.truth = TruthTail(run_dir / "truth.csv")
+        self.nodes = NodesTail(run_dir / NODES_NAME) if lumped else None
         self.tlog = TlogTail(run_dir / "flight.tlog")
         self.t_s = 0.0            # the latest simulated time seen [s]
         self.rows = 0
@@ -184,6 +240,10 @@ class LiveView:
             if len(series["t"]) < MAX_CHUNK_ROWS:
                 break
         self.rows += logged
+        if self.nodes is not None:
+            nodes = self.nodes.read()
+            if nodes is not None:
+                self.logger.log_line_nodes(*nodes)
         self._messages(self.tlog.read())
         return logged
 
@@ -242,6 +302,8 @@ class LiveView:
         """Stop following the files."""
         self.truth.close()
         self.tlog.close()
+        if self.nodes is not None:
+            self.nodes.close()
 
 
 def _ground_half_m(params: Any) -> float:

@@ -1,0 +1,87 @@
+"""``tuav-sitl up --view web`` inside a private network namespace: the banner's URL, the
+web viewer served there while the stack flies in real time (and, where Chromium is
+installed, its picture), Ctrl-C, then the run folder's recording.rrd read back with
+rerun's own reader beside the truth.csv it was made from. Prints one JSON line."""
+
+import io
+import json
+import signal
+import sys
+import time
+import urllib.request
+from collections import Counter
+from pathlib import Path
+
+from tests.netns.up_session import processes_mentioning, up, wait_banner
+
+
+def main() -> int:
+    logdir = Path(sys.argv[1])
+    shot_path = Path(sys.argv[2]) if len(sys.argv) > 2 else None
+    p = up(logdir, "--view", "web", "--position", "4", "0", "10", "--goto", "6", "2", "12",
+           "--duration", "900")
+    banner = wait_banner(p)
+    # the line under the banner
+    view_line = p.stdout.readline()
+    out: dict = {"banner": banner, "view_line": view_line}
+    try:
+        url = view_line.split("viewer): ", 1)[1].split()[0] if "viewer): " in view_line \
+            else None
+        out["url"] = url
+        status = None
+        deadline = time.monotonic() + 180
+        while url is not None and time.monotonic() < deadline:
+            try:
+                with urllib.request.urlopen(url, timeout=5) as r:
+                    status = r.status
+                    break
+            except OSError:
+                time.sleep(1.0)
+        out["http_status"] = status
+        if shot_path is not None and url is not None:
+            sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+            from chromium_util import chromium, image_spread, screenshot
+
+            if chromium() is not None:
+                import numpy as np
+                from PIL import Image
+
+                try:
+                    png = screenshot(url, shot_path, size=(960, 540)).read_bytes()
+                except (TimeoutError, OSError, RuntimeError) as exc:
+                    # a software-rendered live scene can outlast the capture's wait on a
+                    # busy machine; the served recording's picture is test_view's
+                    out["shot_error"] = repr(exc)
+                else:
+                    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
+                    out["shot"] = {
+                        "spread": image_spread(png),
+                        "tether_pixels": int((np.abs(img - np.array([140, 86, 75]))
+                                              .max(axis=2) < 30).sum())}
+        else:
+            time.sleep(20.0)
+    finally:
+        p.send_signal(signal.SIGINT)
+        so, se = p.communicate(timeout=120)
+    out["rc"], out["stdout"], out["stderr"] = p.returncode, so[-2000:], se[-2000:]
+    out["left"] = processes_mentioning(str(logdir))
+    run = next(logdir.iterdir())
+    out["plant_last"] = (run / "plant.log").read_text().strip().splitlines()[-1]
+    out["view_log"] = (run / "view.log").read_text()[-2000:]
+    out["truth_rows"] = len((run / "truth.csv").read_text().splitlines()) - 1
+    from rerun.chunk import RrdReader
+
+    rows: Counter = Counter()
+    static = set()
+    for chunk in RrdReader(run / "recording.rrd").stream():
+        if chunk.is_static:
+            static.add(chunk.entity_path)
+        else:
+            rows[chunk.entity_path] += chunk.num_rows
+    out["rows"], out["static"] = dict(rows), sorted(static)
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
