@@ -342,7 +342,8 @@ class FlightLog:
         if gps is not None:
             self._gps(t_us, gps, onboard)
         imu = inputs.imu
-        if imu is not None and self._fast.due(t):
+        fast, slow = self._fast, self._slow     # (the method called only when near due)
+        if imu is not None and t >= fast.next_s - 1e-6 and fast.due(t):
             p, q, r = flu_to_frd(imu.gyro_flu_rad_s)
             ax, ay, az = flu_to_frd(imu.accel_flu_m_s2)
             bits = imu.fields_updated
@@ -350,7 +351,7 @@ class FlightLog:
             w.write("IMU", t_us, 0, p, q, r, ax, ay, az, 0, 0, imu.temperature_c,
                     int(bits & SENSOR_GYRO == SENSOR_GYRO),
                     int(bits & SENSOR_ACCEL == SENSOR_ACCEL), rate_hz, rate_hz)
-        if self._slow.due(t):
+        if t >= slow.next_s - 1e-6 and slow.due(t):
             if imu is not None:
                 self._baro_mag(t, t_us, imu)
             state = out.state
