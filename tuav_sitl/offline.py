@@ -36,7 +36,7 @@ from groundstation.winder_host import WinderHost
 from sitl.catenary import CatenaryRegime
 from sitl.exit_angle import ExitAngleSensor
 from sitl.faults import CanChannel, FaultSchedule
-from sitl.load_cell import LoadCell
+from sitl.load_cell import LoadCell, LoadCellParams
 from sitl.lumped import L_MAXN
 from sitl.plant import (
     DRUM_ANGLE,
@@ -390,8 +390,11 @@ class OfflineRunner:
         #: the winch's guide-arm encoders (Winch_Exit_Angle every 20 ms, as the plant's
         #: winch node sends it)
         self.exit_sensor = ExitAngleSensor()
-        #: the winch's load cell (Winch_Tension, as the plant's winch node reads it)
-        self.load_cell = LoadCell()
+        #: the winch's load cell (Winch_Tension, as the plant's winch node reads it; without
+        #: its noise for a companion flying on the truth, as the paper's experiments feed
+        #: exact measurements: the tension reaches its tether model through WINCH_STATUS)
+        self.load_cell = LoadCell(LoadCellParams(noise_n=0.0)
+                                  if self.companion.filter is None else None)
         self._exit_every = max(1, round(0.02 * sc.winder_control.rate_hz))
         #: the plant's faults (scenario [[faults]])
         self.faults = FaultSchedule(sc.faults, self.plant,
