@@ -46,8 +46,8 @@ from tuavdefs.jit import njit
 # indices of the packed parameters (WinderController.tension_params)
 (Q_R_W, Q_BETA, Q_TAU_MAX, Q_V_MAX, Q_M_BAR, Q_RHO, Q_L_T, Q_R2, Q_I_ROTOR, Q_FILTER,
  Q_SP_FILTER, Q_GAIN, Q_CEIL, Q_CEIL_GAIN, Q_ACC_MAX, Q_CMD_FILTER, Q_K_W, Q_K_BOUND,
- Q_STIFFNESS, Q_FLOOR, Q_SP_MAX, Q_MARGIN, Q_BOUND_M, Q_LAG_S) = range(24)
-N_TENSION_PARAMS = 24
+ Q_STIFFNESS, Q_FLOOR, Q_SP_MAX, Q_MARGIN, Q_BOUND_M, Q_LAG_S, Q_RECOVER) = range(25)
+N_TENSION_PARAMS = 25
 # indices of its state
 (Z_STARTED, Z_TENSION, Z_SETPOINT, Z_SPEED, Z_ACC, Z_LAG, Z_SPEED_RAW, Z_FEEDBACK,
  Z_FF) = range(9)
@@ -82,12 +82,14 @@ def tension_speed(p: np.ndarray, tension_n: float, setpoint_n: float,
 @njit
 def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
                 omega_rad_s: float, tension_n: float, setpoint_n: float,
-                ff_rate_m_s: float, low_m: float, low_rate_m_s: float, high_m: float
-                ) -> tuple[float, float, float, float, float, bool]:
+                ff_rate_m_s: float, low_m: float, low_rate_m_s: float, high_m: float,
+                recover_m: float) -> tuple[float, float, float, float, float, bool]:
     """One step of the tension law (module docstring) on the packed parameters ``p``,
     its state ``s`` advanced in place: the load cell's ``tension_n`` [N] and the
     set-point ``setpoint_n`` [N] low-passed, the force loops' speed bounded by the length
     bounds ``low_m`` (moving at ``low_rate_m_s``) and ``high_m`` [m] and by the ceiling,
+    a slack line (below the floor) wound in towards ``recover_m`` [m] (NaN: none) at up to
+    the recovery speed,
     the speed set-point filtered with its acceleration limit, then the backstepping
     torque. Returns the fields of a :class:`~groundstation.winder_control.WinderCommand`
     (torque [N m], tension error [N] in the length error's place, e_w [rad/s], the drum
@@ -107,28 +109,49 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
         s[Z_TENSION] += (1.0 - math.exp(-dt_s / p[Q_FILTER])) * (tension_n - s[Z_TENSION])
     else:
         s[Z_TENSION] = tension_n
-    s[Z_SETPOINT] += (1.0 - math.exp(-dt_s / p[Q_SP_FILTER])) * (setpoint_n - s[Z_SETPOINT])
     t_f, t_sp = s[Z_TENSION], s[Z_SETPOINT]
     v0 = tension_speed(p, t_f, t_sp, ff_rate_m_s)
     k_b = p[Q_K_BOUND]
-    # the length bounds: never shorter than the taut floor's low_m (a length loop takes
-    # over there), never longer than high_m; the snap ceiling beats both
-    v = max(v0, low_rate_m_s - k_b * (length_m - low_m))
+    # the slack floor's recovery: a line pulling less than the floor says nothing of how
+    # much of it hangs slack; the length the UAV's position asks does, and is wound in
+    # towards at up to the recovery speed, blended in as the tension falls below the floor
+    slack = (p[Q_FLOOR] - t_f) / p[Q_FLOOR]
+    if slack > 0.0 and p[Q_RECOVER] > 0.0 and recover_m == recover_m:
+        v_rec = ff_rate_m_s - min(k_b * max(length_m - recover_m, 0.0), p[Q_RECOVER])
+        if v_rec < v0:
+            v0 += min(slack, 1.0) * (v_rec - v0)
+    # command filter: the force loops' part first order (the load cell's noise, the
+    # dynamic line's waves), the feed-forward (the UAV's reported motion: smooth) on a
+    # light low-pass
+    s[Z_FEEDBACK] += (1.0 - math.exp(-dt_s / p[Q_CMD_FILTER])) * (
+        v0 - ff_rate_m_s - s[Z_FEEDBACK])
+    s[Z_FF] += (1.0 - math.exp(-dt_s / FF_FILTER_S)) * (ff_rate_m_s - s[Z_FF])
+    v = s[Z_FF] + s[Z_FEEDBACK]
+    # the length bounds, on the encoder's length and the reported position (clean: not
+    # filtered): never shorter than low_m (a length loop takes over there), never longer
+    # than high_m; the snap ceiling beats both
+    free = v
+    v = max(v, low_rate_m_s - k_b * (length_m - low_m))
     v = min(v, ff_rate_m_s + k_b * (high_m - length_m))
     if t_f > p[Q_CEIL]:
-        v = max(v, v0)
+        v = max(v, free)
+    # anti-windup: while a bound holds the line, the tension the torque holds is the one
+    # the line has (else the set-point's torque drives the drum against its speed loop);
+    # free again, the set-point returns on its own filter
+    if v != free:
+        s[Z_SETPOINT] += (1.0 - math.exp(-dt_s / max(p[Q_FILTER], dt_s))) * (
+            t_f - s[Z_SETPOINT])
+    else:
+        s[Z_SETPOINT] += (1.0 - math.exp(-dt_s / p[Q_SP_FILTER])) * (
+            setpoint_n - s[Z_SETPOINT])
+    t_sp = s[Z_SETPOINT]
     saturated = False
     if abs(v) > v_max:
         v = math.copysign(v_max, v)
         saturated = True
     s[Z_SPEED_RAW] = v
-    # command filter: the feedback part (all but the feed-forward) first order, the
-    # feed-forward (the UAV's reported motion: smooth) on a light low-pass, their sum
-    # acceleration limited
-    s[Z_FEEDBACK] += (1.0 - math.exp(-dt_s / p[Q_CMD_FILTER])) * (
-        v - ff_rate_m_s - s[Z_FEEDBACK])
-    s[Z_FF] += (1.0 - math.exp(-dt_s / FF_FILTER_S)) * (ff_rate_m_s - s[Z_FF])
-    acc = (s[Z_FF] + s[Z_FEEDBACK] - s[Z_SPEED]) / dt_s
+    # the sum acceleration limited
+    acc = (v - s[Z_SPEED]) / dt_s
     a_max = p[Q_ACC_MAX]
     if abs(acc) > a_max:
         acc = math.copysign(a_max, acc)
@@ -205,5 +228,5 @@ def tension_step(px: float, py: float, pz: float, vx: float, vy: float, vz: floa
     high = max(lbar_m, room) + law_p[Q_BOUND_M]
     trim_s[13] = 0.0            # no join: the law has no length reference to jump
     cmd = tension_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, setpoint,
-                      rate, low, radial, high)
+                      rate, low, radial, high, lbar_m)
     return length_m + law_s[Z_LAG], law_s[Z_SPEED], root, cmd

@@ -92,6 +92,9 @@ class WinderControlParams(Params):
     k_speed_n_m_s: float = quantity(
         0.15, "N*m*s/rad", "tension law: drum-rate error gain k_w of its speed loop (low: "
         "the drum renders to a snap before the force loop sees it)", gt=0)
+    slack_recovery_m_s: float = quantity(
+        1.0, "m/s", "tension law: below the slack floor the line is wound in towards L-bar "
+        "at up to this speed beyond the feed-forward (0: only the force loop's)", ge=0)
     length_bound_gain_1_s: float = quantity(
         4.0, "1/s", "tension law: the length bounds' loop gain", gt=0)
     length_bound_m: float = quantity(
@@ -186,6 +189,7 @@ class WinderController:
             q[tl.Q_FLOOR], q[tl.Q_SP_MAX] = g.tension_floor_n, g.tension_setpoint_max_n
             q[tl.Q_MARGIN], q[tl.Q_BOUND_M] = g.tension_margin, g.length_bound_m
             q[tl.Q_LAG_S] = LAG_TIME_S
+            q[tl.Q_RECOVER] = g.slack_recovery_m_s
             self._q = q
             self._tension_from = self._packed_from
         return self._q
@@ -211,15 +215,17 @@ class WinderController:
 
     def update_tension(self, dt_s: float, length_m: float, omega_rad_s: float,
                        tension_n: float, setpoint_n: float, ff_rate_m_s: float,
-                       low_m: float, low_rate_m_s: float, high_m: float) -> WinderCommand:
+                       low_m: float, low_rate_m_s: float, high_m: float,
+                       recover_m: float = math.nan) -> WinderCommand:
         """Torque request [N m] of the tension law (:func:`groundstation.tension_law.
         tension_law`) for the measured length [m], drum rate [rad/s] and tension [N], the
         set-point [N], the line speed's feed-forward [m/s] and the length bounds [m]
-        (the lower moving at ``low_rate_m_s``); the length law's filter is forgotten."""
+        (the lower moving at ``low_rate_m_s``), the length a slack line is wound in towards
+        [m] (NaN: none); the length law's filter is forgotten."""
         self.state[:] = 0.0
         return WinderCommand(*tl.tension_law(
             self.tension_params(), self.tension_state, dt_s, length_m, omega_rad_s,
-            tension_n, setpoint_n, ff_rate_m_s, low_m, low_rate_m_s, high_m))
+            tension_n, setpoint_n, ff_rate_m_s, low_m, low_rate_m_s, high_m, recover_m))
 
     def update(self, dt_s: float, length_m: float, omega_rad_s: float, drum_tension_n: float,
                ref_length_m: float, ref_rate_m_s: float) -> WinderCommand:
