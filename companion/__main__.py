@@ -308,7 +308,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         while stop["signal"] is None:
             # one wait for the plant's next batch, the ground stations and the winch
             buffered = client.has_buffered_state()
-            ready = [] if buffered else waiter.wait(autopilot.selectables(), SELECT_TIMEOUT_S)
+            ready = [] if buffered else waiter.wait(
+                autopilot.selectables(), 0.0 if autopilot.backlogged else SELECT_TIMEOUT_S)
             sim = None
             if buffered or sim_fd in ready:
                 try:
@@ -317,7 +318,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     sim = None      # the batch did not complete in time
             if sim is None:
                 # between periods: what they ask applies from the next period
-                if ready:
+                if ready or autopilot.backlogged:
                     autopilot.receive(ready)
                 autopilot.service(None)
                 if time.monotonic() - last_state_wall > SIM_SILENCE_S:
@@ -340,7 +341,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 autopilot.flight_log.period(inputs, out, onboard)
             # the answer is out (in lockstep the plant waits for it); now the ground
             # stations and the winch: what they ask applies from the next period
-            if len(ready) > 1:
+            if len(ready) > 1 or autopilot.backlogged:
                 autopilot.receive(ready)
             if state is None:       # no estimate yet: nothing to report but heartbeats
                 autopilot.service(None)

@@ -69,6 +69,12 @@ from tuavdefs.mav_frames import global_to_local
 M = mavlink2
 
 _WINCH_ACK_TIMEOUT_S = 0.4
+#: Wall time one :meth:`Autopilot.receive` may spend handling ground-station messages [s]
+#: (ArduPilot's GCS receive takes 1 ms a loop): a flood costs the control period at most
+#: this, between two periods.
+RECEIVE_BUDGET_S = 0.001
+#: Messages read and waiting beyond which the ground stations' sockets are not read.
+INBOX_MAX = 2000
 #: The shortest wall time between two STATUSTEXTs about refused (unsigned, badly signed,
 #: replayed) frames [s].
 SIGNING_NOTICE_S = 5.0
@@ -146,6 +152,8 @@ class Autopilot:
         """The onboard-log service (``companion.log_protocol.LogProtocol``) or None."""
         self._flight_log: Any = None
         self._logged_mode: Any = None
+        #: Ground-station messages read and not yet handled (:meth:`receive`'s budget).
+        self._inbox: deque[tuple[Peer, Any]] = deque()
         #: Logs that ended (a full disk, a lost file, a cap) and are still to be said.
         self._logs_ended: deque[str] = deque()   # appended from the log writer's thread
         if endpoints.tlog is not None:
@@ -190,16 +198,35 @@ class Autopilot:
             self._watch_gen, self._watch_comp = gen, comp
         return self._watch
 
+    @property
+    def backlogged(self) -> bool:
+        """Whether ground-station messages wait to be handled (a flood outran the budget
+        of :meth:`receive`): call it again soon, without waiting for a socket."""
+        return bool(self._inbox)
+
     def receive(self, ready: Iterable[Any]) -> None:
         """Take the input of the sockets in ``ready`` (found readable by a ``select`` on
         :meth:`selectables`; other objects in it are ignored): ground-station messages are
         handled (commands answered) and the winch's routed at once; what they change in
-        flight applies from the next control period. Call :meth:`service` after it."""
-        for peer, msg in self.io.receive(ready):
+        flight applies from the next control period. Call :meth:`service` after it.
+
+        Bounded, as ArduPilot bounds its receive: messages are handled for at most
+        :data:`RECEIVE_BUDGET_S` of wall time a call; the rest wait, in order, for the next
+        (:attr:`backlogged`), and while :data:`INBOX_MAX` of them wait the sockets are not
+        read (TCP then pushes back on the sender; a UDP flood overflows the kernel's
+        buffer). The winch's messages are always read."""
+        inbox = self._inbox
+        if len(inbox) < INBOX_MAX:
+            inbox.extend(self.io.receive(ready))
+        end = time.perf_counter() + RECEIVE_BUDGET_S
+        while inbox:
+            peer, msg = inbox.popleft()
             try:
                 self.handle(peer, msg)
             except Exception as exc:  # noqa: BLE001 - one bad message must not stop flight
                 self.log(f"error handling {msg.get_type()} from {peer}: {exc!r}")
+            if time.perf_counter() >= end:
+                break
         comp = self.component
         if comp is not None and comp.selectable in ready:
             self._from_winch(comp.poll())

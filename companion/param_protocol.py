@@ -76,6 +76,7 @@ import re
 import struct
 import tempfile
 import threading
+import time
 import typing
 from collections.abc import Callable, Hashable, Iterable
 from dataclasses import dataclass
@@ -92,6 +93,10 @@ __all__ = ["ParamDef", "ParamProtocol", "WireName", "apply_parm_text", "apply_va
            "FTP_MAX_DATA"]
 
 log = logging.getLogger(__name__)
+
+#: The shortest wall time between two texts of the parameter file [s] (changes in between
+#: are written together: a PARAM_SET flood costs one text per this, not one per message).
+SAVE_EVERY_S = 0.2
 
 SendFn = Callable[[Hashable | None, Any], None]
 StatusTextFn = Callable[[int, str], None]
@@ -280,6 +285,9 @@ class ParamProtocol:
         self._statustext = statustext
         self.persist_path = Path(persist_path) if persist_path is not None else None
         self._writer = FileWriter(self.persist_path) if self.persist_path is not None else None
+        self._dirty = False                     # a change not yet handed to the writer
+        self._saved_wall = -math.inf            # when the last text was made [s, monotonic]
+        self._sorted_defs = sorted(self.defs, key=lambda d: d.name)
         self.stream_rate_hz = float(stream_rate_hz)
         self.stream_burst = int(stream_burst)
         self._streams: dict[Hashable, _Stream] = {}
@@ -310,6 +318,9 @@ class ParamProtocol:
         """Send the parameters the list streams' budgets allow, and say a failed write of
         the parameter file; call often (>= 20 Hz)."""
         w = self._writer
+        if (w is not None and self._dirty
+                and time.monotonic() - self._saved_wall >= SAVE_EVERY_S):
+            self._submit()
         if w is not None and w.errors:
             exc = w.errors.pop(0)
             log.error("cannot save parameters to %s: %s", self.persist_path, exc)
@@ -346,23 +357,36 @@ class ParamProtocol:
         return warnings
 
     def save(self) -> None:
-        """Write every parameter to ``persist_path`` atomically (no-op without a path), off
-        the control path: the text is made now, the file written by a thread of its own
-        (:meth:`flush` waits for it)."""
-        if self._writer is None:
-            return
+        """Have every parameter written to ``persist_path`` (no-op without a path), off the
+        control path and coalesced: the change is marked now; :meth:`tick` makes the
+        file's text at most every :data:`SAVE_EVERY_S` of wall time and a thread of its own
+        writes it atomically (:meth:`flush` makes and waits for it at once). A flood of
+        PARAM_SETs costs one text a period at most, not one a message."""
+        if self._writer is not None:
+            self._dirty = True
+
+    def _submit(self) -> None:
+        assert self._writer is not None
+        self._dirty = False
+        self._saved_wall = time.monotonic()
         lines = ["# tuav-sitl companion parameters (ArduPilot .parm format: NAME VALUE)"]
-        for d in sorted(self.defs, key=lambda d: d.name):
+        for d in self._sorted_defs:
             lines.append(f"{d.name:<16} {_format_value(d, d.get())}")
         self._writer.submit("\n".join(lines) + "\n")
 
     def flush(self, timeout_s: float | None = 10.0) -> bool:
         """Wait until the parameter file holds every accepted change; whether it does."""
-        return self._writer is None or self._writer.flush(timeout_s)
+        if self._writer is None:
+            return True
+        if self._dirty:
+            self._submit()
+        return self._writer.flush(timeout_s)
 
     def close(self) -> None:
         """Write what is waiting and end the writer's thread."""
         if self._writer is not None:
+            if self._dirty:
+                self._submit()
             self._writer.close()
 
     # --- handlers ----------------------------------------------------------------------

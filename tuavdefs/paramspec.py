@@ -14,6 +14,7 @@ fixed-length ``tuple[float, ...]`` (declare ``length``), nested :class:`Params`,
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 import sys
@@ -133,12 +134,19 @@ def _coerce(name: str, tp: Any, value: Any, meta: dict[str, Any]) -> Any:
     raise TypeError(f"{name}: unsupported parameter type {tp!r}")  # a bug, not bad input
 
 
+@functools.cache
+def _type_hints(cls: type) -> dict[str, Any]:
+    """A parameter class's field types, resolved once (``typing.get_type_hints`` compiles
+    every string annotation anew: most of a PARAM_SET's cost, a flood's load)."""
+    return typing.get_type_hints(cls)
+
+
 @dataclasses.dataclass(frozen=True)
 class Params:
     """Base class of every parameter group: validates itself on construction."""
 
     def __post_init__(self) -> None:
-        hints = typing.get_type_hints(type(self))
+        hints = _type_hints(type(self))
         prefix = getattr(self, "_prefix", None) or type(self).__name__
         for f in dataclasses.fields(self):
             value = _coerce(f"{prefix}.{f.name}", hints[f.name], getattr(self, f.name),
@@ -164,7 +172,7 @@ class Params:
             if key not in names:
                 raise ParameterError(f"{prefix}.{key}", f"unknown parameter (known: "
                                      f"{', '.join(sorted(names))})")
-        hints = typing.get_type_hints(cls)
+        hints = _type_hints(cls)
         kwargs = {}
         for f in dataclasses.fields(cls):
             if f.name in data:
