@@ -38,6 +38,11 @@ Modes (the ``WINCH_ACTIONS`` value of the last accepted ``DO_WINCH``):
   the load cell's tension, winding in slowly, paying out fast (holding instead while no
   position is known), never below the taut floor. Without a load-cell reading it holds
   the length it had.
+  Line RELAXED pays out while nothing pulls it (the load cell below ``slack_tension_n``,
+  no line leaving the exit above the ground) is counted; past ``slack_payout_max_m`` the
+  drum holds and pays out only as it is pulled (the *slack guard*,
+  :meth:`Winch._check_slack`): a vehicle on the ground after a failure whose reported
+  position runs away does not get the tether paid out to it.
 - ``WINCH_RELATIVE_LENGTH_CONTROL`` (1): from the measured length, pay out (+) or wind in
   (-) ``param3`` m at ``|param4|`` m/s (``default_rate_m_s`` if 0 or NaN), then hold: the
   backstepping law (the host's own :class:`WinderController`) tracks this ramped
@@ -234,6 +239,17 @@ class WinchParams(Params):
         0.3, "m/s", "the UAV counts as on the ground only while it also reports climbing "
         "slower than this (a take-off ends the pre-tension at once; a landing's descent "
         "does not delay it)", gt=0)
+    slack_tension_n: float = quantity(
+        0.05, "N", "the line counts as slack (nothing pulls it) while the load cell reads "
+        "less than this and the guide arm reads no line leaving the exit above the ground "
+        "(the load cell's noise: less is nothing it can tell)", ge=0)
+    slack_payout_max_m: float = quantity(
+        4.0, "m", "RELAXED pays out at most this much line while it stays slack: more "
+        "lies on the ground, where no vehicle pulls it (one on the ground after a failure, "
+        "its reported position run away); then the drum holds and pays out only as the "
+        "line is pulled. A real climb with the line's bottom lying at the exit (near the "
+        "vertical, on a line whose ground friction takes the pull) pays out up to 2.6 m "
+        "so between two pulls", gt=0)
 
 
 class Notice(NamedTuple):
@@ -401,6 +417,12 @@ class Winch:
         self._join_rate = 0.0               # how fast that closes [m/s]
         self._ground = False                # RELAXED holding the ground pre-tension
         self._ground_low = False            # ... since the UAV reported itself on the ground
+        #: Line paid out (net) by RELAXED since the line was last pulled [m].
+        self.slack_paid_m = 0.0
+        self._slack_length_m = math.nan     # the length at the last slack count [m]
+        #: Whether RELAXED holds the line against a pay-out nothing pulls (the slack guard,
+        #: :meth:`_check_slack`): the pre-tension's loop, paid out only as it is pulled.
+        self.slack_hold = False
         self._limit_noticed = False
         self._lock_noticed = False
         self._over_frames = 0               # encoder frames in a row above the limit
@@ -942,7 +964,7 @@ class Winch:
                     self._rejoin_rate = rate
                     self._rejoin_m -= rate * dt
                     self.ref_m, self.ref_rate_m_s = self._rejoin_m, -rate
-            if self._on_ground(uav):
+            if self._check_slack(out, uav) or self._on_ground(uav):
                 self._ground_reference()
                 command = self.host.controller.update(self.dt_s, length, omega, tension,
                                                       self.ref_m, self.ref_rate_m_s)
@@ -1021,6 +1043,58 @@ class Winch:
         self._join_gap_m, self._join_rate = gap, rate
         return gap, rate
 
+    def _check_slack(self, out: WinchOutput, uav: UavState | None) -> bool:
+        """The slack guard of RELAXED; returns whether it holds the line now.
+
+        The line counts as slack while the load cell reads below ``slack_tension_n`` and
+        the guide arm reads no line leaving the exit above the ground: nothing pulls it.
+        The line RELAXED pays out (net) while it stays slack is counted
+        (:attr:`slack_paid_m`, back to 0 at any pull); beyond ``slack_payout_max_m`` it
+        lies on the ground, where the vehicle is not taking it (a vehicle on the ground
+        after a failure, flipped or landed, whose reported position runs away with a
+        diverged estimate: the law followed it and paid out the whole tether). From then
+        the drum holds the length and runs the ground pre-tension's loop, which pays out
+        only as the line is pulled and winds in slowly to the pre-tension, its floor from
+        the reported position stopping a wind-in but paying nothing out; said once. It
+        ends when the line is pulled and the report asks no more than what is out (L-bar
+        at most ``REJOIN_MARGIN_M`` beyond the length: the law takes up again, a longer
+        line rejoining L-bar), or with an operator's ``DO_WINCH``."""
+        p = self.p
+        length = self.length_m
+        ea = self.exit_angle
+        fixer = self.fixer
+        ground_el = fixer.p.ground_elevation_rad if fixer is not None else 0.0
+        leaves = ea is not None and ea[3] and ea[1] >= ground_el
+        slack = self.tension_n < p.slack_tension_n and not leaves
+        last, self._slack_length_m = self._slack_length_m, length
+        if not slack:
+            self.slack_paid_m = 0.0
+        elif math.isfinite(last):
+            self.slack_paid_m = max(0.0, self.slack_paid_m + length - last)
+        if not self.slack_hold:
+            if self.slack_paid_m > p.slack_payout_max_m:
+                self.slack_hold = True
+                self.ref_m, self.ref_rate_m_s = length, 0.0
+                self._rejoin_m, self._rejoin_rate = math.nan, 0.0
+                self._join_gap_m = self._join_rate = 0.0
+                out.notices.append(_notice(
+                    mavlink2.MAV_SEVERITY_CRITICAL,
+                    f"winch: {self.slack_paid_m:.1f} m paid out slack, pay-out held"))
+            return self.slack_hold
+        if (not slack and uav is not None
+                and self.host.lbar.length(uav[0])[0] <= length + REJOIN_MARGIN_M):
+            self._end_slack_hold()
+            out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE,
+                                       "winch: line pulled, following L-bar again"))
+        return self.slack_hold
+
+    def _end_slack_hold(self) -> None:
+        """The slack guard off: the law takes up from the measured length."""
+        self.slack_hold = False
+        self.slack_paid_m = 0.0
+        if math.isfinite(self.length_m):
+            self._resume_from(self.length_m)
+
     def _on_ground(self, uav: UavState | None) -> bool:
         """Whether RELAXED holds the ground pre-tension now (module docstring): the UAV on
         the ground by its report (or none yet), a load cell to hold it with. Leaving it, a
@@ -1066,7 +1140,12 @@ class Winch:
         floor, _ = self.taut_floor()
         lower = max(floor, self.length_min_m) if math.isfinite(floor) else self.length_min_m
         if ref < lower:
-            ref, rate = lower, 0.0
+            if not self.slack_hold:
+                ref, rate = lower, 0.0
+            elif rate < 0.0:
+                # holding against a slack pay-out, the reported position is not to be
+                # trusted: its floor stops a wind-in, it pays nothing out
+                ref, rate = max(ref, min(self.ref_m, lower)), 0.0
         if ref > self.length_max_m:
             ref, rate = self.length_max_m, 0.0
         self.ref_m, self.ref_rate_m_s = ref, rate
@@ -1288,6 +1367,9 @@ class Winch:
             if abs(speed) > self.max_rate_m_s:
                 speed = math.copysign(self.max_rate_m_s, speed)
                 notices.append(_notice(sev_warn, f"winch: rate clamped to {speed:.2f} m/s"))
+        self.slack_hold = False         # (the operator's act: RELAXED counts afresh)
+        self.slack_paid_m = 0.0
+        self._slack_length_m = math.nan
         if self.foreign_brake and mode not in BRAKED_MODES:
             # the operator's act releases the brake against another host (the next frame
             # of that host, if it goes on, brakes the drum again)

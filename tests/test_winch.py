@@ -983,8 +983,9 @@ def test_relaxed_holds_a_ground_pre_tension_while_the_uav_is_unknown_or_on_the_g
     assert gaps[1] > 0.0 and gaps[-1] == pytest.approx(0.0, abs=1e-9)
     lead = float(w.host.lbar.trim_state[4])
     assert w.reference()[0] == pytest.approx(lbar_high + lead, abs=1e-5)
+    tension(w, 36.0, 2.0)       # (pulled: 10 m more out is no slack for the guard)
     w.set_uav(UAV)
-    encoder(w, 30.0, 13.5)
+    encoder(w, 36.0, 13.5)
     lead = float(w.host.lbar.trim_state[4])      # the stop lead, as above
     assert w.reference()[0] == pytest.approx(host.lbar.length(UAV[0])[0] + lead, abs=1e-5)
     # without a pre-tension (or a load cell: the earlier test) it holds its length
@@ -992,6 +993,66 @@ def test_relaxed_holds_a_ground_pre_tension_while_the_uav_is_unknown_or_on_the_g
     tension(w2, 0.0, 0.0)
     encoder(w2, 0.0, 5.0)
     assert track(w2, 50)[-1] == (pytest.approx(5.0, abs=1e-6), 0.0)
+
+
+RUNAWAYS = {
+    # a diverged estimate: climbing away, flying away, sliding away on the ground
+    "up": lambda t: ((4.0, 1.0, 0.3 + 6.0 * t), (0.0, 0.0, 6.0)),
+    "out": lambda t: ((4.0 + 6.0 * t, 1.0, 2.0), (6.0, 0.0, 0.0)),
+    "on the ground": lambda t: ((4.0 + 6.0 * t, 1.0, 0.2), (6.0, 0.0, 0.0)),
+}
+
+
+@pytest.mark.parametrize("runaway", sorted(RUNAWAYS))
+def test_a_slack_line_is_not_paid_out_to_a_report_that_runs_away(runaway):
+    """The ground side of a crash (issue 35): a vehicle on the ground 4.1 m out, the line
+    slack to it (nothing pulls: the load cell reads 0), its reported position running
+    away at 6 m/s. The winch pays out at most slack_payout_max_m more, says so once and
+    holds; the report coming back with the line pulled ends it, and L-bar's law takes up
+    again. Before, the law followed the report to the drum's end (2.4 -> 49.5 m in 8 s)."""
+    report = RUNAWAYS[runaway]
+    start = math.hypot(4.0, 1.0) + 0.5
+    b = Bench(start, tension_n=0.0, uav=((4.0, 1.0, 0.2), (0.0, 0.0, 0.0)))
+    b.run(1.0)
+    first = b.length
+    limit = b.winch.p.slack_payout_max_m
+    lengths = []
+    for k in range(1000):          # 10 s of a runaway
+        b.winch.set_uav(report(k * 0.01))
+        b.run(0.01)
+        lengths.append(b.length)
+    # (and stops from the law's full speed, 5.4 m/s: under a metre more)
+    assert max(lengths) < first + limit + 1.0
+    assert b.winch.slack_hold
+    said = [n for n in b.notices if "paid out slack, pay-out held" in n]
+    assert len(said) == 1
+    held = b.length
+    b.run(2.0)
+    assert b.length == pytest.approx(held, abs=0.01)      # held, not wound in onto it
+    # the vehicle back where it is, and pulling the line: the law takes up again
+    b.winch.set_uav(((4.0, 1.0, 3.0), (0.0, 0.0, 0.0)))
+    b.tension = 1.0
+    b.run(0.2)
+    assert not b.winch.slack_hold and "winch: line pulled, following L-bar again" in b.notices
+    b.run(10.0)                    # (rejoining from the longer line at 1 m/s)
+    lbar = b.winch.host.lbar.length((4.0, 1.0, 3.0))[0]
+    assert b.winch.reference()[0] >= lbar              # L-bar's law (with its lead)
+    assert b.length == pytest.approx(b.winch.reference()[0], abs=0.01)
+    assert b.length < lbar + 0.3
+
+
+def test_a_slack_line_pulled_again_counts_afresh_and_a_pulled_line_is_paid_out():
+    """The count is of line paid out while nothing pulls it: a pull resets it, so a real
+    vehicle moving away on a line that pulls (the tether governor's moves, a climb on the
+    catenary's 0.3-0.7 N) is followed as far as it goes."""
+    b = Bench(5.0, tension_n=0.0, uav=((4.0, 1.0, 3.0), (0.0, 0.0, 0.0)))
+    b.run(1.0)
+    for k in range(1000):          # 10 s of a climb at 2 m/s: 20 m of line
+        b.tension = 0.0 if (k // 50) % 2 else 0.5      # slack half the time, 0.5 s each
+        b.winch.set_uav(((4.0, 1.0, 3.0 + 0.02 * k), (0.0, 0.0, 2.0)))
+        b.run(0.01)
+    assert not b.winch.slack_hold
+    assert b.length > b.winch.host.lbar.length((4.0, 1.0, 22.98))[0] - 0.05
 
 
 def test_a_join_never_winds_the_line_in():
