@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import re
 import shutil
 import socket
 import subprocess
@@ -269,3 +270,63 @@ def test_mavlogdump_reads_it_with_its_date(flight):
     assert len(gps) == len(flight["rec"]["GPS"])
     assert {ln[:10] for ln in lines if ": " in ln[:30]} <= days
     assert any(": XKF4 {" in ln for ln in lines) and any(": ERR {" in ln for ln in lines)
+
+
+#: MAVExplorer's graphs (MAVProxy's tools/graphs/*.xml) an ArduCopter log with one IMU,
+#: barometer, compass, GPS and EKF3 core offers: each must be offered for this log too,
+#: and plot finite values.
+GRAPHS = ("EKF3/State Values/Pos NE", "EKF3/State Values/Velocity NE",
+          "EKF3/State Values/Gyro Bias", "EKF3/State Values/Euler Yaw",
+          "EKF3/Innovations/Position Innovation NE", "EKF3/Innovations/Velocity Innovation NE",
+          "EKF3/Innovations/Normalised Innovations EK3 Lane1",
+          "EKF3/State Values/Solution Status", "Sensors/Accelerometer/Accelerometers",
+          "Sensors/Gyroscope/Gyro 1 XYZ", "Sensors/Barometer/Barometer",
+          "Sensors/Compass/Compass", "Sensors/Compass/EarthField Error EK3 Lane1",
+          "Sensors/GPS/GPS Accuracy", "Sensors/GPS/GPS Vel NE", "Speed/Ground Speed",
+          "Attitude/Roll and Pitch", "Servos/Servos 1-4", "RC/RC Input 1-4")
+
+
+def _fields(expression: str) -> list[str]:
+    """An expression's terms as MAVExplorer evaluates them (without the axis suffix
+    ``:2`` and a unit ``<...>``)."""
+    out = []
+    for term in expression.split():
+        if term.endswith(">") and "<" in term:
+            term = term[:term.rfind("<")]
+        if len(term) > 2 and term[-2] == ":" and term[-1].isdigit():
+            term = term[:-2]
+        out.append(term)
+    return out
+
+
+def _value(term: str, messages: dict) -> float | None:
+    """A term's value as MAVExplorer takes it (None: not available now)."""
+    try:
+        return mavutil.evaluate_expression(term, messages)
+    except Exception:  # noqa: BLE001 - as MAVExplorer's expression_ok: not plottable
+        return None
+
+
+def test_mavexplorer_offers_its_graphs_and_they_plot(flight):
+    lxml = pytest.importorskip("lxml.objectify")
+    mavproxy = pytest.importorskip("MAVProxy")
+    from pathlib import Path
+    graphs: dict[str, list[str]] = {}
+    for xml in sorted((Path(mavproxy.__file__).parent / "tools" / "graphs").glob("*.xml")):
+        for g in lxml.fromstring(xml.read_bytes()).graph:
+            graphs.setdefault(g.attrib["name"], []).extend(
+                e.text for e in g.expression if e.text)
+    mlog = mavutil.mavlink_connection(str(flight["path"]), zero_time_base=False)
+    points: dict[str, int] = {}
+    while (msg := mlog.recv_msg()) is not None:
+        kind = msg.get_type()
+        for name in GRAPHS:
+            for expr in graphs[name]:
+                terms = _fields(expr)
+                if not any(re.search(rf"\b{kind}\b", t) for t in terms):
+                    continue        # (plotted when one of its messages comes)
+                values = [_value(t, mlog.messages) for t in terms]
+                if all(v is not None and math.isfinite(v) for v in values):
+                    points[name] = points.get(name, 0) + 1
+                    break
+    assert {name: points.get(name, 0) for name in GRAPHS if points.get(name, 0) < 50} == {}
