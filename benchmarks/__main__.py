@@ -546,7 +546,9 @@ def main(argv: list[str] | None = None) -> int:
     benches = [bench_tether, bench_plant_step, bench_estimator, bench_offline, bench_peer,
                bench_first_result, bench_sweep]
     if not args.no_processes:
-        benches += [bench_processes, bench_command_latency]
+        from benchmarks.view import bench_view
+
+        benches += [bench_processes, bench_command_latency, bench_view]
     loads: list[tuple[str, Load]] = []
     total = LoadMeter()
     for bench in benches:

@@ -846,13 +846,22 @@ def run_scenario(scenario: ScenarioParams, out_dir: Path | None = None,
     """Run ``scenario`` and, if ``out_dir`` is given, write its outputs there; with
     ``recording`` (and rerun-sdk installed) also its ``recording.rrd``, written by a
     background process (``result.recording``)."""
-    result = OfflineRunner(scenario).run(progress=progress)
-    if out_dir is not None:
-        write_outputs(result, out_dir)
-        if recording:
-            from tuav_sitl.view.recording import start_run_recording
+    job = None
+    if recording and out_dir is not None:
+        from tuav_sitl.view.recording import run_recording_args, start_recording_job
 
-            result.recording = start_run_recording(result, out_dir)
+        job = start_recording_job()   # it imports rerun while the run goes on
+    try:
+        result = OfflineRunner(scenario).run(progress=progress)
+        if out_dir is not None:
+            write_outputs(result, out_dir)
+    except BaseException:
+        if job is not None:
+            job.cancel()
+        raise
+    if job is not None:
+        job.write(*run_recording_args(result, out_dir))
+        result.recording = job
     return result
 
 

@@ -26,8 +26,10 @@ timeline ``sim`` is simulated time):
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import math
+import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -44,8 +46,6 @@ TIMELINE = "sim"
 #: How often the tether's shape and the path flown are logged [Hz of simulated time] (the
 #: lumped tether's nodes come at the rate the run recorded them).
 SHAPE_RATE_HZ = 15.0
-#: The path flown, thinned to a point every this many seconds of simulated time [s].
-PATH_STEP_S = 0.1
 #: Points along a catenary drawn as the tether.
 CATENARY_POINTS = 60
 
@@ -103,11 +103,16 @@ class LogLevel(enum.StrEnum):
 def blueprint() -> Any:
     """The first view: the 3-D scene beside the tension, length and error plots (the
     rotor commands and the text log in tabs), the time panel on simulated time."""
+    import rerun as rr
     import rerun.blueprint as rrb
 
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial3DView(origin=Entity.WORLD, name="scene"),
+            rrb.Spatial3DView(origin=Entity.WORLD, name="scene", overrides={
+                # the path's pieces from the start to the time shown: the path flown
+                Entity.PATH: rrb.VisibleTimeRanges(
+                    timeline=TIMELINE, start=rr.TimeRangeBoundary.infinite(),
+                    end=rr.TimeRangeBoundary.cursor_relative(seconds=0.0))}),
             rrb.Vertical(
                 rrb.TimeSeriesView(origin="plots/tension", name="tension [N]"),
                 rrb.TimeSeriesView(origin="plots/length", name="paid-out length, L-bar [m]"),
@@ -170,8 +175,7 @@ class SceneLogger:
         self.drum_radius_m = float(system.winder.drum_radius_m)
         self.tether = Tether(system.tether, system.environment.gravity_m_s2)
         self._next_shape_t = 0.0
-        self._next_path_t = 0.0
-        self._path: list[np.ndarray] = []
+        self._path_last: np.ndarray | None = None
         self._log_static(ground_half_m)
 
     # --- the fixed scene ------------------------------------------------------------
@@ -185,7 +189,7 @@ class SceneLogger:
                  + [[(-half_m, y, 0.0), (half_m, y, 0.0)] for y in ticks])
         rec.log(Entity.GROUND, rr.LineStrips3D(lines, colors=(170, 170, 170),
                                                radii=rr.Radius.ui_points(0.5)), static=True)
-        rec.log(Entity.WINDER, rr.Arrows3D(vectors=np.eye(3), colors=_AXIS_COLORS,
+        rec.log(Entity.WINDER, rr.Arrows3D(vectors=np.eye(3) * step, colors=_AXIS_COLORS,
                                            labels=["east", "north", "up"],
                                            radii=rr.Radius.ui_points(1.5)), static=True)
         r = self.drum_radius_m
@@ -320,24 +324,24 @@ class SceneLogger:
 
     def _shapes_and_path(self, t: np.ndarray, pos: np.ndarray,
                          length: np.ndarray | None) -> None:
-        """The catenary (unless the nodes come) and the path flown, at
-        :data:`SHAPE_RATE_HZ`."""
+        """The catenary (unless the nodes come) and the path flown (a piece at a time),
+        at :data:`SHAPE_RATE_HZ`."""
         rr, rec = self.rr, self.rec
         for i in range(len(t)):
             ti = float(t[i])
             p = pos[i]
             if not np.isfinite(p).all():
                 continue
-            if ti >= self._next_path_t - 1e-9:
-                self._path.append(p)
-                self._next_path_t = _next_on_grid(ti, PATH_STEP_S)
             if ti < self._next_shape_t - 1e-9:
                 continue
             self._next_shape_t = _next_on_grid(ti, 1.0 / SHAPE_RATE_HZ)
             rec.set_time(TIMELINE, duration=ti)
-            rec.log(Entity.PATH, rr.LineStrips3D([np.vstack((*self._path, p))],
-                                                 colors=_PATH_COLOR,
+            # the piece flown since the last one (the blueprint shows them all up to the
+            # time shown): the recording grows with the run, not with its square
+            last = self._path_last if self._path_last is not None else p
+            rec.log(Entity.PATH, rr.LineStrips3D([np.vstack((last, p))], colors=_PATH_COLOR,
                                                  radii=rr.Radius.ui_points(1.2)))
+            self._path_last = p
             if not self.lumped and length is not None and np.isfinite(length[i]) \
                     and length[i] > 0:
                 pts = self.catenary(p, float(length[i]))
@@ -469,43 +473,70 @@ def nav_event_texts(events: Sequence[tuple[Any, object, float]]
 
 
 class RecordingJob:
-    """A run's ``recording.rrd`` written by a forked process (the caller goes on: with
-    the figures, with its next run); :meth:`wait` for it. The child shares the series
-    with its parent (fork) and writes them with :func:`write_recording`."""
+    """A run's ``recording.rrd`` written by a forked process that is started before the
+    run, so that it imports rerun while the run goes on; :meth:`write` hands it the run
+    (through a pipe) when it is over, :meth:`wait` waits for the file, :meth:`cancel`
+    ends it without one."""
 
-    def __init__(self, path: Path, name: str, system: Any, series: Mapping[str, np.ndarray],
-                 events: Sequence[tuple[float, str, LogLevel]] = ()) -> None:
+    def __init__(self) -> None:
         import multiprocessing
 
-        self.path = Path(path)
         ctx = multiprocessing.get_context("fork")
-        self.process = ctx.Process(target=_write_in_child,
-                                   args=(self.path, name, system, series, list(events)),
-                                   name="tuav-sitl recording", daemon=False)
+        self._conn, child = ctx.Pipe()
+        self.path: Path | None = None
+        self.process = ctx.Process(target=_recording_child, args=(child,),
+                                   name="tuav-sitl recording", daemon=True)
         self.process.start()
+        child.close()
+
+    def write(self, path: Path, name: str, system: Any, series: Mapping[str, np.ndarray],
+              events: Sequence[tuple[float, str, LogLevel]] = ()) -> None:
+        """Have the run written to ``path`` (see :func:`write_recording`)."""
+        self.path = Path(path)
+        self._conn.send((self.path, name, system, dict(series), list(events)))
+        self._conn.close()
+
+    def cancel(self) -> None:
+        """End the process without a recording."""
+        with contextlib.suppress(OSError):
+            self._conn.send(None)
+            self._conn.close()
+        self.process.join(10.0)
 
     def wait(self, timeout_s: float | None = None) -> bool:
         """Wait for the file (at most ``timeout_s`` [s]); whether it was written."""
         self.process.join(timeout_s)
-        return self.process.exitcode == 0 and self.path.is_file()
+        return (self.process.exitcode == 0 and self.path is not None
+                and self.path.is_file())
 
 
-def _write_in_child(path: Path, name: str, system: Any, series: Mapping[str, np.ndarray],
-                    events: Sequence[tuple[float, str, LogLevel]]) -> None:
-    import contextlib
-    import os
-
+def _recording_child(conn: Any) -> None:
+    """The job's process: rerun imported (pyarrow's conversions too) while the run goes
+    on, then the run it is handed written."""
     with contextlib.suppress(OSError):
         os.nice(5)       # below the figures the parent draws meanwhile
-    write_recording(path, name, system, series, events)
+    rerun_module()
+    import pyarrow
+
+    pyarrow.array(["warm"])   # (its first text conversion loads pandas: not in the wait)
+    try:
+        job = conn.recv()
+    except EOFError:
+        return
+    if job is not None:
+        write_recording(*job)
 
 
-def start_run_recording(result: Any, out_dir: Path) -> RecordingJob | None:
-    """``OUT/recording.rrd`` of an offline run (a :class:`tuav_sitl.offline.RunResult`)
-    being written in the background; None without rerun-sdk (:data:`INSTALL_HINT`)."""
+def start_recording_job() -> RecordingJob | None:
+    """A :class:`RecordingJob` started now, or None without rerun-sdk
+    (:data:`tuav_sitl.view.INSTALL_HINT`)."""
     from tuav_sitl.view import available
 
-    if not available():
-        return None
-    return RecordingJob(Path(out_dir) / RECORDING_NAME, result.scenario.name,
-                        result.scenario, result.series, nav_event_texts(result.events))
+    return RecordingJob() if available() else None
+
+
+def run_recording_args(result: Any, out_dir: Path) -> tuple:
+    """:meth:`RecordingJob.write`'s arguments for an offline run (a
+    :class:`tuav_sitl.offline.RunResult`) in ``out_dir``."""
+    return (Path(out_dir) / RECORDING_NAME, result.scenario.name, result.scenario,
+            result.series, nav_event_texts(result.events))
