@@ -458,6 +458,11 @@ def ports_for(instance: int) -> Ports:
 
 def run_up(args: argparse.Namespace) -> int:
     """Start, supervise and stop the stack; returns the exit code."""
+    from tuav_sitl.view import INSTALL_HINT, available
+
+    if args.view is not None and not available():
+        print(f"tuav-sitl up: --view: {INSTALL_HINT}", file=sys.stderr)
+        return 2
     speedup = args.speedup
     ports = ports_for(args.instance)
     if args.sim_link == "unix" and not ABSTRACT_UNIX:
@@ -496,11 +501,6 @@ def run_up(args: argparse.Namespace) -> int:
         key = signing_key(args)
     except sg.SigningError as exc:
         print(f"tuav-sitl up: {exc}", file=sys.stderr)
-        return 2
-    from tuav_sitl.view import INSTALL_HINT, available
-
-    if args.view is not None and not available():
-        print(f"tuav-sitl up: --view: {INSTALL_HINT}", file=sys.stderr)
         return 2
     # the files given are checked before anything is made or started
     parm_text = faults = None
