@@ -234,6 +234,8 @@ def test_up_view_web_serves_the_live_view_and_records(tmp_path):
         assert rows["/" + path] == n, path
     assert rows["/" + Entity.TETHER] >= 0.25 * n * SHAPE_RATE_HZ / 50.0
     assert rows.get("/" + Entity.ESTIMATE, 0) > 0
+    # the estimate against the truth interpolated at its instants
+    assert 0 < rows.get("/plots/error/estimate_x", 0) <= rows["/" + Entity.ESTIMATE]
     assert rows.get("/" + Entity.GNSS_FIX, 0) > 0
     assert rows.get("/" + Entity.STATUS, 0) > 0
     assert f"{n} truth rows" in out["view_log"]

@@ -35,6 +35,10 @@ import numpy as np
 
 from tuav_sitl.view import RECORDING_NAME, ViewUnavailableError, rerun_module
 
+#: The truth kept to compare the estimates with [s of simulated time].
+TRUTH_KEPT_S = 10.0
+#: What the estimates' comparison with the truth logs (the error plots only).
+ERROR_PLOT_COLUMNS = ("errors",)
 #: How often the files are read [s of wall time].
 POLL_S = 0.1
 #: Truth rows handed to the logger at most at once (a backlog is logged in such chunks).
@@ -223,6 +227,9 @@ class LiveView:
         self.vehicle_system = 1
         self._last_stamp: dict[str, int] = {}
         self._recent_texts: list[tuple[int, bytes]] = []
+        self._truth_t = np.empty(0)
+        self._truth_pos = np.empty((0, 3))
+        self._pending_est: list[tuple[float, tuple[float, float, float]]] = []
 
     def poll(self) -> int:
         """Log what the files hold beyond the last call; returns the truth rows logged."""
@@ -235,6 +242,7 @@ class LiveView:
                 break
             series = build_series(chunk, self.params)
             self.logger.log_series(series)
+            self._keep_truth(series["t"], series["pos"])
             self.t_s = float(series["t"][-1])
             logged += len(series["t"])
             if len(series["t"]) < MAX_CHUNK_ROWS:
@@ -294,9 +302,35 @@ class LiveView:
                 self.t_s = max(self.t_s, boot * 1e-3)
         if est:
             self.logger.log_series({"t": np.array(est_t), "est_pos": np.array(est)})
+            self._pending_est += list(zip(est_t, est, strict=True))
+        self._estimate_errors()
         if fix:
             self.logger.log_fixes(Entity.GNSS_FIX, np.array(fix_t), np.array(fix),
                                   accuracy_m=np.array(acc))
+
+    def _keep_truth(self, t: np.ndarray, pos: np.ndarray) -> None:
+        """The truth's last :data:`TRUTH_KEPT_S` seconds, to compare the estimates with."""
+        self._truth_t = np.concatenate((self._truth_t, t))
+        self._truth_pos = np.concatenate((self._truth_pos, pos))
+        keep = self._truth_t >= self._truth_t[-1] - TRUTH_KEPT_S
+        self._truth_t, self._truth_pos = self._truth_t[keep], self._truth_pos[keep]
+
+    def _estimate_errors(self) -> None:
+        """Estimate minus truth (interpolated) for the estimates the truth has reached;
+        the later ones wait for it."""
+        if not self._pending_est or len(self._truth_t) < 2:
+            return
+        t_end = self._truth_t[-1]
+        ready = [(t, p) for t, p in self._pending_est if self._truth_t[0] <= t <= t_end]
+        self._pending_est = [(t, p) for t, p in self._pending_est if t > t_end]
+        if not ready:
+            return
+        t = np.array([r[0] for r in ready])
+        est = np.array([r[1] for r in ready])
+        truth = np.column_stack([np.interp(t, self._truth_t, self._truth_pos[:, i])
+                                 for i in range(3)])
+        self.logger.log_series({"t": t, "est_pos": est, "pos": truth},
+                               only=ERROR_PLOT_COLUMNS)
 
     def close(self) -> None:
         """Stop following the files."""

@@ -250,12 +250,16 @@ class SceneLogger:
                 [np.asarray(ref_pos)[ok][::max(1, int(ok.sum()) // 2000)]],
                 colors=_REF_COLOR, radii=self.rr.Radius.ui_points(1.0)), static=True)
 
-    def log_series(self, s: Mapping[str, np.ndarray]) -> None:
+    def log_series(self, s: Mapping[str, np.ndarray], only: Sequence[str] = ()) -> None:
         """A chunk of the offline runner's columns (any of them; ``t`` [s] required, later
-        than the previous chunk's), NaN where a column has no value."""
+        than the previous chunk's), NaN where a column has no value. ``only=("errors",)``
+        logs the error plots alone (columns that also fill other entities)."""
         rr, rec = self.rr, self.rec
         t = np.asarray(s["t"], dtype=float)
         if not len(t):
+            return
+        if "errors" in only:
+            self._error_plots(t, s)
             return
         if "pos" in s and "euler" in s:
             pos, euler = np.asarray(s["pos"], float), np.asarray(s["euler"], float)
@@ -295,10 +299,7 @@ class SceneLogger:
                            ("drum_tension", Entity.TENSION_DRUM)):
             if name in s:
                 self._scalars(path, t, np.asarray(s[name], float))
-        for path, a, b, axis in ERROR_PLOTS:
-            if a in s and b in s:
-                self._scalars(path, t, np.asarray(s[a], float)[:, axis]
-                              - np.asarray(s[b], float)[:, axis])
+        self._error_plots(t, s)
         if "ref_pos" in s:
             ref = np.asarray(s["ref_pos"], float)
             ok = _finite_rows(ref)
@@ -321,6 +322,12 @@ class SceneLogger:
         if "pos" in s:
             self._shapes_and_path(t, np.asarray(s["pos"], float),
                                   np.asarray(s["length"], float) if "length" in s else None)
+
+    def _error_plots(self, t: np.ndarray, s: Mapping[str, np.ndarray]) -> None:
+        for path, a, b, axis in ERROR_PLOTS:
+            if a in s and b in s:
+                self._scalars(path, t, np.asarray(s[a], float)[:, axis]
+                              - np.asarray(s[b], float)[:, axis])
 
     def _shapes_and_path(self, t: np.ndarray, pos: np.ndarray,
                          length: np.ndarray | None) -> None:
