@@ -15,8 +15,9 @@ import sys
 import tempfile
 from pathlib import Path
 
+from tests.netns.flood_session import KINDS
+
 ROOT = Path(__file__).resolve().parents[1]
-KINDS = ("param_set", "param_list", "command", "mission", "interval", "peers")
 MISSED_GOAL_PERCENT = 0.1
 DRIFT_GOAL_M = 0.5
 

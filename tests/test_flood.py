@@ -13,7 +13,7 @@ import json
 import pytest
 from netns_util import PYTHON, ROOT, netns_available, run_in_netns
 
-from benchmarks.flood import KINDS
+from tests.netns.flood_session import KINDS
 
 needs_netns = pytest.mark.skipif(not netns_available(),
                                  reason="needs root (unshare) for a private network namespace")

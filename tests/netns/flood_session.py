@@ -35,6 +35,8 @@ from tests.netns.up_session import processes_mentioning, wait_banner
 
 ROOT = Path(__file__).resolve().parents[2]
 POSITION = (6.0, 2.0, 12.0)
+#: The kinds of flood (the module docstring), in the order they are sent.
+KINDS = ("param_set", "param_list", "command", "mission", "interval", "peers")
 RATE_HZ = 1000.0           # per kind, wall
 PEERS = 300
 INSTANCE = 7
