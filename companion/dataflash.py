@@ -21,6 +21,7 @@ waits for the disk.
 
 from __future__ import annotations
 
+import contextlib
 import struct
 import threading
 from collections.abc import Callable
@@ -116,7 +117,8 @@ class DataFlashWriter:
     def __init__(self, path: Path, formats: list[LogFormat], flush_s: float = 0.2,
                  max_bytes: int | None = None) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with contextlib.suppress(OSError):   # if it fails, opening the file says so
+            self.path.parent.mkdir(parents=True, exist_ok=True)
         every = [_FMT, UNIT, MULT, FMTU, *formats]
         if len({f.type for f in every}) != len(every) or len({f.name for f in every}) != len(
                 every):

@@ -49,6 +49,7 @@ are packed there (microseconds) and written by the writer's own thread.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from enum import IntEnum
@@ -280,9 +281,12 @@ class FlightLog:
     def __init__(self, log_dir: Path, origin: tuple[float, float, float],
                  clock: LogClock | None = None) -> None:
         self.dir = Path(log_dir)
-        self.dir.mkdir(parents=True, exist_ok=True)
+        # a full disk or a lost folder costs the log (the writer then says so), not the boot
+        with contextlib.suppress(OSError):
+            self.dir.mkdir(parents=True, exist_ok=True)
         self.number = next_log_number(self.dir)
-        (self.dir / "LASTLOG.TXT").write_text(f"{self.number}\n")
+        with contextlib.suppress(OSError):
+            (self.dir / "LASTLOG.TXT").write_text(f"{self.number}\n")
         self.writer = DataFlashWriter(log_path(self.dir, self.number), FORMATS)
         self.origin = origin
         self.clock = clock if clock is not None else LogClock()

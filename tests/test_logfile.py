@@ -99,3 +99,18 @@ def test_the_tlog_on_a_full_disk_calls_its_end_once():
     tlog.flush()
     tlog.close()
     assert len(said) == 1 and tlog.ended == said[0]
+
+
+def test_an_onboard_log_that_cannot_be_made_ends_and_the_boot_goes_on(tmp_path: Path):
+    """The companion's DataFlash log in a folder that cannot exist (a file is in its way):
+    the boot's log object is made, says its end once through the writer, takes records."""
+    from companion.flight_log import FlightLog
+
+    blocker = tmp_path / "logs"
+    blocker.write_text("a file where the folder should be")
+    log = FlightLog(blocker, (47.0, 8.0, 400.0))
+    said: list[str] = []
+    log.writer.on_end = said.append
+    log.message("still flying")
+    log.close()
+    assert log.writer.ended is not None and "cannot open" in log.writer.ended
