@@ -1056,15 +1056,19 @@ class Winch:
         the drum holds the length and runs the ground pre-tension's loop, which pays out
         only as the line is pulled and winds in slowly to the pre-tension, its floor from
         the reported position stopping a wind-in but paying nothing out; said once. It
-        ends when the line is pulled and the report asks no more than what is out (L-bar
-        at most ``REJOIN_MARGIN_M`` beyond the length: the law takes up again, a longer
-        line rejoining L-bar), or with an operator's ``DO_WINCH``."""
+        ends when the line is pulled and the report agrees with what is out (L-bar within
+        ``REJOIN_MARGIN_M`` of the length: a report still asking much more, or much less,
+        which would wind the line in onto a vehicle elsewhere, is not followed), or with
+        an operator's ``DO_WINCH``."""
         p = self.p
         length = self.length_m
         ea = self.exit_angle
         fixer = self.fixer
         ground_el = fixer.p.ground_elevation_rad if fixer is not None else 0.0
-        leaves = ea is not None and ea[3] and ea[1] >= ground_el
+        leaves = (ea is not None and ea[3] and ea[1] >= ground_el
+                  and self.sample_time_ms is not None
+                  and ((self.sample_time_ms - ea[2] + 0x8000) & 0xFFFF) - 0x8000
+                  <= 1e3 * p.bus_window_s)      # (a reading of this window, not a stale one)
         slack = self.tension_n < p.slack_tension_n and not leaves
         last, self._slack_length_m = self._slack_length_m, length
         if not slack:
@@ -1082,7 +1086,7 @@ class Winch:
                     f"winch: {self.slack_paid_m:.1f} m paid out slack, pay-out held"))
             return self.slack_hold
         if (not slack and uav is not None
-                and self.host.lbar.length(uav[0])[0] <= length + REJOIN_MARGIN_M):
+                and abs(self.host.lbar.length(uav[0])[0] - length) <= REJOIN_MARGIN_M):
             self._end_slack_hold()
             out.notices.append(_notice(mavlink2.MAV_SEVERITY_NOTICE,
                                        "winch: line pulled, following L-bar again"))

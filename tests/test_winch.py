@@ -1029,11 +1029,23 @@ def test_a_slack_line_is_not_paid_out_to_a_report_that_runs_away(runaway):
     held = b.length
     b.run(2.0)
     assert b.length == pytest.approx(held, abs=0.01)      # held, not wound in onto it
-    # the vehicle back where it is, and pulling the line: the law takes up again
+    # a report near the winder, the line pulled: not followed (it would wind the line in
+    # onto a vehicle that may be elsewhere); the pull is paid out, slowly
     b.winch.set_uav(((4.0, 1.0, 3.0), (0.0, 0.0, 0.0)))
-    b.tension = 1.0
+    b.tension = wm.WinchParams().ground_tension_n + 0.1
+    b.run(1.0)
+    assert b.winch.slack_hold and held <= b.length < held + 0.2
+    # a report that agrees with the line pulled straight to it: the law takes up again
+    k = (b.length - 0.3) / math.dist((4.0, 1.0, 3.0), (0, 0, 0))
+    b.winch.set_uav(((4.0 * k, 1.0 * k, 3.0 * k), (0.0, 0.0, 0.0)))
     b.run(0.2)
     assert not b.winch.slack_hold and "winch: line pulled, following L-bar again" in b.notices
+    # and an operator's DO_WINCH RELAXED ends it too: the line rejoins L-bar
+    b.winch.set_uav(((4.0, 1.0, 3.0), (0.0, 0.0, 0.0)))
+    b.winch.slack_hold = True
+    assert b.command(request(mavlink2.WINCH_RELAXED)).result == ACK
+    assert not b.winch.slack_hold
+    b.tension = 1.0
     b.run(10.0)                    # (rejoining from the longer line at 1 m/s)
     lbar = b.winch.host.lbar.length((4.0, 1.0, 3.0))[0]
     assert b.winch.reference()[0] >= lbar              # L-bar's law (with its lead)
