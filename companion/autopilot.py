@@ -61,6 +61,7 @@ from companion.mission_protocol import MissionItem, MissionProtocol
 from companion.navigation import FlightMode, NavEvent, Navigator, Reason, Refusal
 from companion.param_protocol import ParamDef, ParamProtocol
 from companion.signing import VehicleSigning
+from companion.statustext import Notice, StatusTextChunks, TextKind
 from companion.telemetry import DUE_TOLERANCE_S, Telemetry, TelemetryStreams
 from tuavdefs import component_link as cl
 from tuavdefs import signing as sg
@@ -138,7 +139,7 @@ class Autopilot:
         self._boot_wall = time.monotonic()
         self._last_hb_sim = -math.inf
         self._last_hb_wall = -math.inf
-        self._statustext_id = 0
+        self._chunks = StatusTextChunks()
         self._winch_pending: list[tuple[float, Peer, int, int, int]] = []
         #: the mission's DO_WINCH items sent to the winch and not yet answered (seq)
         self._mission_winch: list[int] = []
@@ -166,24 +167,20 @@ class Autopilot:
         if peer is None and self.flight_log is not None and msg.get_type() == "PARAM_VALUE":
             self.flight_log.param(msg.param_id, msg.param_value)   # an accepted change
 
-    def statustext(self, severity: int, text: str | Refusal) -> None:
-        """STATUSTEXT to every link (chunked past 50 characters, as MAVLink 2 allows) and
-        the process log."""
+    def statustext(self, severity: int, text: str | Refusal | Notice) -> None:
+        """STATUSTEXT to every link and the process log; a text of more than 50
+        characters in chunks as ArduPilot sends them (``companion.statustext``). A
+        :class:`Notice` (a repeating text) is said only if the navigator's rate limit
+        allows its kind now (the navigator's own events have passed it already)."""
+        if isinstance(text, Notice) and not self.nav.texts.allow(text.kind,
+                                                                 self.nav.time_s):
+            return
         text = str(text)
         self.log(text)
         if self.flight_log is not None:
             self.flight_log.message(text)
-        data = text.encode("utf-8", "replace")
-        if len(data) <= 50:
-            self.io.send(M.MAVLink_statustext_message(severity, data, 0, 0))
-            return
-        self._statustext_id = self._statustext_id % 65535 + 1
-        data = data[:50 * 255]      # chunk_seq is a byte
-        # a receiver takes a chunk shorter than 50 as the last: one of exactly 50 is
-        # followed by an empty one
-        for i in range(0, len(data) + (len(data) % 50 == 0), 50):
-            self.io.send(M.MAVLink_statustext_message(severity, data[i:i + 50],
-                                                      self._statustext_id, i // 50))
+        for data, text_id, seq in self._chunks.split(text):
+            self.io.send(M.MAVLink_statustext_message(severity, data, text_id, seq))
 
     # ----- the loop
 
@@ -409,7 +406,8 @@ class Autopilot:
             if now_wall - t0 > _WINCH_ACK_TIMEOUT_S:
                 self.io.send(M.MAVLink_command_ack_message(cmd, M.MAV_RESULT_FAILED, 0, 0,
                                                            sysid, compid), peer)
-                self.statustext(M.MAV_SEVERITY_WARNING, "Winch: no answer")
+                self.statustext(M.MAV_SEVERITY_WARNING,
+                                Notice(TextKind.WINCH_NO_ANSWER, "Winch: no answer"))
             else:
                 keep.append(entry)
         self._winch_pending = keep
@@ -545,7 +543,8 @@ class Autopilot:
             self._breach = breach
             return
         self._breach = breach
-        self.statustext(M.MAV_SEVERITY_CRITICAL, f"Fence breach: {breach.value}")
+        self.statustext(M.MAV_SEVERITY_CRITICAL,
+                        Notice(TextKind.FENCE_BREACH, f"Fence breach: {breach.value}"))
         action = (FenceAction.RTL if breach is FenceBreach.TETHER
                   else FenceAction(self.fence.p.action))
         if action is FenceAction.REPORT or nav.mode in (FlightMode.RTL, FlightMode.LAND):

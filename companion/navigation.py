@@ -37,6 +37,7 @@ from enum import Enum, IntEnum
 
 from companion.legs import CircleItem, GotoItem, LegFollower
 from companion.reference import Circle, RefSample, _new
+from companion.statustext import Notice, TextKind, TextRateLimit
 from tuavdefs.frames import quat_to_yaw
 from tuavdefs.jit import njit
 from tuavdefs.paramspec import Params, quantity
@@ -502,6 +503,13 @@ def brake_distance_m(speed_m_s: float, acc_along_m_s2: float, acc_m_s2: float,
     return speed_m_s * ramp + 0.5 * a0 * ramp * ramp + v1 * v1 / (2.0 * acc_m_s2)
 
 
+#: ArduCopter's RTL_CONE_SLOPE default: RTL climbs to at most this many times its
+#: horizontal distance from home (0.5 and more; ArduCopter's 0 switches the cone off).
+RTL_CONE_SLOPE = 3.0
+#: ArduCopter's RTL_ALT_MIN: the least height [m] above home RTL returns at.
+RTL_ALT_MIN_M = 2.0
+
+
 def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
@@ -568,6 +576,9 @@ class Navigator:
         self.position_sigma_m = 0.0
         #: the pre-arm checks of the rest of the vehicle (the estimator's), or None
         self.prearm: Callable[[], Refusal | None] | None = None
+        #: the rate limit of repeating texts (the navigator's events and the autopilot's
+        #: STATUSTEXTs of a kind), in simulated time
+        self.texts = TextRateLimit()
 
     def reboot(self) -> None:
         """Back to the power-on state (disarmed, STABILIZE, on the ground, no home, no
@@ -655,8 +666,9 @@ class Navigator:
         k = max(d - self.p.tension_step_m, 0.0) / d if d > 0 else 0.0
         # towards the winder, but no lower than 1 m above the gear unless already lower
         target = (k * x, k * y, max(k * z, min(z, self.gear_height_m + 1.0)))
-        self._emit(NavEvent.FAILSAFE, f"Tether over-tension ({tension_n:.0f} N > "
-                   f"{self.p.tension_limit_n:.0f} N): moving towards the winder")
+        self._emit(NavEvent.FAILSAFE, Notice(
+            TextKind.OVER_TENSION, f"Tether over-tension ({tension_n:.0f} N > "
+            f"{self.p.tension_limit_n:.0f} N): moving towards the winder"))
         self.mode = FlightMode.GUIDED
         self.mission_running = False
         self._vel = None
@@ -710,7 +722,16 @@ class Navigator:
         the event WARNING)."""
         self._emit(NavEvent.WARNING, text)
 
+    @property
+    def time_s(self) -> float:
+        """The time of the last step [s] (simulated)."""
+        return self._t
+
     def _emit(self, kind: NavEvent, value: object = None) -> None:
+        """Report an event; a :class:`Notice` (a repeating text) only if its kind has not
+        been said within :data:`companion.statustext.TEXT_KIND_INTERVAL_S`."""
+        if isinstance(value, Notice) and not self.texts.allow(value.kind, self._t):
+            return
         self._events.append((kind, value))
         if self.on_event is not None:
             self.on_event(kind, value)
@@ -1074,21 +1095,8 @@ class Navigator:
         the vehicle's positions (latency ``tether_latency_s`` +
         :data:`GOVERNOR_SLOW_RAMP_S`, deceleration ``tether_brake_acc_m_s2``, the limit
         :attr:`governor_limit_m` less ``tether_sigma_k`` position standard deviations)."""
-        nom = self._nominal
         s, sd = self._s, self._sd
-        target = 1.0
-        speed = 0.0
-        if nom is not None:
-            v = nom.vel_m_s
-            speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-            if speed > 1e-3:
-                p, a, pe, ve = nom.pos_m, nom.acc_m_s2, self._pos, self._vel_now
-                target = slow_target(
-                    v[0], v[1], v[2], p[0], p[1], p[2], a[0], a[1], a[2], pe[0], pe[1],
-                    pe[2], ve[0], ve[1], ve[2], s, self.governor_limit_m,
-                    GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k * self.position_sigma_m,
-                    self.p.tether_latency_s + GOVERNOR_SLOW_RAMP_S,
-                    self.p.tether_brake_acc_m_s2, self._lookahead_winch_speed_m_s())
+        target, speed = self._slow_target(self._nominal, s, ahead=False)
         vs = max(speed, 0.1)
         w = GOVERNOR_CLOCK_OMEGA
         jm = GOVERNOR_SLOW_JERK_M_S3 / vs
@@ -1102,11 +1110,45 @@ class Navigator:
             s_new, sd_new = 0.0, 0.0
         if target < 0.999 and not self._slowed:
             self._slowed = True
-            self._emit(NavEvent.WARNING, "Tether: slowing to the room the line gives")
+            self._emit(NavEvent.WARNING, Notice(TextKind.TETHER_SLOWING,
+                                                "Tether: slowing to the room the line gives"))
         elif target >= 1.0 and s_new >= 1.0:
             self._slowed = False
         self._clock_lag += (1.0 - 0.5 * (s + s_new)) * dt
         self._s, self._sd = s_new, sd_new
+
+    def _slow_target(self, nom: RefSample | None, s: float, ahead: bool
+                     ) -> tuple[float, float]:
+        """The rate in [0, 1] the slowing asks of the leg's clock for the leg's nominal
+        sample ``nom`` (None: none yet) with the clock at rate ``s``, and the speed [m/s]
+        it counted: the leg's now, or (``ahead``) the larger its plan has
+        :data:`GOVERNOR_LOOKAHEAD_S` on."""
+        if nom is None:
+            return 1.0, 0.0
+        v = nom.vel_m_s
+        speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        ahead = self._leg_velocity_ahead() if ahead else None
+        if ahead is not None:
+            sa = math.sqrt(ahead[0] * ahead[0] + ahead[1] * ahead[1] + ahead[2] * ahead[2])
+            if sa > speed:
+                v, speed = ahead, sa
+        if not speed > 1e-3:
+            return 1.0, speed
+        p, a, pe, ve = nom.pos_m, nom.acc_m_s2, self._pos, self._vel_now
+        return slow_target(
+            v[0], v[1], v[2], p[0], p[1], p[2], a[0], a[1], a[2], pe[0], pe[1],
+            pe[2], ve[0], ve[1], ve[2], s, self.governor_limit_m,
+            GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k * self.position_sigma_m,
+            self.p.tether_latency_s + GOVERNOR_SLOW_RAMP_S,
+            self.p.tether_brake_acc_m_s2, self._lookahead_winch_speed_m_s()), speed
+
+    def _leg_velocity_ahead(self) -> Vec3 | None:
+        """The velocity [m/s] the current leg's plan has :data:`GOVERNOR_LOOKAHEAD_S` on
+        its own clock (None: no leg, or a streamed script, whose future is unknown)."""
+        leg = self._leg
+        if leg is None or self._script is not None:
+            return None
+        return leg.follower.trajectory.sample(self._leg_clock + GOVERNOR_LOOKAHEAD_S).vel_m_s
 
     def _lookahead_winch_speed_m_s(self) -> float:
         """The line speed [m/s] the slowing's look-ahead counts on: the winch's reported
@@ -1140,6 +1182,9 @@ class Navigator:
         speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
         if speed < 1e-3:
             return self._at_rest(ref, lim)
+        if v[2] < 0.0 and v[0] * p[0] + v[1] * p[1] + v[2] * p[2] <= 0.0:
+            # a descent coming closer to the winder: the line only gets shorter
+            return ref
         u = (v[0] / speed, v[1] / speed, v[2] / speed)
         ab, jerk = self.p.tether_brake_acc_m_s2, TETHER_BRAKE_JERK_M_S3
         run = brake_distance_m(speed, a[0] * u[0] + a[1] * u[1] + a[2] * u[2], ab, jerk)
@@ -1172,19 +1217,20 @@ class Navigator:
         """Brake the reference (:meth:`_govern`), pausing what it flew."""
         paused: list[_Leg] = []
         if self._script is not None:
-            self._emit(NavEvent.ERROR, "scripted reference stopped at the tether's reach")
+            self._emit(NavEvent.ERROR, "script stopped at the tether's reach")
         elif self._vel is not None:
             if not self._vel_limited:
                 self._vel_limited = True
-                self._emit(NavEvent.WARNING, "Guided velocity stopped at the tether's reach")
+                self._emit(NavEvent.WARNING, Notice(TextKind.VELOCITY_STOPPED,
+                                                    "Guided velocity stopped at the reach"))
         elif self._leg is not None:
             # a circle resumes with the turns it has left (ArduCopter's circle continues
             # after a pause), not from its first again: a circle braked once a turn would
             # otherwise never end
             self._leg.item = self._leg.follower.remaining_item(self._leg_clock)
             paused = [self._leg, *self._legs]
-        self._emit(NavEvent.WARNING, f"Tether: braking {lim:.2f} m from the winder "
-                   "(the reported length)")
+        self._emit(NavEvent.WARNING, Notice(TextKind.TETHER_BRAKING,
+                                            f"Tether: braking at {lim:.2f} m from the winder"))
         self._script, self._vel, self._leg, self._legs = None, None, None, []
         self._paused = paused
         self._brake = _BrakeRef(ref, self.p.tether_brake_acc_m_s2, TETHER_BRAKE_JERK_M_S3)
@@ -1221,7 +1267,8 @@ class Navigator:
                 and self._locked_length_m is None and leg is not None \
                 and leg.tag is LegTag.HOLD and leg.follower.done:
             paused = self._paused
-            self._emit(NavEvent.WARNING, "Tether: room again, resuming")
+            self._emit(NavEvent.WARNING, Notice(TextKind.TETHER_RESUMING,
+                                                "Tether: room again, resuming"))
             self._ref = ref
             self._queue(paused)
             return self._leg.follower.update(self._leg_clock, self._pos)
@@ -1231,8 +1278,8 @@ class Navigator:
             target = (k * p[0], k * p[1], max(k * p[2], min(p[2], self.gear_height_m + 1.0)))
             if math.dist(target, leg.follower.target_m or p) > 0.05:
                 paused = self._paused
-                self._emit(NavEvent.WARNING, f"Tether: moving in within the braked length "
-                           f"({lim:.2f} m)")
+                self._emit(NavEvent.WARNING, Notice(
+                    TextKind.TETHER_MOVING_IN, f"Tether: moving in within the braked {lim:.2f} m"))
                 self._queue([_Leg(self._follower(self.speed_m_s), GotoItem(target, ref.yaw_rad),
                                   tag=LegTag.HOLD)])
                 self._paused = paused
@@ -1245,7 +1292,7 @@ class Navigator:
             x, y, z = ref.pos_m
             reach = self.reach_m
             if not (z >= 0.0 and x * x + y * y + z * z <= reach * reach):   # NaN too
-                self._emit(NavEvent.ERROR, f"scripted reference {self.check_target(ref.pos_m)}")
+                self._emit(NavEvent.ERROR, f"script: {self.check_target(ref.pos_m)}")
                 self._hold()
                 return self._advance_plan(t, dt)
             return ref
@@ -1294,7 +1341,8 @@ class Navigator:
             v.cmd = (cmd[0], cmd[1], cmd[2])
             if not self._vel_limited:
                 self._vel_limited = True
-                self._emit(NavEvent.WARNING, "Guided velocity stopped at the tether's reach")
+                self._emit(NavEvent.WARNING, Notice(TextKind.VELOCITY_STOPPED,
+                                                    "Guided velocity stopped at the reach"))
 
     def _slow_velocity(self) -> None:
         """The fence-like part of the tether governor for a velocity target: its command's
@@ -1325,7 +1373,8 @@ class Navigator:
         if v_max < speed:
             if not self._slowed:
                 self._slowed = True
-                self._emit(NavEvent.WARNING, "Tether: slowing to the room the line gives")
+                self._emit(NavEvent.WARNING, Notice(TextKind.TETHER_SLOWING,
+                                                    "Tether: slowing to the room the line gives"))
         else:
             self._slowed = False
 
@@ -1382,6 +1431,15 @@ class Navigator:
                            current_yaw=ref.yaw_rad, current_acc=ref.acc_m_s2)
         self._leg = leg
         self._s, self._sd, self._nominal = 1.0, 0.0, None
+        v = ref.vel_m_s
+        if (self.p.tether_governor and not (leg.landing or leg.takeoff)
+                and v[0] * v[0] + v[1] * v[1] + v[2] * v[2] < 1e-6):
+            # a leg from rest starts on its clock at the rate the room allows (the
+            # reference, at rest, is unchanged by it): from 1, the clock's slowing could
+            # not follow the leg's first acceleration near the vertical, and the brake
+            # stopped it at once (resumed, it began again: the chatter)
+            self._s = self._slow_target(leg.follower.trajectory.sample(self._leg_clock),
+                                        1.0, ahead=True)[0]
 
     def _queue(self, legs: list[_Leg]) -> None:
         """Fly these legs in order, the first from the current reference (what the tether
@@ -1441,20 +1499,35 @@ class Navigator:
                 best, best_d = r, d
         return best
 
+    def rtl_altitude_m(self, stop: Vec3, home: Vec3) -> float:
+        """The height [m] RTL returns at from ``stop`` [m] to ``home`` [m], as ArduCopter
+        computes it (ModeRTL's return target, its default RTL_CONE_SLOPE and RTL_CLIMB_MIN
+        0): ``rtl_alt_m`` above home, at least :data:`RTL_ALT_MIN_M`, but within a cone
+        of :data:`RTL_CONE_SLOPE` above home (a vehicle near home climbs little or not
+        at all), and never below where it is. The tether's reach bounds it after."""
+        base = self.gear_height_m
+        here = stop[2] - base
+        least = max(RTL_ALT_MIN_M, here)
+        target = max(self.p.rtl_alt_m, least)
+        cone = RTL_CONE_SLOPE * math.hypot(home[0] - stop[0], home[1] - stop[1])
+        target = min(target, max(cone, least))
+        return base + max(target, here)
+
     def _rtl(self, seq: int | None = None) -> None:
         ref = self._current_ref()
         legs: list[_Leg] = []
         stop = _stop_point(ref, self.p.acc_m_s2)
         home = self.rtl_destination(stop)
-        alt = max(ref.pos_m[2], self.gear_height_m + self.p.rtl_alt_m)
+        alt = self.rtl_altitude_m(stop, home)
         # the climb and the way home stay within the tether's reach, whatever RTL_ALT says
         # (a level line's farthest point from the winder is one of its ends)
         reach = self.reach_m
         far_h = max(math.hypot(stop[0], stop[1]), math.hypot(home[0], home[1]))
         cap = math.sqrt(max(reach * reach - far_h * far_h, 0.0))
         if alt > cap:
-            self._emit(NavEvent.WARNING, f"RTL: altitude {alt:.1f} m limited to {cap:.1f} m "
-                       "by the tether's reach")
+            self._emit(NavEvent.WARNING, Notice(
+                TextKind.RTL_ALT_LIMITED, f"RTL: altitude {alt:.1f} m limited to {cap:.1f} m "
+                "by the tether's reach"))
             alt = max(cap, self.gear_height_m)
         if alt > stop[2] + 0.5:
             legs.append(_Leg(self._follower(self.p.speed_up_m_s),

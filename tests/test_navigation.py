@@ -151,3 +151,104 @@ def test_guided_velocity_target_moves_then_stops_after_timeout() -> None:
     assert abs(loop.plant.x[3]) < 0.05
     travelled = loop.pos[0] - x0
     assert 2.5 < travelled < 5.0
+
+
+def _rtl_run(loop: Loop, limit_s: float = 120.0) -> tuple[float, float, list]:
+    """RTL from where the loop is: (its duration [s] to the disarm, the highest the
+    vehicle went [m], the events meanwhile)."""
+    n0, t0, top = len(loop.events), loop.t, [loop.pos[2]]
+    assert loop.nav.set_mode(FlightMode.RTL) is None
+
+    def done(lp: Loop) -> bool:
+        top[0] = max(top[0], lp.pos[2])
+        return not lp.nav.armed
+
+    assert loop.run_until(done, limit_s)
+    return loop.t - t0, top[0], loop.events[n0:]
+
+
+def _descent_s(nav, x: float, y: float, z: float) -> float:
+    """The time [s] RTL's descent from (x, y, z) [m] takes by its plans: to land_alt_low_m
+    at speed_down_m_s, then at land_speed_m_s until the gear is on the ground, and the
+    land detector's land_detect_s."""
+    from companion.reference import Transition
+
+    p, gear = nav.p, nav.gear_height_m
+    low = gear + p.land_alt_low_m
+    t = 0.0
+    if z > low + 0.5:
+        t += Transition((x, y, z), (x, y, low), 0.0, p.speed_down_m_s, p.acc_m_s2).end_s
+        z = low
+    final = Transition((x, y, z), (x, y, -1.0), 0.0, p.land_speed_m_s, p.acc_m_s2)
+    lo, hi = 0.0, final.end_s        # when the plan reaches the gear's height
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if final.sample(mid).pos_m[2] > gear else (lo, mid)
+    return t + hi + p.land_detect_s
+
+
+def test_rtl_from_10_m_above_home_descends_at_once_unbraked_in_the_time_its_speeds_set():
+    """ArduCopter's RTL near home: within its cone (RTL_CONE_SLOPE 3 x the distance from
+    home) it does not climb to RTL_ALT; it waits RTL_LOIT_TIME and lands. Near the vertical
+    above the winder the tether governor has nothing to slow or brake on the way down."""
+    loop = Loop(start_xy=(2.0, 0.0))
+    nav = loop.nav
+    nav.set_mode(FlightMode.GUIDED)
+    nav.arm()
+    nav.takeoff(10.0)
+    assert loop.run_until(lambda lp: NavEvent.TAKEOFF_DONE in lp.kinds(), 30.0)
+    loop.run_until(lambda lp: False, 3.0)
+    z0 = loop.pos[2]
+    took, top, events = _rtl_run(loop)
+    assert top < z0 + 0.05                                  # no climb
+    planned = nav.p.rtl_loiter_s + _descent_s(nav, 2.0, 0.0, z0)
+    assert planned - 0.5 < took < planned + 1.5, (took, planned)
+    said = [str(v) for _, k, v in events if k in (NavEvent.WARNING, NavEvent.ERROR)]
+    assert said == []                                       # nothing to say
+    assert math.hypot(loop.pos[0] - 2.0, loop.pos[1]) < 0.1
+    assert loop.max_taut < 0.0
+
+
+def test_rtl_climbs_within_its_cone_and_its_descent_is_never_braked():
+    """From farther out RTL climbs to RTL_ALT (within the cone), flies home, descends and
+    lands: the descent (the line only shortening) meets no brake and no slowing, and the
+    governor's texts, if any, come at most once per kind every few seconds."""
+    from companion.statustext import TEXT_KIND_INTERVAL_S, Notice
+
+    loop = Loop(start_xy=(3.0, -1.0))
+    nav = loop.nav
+    nav.set_mode(FlightMode.GUIDED)
+    nav.arm()
+    nav.takeoff(4.0)
+    assert loop.run_until(lambda lp: NavEvent.TAKEOFF_DONE in lp.kinds(), 30.0)
+    assert nav.goto((6.0, 1.0, 4.0)) is None      # 3.6 m from home: the cone allows 10.9 m
+    assert loop.run_until(lambda lp: math.dist(lp.pos, (6.0, 1.0, 4.0)) < 0.1, 30.0)
+    took, top, events = _rtl_run(loop)
+    gear = nav.gear_height_m
+    assert top == pytest.approx(gear + nav.p.rtl_alt_m, abs=0.1)
+    assert math.hypot(loop.pos[0] - 3.0, loop.pos[1] + 1.0) < 0.1
+    # the descent began when the vehicle, home, started down: no governor text after it
+    down = next(t for t, k, v in events if k is NavEvent.LANDED) - _descent_s(
+        nav, 3.0, -1.0, gear + nav.p.rtl_alt_m)
+    late = [(t, str(v)) for t, k, v in events if isinstance(v, Notice) and t > down - 1.0]
+    assert late == []
+    kinds: dict[object, list[float]] = {}
+    for t, _, v in events:
+        if isinstance(v, Notice):
+            kinds.setdefault(v.kind, []).append(t)
+    for times in kinds.values():
+        assert all(b - a >= TEXT_KIND_INTERVAL_S for a, b in zip(times, times[1:], strict=False))
+    assert loop.max_taut < 0.0
+
+
+def test_rtl_altitude_is_arducopters_return_target():
+    """RTL_ALT above home unless home is near (RTL_CONE_SLOPE 3 x the horizontal distance,
+    never below RTL_ALT_MIN 2 m), never below where the vehicle is."""
+    loop = Loop(start_xy=(2.0, 0.0))
+    nav = loop.nav
+    g, home = nav.gear_height_m, (2.0, 0.0, nav.gear_height_m)
+    assert nav.rtl_altitude_m((2.0, 0.0, g + 9.8), home) == pytest.approx(g + 9.8)
+    assert nav.rtl_altitude_m((2.0, 0.0, g + 1.0), home) == pytest.approx(g + 2.0)
+    assert nav.rtl_altitude_m((3.0, 0.0, g + 1.0), home) == pytest.approx(g + 3.0)
+    assert nav.rtl_altitude_m((22.0, 0.0, g + 1.0), home) == pytest.approx(g + 10.0)
+    assert nav.rtl_altitude_m((22.0, 0.0, g + 15.0), home) == pytest.approx(g + 15.0)
