@@ -295,9 +295,9 @@ class Autopilot:
     def flight_log(self, log: Any) -> None:
         self._flight_log = log
         if log is not None:
-            log.writer.on_end = self.log_ended
-            if log.writer.ended is not None:     # it could not even be opened
-                self.log_ended(log.writer.ended)
+            log.writer.file.on_end = self.log_ended
+            if log.writer.file.ended is not None:     # it could not even be opened
+                self.log_ended(log.writer.file.ended)
 
     def log_ended(self, why: str) -> None:
         """A log of the vehicle's ended (``why``: which and what happened); said with the

@@ -24,7 +24,6 @@ from __future__ import annotations
 import contextlib
 import struct
 import threading
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -110,9 +109,9 @@ class DataFlashWriter:
     :meth:`write` packs one record and returns; a thread of its own appends what was
     packed to the file (every ``flush_s`` [s] of wall time, and at :meth:`close`).
     ``size`` is the bytes written so far (what a reader may ask for). A write that fails (a
-    full disk, a lost file) or would pass ``max_bytes`` ends the log
-    (:class:`tuavdefs.logfile.LogFile`) and calls :attr:`on_end`; the records packed after
-    it are dropped."""
+    full disk, a lost file) or would pass ``max_bytes`` ends the log (:attr:`file`, a
+    :class:`tuavdefs.logfile.LogFile`, calls its ``on_end``); the records packed after it
+    are dropped."""
 
     def __init__(self, path: Path, formats: list[LogFormat], flush_s: float = 0.2,
                  max_bytes: int | None = None) -> None:
@@ -132,11 +131,11 @@ class DataFlashWriter:
         self._stop = threading.Event()
         self.size = 0
         """Bytes in the file (written and flushed)."""
-        #: Called once, from the writer's thread, with why the log ended (a full disk, a
-        #: lost file, the cap): the flight goes on without it.
-        self.on_end: Callable[[str], None] | None = None
-        self._file = LogFile(self.path, name=f"log {self.path.name}", max_bytes=max_bytes,
-                             on_end=self._ended, flush_s=0.0)
+        #: The file: its ``on_end`` is called once, from the writer's thread, with why the
+        #: log ended (a full disk, a lost file, the cap; ``ended`` keeps it): the flight
+        #: goes on without it.
+        self.file = LogFile(self.path, name=f"log {self.path.name}", max_bytes=max_bytes,
+                            flush_s=0.0)
         for f in every:
             self._pending.append(HEAD + bytes((FMT_TYPE,)) + _FMT.struct.pack(
                 f.type, f.length, f.name.encode(), f.fmt.encode(), f.columns.encode()))
@@ -167,20 +166,11 @@ class DataFlashWriter:
             n = len(pending)
             data = b"".join(pending[:n])
             del pending[:n]
-            if data and self._file.write(data):
+            if data and self.file.write(data):
                 self.size += len(data)
             if closed:
-                self._file.close()
+                self.file.close()
                 return
-
-    @property
-    def ended(self) -> str | None:
-        """Why the log ended (None while it is written)."""
-        return self._file.ended
-
-    def _ended(self, why: str) -> None:
-        if self.on_end is not None:
-            self.on_end(why)
 
     def close(self, timeout_s: float = 10.0) -> None:
         """Write what is pending, close the file, end the thread."""

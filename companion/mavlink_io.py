@@ -53,38 +53,19 @@ UDP_PEER_TIMEOUT_S = 10.0
 _TCP_BACKLOG_BYTES = 1 << 20
 
 
-class TelemetryLog:
-    """A ``.tlog``: timestamped raw frames, flushed at least once a second. A write that
-    fails (a full disk, a lost file) or would pass ``max_bytes`` ends the log, not the
-    process (:class:`tuavdefs.logfile.LogFile`): ``on_end(why)`` is called once (the
+class TelemetryLog(LogFile):
+    """A ``.tlog``: timestamped raw frames, appended, flushed at least once a second. A
+    write that fails (a full disk, a lost file) or would pass ``max_bytes`` ends the log,
+    not the process (:class:`tuavdefs.logfile.LogFile`: its ``on_end`` is called once; the
     autopilot sets it to say so)."""
 
     def __init__(self, path: Path | str, max_bytes: int | None = None) -> None:
-        self.path = Path(path)
-        self.on_end: Callable[[str], None] | None = None
-        self._file = LogFile(self.path, append=True, max_bytes=max_bytes,
-                             on_end=self._ended, flush_s=_TLOG_FLUSH_S)
+        super().__init__(path, append=True, max_bytes=max_bytes, flush_s=_TLOG_FLUSH_S)
 
-    @property
-    def ended(self) -> str | None:
-        """Why the log ended (None while it is written)."""
-        return self._file.ended
-
-    def _ended(self, why: str) -> None:
-        if self.on_end is not None:
-            self.on_end(why)
-
-    def write(self, data: bytes) -> None:
+    def write(self, data: bytes | str) -> bool:
         """Record one frame (or several back to back) with the current wall time."""
-        self._file.write(_TLOG_STAMP.pack(int(time.time() * 1e6)) + data)
-
-    def flush(self) -> None:
-        """Write out what is buffered."""
-        self._file.flush()
-
-    def close(self) -> None:
-        """Flush and close."""
-        self._file.close()
+        raw = data.encode() if isinstance(data, str) else data
+        return super().write(_TLOG_STAMP.pack(int(time.time() * 1e6)) + raw)
 
 
 class _Link:

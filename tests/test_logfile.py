@@ -110,7 +110,7 @@ def test_an_onboard_log_that_cannot_be_made_ends_and_the_boot_goes_on(tmp_path: 
     blocker.write_text("a file where the folder should be")
     log = FlightLog(blocker, (47.0, 8.0, 400.0))
     said: list[str] = []
-    log.writer.on_end = said.append
+    log.writer.file.on_end = said.append
     log.message("still flying")
     log.close()
-    assert log.writer.ended is not None and "cannot open" in log.writer.ended
+    assert log.writer.file.ended is not None and "cannot open" in log.writer.file.ended
