@@ -64,3 +64,39 @@ def test_a_crashed_vehicle_never_gets_the_line_paid_out_to_it(runaway):
     assert len(held) <= 1
     if runaway != "none":
         assert len(held) == 1
+
+
+# --------------------------------------------------- the same through the real processes
+
+@pytest.fixture(scope="module")
+def stack_crash(tmp_path_factory) -> dict:
+    from netns_util import netns_available, run_session
+    if not netns_available():
+        pytest.skip("needs root (unshare) for a private network namespace")
+    return run_session("tests.netns.crash_stack_session",
+                       str(tmp_path_factory.mktemp("crash_stack")), timeout_s=600)
+
+
+def test_the_real_stack_holds_the_line_of_a_crashed_vehicle(stack_crash):
+    """The plant, the companion and the ground station as processes on a real CAN bus:
+    rotor 1 fails at 1.5 m, the vehicle rolls over and tumbles on the ground, and its
+    reports to the winch climb away at 6 m/s (tests/netns/crash_stack_session.py). The
+    drum pays out at most the slack allowance and its stop, and the winch says so once,
+    on the component link."""
+    from groundstation.winch import WinchParams
+    from tests.netns.crash_stack_session import WRONG_S
+
+    rows = np.array(stack_crash["rows"])
+    t, length = rows[:, 0], rows[:, 4]
+    assert t[-1] >= 24.0
+    after = t > WRONG_S
+    assert np.max(np.abs(rows[after, 5])) > math.pi / 2     # rolled over
+    assert np.all(rows[after, 3] < 1.5)                      # on the ground
+    # (armed on three rotors it crawls over the ground, pulling the line, which is paid
+    # out as it pulls: the bound is the farthest it has been, plus the allowance and the
+    # drum's stop from the law's full speed)
+    farthest = np.maximum.accumulate(np.linalg.norm(rows[:, 1:4], axis=1))
+    excess = length[after] - farthest[after]
+    assert np.max(excess) < WinchParams().slack_payout_max_m + 1.2
+    held = [text for _, text in stack_crash["texts"] if "paid out slack, pay-out held" in text]
+    assert len(held) == 1
