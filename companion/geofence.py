@@ -34,8 +34,8 @@ from companion.mission_protocol import MissionItem, e7_to_degrees
 from tuavdefs.frames import global_to_local_enu
 from tuavdefs.paramspec import Params, quantity
 
-__all__ = ["FENCE_COMMANDS", "FenceAction", "FenceBreach", "FenceParams", "Geofence",
-           "check_fence_item"]
+__all__ = ["FENCE_COMMANDS", "FenceAction", "FenceBreach", "FenceParams", "FenceStatus",
+           "Geofence", "check_fence_item"]
 
 M = mavlink2
 Vec2 = tuple[float, float]
@@ -73,6 +73,22 @@ class FenceBreach(Enum):
     ALT_MAX = "maximum altitude"
     CIRCLE = "circle"
     POLYGON = "polygon"
+
+
+@dataclass(frozen=True)
+class FenceStatus:
+    """SYS_STATUS's ``MAV_SYS_STATUS_GEOFENCE`` bits as ArduPilot sets them (AC_Fence's
+    ``sys_status_present``, ``_enabled`` and ``_failed``; MAVProxy's fence module says
+    "fence present", "fence enabled", "fence breach" from them)."""
+
+    present: bool
+    """A fence type of ``FENCE_TYPE`` has something to check: the maximum altitude or the
+    circle (parameters: no fence items), or polygons with an upload (the fence mission
+    type's items)."""
+    enabled: bool
+    """Present, ``FENCE_ENABLE`` set and ``FENCE_ACTION`` not report-only."""
+    healthy: bool
+    """Not present, or present and not breached."""
 
 
 class FenceAction(Enum):
@@ -166,6 +182,14 @@ class Geofence:
         uploaded = bool(self.include_polygons or self.exclude_polygons
                         or self.include_circles or self.exclude_circles)
         return bool(mask & (TYPE_ALT_MAX | TYPE_CIRCLE) or (mask & TYPE_POLYGON and uploaded))
+
+    def sys_status(self, breached: bool) -> FenceStatus:
+        """The geofence bits of SYS_STATUS as ArduPilot sets them, with ``breached``
+        whether a fence is breached now."""
+        present = self.present()
+        return FenceStatus(present, present and self.p.enable
+                           and self.p.action != FenceAction.REPORT.value,
+                           not (present and breached))
 
     def pre_arm(self, pos_m: Vec3 | None, home_m: Vec3 | None) -> str | None:
         """ArduCopter's fence pre-arm check: None (arming may go on) or why not, as the

@@ -219,3 +219,23 @@ def test_arming_outside_an_enabled_fence_is_denied(tmp_path):
         assert command(m, arm_once, 1).result == M.MAV_RESULT_ACCEPTED
     finally:
         veh.stop()
+
+
+def test_sys_status_bits_as_arducopter_sets_them():
+    """AC_Fence: present when FENCE_TYPE holds the altitude or the circle (parameters, no
+    fence items) or polygons with an upload; enabled when present, FENCE_ENABLE set and the
+    action not report-only; unhealthy only when present and breached."""
+    from companion.geofence import FenceStatus
+
+    # ArduCopter's defaults (FENCE_TYPE 7, FENCE_ENABLE 0): present with no fence items
+    assert Geofence(FenceParams(), HOME_DEFAULT).sys_status(False) == FenceStatus(
+        True, False, True)
+    polys = Geofence(FenceParams(enable=True, type_mask=4), HOME_DEFAULT)
+    assert polys.sys_status(True) == FenceStatus(False, False, True)   # nothing to check
+    assert polys.set_items(polygon(INC, CONCAVE)) is None
+    assert polys.sys_status(False) == FenceStatus(True, True, True)
+    assert polys.sys_status(True) == FenceStatus(True, True, False)
+    report = Geofence(FenceParams(enable=True, action=0), HOME_DEFAULT)
+    assert report.sys_status(True) == FenceStatus(True, False, False)
+    assert Geofence(FenceParams(enable=True, type_mask=0), HOME_DEFAULT).sys_status(
+        False) == FenceStatus(False, False, True)

@@ -152,3 +152,24 @@ def test_wp_load_of_a_qgc_wpl_file_uploads_the_mission(session):
 def test_fence_list_gets_an_answer(session):
     mp = session["mp"]
     mp.say("fence list", "Requesting 0 fence items")
+
+
+def test_fence_present_enabled_and_listed_agree_as_arducopter_has_them(session):
+    """MAVProxy's fence module says "fence present" from SYS_STATUS's geofence bit; as in
+    ArduCopter (AC_Fence::present) that is FENCE_TYPE's altitude or circle fence, which are
+    parameters and no fence items, or uploaded polygons: so with the defaults it says
+    "fence present" and `fence list` answers 0 items. "fence enabled" follows
+    FENCE_ENABLE."""
+    mp = session["mp"]
+    mp.wait_for("fence present")
+    fence_type = int(shown(mp.say("param show FENCE_TYPE", "FENCE_TYPE "), "FENCE_TYPE"))
+    line = mp.say("fence list", "fence items")
+    m = re.search(r"Requesting (\d+) fence items", line)
+    assert m is not None, line
+    assert fence_type & 3 or int(m.group(1)) > 0, (fence_type, line)
+    since = len(mp.lines)
+    mp.send("param set FENCE_ENABLE 1")
+    mp.wait_for("fence enabled", since)
+    since = len(mp.lines)
+    mp.send("param set FENCE_ENABLE 0")
+    mp.wait_for("fence disabled", since)
