@@ -10,9 +10,11 @@ timeline ``sim`` is simulated time):
   the front arms red) and rotor discs (``world/vehicle/rotors``, brighter with their
   command); ``world/tether``: the line as the plant has it (the lumped nodes when the run
   has them, else the plant's catenary for the position and the paid-out length);
-  ``world/path``: the path flown; ``world/reference`` (and ``world/reference_path``): the
-  reference; ``world/estimate``: the filter's position with its 3-sigma ellipsoid
-  (``world/estimate/ellipsoid``); ``world/fixes/gnss``, ``world/fixes/tether``: the fixes;
+  ``world/path``: the path flown (a piece per shape, the blueprint showing the pieces up to
+  the time shown); ``world/reference`` (and ``world/reference_path``): the reference;
+  ``world/estimate``: the filter's position with its 3-sigma ellipsoid
+  (``world/estimate/ellipsoid``); ``world/fixes/gnss``, ``world/fixes/tether``: position
+  fixes (with ``.../accuracy``, their 3-sigma ellipsoids) where the run has them;
 - ``plots/tension/{top,drum}`` [N], ``plots/length/{paid_out,lbar}`` [m],
   ``plots/error/tracking_{x,y,z}`` (truth minus reference) and
   ``plots/error/estimate_{x,y,z}`` (estimate minus truth) [m], ``plots/rotors/{1..4}``
