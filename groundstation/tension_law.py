@@ -27,6 +27,9 @@ the set-point's: the drum renders to the line's true pull by itself). Lyapunov f
     dV/dt = -e sigma(T) - k_w e_w^2 - e (v_c - v0)
 
 (the last term is the command filter's lag and the bounds: zero while neither acts).
+While a length bound holds the line, the torque's ``T*`` follows the measured tension
+(anti-windup); below the slack floor the line is wound in towards L-bar (the slack
+floor's recovery).
 """
 
 from __future__ import annotations

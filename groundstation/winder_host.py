@@ -88,7 +88,10 @@ class WinderHost:
         exit elevation [rad] (NaN: none; the tension trim then uses the model's weight)
         and the UAV's position [m] as the winder's own tether fix places it (None: none
         now; the slack floor is taken back); ``join_m`` [m] and its rate [m/s] are
-        added to the reference (a join's gap)."""
+        added to the reference (a join's gap). With ``law = "tension"`` the tension law
+        (:func:`groundstation.tension_law.tension_step`) runs instead: no trim, lead,
+        floor or join; the step's length is the measured one plus the drum's lag behind
+        its speed set-point, its rate that set-point."""
         lb, ctl = self.lbar, self.controller
         px, py, pz = uav_pos_m
         vx, vy, vz = uav_vel_m_s
