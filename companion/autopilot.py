@@ -514,18 +514,20 @@ class Autopilot:
             return M.MAV_MISSION_UNSUPPORTED, f"Rally: item {seq}: command {item.command}"
         return None
 
-    def _other_changed(self, mission_type: int, items: list[MissionItem]) -> None:
+    def _other_changed(self, mission_type: int, items: list[MissionItem]) -> str | None:
+        """A fence or rally list uploaded: in use, or why not (the upload is refused with
+        that text and the previous list stays)."""
         if mission_type == M.MAV_MISSION_TYPE_FENCE:
             why = self.fence.set_items(items)
             if why is not None:
-                self.statustext(M.MAV_SEVERITY_WARNING, why)
-            else:
-                self.log(f"fence of {len(items)} items accepted")
+                return why
+            self.log(f"fence of {len(items)} items accepted")
         else:
             self.rally = items
             self.nav.rally_m = tuple(global_to_local(i.x * 1e-7, i.y * 1e-7, i.z, i.frame,
                                                      self.origin) for i in items)
             self.log(f"{len(items)} rally points accepted")
+        return None
 
     def _fence_prearm(self) -> Refusal | None:
         """The geofence's pre-arm check (:meth:`Geofence.pre_arm`) as a refusal."""

@@ -62,7 +62,11 @@ Mission types
     ``MAV_MISSION_TYPE_MISSION`` (home at seq 0), ``_FENCE`` and ``_RALLY`` (their items from
     seq 0) are each a store uploaded, downloaded and cleared with the same exchanges, one
     upload at a time; a fence or rally upload's items are checked by ``validate_other(type,
-    seq, item)`` and the new list handed to ``on_other_changed(type, items)``.
+    seq, item)`` and the new list handed to ``on_other_changed(type, items)``, which may
+    refuse the list as a whole (a polygon cut short): the upload is then answered
+    ``MAV_MISSION_ERROR`` with its reason and the stored list stays what it was, so that
+    the count a download gets is the list in use (ArduPilot refuses a fence it cannot
+    write).
     ``MAV_MISSION_TYPE_ALL`` is accepted by MISSION_CLEAR_ALL only (it clears the mission;
     ArduPilot answers it ``MAV_MISSION_UNSUPPORTED``); other values get
     ``MAV_MISSION_UNSUPPORTED``.
@@ -317,7 +321,8 @@ class MissionProtocol:
                  max_items: int = 700,
                  validate_other: Callable[[int, int, MissionItem], tuple[int, str] | None]
                  | None = None,
-                 on_other_changed: Callable[[int, list[MissionItem]], None] | None = None
+                 on_other_changed: Callable[[int, list[MissionItem]], str | None] | None
+                 = None
                  ) -> None:
         if timeout_s <= 0 or max_retries < 0 or max_items < 1:
             raise ValueError("timeout_s must be > 0, max_retries >= 0, max_items >= 1")
@@ -518,12 +523,19 @@ class MissionProtocol:
         if up.expected < up.count:
             self._request(up, now_s)
             return True
+        if mtype != _MISSION:
+            why = self._on_other_changed(mtype, list(up.received))
+            if why is not None:      # the list as a whole cannot be used: the old one stays
+                self._abort(up, mavlink2.MAV_MISSION_ERROR, why)
+                return True
         self._upload = None
         self._finished = _Finished(peer, sysid, compid, up.count - 1, now_s, mtype)
         self._ack(peer, msg, mavlink2.MAV_MISSION_ACCEPTED, mtype)
         if mtype == _MISSION:
             self._statustext(mavlink2.MAV_SEVERITY_INFO, "Flight plan received")
-        self._store(mtype, up.received)
+            self._store(mtype, up.received)
+        else:
+            self._other[mtype] = up.received
         return True
 
     def _store(self, mtype: int, items: list[MissionItem]) -> None:
@@ -531,9 +543,8 @@ class MissionProtocol:
         if mtype == _MISSION:
             self._body = items
             self._on_changed(self.items)
-        else:
+        elif self._on_other_changed(mtype, list(items)) is None:
             self._other[mtype] = items
-            self._on_other_changed(mtype, list(items))
 
     def _on_ack(self, peer: Hashable, msg: Any, now_s: float) -> bool:
         up = self._upload

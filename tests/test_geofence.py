@@ -239,3 +239,33 @@ def test_sys_status_bits_as_arducopter_sets_them():
     assert report.sys_status(True) == FenceStatus(True, False, False)
     assert Geofence(FenceParams(enable=True, type_mask=0), HOME_DEFAULT).sys_status(
         False) == FenceStatus(False, False, True)
+
+
+def _fence_count(m) -> int:
+    m.mav.mission_request_list_send(1, 1, M.MAV_MISSION_TYPE_FENCE)
+    count = wait_msg(m, "MISSION_COUNT", lambda c: c.mission_type == M.MAV_MISSION_TYPE_FENCE)
+    assert count is not None
+    m.mav.mission_ack_send(1, 1, M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_FENCE)
+    return count.count
+
+
+def test_a_fence_that_cannot_be_used_is_refused_and_the_listed_count_stays_the_used_one(
+        tmp_path):
+    """A polygon cut short (four vertices announced, three sent) is refused as a whole,
+    MISSION_ACK MAV_MISSION_ERROR and a STATUSTEXT saying why, as ArduPilot refuses a fence
+    it cannot write: the count a ground station lists stays the fence in use."""
+    veh = Vehicle(tmp_path)
+    try:
+        m = veh.connect()
+        square = [(-10.0, -10.0), (10.0, -10.0), (10.0, 10.0), (-10.0, 10.0)]
+        assert upload_fence(m, polygon(INC, square)).type == M.MAV_MISSION_ACCEPTED
+        assert _fence_count(m) == 4
+        short = polygon(INC, square)[:3]
+        seen: list = []
+        ack = upload_fence(m, short)
+        assert ack.type == M.MAV_MISSION_ERROR
+        said = wait_msg(m, "STATUSTEXT", lambda s: "fewer than 4 vertices" in s.text, 5, seen)
+        assert said is not None
+        assert _fence_count(m) == 4
+    finally:
+        veh.stop()
