@@ -1526,8 +1526,8 @@ class Navigator:
         cap = math.sqrt(max(reach * reach - far_h * far_h, 0.0))
         if alt > cap:
             self._emit(NavEvent.WARNING, Notice(
-                TextKind.RTL_ALT_LIMITED, f"RTL: altitude {alt:.1f} m limited to {cap:.1f} m "
-                "by the tether's reach"))
+                TextKind.RTL_ALT_LIMITED, f"RTL: altitude {alt:.1f} m cut to {cap:.1f} m by "
+                "the tether"))
             alt = max(cap, self.gear_height_m)
         if alt > stop[2] + 0.5:
             legs.append(_Leg(self._follower(self.p.speed_up_m_s),
