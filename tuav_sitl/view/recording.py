@@ -335,27 +335,45 @@ class SceneLogger:
                          length: np.ndarray | None) -> None:
         """The catenary (unless the nodes come) and the path flown (a piece at a time),
         at :data:`SHAPE_RATE_HZ`."""
-        rr, rec = self.rr, self.rec
+        ticks: list[float] = []
+        pieces: list[np.ndarray] = []
+        shape_t: list[float] = []
+        shapes: list[np.ndarray] = []
         for i in range(len(t)):
             ti = float(t[i])
             p = pos[i]
-            if not np.isfinite(p).all():
-                continue
-            if ti < self._next_shape_t - 1e-9:
+            if not np.isfinite(p).all() or ti < self._next_shape_t - 1e-9:
                 continue
             self._next_shape_t = _next_on_grid(ti, 1.0 / SHAPE_RATE_HZ)
-            rec.set_time(TIMELINE, duration=ti)
             # the piece flown since the last one (the blueprint shows them all up to the
             # time shown): the recording grows with the run, not with its square
             last = self._path_last if self._path_last is not None else p
-            rec.log(Entity.PATH, rr.LineStrips3D([np.vstack((last, p))], colors=_PATH_COLOR,
-                                                 radii=rr.Radius.ui_points(1.2)))
+            ticks.append(ti)
+            pieces.append(np.vstack((last, p)))
             self._path_last = p
             if not self.lumped and length is not None and np.isfinite(length[i]) \
                     and length[i] > 0:
-                pts = self.catenary(p, float(length[i]))
-                rec.log(Entity.TETHER, rr.LineStrips3D([pts], colors=_TETHER_COLOR,
-                                                       radii=rr.Radius.ui_points(2.0)))
+                shape_t.append(ti)
+                shapes.append(self.catenary(p, float(length[i])))
+        self._strips(Entity.PATH, ticks, pieces, _PATH_COLOR, 1.2)
+        self._strips(Entity.TETHER, shape_t, shapes, _TETHER_COLOR, 2.0)
+
+    def _strips(self, path: str, t: Sequence[float], strips: Sequence[np.ndarray],
+                color: tuple[int, int, int], width_pt: float,
+                points_pt: float | None = None) -> None:
+        """A line strip per instant (and, with ``points_pt``, its points), in one call."""
+        if not strips:
+            return
+        rr, n = self.rr, len(strips)
+        cols = rr.LineStrips3D.columns(strips=list(strips), colors=np.tile(color, (n, 1)),
+                                       radii=np.full(n, -width_pt))
+        if points_pt is not None:
+            sizes = [len(s) for s in strips]
+            total = int(sum(sizes))
+            cols = [*cols, *rr.Points3D.columns(
+                positions=np.vstack(strips), colors=np.tile(color, (total, 1)),
+                radii=np.full(total, -points_pt)).partition(sizes)]
+        self.rec.send_columns(path, indexes=self._time(np.asarray(t, float)), columns=cols)
 
     def catenary(self, pos: np.ndarray, length_m: float) -> np.ndarray:
         """(n, 3) points [m] of the plant's catenary from the exit to the vehicle at
@@ -371,13 +389,10 @@ class SceneLogger:
     def log_line_nodes(self, t: np.ndarray, nodes: np.ndarray) -> None:
         """The lumped tether's nodes: times [s] and (samples, points, 3) [m], NaN-padded
         (the offline runner's ``line_t``, ``line_nodes``), as a strip and its points."""
-        rr, rec = self.rr, self.rec
-        for ti, row in zip(np.asarray(t, float), np.asarray(nodes, float), strict=True):
-            pts = row[np.isfinite(row[:, 0])]
-            rec.set_time(TIMELINE, duration=float(ti))
-            rec.log(Entity.TETHER, rr.LineStrips3D([pts], colors=_TETHER_COLOR,
-                                                   radii=rr.Radius.ui_points(2.0)),
-                    rr.Points3D(pts, colors=_TETHER_COLOR, radii=rr.Radius.ui_points(3.0)))
+        rows = np.asarray(nodes, float)
+        self._strips(Entity.TETHER, np.asarray(t, float),
+                     [row[np.isfinite(row[:, 0])] for row in rows], _TETHER_COLOR, 2.0,
+                     points_pt=3.0)
 
     def log_fixes(self, path: str, t: np.ndarray, pos: np.ndarray,
                   accuracy_m: np.ndarray | None = None) -> None:
