@@ -536,6 +536,9 @@ def main(argv: list[str] | None = None) -> int:
     """Run the benchmarks and print the table."""
     ap = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__)
     ap.add_argument("--quick", action="store_true", help="tiny configuration, for tests")
+    ap.add_argument("--soak", action="store_true",
+                    help="also fly the soak: up --speedup max for an hour of wall time (a "
+                         "minute with --quick)")
     ap.add_argument("--no-processes", action="store_true",
                     help="skip the benchmarks that start the processes (the stack, real "
                          "time, the torque and command latencies)")
@@ -546,9 +549,14 @@ def main(argv: list[str] | None = None) -> int:
     benches = [bench_tether, bench_plant_step, bench_estimator, bench_offline, bench_peer,
                bench_first_result, bench_sweep]
     if not args.no_processes:
+        from benchmarks.flood import bench_flood
         from benchmarks.view import bench_view
 
-        benches += [bench_processes, bench_command_latency, bench_view]
+        benches += [bench_processes, bench_command_latency, bench_view, bench_flood]
+    if args.soak:
+        from benchmarks.soak import bench_soak
+
+        benches.append(bench_soak)
     loads: list[tuple[str, Load]] = []
     total = LoadMeter()
     for bench in benches:

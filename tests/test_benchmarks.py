@@ -56,6 +56,8 @@ def test_benchmarks_run_quick():
         assert re.search(r"\d ms, max [\d.]+ ms over 30 commands;", ln), ln
         assert "failed" not in ln and "unanswered" not in ln, ln
     if netns_available():
+        flood = next(ln for ln in out.splitlines() if ln.startswith("flood of all kinds"))
+        assert "failed" not in flood and "% missed" in flood, flood
         for row in ("where the time goes: plant", "where the time goes: companion",
                     "where the time goes: groundstation",
                     "where the time goes: mission client (pymavlink)"):
