@@ -238,8 +238,10 @@ class TelemetryStreams:
         links = io.links()
         built: dict[str, bytes] = {}
         next_due = math.inf
-        home = self.home_set()
+        ready, home = self.ready(), self.home_set()
         newly_home, self._home_reported = home and not self._home_reported, home
+        # what is not sent yet (ArduPilot has no local position before its EKF gives one)
+        withheld = {"HOME_POSITION": not home, "LOCAL_POSITION_NED": not ready}
         for peer in links:
             st = self._link(peer)
             frames: list[bytes] = []
@@ -251,7 +253,7 @@ class TelemetryStreams:
                     continue
                 if t >= due - DUE_TOLERANCE_S:
                     entry[1] = max(due + interval, t) if t - due < interval else t + interval
-                    if not (name == "HOME_POSITION" and not home):
+                    if not withheld.get(name, False):
                         data = built.get(name)
                         if data is None:
                             data = built[name] = io.pack(self.build(name, self.telem))
@@ -341,6 +343,8 @@ class TelemetryStreams:
             if not self.home_set():
                 return M.MAV_RESULT_TEMPORARILY_REJECTED
             self.io.send(self.home_position(), peer)
+        elif mid == M.MAVLINK_MSG_ID_LOCAL_POSITION_NED and not self.ready():
+            return M.MAV_RESULT_TEMPORARILY_REJECTED
         elif _MSG_NAMES.get(mid) in FORWARDED:
             data = self._forwarded.get(_MSG_NAMES[mid])
             if data is None:
