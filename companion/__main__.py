@@ -216,7 +216,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         """New fence parameters: the geofence's, and SYS_STATUS's bits."""
         for ap in fence_holder:
             ap.fence.p = p
-            ap.streams.fence_enabled = p.enable
+            ap.fence_changed()
 
     defs = build_defs(gains, nav_params, onboard.set_gains, onboard.set_nav_params,
                       lambda: onboard.arming_check,

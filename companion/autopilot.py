@@ -127,6 +127,7 @@ class Autopilot:
         self.params = ParamProtocol(params, self._send_to, self.statustext,
                                     persist_path=param_file)
         self.streams = TelemetryStreams(endpoints, nav, self.origin, self.missions)
+        self.fence_changed()
         self.counters = {"commands": 0, "unsupported": 0, "rejected_targets": 0}
         self.commands = CommandHandler(endpoints, nav, self.origin, self.streams,
                                        self.counters, self.statustext, self.send_heartbeat,
@@ -521,6 +522,7 @@ class Autopilot:
             why = self.fence.set_items(items)
             if why is not None:
                 return why
+            self.fence_changed()
             self.log(f"fence of {len(items)} items accepted")
         else:
             self.rally = items
@@ -528,6 +530,11 @@ class Autopilot:
                                                      self.origin) for i in items)
             self.log(f"{len(items)} rally points accepted")
         return None
+
+    def fence_changed(self) -> None:
+        """The fence's parameters, items or breach changed: SYS_STATUS's geofence bits
+        follow (:meth:`Geofence.sys_status`, as ArduCopter sets them)."""
+        self.streams.fence_status = self.fence.sys_status(self._breach is not None)
 
     def _fence_prearm(self) -> Refusal | None:
         """The geofence's pre-arm check (:meth:`Geofence.pre_arm`) as a refusal."""
@@ -540,11 +547,12 @@ class Autopilot:
         nav = self.nav
         breach = (self.fence.breach(pos_m, nav.home_m, nav.tether_limit_m) if nav.flying
                   else None)
-        self.streams.fence_breached = breach is not None
-        if breach is None or breach == self._breach:
-            self._breach = breach
+        if breach == self._breach:
             return
         self._breach = breach
+        self.fence_changed()
+        if breach is None:
+            return
         self.statustext(M.MAV_SEVERITY_CRITICAL,
                         Notice(TextKind.FENCE_BREACH, f"Fence breach: {breach.value}"))
         action = (FenceAction.RTL if breach is FenceBreach.TETHER

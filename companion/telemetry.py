@@ -24,6 +24,7 @@ from pymavlink.dialects.v20 import ardupilotmega
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.estimator import EstimatorFlags, FilterHealth, FilterStatus
+from companion.geofence import FenceStatus
 from companion.mavlink_io import MavlinkEndpoints, Peer
 from companion.mission_items import finite
 from companion.mission_protocol import MissionProtocol
@@ -182,10 +183,8 @@ class TelemetryStreams:
         """``f()`` -> the onboard wind estimate (velocity the air moves with, z-up [m/s]),
         asked only when WIND is due; None: no estimate (zero wind reported)."""
         self._forwarded: dict[str, bytes] = {}     # the last frame of each forwarded message
-        self.fence_enabled = False
-        """FENCE_ENABLE (SYS_STATUS's geofence bits)."""
-        self.fence_breached = False
-        """A fence is breached now."""
+        self.fence_status: FenceStatus | None = None
+        """SYS_STATUS's geofence bits (None: no geofence; the autopilot sets them)."""
         self.estimator_ready: Callable[[], bool] | None = None
         """``f()`` -> whether the estimate is ready to arm on now (the onboard step's
         :meth:`~companion.onboard.Companion.estimator_ready`, which the pre-arm check asks
@@ -462,13 +461,14 @@ class TelemetryStreams:
         the estimate is ready to arm on (EKF3 is not healthy until it has settled); the
         GNSS present once the receiver has spoken, healthy with a 3D fix that the
         estimate is ready to fly on; the pre-arm bit healthy when armed or when the
-        pre-arm checks pass (the same check arming runs); the fence (the tether's reach
-        at least) present, enabled with FENCE_ENABLE, healthy while not breached."""
+        pre-arm checks pass (the same check arming runs); the fence's as ArduCopter sets
+        them (:attr:`fence_status`)."""
         nav = self.nav
         fence = M.MAV_SYS_STATUS_GEOFENCE
-        present = _INERTIAL | _ALWAYS | _READINESS | fence
-        enabled = _INERTIAL | _ALWAYS | _READINESS | (fence if self.fence_enabled else 0)
-        health = _ALWAYS | (0 if self.fence_breached else fence)
+        fs = self.fence_status
+        present = _INERTIAL | _ALWAYS | _READINESS | (fence if fs and fs.present else 0)
+        enabled = _INERTIAL | _ALWAYS | _READINESS | (fence if fs and fs.enabled else 0)
+        health = _ALWAYS | (fence if fs is None or fs.healthy else 0)
         if tm.imu is not None:
             health |= _INERTIAL
         ready = self.ready()

@@ -103,8 +103,15 @@ def test_a_polygon_breach_in_flight_is_answered_by_rtl(tmp_path):
     veh = Vehicle(tmp_path)
     try:
         m = veh.connect()
+        # polygons only, none uploaded: no fence present (MAVProxy says no "fence present")
+        m.mav.param_set_send(1, 1, b"FENCE_TYPE", 4, M.MAV_PARAM_TYPE_INT8)
+        assert wait_msg(m, "PARAM_VALUE", lambda p: p.param_id == "FENCE_TYPE").param_value == 4
+        assert not (wait_msg(m, "SYS_STATUS").onboard_control_sensors_present
+                    & M.MAV_SYS_STATUS_GEOFENCE)
         square = [(-10.0, -10.0), (10.0, -10.0), (10.0, 10.0), (-10.0, 10.0)]
         assert upload_fence(m, polygon(INC, square)).type == M.MAV_MISSION_ACCEPTED
+        assert (wait_msg(m, "SYS_STATUS").onboard_control_sensors_present
+                & M.MAV_SYS_STATUS_GEOFENCE)             # the uploaded polygon: present
         for name, value, ptype in ((b"FENCE_TYPE", 4, M.MAV_PARAM_TYPE_INT8),
                                    (b"FENCE_ENABLE", 1, M.MAV_PARAM_TYPE_INT8)):
             m.mav.param_set_send(1, 1, name, value, ptype)
