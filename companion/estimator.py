@@ -1099,8 +1099,8 @@ class NavFilter:
         self._zero_vel_k = entry_point(fuse_zero_velocity_kernel, x, P, buf, meta, dx, 0.0,
                                        0.0, 0.0, 0.0)
         self._tether_k = (entry_point(fuse_tether_kernel, x, P, buf, meta, dx, diag, dl, 0.0,
-                                      0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                                      0.0) if self.params.tether_aid else None)
+                                      0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+                          if self.params.tether_aid else None)
 
     # ----- properties
     @property
