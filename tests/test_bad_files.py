@@ -222,9 +222,9 @@ def test_a_mutated_scenario_that_loads_runs_or_is_refused_by_field(data, tmp_pat
 
 def _default_parm() -> str:
     """A .parm file of every companion parameter at its default, as MAVProxy saves one."""
-    from companion.param_names import build_defs
     from companion.gains import FlightControlParams
     from companion.navigation import NavigationParams
+    from companion.param_names import build_defs
 
     defs = build_defs(FlightControlParams(), NavigationParams(), lambda _g: None,
                       lambda _n: None, lambda: 1, lambda _v: None)
