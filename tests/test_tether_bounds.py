@@ -66,7 +66,7 @@ def test_rtl_climbs_no_higher_than_the_tether_allows() -> None:
     assert not nav.armed and nav.landed                      # home and down
     assert top <= reach + 0.3
     assert loop.max_taut < 0.0
-    assert any("limited" in t and "tether" in t for t in texts(loop, NavEvent.WARNING))
+    assert any("cut to" in t and "tether" in t for t in texts(loop, NavEvent.WARNING))
 
 
 def test_an_item_without_a_position_is_checked_where_it_is_flown() -> None:

@@ -110,20 +110,30 @@ def main() -> int:
             flood_from = sim_t
         if flooding:
             flood_to = sim_t
-            while next_send <= now:
-                for k in kinds:
-                    _flood_one(k, sent[k], gcs, udp, peers)
-                    sent[k] += 1
-                next_send += 1.0 / RATE_HZ
+            try:
+                while next_send <= now:
+                    for k in kinds:
+                        _flood_one(k, sent[k], gcs, udp, peers)
+                        sent[k] += 1
+                    next_send += 1.0 / RATE_HZ
+            except ConnectionError:
+                out["link_closed_sim_s"] = sim_t
+                break
         else:
             next_send = now
-        m = gcs.recv_match(blocking=True, timeout=0.0005 if flooding else 0.05)
-        while m is not None:
-            kind = m.get_type()
-            heard[kind] = heard.get(kind, 0) + 1
-            if hasattr(m, "time_boot_ms"):
-                sim_t = max(sim_t, m.time_boot_ms * 1e-3)
-            m = gcs.recv_match(blocking=False)
+        try:
+            m = gcs.recv_match(blocking=True, timeout=0.0005 if flooding else 0.05)
+            while m is not None:
+                kind = m.get_type()
+                heard[kind] = heard.get(kind, 0) + 1
+                if hasattr(m, "time_boot_ms"):
+                    sim_t = max(sim_t, m.time_boot_ms * 1e-3)
+                m = gcs.recv_match(blocking=False)
+        except ConnectionError:
+            # the companion closed the link: the run's end (up's exit and the plant's
+            # periods say whether it was), or a failure the checks then show
+            out["link_closed_sim_s"] = sim_t
+            break
     gcs.close()
     for s in (udp, *peers):
         s.close()
