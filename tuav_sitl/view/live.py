@@ -50,26 +50,25 @@ _TLOG_STAMP = struct.Struct(">Q")
 _MAGIC_V2, _MAGIC_V1 = 0xFD, 0xFE
 
 
-class TruthTail:
-    """The rows of a growing ``truth.csv`` (:data:`sitl.truth_log.TRUTH_COLUMNS`), read
-    line by line as they are completed."""
+class LineTail:
+    """The complete lines of a growing text file, as they are written (a line still being
+    written waits for its end)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
         self._file: Any = None
         self._partial = ""
-        self.header: list[str] | None = None
 
-    def read(self, max_rows: int = MAX_CHUNK_ROWS) -> dict[str, np.ndarray] | None:
-        """The columns of the complete rows written since the last call (at most
-        ``max_rows``; None if there are none yet)."""
+    def lines(self, max_lines: int | None = None) -> list[str]:
+        """The complete lines written since the last call (at most ``max_lines``), without
+        their line ends; none while the file does not exist."""
         if self._file is None:
             try:
                 self._file = open(self.path)  # noqa: SIM115 - followed for the run's life
             except OSError:
-                return None
-        rows: list[list[float]] = []
-        while len(rows) < max_rows:
+                return []
+        out: list[str] = []
+        while max_lines is None or len(out) < max_lines:
             line = self._file.readline()
             if not line:
                 break
@@ -78,6 +77,28 @@ class TruthTail:
                 self._partial = line
                 break
             self._partial = ""
+            out.append(line.rstrip("\n"))
+        return out
+
+    def close(self) -> None:
+        """Stop following the file."""
+        if self._file is not None:
+            self._file.close()
+
+
+class TruthTail(LineTail):
+    """The rows of a growing ``truth.csv`` (:data:`sitl.truth_log.TRUTH_COLUMNS`), read
+    line by line as they are completed."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(path)
+        self.header: list[str] | None = None
+
+    def read(self, max_rows: int = MAX_CHUNK_ROWS) -> dict[str, np.ndarray] | None:
+        """The columns of the complete rows written since the last call (at most
+        ``max_rows``; None if there are none yet)."""
+        rows: list[list[float]] = []
+        for line in self.lines(max_rows + (self.header is None)):
             parts = line.strip().split(",")
             if self.header is None:
                 self.header = parts
@@ -93,40 +114,17 @@ class TruthTail:
         data = np.array(rows, dtype=float)
         return {name: np.ascontiguousarray(data[:, i]) for i, name in enumerate(self.header)}
 
-    def close(self) -> None:
-        """Stop following the file."""
-        if self._file is not None:
-            self._file.close()
 
-
-class NodesTail:
+class NodesTail(LineTail):
     """The lumped line's nodes of a growing ``tether_nodes.csv``
     (:data:`sitl.truth_log.NODES_NAME`: rows ``t_s,n,x0,y0,z0,...``)."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self._file: Any = None
-        self._partial = ""
 
     def read(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(times [s], nodes (rows, most points, 3) [m], NaN-padded) of the complete rows
         written since the last call; None if there are none."""
-        if self._file is None:
-            try:
-                self._file = open(self.path)  # noqa: SIM115 - followed for the run's life
-            except OSError:
-                return None
         times: list[float] = []
         rows: list[np.ndarray] = []
-        while True:
-            line = self._file.readline()
-            if not line:
-                break
-            line = self._partial + line
-            if not line.endswith("\n"):
-                self._partial = line
-                break
-            self._partial = ""
+        for line in self.lines():
             try:
                 values = [float(v) for v in line.split(",")]
                 n = int(values[1])
