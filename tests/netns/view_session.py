@@ -47,7 +47,10 @@ def main() -> int:
                 from PIL import Image
 
                 try:
-                    png = screenshot(url, shot_path, size=(960, 540)).read_bytes()
+                    # a live scene never stands still: the picture once the viewer has
+                    # loaded and drawn for a while (not the 240 s a still page may take)
+                    png = screenshot(url, shot_path, size=(960, 540),
+                                     settle_s=120.0).read_bytes()
                 except (TimeoutError, OSError, RuntimeError) as exc:
                     # a software-rendered live scene can outlast the capture's wait on a
                     # busy machine; the served recording's picture is test_view's
