@@ -35,11 +35,11 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 
+from companion.governor import GOVERNOR_LOOKAHEAD_S, TetherGovernor, Verdict, towards_winder
 from companion.legs import CircleItem, GotoItem, LegFollower
-from companion.reference import Circle, RefSample, _new
+from companion.reference import Circle, RefSample
 from companion.statustext import Notice, TextKind, TextRateLimit
 from tuavdefs.frames import quat_to_yaw
-from tuavdefs.jit import njit
 from tuavdefs.paramspec import Params, quantity
 
 Vec3 = tuple[float, float, float]
@@ -315,113 +315,6 @@ class _VelocityRef:
                          self.yaw, self.yaw_rate)
 
 
-#: The tether governor's jerk while its brake builds up [m/s^3].
-TETHER_BRAKE_JERK_M_S3 = 20.0
-#: A drum whose line moves slower than this [m/s] has caught up with its reference.
-TETHER_CAUGHT_UP_M_S = 0.02
-#: Outward speed [m/s] from which the governor keeps its whole margin for the
-#: estimate's uncertainty (in proportion below).
-GOVERNOR_SIGMA_SPEED_M_S = 0.5
-#: Room [m] the governor wants between the vehicle's distance and its limit before it
-#: resumes what it stopped (or that it moves in to, when beyond).
-TETHER_RESUME_ROOM_M = 0.1
-#: The governor's slowing of a leg (its clock): the time [s] its deceleration's build-up
-#: loses (a brake at tether_brake_acc_m_s2 reached at TETHER_BRAKE_JERK_M_S3, 3/20 s,
-#: loses half of it; rounded up), added to the vehicle's latency in the speed limit.
-GOVERNOR_SLOW_RAMP_S = 0.1
-#: Largest deceleration [m/s^2] and jerk [m/s^3] the slowing of a leg puts on the
-#: reference, and the acceleration [m/s^2] with which it gives the speed back.
-GOVERNOR_SLOW_ACC_M_S2 = 2.0
-GOVERNOR_SLOW_JERK_M_S3 = 8.0
-GOVERNOR_RESUME_ACC_M_S2 = 0.8
-#: Bandwidth [rad/s] of the leg clock's rate following its limit (critically damped).
-GOVERNOR_CLOCK_OMEGA = 4.0
-#: How far ahead [s] the slowing looks at the leg's own speed (its acceleration on).
-GOVERNOR_LOOKAHEAD_S = 0.5
-#: Length [m] the slowing keeps inside the braking limit (in full from an outward speed
-#: of GOVERNOR_SIGMA_SPEED_M_S, in proportion below), so that in a flight without a fault
-#: the brake is never needed.
-GOVERNOR_SLOW_MARGIN_M = 0.02
-
-
-@njit
-def governed_speed_m_s(pos: Vec3, direction: Vec3, limit_m: float, latency_s: float,
-                       acc_m_s2: float, margin_s: float = 0.0) -> float:
-    """Largest speed [m/s] along the unit ``direction`` at ``pos`` [m] from which a stop
-    (``latency_s`` [s] at that speed, then braking at ``acc_m_s2`` [m/s^2]) stays within
-    ``limit_m`` [m] of the origin (the winder): ``v t + v^2 / 2a <= r`` with ``r`` the
-    distance along ``direction`` to that sphere (ArduPilot's fence idea, sqrt(2 a r),
-    with a latency). ``math.inf`` for a motion inward from beyond it. A margin growing
-    with the speed, the sphere ``margin_s`` [s] times ``v`` smaller, shortens ``r`` by
-    ``dr/dlimit margin_s v`` (to first order): it is that much more latency."""
-    d2 = pos[0] * pos[0] + pos[1] * pos[1] + pos[2] * pos[2]
-    dc = pos[0] * direction[0] + pos[1] * direction[1] + pos[2] * direction[2]
-    if d2 >= limit_m * limit_m:          # on or beyond the limit
-        return math.inf if dc < 0.0 else 0.0
-    root = math.sqrt(max(limit_m * limit_m - d2 + dc * dc, 0.0))
-    r = -dc + root
-    if margin_s > 0.0 and root > 0.0:
-        latency_s += margin_s * limit_m / root
-    return acc_m_s2 * (-latency_s + math.sqrt(latency_s * latency_s + 2.0 * r / acc_m_s2))
-
-
-@njit
-def slow_target(vx: float, vy: float, vz: float, px: float, py: float, pz: float,
-                ax: float, ay: float, az: float, ex: float, ey: float, ez: float,
-                wx: float, wy: float, wz: float, s: float, limit_m: float, margin_m: float,
-                latency_s: float, acc_m_s2: float, winch_speed_m_s: float) -> float:
-    """The rate in [0, 1] the slowing asks of a leg's clock (:meth:`Navigator._slow_clock`)
-    for the leg's nominal velocity (``vx``, ``vy``, ``vz``) [m/s], position [m] and
-    acceleration [m/s^2], the vehicle's estimated position (``ex``...) [m] and velocity
-    (``wx``...) [m/s], the clock's rate ``s`` now, the governor's limit ``limit_m`` [m] and
-    its full margin ``margin_m`` [m], the latency [s] and deceleration [m/s^2] of the stop,
-    and the line speed [m/s] the look-ahead counts on; 1 for a leg not moving."""
-    v, p, a = (vx, vy, vz), (px, py, pz), (ax, ay, az)
-    pe, ve = (ex, ey, ez), (wx, wy, wz)
-    speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-    if not speed > 1e-3:
-        return 1.0
-    u = (v[0] / speed, v[1] / speed, v[2] / speed)
-    lim = limit_m
-    d = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
-    d_e = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
-    ve_out = 0.0
-    if d_e > 0:
-        ve_out = max((ve[0] * pe[0] + ve[1] * pe[1] + ve[2] * pe[2]) / d_e, 0.0)
-    # the margin M min(1, v_out / v_s) (v_s = GOVERNOR_SIGMA_SPEED_M_S) at the speed v the
-    # leg is allowed (its outward part v cos, or the vehicle's): at most M, and at most
-    # M ve_out / v_s plus M cos / v_s [s] per m/s of v; the larger speed either allows
-    # (counted at the speed it has now, the margin grew as the leg sped up, faster than
-    # the slowing followed)
-    m_full = margin_m
-    cos_out = (max((v[0] * p[0] + v[1] * p[1] + v[2] * p[2]) / (d * speed), 0.0)
-               if d > 0 else 1.0)
-    lim_v = lim - m_full * ve_out / GOVERNOR_SIGMA_SPEED_M_S
-    m_s = m_full * cos_out / GOVERNOR_SIGMA_SPEED_M_S
-    lim -= m_full
-    lat, ab = latency_s, acc_m_s2
-    v_max = max(min(governed_speed_m_s(p, u, lim, lat, ab, 0.0),
-                    governed_speed_m_s(pe, u, lim, lat, ab, 0.0)),
-                min(governed_speed_m_s(p, u, lim_v, lat, ab, m_s),
-                    governed_speed_m_s(pe, u, lim_v, lat, ab, m_s)))
-    # and GOVERNOR_LOOKAHEAD_S on: the leg's speed, direction and place then
-    h = GOVERNOR_LOOKAHEAD_S
-    ahead = speed + h * max(a[0] * u[0] + a[1] * u[1] + a[2] * u[2], 0.0)
-    target = min(1.0, v_max / ahead)
-    va = (v[0] + a[0] * h, v[1] + a[1] * h, v[2] + a[2] * h)
-    sa = math.sqrt(va[0] * va[0] + va[1] * va[1] + va[2] * va[2])
-    if sa > 1e-3:
-        ua = (va[0] / sa, va[1] / sa, va[2] / sa)
-        pa = (p[0] + v[0] * s * h, p[1] + v[1] * s * h, p[2] + v[2] * s * h)
-        # the limit then: the length the winch pays out meanwhile at its reported line
-        # speed, at most what the move gains in distance (a braked drum pays out
-        # nothing); the place then against the length now counted the same run twice
-        gain = math.sqrt(pa[0] * pa[0] + pa[1] * pa[1] + pa[2] * pa[2]) - d
-        more = max(0.0, min(h * winch_speed_m_s, gain))
-        target = min(target, max(
-            governed_speed_m_s(pa, ua, lim + more, lat, ab, 0.0),
-            governed_speed_m_s(pa, ua, lim_v + more, lat, ab, m_s)) / sa)
-    return target
 
 
 #: A vehicle whose first state (or, on its estimate, first GNSS fix) puts it more than
@@ -448,61 +341,6 @@ def air_start_too_low_m(z_m: float, gear_height_m: float, epv_m: float) -> float
     return need if gear_height_m < z_m < need else None
 
 
-class _BrakeRef:
-    """The tether governor's stop: the reference's speed brought to rest along its
-    direction, the deceleration ``acc`` [m/s^2] reached at ``jerk`` [m/s^3] from the
-    acceleration it had along it; the position integrates it."""
-
-    def __init__(self, ref: RefSample, acc: float, jerk: float) -> None:
-        self.pos = list(ref.pos_m)
-        v = ref.vel_m_s
-        s = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-        self.dir: Vec3 = (v[0] / s, v[1] / s, v[2] / s) if s > 1e-9 else _ZERO3
-        self.speed = s if s > 1e-9 else 0.0
-        self.acc_along = sum(ref.acc_m_s2[i] * self.dir[i] for i in range(3))
-        self.acc_max = acc
-        self.jerk_max = jerk
-        self.yaw = ref.yaw_rad
-
-    @property
-    def stopped(self) -> bool:
-        """Whether the reference is at rest."""
-        return self.speed <= 0.0
-
-    def step(self, dt: float) -> RefSample:
-        d = self.dir
-        if self.speed <= 0.0:
-            return RefSample(tuple(self.pos), _ZERO3, _ZERO3, _ZERO3,  # type: ignore
-                             self.yaw, 0.0)
-        a = max(self.acc_along - self.jerk_max * dt, -self.acc_max)
-        jerk = (a - self.acc_along) / dt
-        speed = self.speed + a * dt
-        if speed <= 0.0:         # at rest within this period
-            step_m = 0.5 * self.speed * self.speed / max(-a, 1e-9)
-            speed, a, jerk = 0.0, 0.0, 0.0
-        else:
-            step_m = 0.5 * (self.speed + speed) * dt
-        self.pos = [self.pos[i] + d[i] * step_m for i in range(3)]
-        self.speed, self.acc_along = speed, a
-        return RefSample(tuple(self.pos), tuple(d[i] * speed for i in range(3)),  # type: ignore
-                         tuple(d[i] * a for i in range(3)), tuple(d[i] * jerk for i in range(3)),
-                         self.yaw, 0.0)
-
-
-def brake_distance_m(speed_m_s: float, acc_along_m_s2: float, acc_m_s2: float,
-                     jerk_m_s3: float) -> float:
-    """An upper bound of the distance [m] a :class:`_BrakeRef` runs from ``speed_m_s``
-    [m/s] with ``acc_along_m_s2`` [m/s^2] along its motion: the build-up of the brake at
-    ``jerk_m_s3`` [m/s^3] at the speed and acceleration it had, then ``v^2 / 2a`` at
-    ``acc_m_s2``."""
-    if speed_m_s <= 0.0:
-        return 0.0
-    a0 = max(acc_along_m_s2, 0.0)
-    ramp = (a0 + acc_m_s2) / jerk_m_s3
-    v1 = speed_m_s + 0.5 * a0 * ramp
-    return speed_m_s * ramp + 0.5 * a0 * ramp * ramp + v1 * v1 / (2.0 * acc_m_s2)
-
-
 #: ArduCopter's RTL_CONE_SLOPE default: RTL climbs to at most this many times its
 #: horizontal distance from home (0.5 and more; ArduCopter's 0 switches the cone off).
 RTL_CONE_SLOPE = 3.0
@@ -525,6 +363,9 @@ class Navigator:
     def __init__(self, params: NavigationParams, gear_height_m: float,
                  tether_length_m: float,
                  on_event: Callable[[NavEvent, object], None] | None = None) -> None:
+        #: the tether governor (companion/governor.py): the winch's reports, the slowing
+        #: of legs and velocity targets, the brake
+        self.governor = TetherGovernor(params, tether_length_m, gear_height_m)
         self.p = params
         self.gear_height_m = gear_height_m
         self.tether_length_m = tether_length_m
@@ -555,22 +396,12 @@ class Navigator:
         self._vel_now: Vec3 = _ZERO3
         self._quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
         self._auto_takeoff_pending = False
-        self._locked_length_m: float | None = None   # the drum's length while braked
-        self._tension_move_t = -math.inf             # the last over-tension move [s]
-        # since when every winch report has said the tension is above the limit [s]
-        self._tension_over_t: float | None = None
         self._vel_limited = False                    # a velocity target cut at the reach
-        self._winch_length_m: float | None = None    # the last reported length [m]
-        self._winch_speed_m_s = 0.0                  # and line speed [m/s]
-        self._brake: _BrakeRef | None = None         # the tether governor's stop
-        self._paused: list[_Leg] = []                # the legs it stopped, to resume
-        # the governor's slowing of legs: the leg clock runs at rate s (ds/dt = sd),
-        # ``_clock_lag`` [s] behind the vehicle's; ``_nominal`` the leg's unscaled sample
-        self._s, self._sd = 1.0, 0.0
-        self._clock_lag = 0.0
-        self._script_lag = 0.0                       # _clock_lag when a script began [s]
+        self._paused: list[_Leg] = []                # the legs the governor stopped
+        # the governor's slowing of legs runs the leg clock behind the vehicle's
+        # (governor.clock_lag); ``_nominal`` the leg's unscaled sample
+        self._script_lag = 0.0                       # clock_lag when a script began [s]
         self._nominal: RefSample | None = None
-        self._slowed = False                         # said once per slowing
         #: The estimate's position standard deviation [m] (largest axis; 0 on the
         #: truth), which the tether governor keeps as margin (set by the onboard step).
         self.position_sigma_m = 0.0
@@ -591,6 +422,16 @@ class Navigator:
     # ----- state
 
     @property
+    def p(self) -> NavigationParams:
+        """The parameters (the tether governor reads the same)."""
+        return self._p
+
+    @p.setter
+    def p(self, params: NavigationParams) -> None:
+        self._p = params
+        self.governor.p = params
+
+    @property
     def _yaw(self) -> float:
         """The vehicle's heading now [rad] (from its attitude quaternion, when needed)."""
         return quat_to_yaw(self._quat)
@@ -605,36 +446,14 @@ class Navigator:
         """Largest straight-line distance [m] from the winder a target may have: of the
         whole tether, or of the length paid out while the winch's drum is braked
         (LOCK, HOLD, a lost winder: it pays out no more)."""
-        length = self.tether_length_m
-        if self._locked_length_m is not None:
-            length = min(length, self._locked_length_m)
-        return self.p.reach_fraction * length - self.p.reach_slack_m
+        return self.p.reach_fraction * self.governor.reach_length_m - self.p.reach_slack_m
 
     @property
     def tether_limit_m(self) -> float:
         """Distance [m] from the winder beyond which the tether would be near taut (the
         always-on fence's): the whole tether, or the length a braked drum has paid out,
         less ``reach_slack_m``. Targets keep the margin of :attr:`reach_m` inside it."""
-        length = self.tether_length_m
-        if self._locked_length_m is not None:
-            length = min(length, self._locked_length_m)
-        return max(length - self.p.reach_slack_m, 0.0)
-
-    @property
-    def governor_limit_m(self) -> float:
-        """Distance [m] from the winder the tether governor keeps the stopping point of
-        the reference and of the vehicle within: the length the drum last reported (it
-        may stop there at any moment: a snag, a lost bus's watchdog; while winding in,
-        where it would be 0.15 s on), or the whole tether before any report, less
-        ``tether_margin_m`` (moving outward, :meth:`_govern` keeps ``tether_sigma_k``
-        times the estimate's position standard deviation more)."""
-        length = self.tether_length_m
-        if self._winch_length_m is not None:
-            length = min(length, self._winch_length_m
-                         + 0.15 * min(self._winch_speed_m_s, 0.0))
-        if self._locked_length_m is not None:
-            length = min(length, self._locked_length_m)
-        return length - self.p.tether_margin_m
+        return max(self.governor.reach_length_m - self.p.reach_slack_m, 0.0)
 
     def winch_report(self, length_m: float, tension_n: float | None,
                      braked: bool, speed_m_s: float | None = None) -> None:
@@ -644,28 +463,16 @@ class Navigator:
         may stop at any moment); a tension above ``tension_limit_n`` in every report for
         ``tension_time_s`` moves the vehicle towards the winder, ``tension_step_m`` at a
         time (again every 2 s while it lasts), in GUIDED."""
-        self._locked_length_m = (float(length_m) if braked and math.isfinite(length_m)
-                                 else None)
-        if math.isfinite(length_m):
-            self._winch_length_m = float(length_m)
-        if speed_m_s is not None and math.isfinite(speed_m_s):
-            self._winch_speed_m_s = float(speed_m_s)
-        if tension_n is None or not tension_n > self.p.tension_limit_n:
-            self._tension_over_t = None
+        self.governor.report(length_m, braked, speed_m_s)
+        if not self.governor.over_tension(
+                self._t, tension_n,
+                # in flight, and not on the way in already
+                self.flying and self.mode not in (FlightMode.RTL, FlightMode.LAND)):
             return
-        if self._tension_over_t is None:
-            self._tension_over_t = self._t
-        if (not self.flying
-                or self.mode in (FlightMode.RTL, FlightMode.LAND)   # on the way in already
-                or self._t - self._tension_over_t < self.p.tension_time_s
-                or self._t - self._tension_move_t < 2.0):
-            return
-        self._tension_move_t = self._t
         x, y, z = self._current_ref().pos_m
         d = math.sqrt(x * x + y * y + z * z)
-        k = max(d - self.p.tension_step_m, 0.0) / d if d > 0 else 0.0
         # towards the winder, but no lower than 1 m above the gear unless already lower
-        target = (k * x, k * y, max(k * z, min(z, self.gear_height_m + 1.0)))
+        target = towards_winder((x, y, z), d - self.p.tension_step_m, self.gear_height_m + 1.0)
         self._emit(NavEvent.FAILSAFE, Notice(
             TextKind.OVER_TENSION, f"Tether over-tension ({tension_n:.0f} N > "
             f"{self.p.tension_limit_n:.0f} N): moving towards the winder"))
@@ -802,7 +609,7 @@ class Navigator:
     def _disarm(self) -> None:
         self.armed = False
         self._leg, self._legs, self._vel, self._script = None, [], None, None
-        self._brake, self._paused = None, []
+        self._unpause()
         self.mission_running = False
         self._armed_on_ground_since = None
         self._auto_takeoff_pending = False
@@ -901,7 +708,7 @@ class Navigator:
         if self._vel is None:
             self._vel = _VelocityRef(ref, self.p.acc_m_s2)
             self._leg, self._legs, self._script = None, [], None
-            self._brake, self._paused = None, []
+            self._unpause()
         self._vel.cmd = tuple(float(v) for v in vel_m_s)
         if yaw_rad is not None and math.isfinite(yaw_rad):
             self._vel.yaw = yaw_rad
@@ -923,10 +730,11 @@ class Navigator:
         if not self.flying:
             return Refusal(Reason.NOT_FLYING, "not flying (take off first)")
         self._leg, self._legs, self._vel = None, [], None
-        self._brake, self._paused = None, []
+        self._unpause()
         self._script = source
-        self._script_lag = self._clock_lag
-        self._s, self._sd, self._nominal = 1.0, 0.0, None
+        self._script_lag = self.governor.clock_lag
+        self.governor.reset_clock()
+        self._nominal = None
         return None
 
     def set_yaw(self, yaw_rad: float) -> Refusal | None:
@@ -1042,23 +850,27 @@ class Navigator:
     def _advance(self, t: float, dt: float) -> RefSample:
         """The period's reference: the tether governor's stop while it brakes, else the
         plan's (script, velocity target or legs), governed."""
-        if self._brake is not None:
+        gov = self.governor
+        if gov.brake is not None:
             ref = self._braking(dt)
             if ref is not None:
                 return ref
-        if not self.p.tether_governor:
+        if not gov.enabled:
             return self._advance_plan(t, dt)
         leg, script = self._leg, self._script
         slow = self._vel is None and (script is not None or (
             leg is not None and not (leg.landing or leg.takeoff)))
         if slow:
-            self._slow_clock(dt)
-        elif self._s != 1.0 or self._sd != 0.0:
-            self._s, self._sd = 1.0, 0.0
+            notice = gov.slow_clock(self._nominal, self._pos, self._vel_now,
+                                    self.position_sigma_m, dt)
+            if notice is not None:
+                self._emit(NavEvent.WARNING, notice)
+        elif gov.s != 1.0 or gov.sd != 0.0:
+            gov.reset_clock()
         ref = self._advance_plan(t, dt)
         if slow and self._leg is leg and self._script is script:
             self._nominal = ref
-            ref = self._scaled(ref)
+            ref = gov.scaled(ref)
         else:
             self._nominal = None
         return self._govern(ref, dt)
@@ -1066,81 +878,7 @@ class Navigator:
     @property
     def _leg_clock(self) -> float:
         """The legs' clock [s]: the vehicle's, less what the governor's slowing took."""
-        return self._t - self._clock_lag
-
-    def _scaled(self, ref: RefSample) -> RefSample:
-        """A leg's sample ``ref`` on a clock running at rate s (ds/dt = sd, its own rate
-        taken as 0): velocity v s, acceleration a s^2 + v sd, jerk j s^3 + 3 a s sd, with
-        v, a, j the leg's derivatives in its own time (position, velocity and acceleration
-        continuous)."""
-        s, sd = self._s, self._sd
-        if s == 1.0 and sd == 0.0:
-            return ref
-        vx, vy, vz = ref.vel_m_s
-        ax, ay, az = ref.acc_m_s2
-        jx, jy, jz = ref.jerk_m_s3
-        return _new(RefSample, (
-            ref.pos_m, (vx * s, vy * s, vz * s),
-            (ax * s * s + vx * sd, ay * s * s + vy * sd, az * s * s + vz * sd),
-            (jx * s * s * s + 3.0 * ax * s * sd, jy * s * s * s + 3.0 * ay * s * sd,
-             jz * s * s * s + 3.0 * az * s * sd),
-            ref.yaw_rad, ref.yaw_rate_rad_s * s))
-
-    def _slow_clock(self, dt: float) -> None:
-        """The fence-like part of the tether governor: the rate s of the leg's clock
-        follows (critically damped, its effect on the reference limited to
-        :data:`GOVERNOR_SLOW_JERK_M_S3` and :data:`GOVERNOR_SLOW_ACC_M_S2`) the largest
-        rate at which the leg's speed along its path stays within
-        :func:`governed_speed_m_s` of the room the tether leaves, from the reference's and
-        the vehicle's positions (latency ``tether_latency_s`` +
-        :data:`GOVERNOR_SLOW_RAMP_S`, deceleration ``tether_brake_acc_m_s2``, the limit
-        :attr:`governor_limit_m` less ``tether_sigma_k`` position standard deviations)."""
-        s, sd = self._s, self._sd
-        target, speed = self._slow_target(self._nominal, s, ahead=False)
-        vs = max(speed, 0.1)
-        w = GOVERNOR_CLOCK_OMEGA
-        jm = GOVERNOR_SLOW_JERK_M_S3 / vs
-        sdd = max(-jm, min(jm, w * w * (target - s) - 2.0 * w * sd))
-        sd_new = max(-GOVERNOR_SLOW_ACC_M_S2 / vs,
-                     min(GOVERNOR_RESUME_ACC_M_S2 / vs, sd + sdd * dt))
-        s_new = s + 0.5 * (sd + sd_new) * dt
-        if s_new >= 1.0:
-            s_new, sd_new = 1.0, 0.0
-        elif s_new <= 0.0:
-            s_new, sd_new = 0.0, 0.0
-        if target < 0.999 and not self._slowed:
-            self._slowed = True
-            self._emit(NavEvent.WARNING, Notice(TextKind.TETHER_SLOWING,
-                                                "Tether: slowing to the room the line gives"))
-        elif target >= 1.0 and s_new >= 1.0:
-            self._slowed = False
-        self._clock_lag += (1.0 - 0.5 * (s + s_new)) * dt
-        self._s, self._sd = s_new, sd_new
-
-    def _slow_target(self, nom: RefSample | None, s: float, ahead: bool
-                     ) -> tuple[float, float]:
-        """The rate in [0, 1] the slowing asks of the leg's clock for the leg's nominal
-        sample ``nom`` (None: none yet) with the clock at rate ``s``, and the speed [m/s]
-        it counted: the leg's now, or (``ahead``) the larger its plan has
-        :data:`GOVERNOR_LOOKAHEAD_S` on."""
-        if nom is None:
-            return 1.0, 0.0
-        v = nom.vel_m_s
-        speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-        ahead = self._leg_velocity_ahead() if ahead else None
-        if ahead is not None:
-            sa = math.sqrt(ahead[0] * ahead[0] + ahead[1] * ahead[1] + ahead[2] * ahead[2])
-            if sa > speed:
-                v, speed = ahead, sa
-        if not speed > 1e-3:
-            return 1.0, speed
-        p, a, pe, ve = nom.pos_m, nom.acc_m_s2, self._pos, self._vel_now
-        return slow_target(
-            v[0], v[1], v[2], p[0], p[1], p[2], a[0], a[1], a[2], pe[0], pe[1],
-            pe[2], ve[0], ve[1], ve[2], s, self.governor_limit_m,
-            GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k * self.position_sigma_m,
-            self.p.tether_latency_s + GOVERNOR_SLOW_RAMP_S,
-            self.p.tether_brake_acc_m_s2, self._lookahead_winch_speed_m_s()), speed
+        return self._t - self.governor.clock_lag
 
     def _leg_velocity_ahead(self) -> Vec3 | None:
         """The velocity [m/s] the current leg's plan has :data:`GOVERNOR_LOOKAHEAD_S` on
@@ -1150,68 +888,26 @@ class Navigator:
             return None
         return leg.follower.trajectory.sample(self._leg_clock + GOVERNOR_LOOKAHEAD_S).vel_m_s
 
-    def _lookahead_winch_speed_m_s(self) -> float:
-        """The line speed [m/s] the slowing's look-ahead counts on: the winch's reported
-        one, never paying out while the drum is braked nor beyond the whole tether."""
-        ws = self._winch_speed_m_s
-        if self._locked_length_m is not None or self._winch_length_m is None:
-            return min(ws, 0.0)
-        room = self.tether_length_m - self._winch_length_m
-        return min(ws, max(room, 0.0) / GOVERNOR_LOOKAHEAD_S)
-
-    # ----- the tether governor
+    # ----- the tether governor's decisions carried out on the plan
 
     def _govern(self, ref: RefSample, dt: float) -> RefSample:
-        """The tether governor, in every mode: when the stopping point of the reference
-        moving outward, or of the vehicle (its estimate, going on for
-        ``tether_latency_s`` before it follows), braking at ``tether_brake_acc_m_s2``,
-        would pass :attr:`governor_limit_m`, the reference brakes now (what it was doing
-        is paused: a leg is resumed once the drum has paid out room again, a script or a
-        velocity target ends). A stopped vehicle beyond the limit of a braked drum moves
-        in; a paused leg resumes with :data:`TETHER_RESUME_ROOM_M` of room, or once the
-        drum stands (:data:`TETHER_CAUGHT_UP_M_S`) with some room, and not braked."""
-        p, v, a = ref.pos_m, ref.vel_m_s, ref.acc_m_s2
-        lim = self.governor_limit_m
+        """The tether governor, in every mode (:meth:`TetherGovernor.check`): a reference
+        whose stopping point would pass its limit brakes now (what it was doing is
+        paused: a leg is resumed once the drum has paid out room again, a script or a
+        velocity target ends); at rest, a paused leg resumes or the vehicle moves in
+        (:meth:`_at_rest`)."""
         leg = self._leg
         if leg is not None and (leg.landing or leg.takeoff):
             # the final descent: the ground stops it; the take-off: the winch pays out on
             # its ground pre-tension as the climb pulls (no reported length to keep
             # within until it follows L-bar), and a snag there stops a climb, not a run
             return ref
-        d_ref = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
-        speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-        if speed < 1e-3:
-            return self._at_rest(ref, lim)
-        if v[2] < 0.0 and v[0] * p[0] + v[1] * p[1] + v[2] * p[2] <= 0.0:
-            # a descent coming closer to the winder: the line only gets shorter
-            return ref
-        u = (v[0] / speed, v[1] / speed, v[2] / speed)
-        ab, jerk = self.p.tether_brake_acc_m_s2, TETHER_BRAKE_JERK_M_S3
-        run = brake_distance_m(speed, a[0] * u[0] + a[1] * u[1] + a[2] * u[2], ab, jerk)
-        sx, sy, sz = p[0] + u[0] * run, p[1] + u[1] * run, p[2] + u[2] * run
-        stop = math.sqrt(sx ** 2 + sy ** 2 + sz ** 2)
-        if stop <= d_ref + 1e-4:          # not outward: nothing to govern
-            return ref
-        v_out = (v[0] * p[0] + v[1] * p[1] + v[2] * p[2]) / d_ref if d_ref > 0 else speed
-        pe, ve = self._pos, self._vel_now
-        se = math.sqrt(ve[0] * ve[0] + ve[1] * ve[1] + ve[2] * ve[2])
-        d_e = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
-        if se > 1e-6:       # the vehicle's own stopping point, if it is outward too
-            run_e = se * self.p.tether_latency_s + se * se / (2.0 * ab)
-            sx = pe[0] + ve[0] / se * run_e
-            sy = pe[1] + ve[1] / se * run_e
-            sz = pe[2] + ve[2] / se * run_e
-            stop = max(stop, math.sqrt(sx ** 2 + sy ** 2 + sz ** 2))
-            if d_e > 0:
-                v_out = max(v_out, (ve[0] * pe[0] + ve[1] * pe[1] + ve[2] * pe[2]) / d_e)
-        # the estimate's uncertainty as margin, in full from an outward speed of
-        # GOVERNOR_SIGMA_SPEED_M_S (at rest a margin beyond the winder's least slack
-        # would forbid every move outward)
-        lim -= (self.p.tether_sigma_k * self.position_sigma_m
-                * min(1.0, max(v_out, 0.0) / GOVERNOR_SIGMA_SPEED_M_S))
-        if stop <= lim:
-            return ref
-        return self._start_brake(ref, lim, dt)
+        decision = self.governor.check(ref, self._pos, self._vel_now, self.position_sigma_m)
+        if decision.verdict is Verdict.AT_REST:
+            return self._at_rest(ref, decision.limit_m)
+        if decision.verdict is Verdict.BRAKE:
+            return self._start_brake(ref, decision.limit_m, dt)
+        return ref
 
     def _start_brake(self, ref: RefSample, lim: float, dt: float) -> RefSample:
         """Brake the reference (:meth:`_govern`), pausing what it flew."""
@@ -1233,18 +929,14 @@ class Navigator:
                                             f"Tether: braking at {lim:.2f} m from the winder"))
         self._script, self._vel, self._leg, self._legs = None, None, None, []
         self._paused = paused
-        self._brake = _BrakeRef(ref, self.p.tether_brake_acc_m_s2, TETHER_BRAKE_JERK_M_S3)
-        return self._brake.step(dt)
+        return self.governor.start_brake(ref, dt)
 
     def _braking(self, dt: float) -> RefSample | None:
         """The governor's stop, stepped; None once at rest (the plan goes on: a hold, a
         move in, or the paused legs)."""
-        b = self._brake
-        assert b is not None
-        ref = b.step(dt)
-        if not b.stopped:
+        ref, stopped = self.governor.step_brake(dt)
+        if not stopped:
             return ref
-        self._brake = None
         self._ref = ref
         paused = self._paused
         self._queue([_Leg(self._follower(self.speed_m_s), GotoItem(ref.pos_m, ref.yaw_rad),
@@ -1253,42 +945,35 @@ class Navigator:
         return None
 
     def _at_rest(self, ref: RefSample, lim: float) -> RefSample:
-        """A reference at rest: a paused leg resumes when there is room; beyond the limit
-        of a braked drum, the vehicle moves in (radially, to the room short of it)."""
+        """A reference at rest: a paused leg resumes when the governor gives room again
+        (:meth:`TetherGovernor.may_resume`); beyond the limit of a braked drum, the vehicle
+        moves in (:meth:`TetherGovernor.move_in_target`)."""
         p = ref.pos_m
-        d = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
-        pe = self._pos
-        room = lim - max(d, math.sqrt(pe[0] ** 2 + pe[1] ** 2 + pe[2] ** 2))
         leg = self._leg
-        # room: the drum has paid out the resume room, or (a line with little slack at
-        # rest) it has caught up with the winder's reference and stands
-        caught_up = abs(self._winch_speed_m_s) < TETHER_CAUGHT_UP_M_S and room > 0.0
-        if self._paused and (room >= TETHER_RESUME_ROOM_M or caught_up) \
-                and self._locked_length_m is None and leg is not None \
-                and leg.tag is LegTag.HOLD and leg.follower.done:
+        holding = leg is not None and leg.tag is LegTag.HOLD
+        if (self._paused and holding and leg.follower.done
+                and self.governor.may_resume(p, self._pos, lim)):
             paused = self._paused
             self._emit(NavEvent.WARNING, Notice(TextKind.TETHER_RESUMING,
                                                 "Tether: room again, resuming"))
             self._ref = ref
             self._queue(paused)
             return self._leg.follower.update(self._leg_clock, self._pos)
-        if (self._locked_length_m is not None and d > lim and d > 0 and leg is not None
-                and leg.tag is LegTag.HOLD and self._vel is None and self._script is None):
-            k = max(lim - TETHER_RESUME_ROOM_M, 0.0) / d
-            target = (k * p[0], k * p[1], max(k * p[2], min(p[2], self.gear_height_m + 1.0)))
-            if math.dist(target, leg.follower.target_m or p) > 0.05:
-                paused = self._paused
-                self._emit(NavEvent.WARNING, Notice(
-                    TextKind.TETHER_MOVING_IN, f"Tether: moving in within the braked {lim:.2f} m"))
-                self._queue([_Leg(self._follower(self.speed_m_s), GotoItem(target, ref.yaw_rad),
-                                  tag=LegTag.HOLD)])
-                self._paused = paused
+        target = (self.governor.move_in_target(p, lim)
+                  if holding and self._vel is None and self._script is None else None)
+        if target is not None and math.dist(target, leg.follower.target_m or p) > 0.05:
+            paused = self._paused
+            self._emit(NavEvent.WARNING, Notice(
+                TextKind.TETHER_MOVING_IN, f"Tether: moving in within the braked {lim:.2f} m"))
+            self._queue([_Leg(self._follower(self.speed_m_s), GotoItem(target, ref.yaw_rad),
+                              tag=LegTag.HOLD)])
+            self._paused = paused
         return ref
 
     def _advance_plan(self, t: float, dt: float) -> RefSample:
         if self._script is not None:
             # on the script's clock: the vehicle's, less what the slowing took since it began
-            ref = self._script(t - (self._clock_lag - self._script_lag), self._pos)
+            ref = self._script(t - (self.governor.clock_lag - self._script_lag), self._pos)
             x, y, z = ref.pos_m
             reach = self.reach_m
             if not (z >= 0.0 and x * x + y * y + z * z <= reach * reach):   # NaN too
@@ -1300,7 +985,7 @@ class Navigator:
             if t > self._vel_deadline:
                 self._vel.cmd = _ZERO3
             self._limit_velocity()
-            if self.p.tether_governor:
+            if self.governor.enabled:
                 self._slow_velocity()
             return self._vel.step(dt)
         if self._leg is None:
@@ -1345,38 +1030,14 @@ class Navigator:
                                                     "Guided velocity stopped at the reach"))
 
     def _slow_velocity(self) -> None:
-        """The fence-like part of the tether governor for a velocity target: its command's
-        speed is capped (:attr:`_VelocityRef.cap`, [m/s]) at :func:`governed_speed_m_s` of
-        the room the tether leaves ahead of the reference (latency
-        :data:`GOVERNOR_SLOW_RAMP_S`, its brake's build-up) and of the vehicle (latency
-        ``tether_latency_s``), less a leg's slowing margin: the brake's own test with
-        margin (the reference approaches the cap without overshoot), so that a target
-        streamed outward slows to the line's room rather than meeting the brake."""
+        """The tether governor's cap on a velocity target's speed
+        (:meth:`TetherGovernor.velocity_cap`)."""
         v = self._vel
         assert v is not None
-        cmd = v.cmd
-        speed = math.sqrt(cmd[0] * cmd[0] + cmd[1] * cmd[1] + cmd[2] * cmd[2])
-        if speed < 1e-3:
-            v.cap = math.inf
-            return
-        u = (cmd[0] / speed, cmd[1] / speed, cmd[2] / speed)
-        p, pe = v.pos, self._pos
-        d = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
-        v_out = speed * (u[0] * p[0] + u[1] * p[1] + u[2] * p[2]) / d if d > 0 else speed
-        lim = self.governor_limit_m - ((GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k
-                                        * self.position_sigma_m)
-                                       * min(1.0, max(v_out, 0.0) / GOVERNOR_SIGMA_SPEED_M_S))
-        ab = self.p.tether_brake_acc_m_s2
-        v_max = min(governed_speed_m_s((p[0], p[1], p[2]), u, lim, GOVERNOR_SLOW_RAMP_S, ab),
-                    governed_speed_m_s(pe, u, lim, self.p.tether_latency_s, ab))
-        v.cap = max(v_max, 0.0)
-        if v_max < speed:
-            if not self._slowed:
-                self._slowed = True
-                self._emit(NavEvent.WARNING, Notice(TextKind.TETHER_SLOWING,
-                                                    "Tether: slowing to the room the line gives"))
-        else:
-            self._slowed = False
+        v.cap, notice = self.governor.velocity_cap(v.cmd, v.pos, self._pos,
+                                                   self.position_sigma_m)
+        if notice is not None:
+            self._emit(NavEvent.WARNING, notice)
 
     def _leg_done(self, t: float, leg: _Leg) -> None:
         if leg.tag is LegTag.TAKEOFF:
@@ -1430,24 +1091,31 @@ class Navigator:
         leg.follower.start(self._leg_clock, ref.pos_m, ref.vel_m_s, leg.item,
                            current_yaw=ref.yaw_rad, current_acc=ref.acc_m_s2)
         self._leg = leg
-        self._s, self._sd, self._nominal = 1.0, 0.0, None
+        self.governor.reset_clock()
+        self._nominal = None
         v = ref.vel_m_s
-        if (self.p.tether_governor and not (leg.landing or leg.takeoff)
+        if (self.governor.enabled and not (leg.landing or leg.takeoff)
                 and v[0] * v[0] + v[1] * v[1] + v[2] * v[2] < 1e-6):
             # a leg from rest starts on its clock at the rate the room allows (the
             # reference, at rest, is unchanged by it): from 1, the clock's slowing could
             # not follow the leg's first acceleration near the vertical, and the brake
             # stopped it at once (resumed, it began again: the chatter)
-            self._s = self._slow_target(leg.follower.trajectory.sample(self._leg_clock),
-                                        1.0, ahead=True)[0]
+            self.governor.s = self.governor.slow_rate(
+                leg.follower.trajectory.sample(self._leg_clock), 1.0,
+                self._leg_velocity_ahead(), self._pos, self._vel_now,
+                self.position_sigma_m)[0]
 
     def _queue(self, legs: list[_Leg]) -> None:
         """Fly these legs in order, the first from the current reference (what the tether
         governor stopped is forgotten)."""
         self._script = None
-        self._brake, self._paused = None, []
+        self._unpause()
         self._legs = legs[1:]
         self._start_leg(legs[0])
+
+    def _unpause(self) -> None:
+        """Forget the governor's stop and what it paused."""
+        self.governor.brake, self._paused = None, []
 
     def _hold(self) -> None:
         ref = self._current_ref()

@@ -286,11 +286,11 @@ def test_the_commands_only_step_is_the_full_step():
 
 
 def test_the_compiled_slowing_target_is_its_python_to_the_bit():
-    """The tether governor's slowing target (companion.navigation.slow_target, compiled)
+    """The tether governor's slowing target (companion.governor.slow_target, compiled)
     gives the same bits as its own Python source interpreted, over legs moving in every
     direction near and far from the limit, with and without a margin and a paying-out
     winch; its rate is in [0, 1] and 1 for a leg moving inward."""
-    from companion.navigation import slow_target
+    from companion.governor import slow_target
 
     py = getattr(slow_target, "py_func", slow_target)
     rng = np.random.default_rng(7)
@@ -299,16 +299,16 @@ def test_the_compiled_slowing_target_is_its_python_to_the_bit():
         p = rng.normal(0.0, 10.0, 3)
         p[2] = abs(p[2]) + 0.5
         d = float(np.linalg.norm(p))
-        args = (*rng.normal(0.0, 2.0, 3), *p, *rng.normal(0.0, 1.0, 3),
-                *(p + rng.normal(0.0, 0.2, 3)), *rng.normal(0.0, 1.0, 3),
-                float(rng.uniform(0.0, 1.0)), d + float(rng.uniform(-0.2, 2.0)),
-                float(rng.uniform(0.0, 0.3)), 0.4, 3.0, float(rng.uniform(-1.0, 1.0)))
-        args = tuple(float(a) for a in args)
+        vectors = (rng.normal(0.0, 2.0, 3), p, rng.normal(0.0, 1.0, 3),
+                   p + rng.normal(0.0, 0.2, 3), rng.normal(0.0, 1.0, 3))
+        scalars = (float(rng.uniform(0.0, 1.0)), d + float(rng.uniform(-0.2, 2.0)),
+                   float(rng.uniform(0.0, 0.3)), 0.4, 3.0, float(rng.uniform(-1.0, 1.0)))
+        args = (*(tuple(float(c) for c in x) for x in vectors), *(float(a) for a in scalars))
         got, want = slow_target(*args), py(*args)
         assert np.float64(got).tobytes() == np.float64(want).tobytes()
         assert 0.0 <= got <= 1.0
         seen_slow |= got < 0.5
     assert seen_slow
     # moving straight in, from inside the limit: nothing to slow
-    assert slow_target(-1.0, 0.0, 0.0, 10.0, 0.0, 5.0, 0.0, 0.0, 0.0, 10.0, 0.0, 5.0,
-                       -1.0, 0.0, 0.0, 1.0, 11.5, 0.02, 0.4, 3.0, 0.0) == 1.0
+    assert slow_target((-1.0, 0.0, 0.0), (10.0, 0.0, 5.0), (0.0, 0.0, 0.0), (10.0, 0.0, 5.0),
+                       (-1.0, 0.0, 0.0), 1.0, 11.5, 0.02, 0.4, 3.0, 0.0) == 1.0

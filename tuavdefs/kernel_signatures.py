@@ -64,10 +64,10 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
         'float64[::1]', 'float64[:, ::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]',
         'float64[:, ::1]', 'float64[::1]', 'float64[:, ::1]', 'float64[::1]', 'float64[::1]',),
     ],
-    'companion.navigation.slow_target': [
-        ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
-        'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
-        'float64', 'float64', 'float64', 'float64', 'float64',),
+    'companion.governor.slow_target': [
+        ('UniTuple(float64, 3)', 'UniTuple(float64, 3)', 'UniTuple(float64, 3)',
+        'UniTuple(float64, 3)', 'UniTuple(float64, 3)', 'float64', 'float64', 'float64',
+        'float64', 'float64', 'float64',),
     ],
     'companion.tether_model.estimate_kernel': [
         ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'bool', 'float64',),
