@@ -20,6 +20,7 @@ from typing import Any, TextIO
 from tuav_sitl.offline import run_scenario
 from tuav_sitl.scenario import load_scenario, shipped_scenarios
 from tuav_sitl.sweep import shipped_sweeps
+from tuavdefs.params import TetherModel, TetherParams
 
 #: (scenario, metric, comparison, limit, description) — the targets of the issue.
 TARGETS: list[tuple[str, str, str, float, str]] = [
@@ -64,15 +65,20 @@ TETHER_AID_VARIANTS = (("hover-gnss-loss, tether_aid = false", "hover-gnss-loss"
                        ("circle-gnss, tether_aid = false", "circle-gnss", False))
 
 
-#: The label of a shipped scenario's run on the lumped (dynamic) truth tether.
-LUMPED_SUFFIX = ", lumped truth"
+def other_truth(name: str) -> TetherModel:
+    """The truth tether shipped scenario ``name`` is not flown on: the catenary for one
+    shipped on the lumped line, the lumped line for one shipped on the catenary."""
+    shipped = TetherModel(load_scenario(name).plant.tether.model)
+    return TetherModel.CATENARY if shipped is TetherModel.LUMPED else TetherModel.LUMPED
 
 
-def lumped_variants(names: list[str]) -> list[str]:
-    """Labels of the runs of the shipped scenarios ``names`` on the lumped truth tether
-    (those whose truth is not the lumped line already)."""
-    return [n + LUMPED_SUFFIX for n in names
-            if load_scenario(n).plant.tether.model != "lumped"]
+def other_truth_label(name: str) -> str:
+    """The label of shipped scenario ``name``'s run on its :func:`other_truth`."""
+    return f"{name}{OTHER_TRUTH_SEP}{other_truth(name).value} truth"
+
+
+#: Between a scenario's name and its other truth in a run's label.
+OTHER_TRUTH_SEP = ", on the "
 
 
 def _one(args: tuple[str, str, bool]) -> tuple[str, dict[str, Any]]:
@@ -82,8 +88,9 @@ def _one(args: tuple[str, str, bool]) -> tuple[str, dict[str, Any]]:
         sc = load_scenario(variant[0])
         sc = sc.replace(estimator=sc.estimator.replace(tether_aid=variant[1]))
         return name, run_scenario(sc, None, progress=None).metrics
-    if name.endswith(LUMPED_SUFFIX):
-        sc = load_scenario(name.removesuffix(LUMPED_SUFFIX)).with_tether_model("lumped")
+    if OTHER_TRUTH_SEP in name:
+        base = name.split(OTHER_TRUTH_SEP)[0]
+        sc = load_scenario(base).with_tether_model(other_truth(base).value)
         return name, run_scenario(sc, None, progress=None).metrics
     out = Path(runs) / name
     result = run_scenario(load_scenario(name), out, progress=None)
@@ -204,21 +211,20 @@ def _tether_aid_section(metrics: dict[str, dict[str, Any]]) -> list[str]:
     return lines
 
 
-def _lumped_section(metrics: dict[str, dict[str, Any]], labels: list[str]) -> list[str]:
-    """Each shipped scenario on the catenary truth (as shipped) beside the same on the
-    lumped truth tether, with what fails there: the targets of :data:`TARGETS` and the
+def _other_truth_section(metrics: dict[str, dict[str, Any]], names: list[str]) -> list[str]:
+    """Each shipped scenario on its own truth beside the same on the other truth
+    (:func:`other_truth`), with what fails there: the targets of :data:`TARGETS` and the
     every-scenario criteria (taut, on the ground, rotor saturation >= 1 %)."""
-    if not labels:
-        return []
-    lines = ["", "## On the lumped (dynamic) tether", "",
-             "Each scenario again with the plant's truth tether the lumped-mass line "
-             "(`[plant.tether] model = \"lumped\"`, docs/model.md), the controllers "
-             "unchanged: catenary → lumped. The catenary stays the default truth while "
-             "these fail (issue 16).", "",
-             "| scenario | position RMSE [m] | min slack [m] | on ground | max tension [N] | "
-             "rotor saturation | fails on the lumped line |", "|---|---|---|---|---|---|---|"]
-    for label in labels:
-        n = label.removesuffix(LUMPED_SUFFIX)
+    lines = ["", "## On the other truth tether", "",
+             "Each scenario again with the plant's other truth tether, the controllers "
+             "unchanged: the catenary for a scenario shipped on the lumped-mass line, the "
+             "lumped line for one shipped on the catenary (docs/model.md). The default "
+             f"truth is the {TetherModel(TetherParams().model).value} line.", "",
+             "| scenario | truth: shipped → other | position RMSE [m] | min slack [m] | "
+             "on ground | max tension [N] | rotor saturation | fails on the other truth |",
+             "|---|---|---|---|---|---|---|---|"]
+    for n in names:
+        label = other_truth_label(n)
         a, b = metrics[n], metrics[label]
         fails = [f"`{key}` {_fmt(b.get(key))}" for sc, key, op, limit, _ in TARGETS
                  if sc == n and not _check(b.get(key), op, limit)]
@@ -233,7 +239,8 @@ def _lumped_section(metrics: dict[str, dict[str, Any]], labels: list[str]) -> li
         pairs = [f"{_fmt(a.get(k))} → {_fmt(b.get(k))}" for k in (
             "position_rmse_m", "min_tether_slack_m", "tether_ground_contact_fraction",
             "max_tension_n", "motor_saturation_fraction")]
-        lines.append(f"| {n} | {' | '.join(pairs)} | {', '.join(fails) or '–'} |")
+        truths = f"{load_scenario(n).plant.tether.model} → {other_truth(n).value}"
+        lines.append(f"| {n} | {truths} | {' | '.join(pairs)} | {', '.join(fails) or '–'} |")
     return lines
 
 
@@ -245,8 +252,8 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
     ``progress`` as each run (simulation, figures and animation) is done."""
     names = sorted(shipped_scenarios())
     wall = time.perf_counter()
-    lumped = lumped_variants(names)
-    jobs = [*names, *(label for label, _, _ in TETHER_AID_VARIANTS), *lumped]
+    jobs = [*names, *(label for label, _, _ in TETHER_AID_VARIANTS),
+            *(other_truth_label(n) for n in names)]
     metrics: dict[str, dict[str, Any]] = {}
     if progress is not None:
         progress.write(f"tuav-sitl results: {len(jobs)} runs"
@@ -282,13 +289,20 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
         "",
         "## Targets",
         "",
-        "| scenario | target | value | limit | met |",
-        "|---|---|---|---|---|",
+        "Each on the scenario's own truth tether (its `[plant.tether] model`), and beside "
+        "it the same run on the other truth (§ On the other truth tether).",
+        "",
+        "| scenario | truth | target | value | limit | met | on the other truth |",
+        "|---|---|---|---|---|---|---|",
     ]
     for sc, key, op, limit, text in TARGETS:
         v = metrics[sc].get(key)
-        lines.append(f"| {sc} | {text} (`{key}`) | {_fmt(v)} | {op} {limit:g} | "
-                     f"{'yes' if _check(v, op, limit) else '**no**'} |")
+        o = metrics[other_truth_label(sc)].get(key)
+        lines.append(f"| {sc} | {load_scenario(sc).plant.tether.model} | {text} (`{key}`) | "
+                     f"{_fmt(v)} | {op} {limit:g} | "
+                     f"{'yes' if _check(v, op, limit) else '**no**'} | "
+                     f"{other_truth(sc).value}: {_fmt(o)} "
+                     f"({'met' if _check(o, op, limit) else '**not met**'}) |")
     lines += [
         "",
         "In every scenario: the tether is never taut (`min_tether_slack_m` > 0), never lies "
@@ -296,15 +310,16 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
         "the ground, where it lies), and the rotors saturate less than 1 % of the time in "
         "flight:",
         "",
-        "| scenario | position RMSE [m] | max error [m] | attitude RMSE [rad] | "
+        "| scenario | truth | position RMSE [m] | max error [m] | attitude RMSE [rad] | "
         "tether-length RMSE [m] | min slack [m] | on ground | max tension [N] | "
         "rotor saturation | settling [s] | overshoot [%] | sim [s] | wall [s] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for n in names:
         m = metrics[n]
         lines.append("| " + " | ".join([
-            n, _fmt(m["position_rmse_m"]), _fmt(m["position_max_error_m"]),
+            n, load_scenario(n).plant.tether.model, _fmt(m["position_rmse_m"]),
+            _fmt(m["position_max_error_m"]),
             _fmt(m["attitude_rmse_rad"]), _fmt(m["tether_length_rmse_m"]),
             _fmt(m["min_tether_slack_m"]), _fmt(m["tether_ground_contact_fraction"]),
             _fmt(m["max_tension_n"]), _fmt(m["motor_saturation_fraction"]),
@@ -364,7 +379,7 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
                          f"{_fmt(m['motor_saturation_fraction'])} | "
                          f"{_fmt(m['min_tether_slack_m'])} |")
     lines += _tether_aid_section(metrics)
-    lines += _lumped_section(metrics, lumped)
+    lines += _other_truth_section(metrics, names)
     missions = {n: metrics[n] for n in names if "items_reached" in metrics[n]}
     if missions:
         lines += ["", "## Missions", "",
