@@ -980,7 +980,7 @@ class Winch:
                                         self.measured_position_m(), -gap, closing)
                 self.ref_m, self.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
                 if gap > 0.0:       # what the step left of it (less, where L-bar fell into it)
-                    self._join_gap_m = float(self.host.lbar.trim_state[13])
+                    self._join_gap_m = self.host.lbar.join_gap_m
                 command = step.command
             else:
                 self.ref_m, self.ref_rate_m_s = self._hold_m, 0.0
