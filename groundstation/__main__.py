@@ -34,10 +34,9 @@ from collections.abc import Sequence
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from groundstation.lbar import LBarParams
-from groundstation.winch import ENCODER_TIMEOUT_S, Winch, WinchOutput
+from groundstation.station_params import GroundStationParams
+from groundstation.winch import ENCODER_TIMEOUT_S, Notice, Winch, WinchOutput
 from groundstation.winch_link import WinchLinkClient
-from groundstation.winder_control import WinderControlParams
 from groundstation.winder_host import WinderHost
 from tuavdefs import can_protocol as cp
 from tuavdefs import signing as sg
@@ -63,6 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--mavlink", default=f"127.0.0.1:{COMPONENT_PORT_DEFAULT}",
                     help="HOST:PORT of the companion's component link ('none' to run alone)")
     ap.add_argument("--params", default=None, help="system parameters TOML (winder, tether)")
+    ap.add_argument("--control", default=None, metavar="FILE",
+                    help="the ground station's own parameters TOML: [winder_control] (its "
+                         "law: paper or tension), [lbar], [winch], as a scenario's tables")
     ap.add_argument("--node", type=int, default=cp.AXIS_NODE_ID_DEFAULT, help="axis node id")
     ap.add_argument("--signing-key-file", default=None, metavar="FILE",
                     help="MAVLink 2 signing key of the component link (64 hexadecimal "
@@ -81,6 +83,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     guard_stdio()   # a process log on a full disk loses lines, not the winder's control
     params = load_option(SystemParams, args.params, "groundstation")
+    station = load_option(GroundStationParams, args.control, "groundstation")
     # every kernel it calls made machine code now, not in its loop (docs/architecture.md)
     load_kernels(("groundstation", "tuavdefs"), sys.stdout, "groundstation")
     try:
@@ -94,15 +97,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"groundstation: {exc}", file=sys.stderr)
         return 1
     g = params.environment.gravity_m_s2
-    host = WinderHost(WinderControlParams(), LBarParams(), params.winder, params.tether, g)
-    winch = Winch(host, params.winder, params.tether, g, axis_node_id=args.node)
+    host = WinderHost(station.winder_control, station.lbar, params.winder, params.tether, g)
+    winch = Winch(host, params.winder, params.tether, g, station.winch, axis_node_id=args.node)
     mav = None if args.mavlink == "none" else WinchLinkClient(args.mavlink, signing_key=key)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     watch_compiles("groundstation", sys.stdout)
     print(f"groundstation: CAN {link.description}, axis node {args.node}, "
-          f"MAVLink {args.mavlink}", flush=True)
+          f"MAVLink {args.mavlink}, law {host.controller.law.value}", flush=True)
 
     def emit(out: WinchOutput) -> None:
         if out.frames:
@@ -162,6 +165,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             if mav is not None:
                 mav.poll()
                 if mav.positions_received != positions_seen:   # a new UAV state
+                    if not positions_seen:
+                        # the link works: the law this station runs, said once
+                        emit(WinchOutput(notices=[Notice(
+                            mavlink2.MAV_SEVERITY_INFO,
+                            f"winch: {host.controller.law.value} law")]))
                     positions_seen = mav.positions_received
                     winch.set_uav(mav.uav_state(), mav.uav_state_time_ms())
                 if mav.commands_waiting:

@@ -37,6 +37,31 @@ import numpy as np
 from tuavdefs.jit import njit
 from tuavdefs.paramspec import Params, quantity
 
+# Named indices of the packed records L-bar's compiled steps take (LBarEstimator's
+# trim_params, trim_state, packed, state), one name a field.
+#: trim_params: the tension trim's, the weight estimate's, the stop lead's and the slack
+#: floor's parameters, in LBarParams' units (TP_LEAD_TAN_MIN the tangent of its angle)
+(TP_TRIM_RATE, TP_TRIM_MAX_RATE, TP_TRIM_MAX, TP_TRIM_BAND, TP_TRIM_FILTER,
+ TP_WEIGHT_FILTER, TP_WEIGHT_RATIO, TP_WEIGHT_MIN_EL, TP_LEAD_TIME, TP_LEAD_ACC,
+ TP_LEAD_MARGIN, TP_LEAD_FULL_SPEED, TP_LEAD_RATE, TP_LEAD_FILTER, TP_FLOOR, TP_FLOOR_RATE,
+ TP_FLOOR_RELEASE, TP_FLOOR_FILTER, TP_LEAD_TAN_MIN, TP_FLOOR_TENSION_RATIO, TP_FLOOR_HOLD,
+ TP_LEAD_MIN_SPEED, TP_LEAD_ONSET, TP_LEAD_RELEASE, TP_WEIGHT_MAX_GAIN,
+ TP_LEAD_RISE) = range(26)
+#: trim_state: the trim's offset [m] and rate [m/s], the low-passed drum tension [N], the
+#: line weight [N/m], the stop lead [m], its rate [m/s], its filtered target [m], the slack
+#: floor [m], its rate [m/s], its filtered needed length [m], the time without a fix [s],
+#: the lead the need asks for before the ground's bound [m], the stop lead's room's
+#: exit-angle root [m], the join's gap as the last period took it [m]
+(TS_OFFSET, TS_OFFSET_RATE, TS_TENSION, TS_WEIGHT, TS_LEAD,
+ TS_LEAD_RATE, TS_LEAD_TARGET, TS_FLOOR, TS_FLOOR_RATE, TS_FLOOR_NEED,
+ TS_NO_FIX_S, TS_LEAD_NEED, TS_ROOM_ROOT, TS_JOIN_GAP) = range(14)
+#: LBarEstimator.packed: the target catenary parameter a [m], the tangent of the least
+#: exit angle, the least slack [m], the model's line weight [N/m]
+LB_A_TARGET, LB_TAN_MIN, LB_MIN_SLACK, LB_W = range(4)
+#: LBarEstimator.state: the last exit-angle root [m], where Newton starts next time
+LS_ROOT = 0
+N_LBAR_STATE = 1
+
 
 @dataclass(frozen=True)
 class LBarParams(Params):
@@ -342,35 +367,36 @@ def weight_estimate(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, w_n_m: 
                     tension_n: float, elevation_rad: float, length_m: float,
                     height_m: float) -> float:
     """One period of the line's weight estimate (docs/control.md §3): the low-passed
-    (``trim_p[5]`` [s]) :func:`line_weight_n_m` of the trim's filtered drum tension
-    ``trim_s[2]`` (before its first sample: ``tension_n`` [N], the one measured now), the
-    measured exit elevation, the paid-out length and the UAV's reported
-    height, bounded to [1/r, r] times the model's ``w_n_m`` (r = ``trim_p[6]``), held
-    while the exit angle is below ``trim_p[7]`` or unknown (NaN), or where the estimate's
-    sensitivity to the tension 2 z / (L^2 - z^2) exceeds ``trim_p[24]`` [1/m] (near the
-    vertical). Its state is
-    ``trim_s[3]`` (NaN: no estimate yet); returns the weight to use [N/m] (the model's
-    until there is one)."""
-    r, w_hat = trim_p[6], trim_s[3]
+    (``trim_p[TP_WEIGHT_FILTER]`` [s]) :func:`line_weight_n_m` of the trim's filtered drum
+    tension ``trim_s[TS_TENSION]`` (before its first sample: ``tension_n`` [N], the one
+    measured now), the measured exit elevation, the paid-out length and the UAV's reported
+    height, bounded to [1/r, r] times the model's ``w_n_m`` (r =
+    ``trim_p[TP_WEIGHT_RATIO]``), held while the exit angle is below
+    ``trim_p[TP_WEIGHT_MIN_EL]`` or unknown (NaN), or where the estimate's sensitivity to
+    the tension 2 z / (L^2 - z^2) exceeds ``trim_p[TP_WEIGHT_MAX_GAIN]`` [1/m] (near the
+    vertical). Its state is ``trim_s[TS_WEIGHT]`` (NaN: no estimate yet); returns the weight
+    to use [N/m] (the model's until there is one)."""
+    r, w_hat = trim_p[TP_WEIGHT_RATIO], trim_s[TS_WEIGHT]
     den = length_m * length_m - height_m * height_m
-    if elevation_rad >= trim_p[7] and 2.0 * height_m <= trim_p[24] * den:   # (not NaN)
-        t = trim_s[2] if trim_s[2] == trim_s[2] else tension_n
+    if (elevation_rad >= trim_p[TP_WEIGHT_MIN_EL]          # (not NaN)
+            and 2.0 * height_m <= trim_p[TP_WEIGHT_MAX_GAIN] * den):
+        t = trim_s[TS_TENSION] if trim_s[TS_TENSION] == trim_s[TS_TENSION] else tension_n
         w = line_weight_n_m(t, elevation_rad, length_m, height_m)
         if w == w:
             w = min(max(w, w_n_m / r), w_n_m * r)
             if w_hat == w_hat:
-                w_hat += (1.0 - math.exp(-dt_s / trim_p[5])) * (w - w_hat)
+                w_hat += (1.0 - math.exp(-dt_s / trim_p[TP_WEIGHT_FILTER])) * (w - w_hat)
             else:
                 w_hat = w
-            trim_s[3] = w_hat
+            trim_s[TS_WEIGHT] = w_hat
     return w_hat if w_hat == w_hat else w_n_m
 
 
 @njit
 def tension_trim(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, a_m: float, px: float,
                  py: float, pz: float, w_n_m: float, tension_n: float) -> None:
-    """One period of the tension trim (docs/control.md §3): the extra length ``trim_s[0]``
-    [m] paid out beyond L-bar, and its rate ``trim_s[1]`` [m/s].
+    """One period of the tension trim (docs/control.md §3): the extra length ``trim_s[TS_OFFSET]``
+    [m] paid out beyond L-bar, and its rate ``trim_s[TS_OFFSET_RATE]`` [m/s].
 
     With e = ln(T / T_expected), T the drum tension measured and T_expected the model
     catenary's (parameter ``a_m`` [m]) for the reported position (``px``, ``py``, ``pz``
@@ -379,17 +405,18 @@ def tension_trim(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, a_m: float
     farther than reported), and below ``-band`` shrinks at ``rate (e + band)``, never
     below 0 (never less tether than L-bar), at most ``offset_max``, at most ``rate_max``
     fast; held where the catenary is degenerate or the tension unknown. T is the measured
-    tension low-passed (time constant ``filter`` [s], its state ``trim_s[2]`` [N], NaN
+    tension low-passed (time constant ``filter`` [s], its state ``trim_s[TS_TENSION]`` [N], NaN
     before the first sample). ``trim_p`` = (rate [m/s], rate_max [m/s], offset_max [m],
     band, filter [s])."""
-    gain, rate_max, offset_max, band = trim_p[0], trim_p[1], trim_p[2], trim_p[3]
+    gain, rate_max = trim_p[TP_TRIM_RATE], trim_p[TP_TRIM_MAX_RATE]
+    offset_max, band = trim_p[TP_TRIM_MAX], trim_p[TP_TRIM_BAND]
     if tension_n >= 0.0:          # (not NaN)
-        tau = trim_p[4]
-        if tau > 0.0 and trim_s[2] == trim_s[2]:
-            trim_s[2] += (1.0 - math.exp(-dt_s / tau)) * (tension_n - trim_s[2])
+        tau = trim_p[TP_TRIM_FILTER]
+        if tau > 0.0 and trim_s[TS_TENSION] == trim_s[TS_TENSION]:
+            trim_s[TS_TENSION] += (1.0 - math.exp(-dt_s / tau)) * (tension_n - trim_s[TS_TENSION])
         else:
-            trim_s[2] = tension_n
-    tension_n = trim_s[2]
+            trim_s[TS_TENSION] = tension_n
+    tension_n = trim_s[TS_TENSION]
     expected = expected_drum_tension_n(a_m, math.hypot(px, py), max(pz, 0.0), w_n_m)
     rate = 0.0
     if gain > 0.0 and expected > 0.0 and tension_n > 0.0:
@@ -399,22 +426,22 @@ def tension_trim(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, a_m: float
         elif e < -band:
             rate = gain * (e + band)
         rate = min(max(rate, -rate_max), rate_max)
-    offset = trim_s[0] + rate * dt_s
+    offset = trim_s[TS_OFFSET] + rate * dt_s
     if offset < 0.0:
         offset, rate = 0.0, 0.0
     elif offset > offset_max:
         offset, rate = offset_max, 0.0
-    trim_s[0] = offset
-    trim_s[1] = rate
+    trim_s[TS_OFFSET] = offset
+    trim_s[TS_OFFSET_RATE] = rate
 
 
 @njit
 def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py: float,
               pz: float, vx: float, vy: float, vz: float, base_m: float, room_m: float,
               elevation_rad: float) -> None:
-    """One period of the stop lead (docs/control.md §3): the extra length ``trim_s[4]``
+    """One period of the stop lead (docs/control.md §3): the extra length ``trim_s[TS_LEAD]``
     [m] paid out beyond the reference ``base_m`` [m] (L-bar and the trim) while the UAV
-    moves, and its rate ``trim_s[5]`` [m/s].
+    moves, and its rate ``trim_s[TS_LEAD_RATE]`` [m/s].
 
     Should the drum stop (a snag, a brake, a lost bus) the UAV at (``px``, ``py``, ``pz``)
     [m] moving at (``vx``, ``vy``, ``vz``) [m/s] runs on ``s = v t + v^2 / 2a`` along its
@@ -423,87 +450,96 @@ def stop_lead(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, px: float, py
     behind its speed). The lead is what the line lacks for that: the stopping point's
     distance from the winder, plus ``margin min(1, v_out / v_full)`` (v_out the outward
     speed), less ``base_m`` (the slack L-bar already has counts); never negative. That
-    target is low-passed (time constant ``trim_p[13]`` [s], into ``trim_s[6]``) and
-    followed (into ``trim_s[11]``) at most ``trim_p[12]`` [m/s] out and ``trim_p[23]``
+    target is low-passed (time constant ``trim_p[TP_LEAD_FILTER]`` [s], into
+    ``trim_s[TS_LEAD_TARGET]``) and followed (into ``trim_s[TS_LEAD_NEED]``) at most
+    ``trim_p[TP_LEAD_RATE]`` [m/s] out and ``trim_p[TP_LEAD_RELEASE]``
     [m/s] back; the lead is that, at most ``room_m`` [m] (the longest line that stays off
     the ground, less ``base_m``: where the room is smaller than the stop, the vehicle's
-    governor slows it), followed at most ``trim_p[12]`` [m/s] fast, its pay-out rate rising
-    at most ``trim_p[25]`` [m/s^2] from what it was, from 0 after a wind-in (0: at once;
+    governor slows it), followed at most ``trim_p[TP_LEAD_RATE]`` [m/s] fast, its pay-out
+    rate rising
+    at most ``trim_p[TP_LEAD_RISE]`` [m/s^2] from what it was, from 0 after a wind-in (0: at once;
     it may fall at once), and not lengthened
     while the line's measured exit elevation ``elevation_rad`` [rad] (NaN: none) is below
-    the bound's angle ``atan(trim_p[18])`` (the room is the reported position's; near the
+    the bound's angle ``atan(trim_p[TP_LEAD_TAN_MIN])`` (the room is the reported
+    position's; near the
     ground or the vertical a report centimetres off is the line on the ground).
     ``trim_p[8:12]`` = (t [s], a [m/s^2], margin [m], v_full [m/s]); a = 0 switches it
     off."""
-    t_lead, acc, margin, v_full = trim_p[8], trim_p[9], trim_p[10], trim_p[11]
+    t_lead, acc = trim_p[TP_LEAD_TIME], trim_p[TP_LEAD_ACC]
+    margin, v_full = trim_p[TP_LEAD_MARGIN], trim_p[TP_LEAD_FULL_SPEED]
     if not acc > 0.0:
-        trim_s[4], trim_s[5], trim_s[11] = 0.0, 0.0, 0.0
+        trim_s[TS_LEAD], trim_s[TS_LEAD_RATE], trim_s[TS_LEAD_NEED] = 0.0, 0.0, 0.0
         return
     d = math.sqrt(px * px + py * py + pz * pz)
     speed = math.sqrt(vx * vx + vy * vy + vz * vz)
     target = 0.0
     if speed > 0.0 and d > 0.0:
         # the speed the stop is allowed for: at least the floor once moving
-        v_eff = max(speed, trim_p[21] * min(1.0, speed / trim_p[22]))
+        v_eff = max(speed, trim_p[TP_LEAD_MIN_SPEED] * min(1.0, speed / trim_p[TP_LEAD_ONSET]))
         run = (v_eff * t_lead + v_eff * v_eff / (2.0 * acc)) / speed
         sx, sy, sz = px + vx * run, py + vy * run, pz + vz * run
         v_out = (px * vx + py * vy + pz * vz) / d * v_eff / speed
         need = (max(math.sqrt(sx * sx + sy * sy + sz * sz), d)
                 + margin * min(1.0, max(v_out, 0.0) / v_full) - base_m)
         target = max(need, 0.0)
-    tau = trim_p[13]
+    tau = trim_p[TP_LEAD_FILTER]
     if tau > 0.0:
-        trim_s[6] += (1.0 - math.exp(-dt_s / tau)) * (target - trim_s[6])
+        trim_s[TS_LEAD_TARGET] += (1.0 - math.exp(-dt_s / tau)) * (target - trim_s[TS_LEAD_TARGET])
     else:
-        trim_s[6] = target
-    # the lead the need asks for (trim_s[11]): out at most trim_p[12], back at most
-    # trim_p[23] [m/s]; then bounded by the ground's room (followed at trim_p[12])
-    step = trim_s[6] - trim_s[11]
-    step = min(max(step, -trim_p[23] * dt_s), trim_p[12] * dt_s)
-    trim_s[11] += step
+        trim_s[TS_LEAD_TARGET] = target
+    # the lead the need asks for (trim_s[TS_LEAD_NEED]): out at most trim_p[TP_LEAD_RATE],
+    # back at most trim_p[TP_LEAD_RELEASE] [m/s]; then bounded by the ground's room
+    # (followed at trim_p[TP_LEAD_RATE])
+    step = trim_s[TS_LEAD_TARGET] - trim_s[TS_LEAD_NEED]
+    step = min(max(step, -trim_p[TP_LEAD_RELEASE] * dt_s), trim_p[TP_LEAD_RATE] * dt_s)
+    trim_s[TS_LEAD_NEED] += step
     bound = max(room_m, 0.0) if room_m == room_m else 0.0
-    step = min(trim_s[11], bound) - trim_s[4]
-    most = trim_p[12] * dt_s
+    step = min(trim_s[TS_LEAD_NEED], bound) - trim_s[TS_LEAD]
+    most = trim_p[TP_LEAD_RATE] * dt_s
     step = min(max(step, -most), most)
-    if elevation_rad < math.atan(trim_p[18]):      # the winder's own reading (not NaN)
+    if elevation_rad < math.atan(trim_p[TP_LEAD_TAN_MIN]):      # the winder's own reading (not NaN)
         step = min(step, 0.0)
-    if trim_p[25] > 0.0:
+    if trim_p[TP_LEAD_RISE] > 0.0:
         # (from a wind-in the pay-out starts at 0: stopping a wind-in is at once)
-        step = min(step, (max(trim_s[5], 0.0) + trim_p[25] * dt_s) * dt_s)
-    trim_s[4] += step
-    trim_s[5] = step / dt_s
+        step = min(step, (max(trim_s[TS_LEAD_RATE], 0.0) + trim_p[TP_LEAD_RISE] * dt_s) * dt_s)
+    trim_s[TS_LEAD] += step
+    trim_s[TS_LEAD_RATE] = step / dt_s
 
 
 @njit
 def slack_floor(trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float, base_m: float,
                 needed_m: float) -> None:
-    """One period of the slack floor (docs/control.md §3): the extra length ``trim_s[7]``
-    [m] paid out beyond the reference ``base_m`` [m] (L-bar, trim and lead) so that the
-    line is never shorter than ``needed_m`` [m], the length the winder's own measurements
-    ask for (:func:`floor_length_m` at its tether fix; NaN: no valid fix now: the last
-    one holds for ``trim_p[20]`` [s], ``trim_s[10]`` counting, then the floor is taken
-    back), whatever the UAV's reported position; its rate ``trim_s[8]`` [m/s]. The needed
-    length is low-passed (``trim_p[17]`` [s], into ``trim_s[9]``); the extra length
-    grows at most ``trim_p[15]`` and shrinks at most ``trim_p[16]`` [m/s], never below 0.
-    ``trim_p[14]`` (the least slack) 0 switches it off."""
-    if not trim_p[14] > 0.0:
-        trim_s[7], trim_s[8] = 0.0, 0.0
+    """One period of the slack floor (docs/control.md §3): the extra length
+    ``trim_s[TS_FLOOR]`` [m] paid out beyond the reference ``base_m`` [m] (L-bar, trim and
+    lead) so that the line is never shorter than ``needed_m`` [m], the length the winder's
+    own measurements ask for (:func:`floor_length_m` at its tether fix; NaN: no valid fix
+    now: the last one holds for ``trim_p[TP_FLOOR_HOLD]`` [s], ``trim_s[TS_NO_FIX_S]``
+    counting, then the floor is taken back), whatever the UAV's reported position; its rate
+    ``trim_s[TS_FLOOR_RATE]`` [m/s]. The needed length is low-passed
+    (``trim_p[TP_FLOOR_FILTER]`` [s], into ``trim_s[TS_FLOOR_NEED]``); the extra length
+    grows at most ``trim_p[TP_FLOOR_RATE]`` and shrinks at most ``trim_p[TP_FLOOR_RELEASE]``
+    [m/s], never below 0. ``trim_p[TP_FLOOR]`` (the least slack) 0 switches it off."""
+    if not trim_p[TP_FLOOR] > 0.0:
+        trim_s[TS_FLOOR], trim_s[TS_FLOOR_RATE] = 0.0, 0.0
         return
     if needed_m == needed_m:
-        tau = trim_p[17]
-        if tau > 0.0 and trim_s[9] == trim_s[9]:
-            trim_s[9] += (1.0 - math.exp(-dt_s / tau)) * (needed_m - trim_s[9])
+        tau = trim_p[TP_FLOOR_FILTER]
+        if tau > 0.0 and trim_s[TS_FLOOR_NEED] == trim_s[TS_FLOOR_NEED]:
+            trim_s[TS_FLOOR_NEED] += ((1.0 - math.exp(-dt_s / tau))
+                                      * (needed_m - trim_s[TS_FLOOR_NEED]))
         else:
-            trim_s[9] = needed_m
-        trim_s[10] = 0.0
+            trim_s[TS_FLOOR_NEED] = needed_m
+        trim_s[TS_NO_FIX_S] = 0.0
     else:
-        trim_s[10] += dt_s
-        if trim_s[10] > trim_p[20]:
-            trim_s[9] = math.nan
-    target = max(trim_s[9] - base_m, 0.0) if trim_s[9] == trim_s[9] else 0.0
-    step = min(max(target - trim_s[7], -trim_p[16] * dt_s), trim_p[15] * dt_s)
-    trim_s[7] += step
-    trim_s[8] = step / dt_s
+        trim_s[TS_NO_FIX_S] += dt_s
+        if trim_s[TS_NO_FIX_S] > trim_p[TP_FLOOR_HOLD]:
+            trim_s[TS_FLOOR_NEED] = math.nan
+    need = trim_s[TS_FLOOR_NEED]
+    target = max(need - base_m, 0.0) if need == need else 0.0
+    step = min(max(target - trim_s[TS_FLOOR], -trim_p[TP_FLOOR_RELEASE] * dt_s),
+               trim_p[TP_FLOOR_RATE] * dt_s)
+    trim_s[TS_FLOOR] += step
+    trim_s[TS_FLOOR_RATE] = step / dt_s
 
 
 @njit
@@ -557,8 +593,11 @@ class LBarEstimator:
         self.p = params
         self.w = w_n_m
         self.a_target = params.target_horizontal_tension_n / w_n_m
-        self._tan_min = math.tan(params.min_exit_angle_rad)
-        self._root = math.nan  # the last exit-angle root: where Newton starts next time
+        #: L-bar's parameters as the compiled steps take them (indices LB_*)
+        self.packed = np.array([self.a_target, math.tan(params.min_exit_angle_rad),
+                                params.min_slack_m, w_n_m])
+        #: what one estimate leaves the next (indices LS_*): the exit-angle root
+        self.state = np.full(N_LBAR_STATE, math.nan)
         #: the tension trim's parameters and state (:func:`tension_trim`)
         self.trim_params = np.array([params.tension_trim_rate_m_s,
                                      params.tension_trim_max_rate_m_s,
@@ -589,16 +628,22 @@ class LBarEstimator:
         #: gap as the last period took it [m] (groundstation.winder_host.winder_step))
         self.trim_state = initial_trim_state()
 
+    @property
+    def join_gap_m(self) -> float:
+        """The join's gap [m] as the last step took it (what a reference falling into it
+        left of it; :func:`winder_step <groundstation.winder_host.winder_step>`)."""
+        return float(self.trim_state[TS_JOIN_GAP])
+
     def weight_n_m(self) -> float:
         """The line's weight per metre [N/m]: the estimate (:func:`weight_estimate`) once
         there is one, else the model's."""
-        w = float(self.trim_state[3])
+        w = float(self.trim_state[TS_WEIGHT])
         return w if math.isfinite(w) else self.w
 
     def drum_tension_n(self, measured_n: float) -> float:
         """The drum tension [N] as the tension trim low-passes it (:func:`tension_trim`),
         ``measured_n`` before its first sample."""
-        t = float(self.trim_state[2])
+        t = float(self.trim_state[TS_TENSION])
         return t if math.isfinite(t) else measured_n
 
     def floor_need_m(self, fix_m: tuple[float, float, float] | None) -> float:
@@ -607,15 +652,17 @@ class LBarEstimator:
         <groundstation.winder_host.winder_step>` gives it); NaN without a fix or with the
         floor off."""
         tp = self.trim_params
-        if fix_m is None or not tp[14] > 0.0:
+        if fix_m is None or not tp[TP_FLOOR] > 0.0:
             return math.nan
-        return floor_length_m(fix_m[0], fix_m[1], fix_m[2], tp[19] * self.a_target, tp[14])
+        return floor_length_m(fix_m[0], fix_m[1], fix_m[2],
+                              tp[TP_FLOOR_TENSION_RATIO] * self.a_target, tp[TP_FLOOR])
 
     def length(self, pos_m: tuple[float, float, float]) -> tuple[float, float]:
         """(L-bar [m], a [m]) for the UAV at ``pos_m``."""
         x, y, z = pos_m
-        length, a, self._root = _length(x, y, z, self.a_target, self._tan_min,
-                                        self.p.min_slack_m, self._root)
+        lp, ls = self.packed, self.state
+        length, a, ls[LS_ROOT] = _length(x, y, z, lp[LB_A_TARGET], lp[LB_TAN_MIN],
+                                         lp[LB_MIN_SLACK], ls[LS_ROOT])
         return length, a
 
     def estimate(self, pos_m: tuple[float, float, float],
@@ -624,7 +671,8 @@ class LBarEstimator:
         length along the velocity direction, exact to O(step^2)), and the parameter a."""
         x, y, z = pos_m
         vx, vy, vz = vel_m_s
-        length, rate, a, self._root = lbar_kernel(x, y, z, vx, vy, vz, self.a_target,
-                                                self._tan_min, self.p.min_slack_m,
-                                                self._root)
+        lp, ls = self.packed, self.state
+        length, rate, a, ls[LS_ROOT] = lbar_kernel(x, y, z, vx, vy, vz, lp[LB_A_TARGET],
+                                                   lp[LB_TAN_MIN], lp[LB_MIN_SLACK],
+                                                   ls[LS_ROOT])
         return LBar(length, rate, a)

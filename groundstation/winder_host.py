@@ -17,6 +17,23 @@ from typing import NamedTuple
 import numpy as np
 
 from groundstation.lbar import (
+    LB_A_TARGET,
+    LB_MIN_SLACK,
+    LB_TAN_MIN,
+    LB_W,
+    LS_ROOT,
+    TP_FLOOR,
+    TP_FLOOR_TENSION_RATIO,
+    TP_LEAD_ACC,
+    TP_LEAD_TAN_MIN,
+    TS_FLOOR,
+    TS_FLOOR_RATE,
+    TS_JOIN_GAP,
+    TS_LEAD,
+    TS_LEAD_RATE,
+    TS_OFFSET,
+    TS_OFFSET_RATE,
+    TS_ROOM_ROOT,
     LBarEstimator,
     LBarParams,
     floor_length_m,
@@ -51,6 +68,36 @@ class WinderStep(NamedTuple):
 
 _command = WinderCommand._make
 
+# Named indices of the step's input records (one record a concern, float64 arrays the host
+# owns and fills before each call)
+#: the UAV as the vehicle reports it: position [m], velocity [m/s], z-up from the exit
+U_PX, U_PY, U_PZ, U_VX, U_VY, U_VZ = range(6)
+N_UAV = 6
+#: the winch's measurements: paid-out length [m], drum rate [rad/s], drum tension [N],
+#: the line's exit elevation [rad] (NaN: none)
+M_LENGTH, M_OMEGA, M_TENSION, M_ELEVATION = range(4)
+N_MEASURED = 4
+#: the winder's own tether fix of the UAV [m] (NaN: none now), and the join's gap [m] added
+#: to the reference and its rate [m/s]
+F_X, F_Y, F_Z, F_JOIN, F_JOIN_RATE = range(5)
+N_FIX = 5
+
+
+class StepRecords(NamedTuple):
+    """:func:`winder_step`'s arguments, in its order: the one declared signature its entry
+    point is compiled for and every call passes (the arrays filled in place)."""
+
+    uav: np.ndarray             #: U_* (N_UAV)
+    measured: np.ndarray        #: M_* (N_MEASURED)
+    fix: np.ndarray             #: F_* (N_FIX)
+    lbar_p: np.ndarray          #: L-bar's parameters, groundstation.lbar.LB_*
+    lbar_s: np.ndarray          #: L-bar's state, groundstation.lbar.LS_* (advanced)
+    law_p: np.ndarray           #: the length law's packed gains and drum model
+    law_s: np.ndarray           #: its reference filter (advanced)
+    trim_p: np.ndarray          #: L-bar's trim, lead and floor parameters (TP_*)
+    trim_s: np.ndarray          #: their state (TS_*, advanced)
+    dt_s: float                 #: the control period [s]
+
 
 class WinderHost:
     """L-bar estimator + winder torque law, at ``gains.rate_hz``."""
@@ -60,22 +107,28 @@ class WinderHost:
         self.dt_s = 1.0 / gains.rate_hz
         self.lbar = LBarEstimator(lbar, tether.weight_per_length_n_m(gravity_m_s2))
         self.controller = WinderController(gains, winder, tether)
+        lb, ctl = self.lbar, self.controller
+        self._uav = np.zeros(N_UAV)
+        self._measured = np.zeros(N_MEASURED)
+        self._fix = np.zeros(N_FIX)
         # load (or compile) the step's machine code now, not at the first encoder frame,
         # and call it without numba's dispatch (the arguments' types never change)
-        lb, ctl = self.lbar, self.controller
-        self._step = entry_point(winder_step, 1.0, 0.0, 10.0, 0.0, 0.0, 0.0, lb.a_target,
-                                 lb._tan_min, lb.p.min_slack_m, math.nan, ctl.params(),
-                                 ctl.state, self.dt_s, 10.0, 0.0, 1.0, lb.w, lb.trim_params,
-                                 initial_trim_state(), 0.1, math.nan, math.nan,
-                                 math.nan, 0.0, 0.0)
+        self._step = entry_point(winder_step, *self._records())
         self._tension = None
         if ctl.law is WinderLaw.TENSION:
-            state = ctl.tension_state.copy()
+            lp = lb.packed
             self._tension = entry_point(tension_step, 1.0, 0.0, 10.0, 0.0, 0.0, 0.0,
-                                        lb.a_target, lb._tan_min, lb.p.min_slack_m, math.nan,
-                                        ctl.tension_params(), state, self.dt_s, 10.0, 0.0,
-                                        1.0, lb.w, lb.trim_params, initial_trim_state(),
+                                        lp[LB_A_TARGET], lp[LB_TAN_MIN], lp[LB_MIN_SLACK],
+                                        math.nan, ctl.tension_params(),
+                                        ctl.tension_state.copy(), self.dt_s, 10.0, 0.0,
+                                        1.0, lp[LB_W], lb.trim_params, initial_trim_state(),
                                         math.nan)
+
+    def _records(self) -> StepRecords:
+        """The step's arguments now (the controller's packed gains as they stand)."""
+        lb, ctl = self.lbar, self.controller
+        return StepRecords(self._uav, self._measured, self._fix, lb.packed, lb.state,
+                           ctl.params(), ctl.state, lb.trim_params, lb.trim_state, self.dt_s)
 
     def update(self, length_m: float, omega_rad_s: float, drum_tension_n: float,
                uav_pos_m: tuple[float, float, float],
@@ -93,85 +146,92 @@ class WinderHost:
         floor or join; the step's length is the measured one plus the drum's lag behind
         its speed set-point, its rate that set-point."""
         lb, ctl = self.lbar, self.controller
-        px, py, pz = uav_pos_m
-        vx, vy, vz = uav_vel_m_s
+        u, m = self._uav, self._measured
+        u[U_PX], u[U_PY], u[U_PZ] = uav_pos_m
+        u[U_VX], u[U_VY], u[U_VZ] = uav_vel_m_s
         if self._tension is not None:
             # the tension law: the join's gap, the trim, the lead and the fix's floor are
             # the length law's; the paper's law's filter starts afresh when it next runs
             ctl.state[:] = 0.0
-            ref_m, rate, lb._root, cmd = self._tension(
-                px, py, pz, vx, vy, vz, lb.a_target, lb._tan_min, lb.p.min_slack_m,
-                lb._root, ctl.tension_params(), ctl.tension_state, self.dt_s, length_m,
-                omega_rad_s, drum_tension_n, lb.w, lb.trim_params, lb.trim_state,
-                exit_elevation_rad)
+            lp, ls = lb.packed, lb.state
+            ref_m, rate, ls[LS_ROOT], cmd = self._tension(
+                u[U_PX], u[U_PY], u[U_PZ], u[U_VX], u[U_VY], u[U_VZ], lp[LB_A_TARGET],
+                lp[LB_TAN_MIN], lp[LB_MIN_SLACK], ls[LS_ROOT], ctl.tension_params(),
+                ctl.tension_state, self.dt_s, length_m, omega_rad_s, drum_tension_n,
+                lp[LB_W], lb.trim_params, lb.trim_state, exit_elevation_rad)
             return WinderStep(cmd[0], ref_m, rate, _command(cmd))
         ctl.tension_state[Z_STARTED] = 0.0
-        lbar_m, rate, lb._root, cmd = self._step(
-            px, py, pz, vx, vy, vz, lb.a_target, lb._tan_min, lb.p.min_slack_m, lb._root,
-            ctl.params(), ctl.state, self.dt_s, length_m, omega_rad_s, drum_tension_n, lb.w,
-            lb.trim_params, lb.trim_state, exit_elevation_rad,
-            *(fix_m if fix_m is not None else (math.nan, math.nan, math.nan)), join_m,
-            join_rate_m_s)
+        m[M_LENGTH], m[M_OMEGA], m[M_TENSION] = length_m, omega_rad_s, drum_tension_n
+        m[M_ELEVATION] = exit_elevation_rad
+        f = self._fix
+        if fix_m is None:
+            f[F_X] = f[F_Y] = f[F_Z] = math.nan
+        else:
+            f[F_X], f[F_Y], f[F_Z] = fix_m
+        f[F_JOIN], f[F_JOIN_RATE] = join_m, join_rate_m_s
+        lbar_m, rate, cmd = self._step(*self._records())
         return WinderStep(cmd[0], lbar_m, rate, _command(cmd))
 
 
 @njit
-def winder_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float,
-                a_target: float, tan_min: float, min_slack: float, root_guess: float,
-                law_p: np.ndarray, law_s: np.ndarray, dt_s: float, length_m: float,
-                omega_rad_s: float, drum_tension_n: float, w_n_m: float,
-                trim_p: np.ndarray, trim_s: np.ndarray, elevation_rad: float,
-                fix_x: float, fix_y: float, fix_z: float, join_m: float,
-                join_rate_m_s: float
-                ) -> tuple[float, float, float, tuple[float, float, float, float, float, bool]]:
-    """:meth:`WinderHost.update` in scalars: L-bar and its rate (:func:`lbar_kernel`), the
-    line's weight (:func:`weight_estimate`, from the exit elevation ``elevation_rad``
-    [rad]; the model's ``w_n_m`` without one), the tension trim's offset
-    (:func:`tension_trim` on that weight, both advanced in place), the stop lead
-    (:func:`stop_lead`, on the UAV's position and velocity, bounded by
-    :func:`lead_room_m <groundstation.lbar.lead_room_m>` (from the last period's root,
-    ``trim_s[12]``) and held while the measured exit elevation is below the bound's
-    angle), the slack floor (:func:`slack_floor`, on the length
-    :func:`floor_length_m` asks at the winder's own fix, (``fix_x``, ``fix_y``,
-    ``fix_z``) [m], NaN: none), plus ``join_m`` [m] moving at ``join_rate_m_s``
-    [m/s] (a join's gap), then the torque law
-    (:func:`winder_law`, its filter ``law_s`` advanced in place) on L-bar + offset + lead
-    + floor + join (the join's gap at most what that asks beyond ``length_m``, written to
-    ``trim_s[13]``). Returns
-    (the length reference, its rate, the exit-angle root for next time, the WinderCommand's
-    fields)."""
-    lbar_m, rate, a, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
-                                        min_slack, root_guess)
-    w = weight_estimate(trim_p, trim_s, dt_s, w_n_m, drum_tension_n, elevation_rad,
+def winder_step(uav: np.ndarray, measured: np.ndarray, fix: np.ndarray, lbar_p: np.ndarray,
+                lbar_s: np.ndarray, law_p: np.ndarray, law_s: np.ndarray,
+                trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float
+                ) -> tuple[float, float, tuple[float, float, float, float, float, bool]]:
+    """:meth:`WinderHost.update` on its records (:class:`StepRecords`): L-bar and its rate
+    (:func:`lbar_kernel`, its exit-angle root in ``lbar_s``), the line's weight
+    (:func:`weight_estimate`, from the measured exit elevation; the model's weight without
+    one), the tension trim's offset (:func:`tension_trim` on that weight, both advanced in
+    place), the stop lead (:func:`stop_lead`, on the UAV's position and velocity, bounded
+    by :func:`lead_room_m <groundstation.lbar.lead_room_m>` (from the last period's root)
+    and held while the measured exit elevation is below the bound's angle), the slack floor
+    (:func:`slack_floor`, on the length :func:`floor_length_m` asks at the winder's own
+    fix, NaN: none), plus the join's gap moving at its rate, then the torque law
+    (:func:`winder_law`, its filter ``law_s`` advanced in place) on L-bar + offset + lead +
+    floor + join (the join's gap at most what that asks beyond the measured length,
+    written to ``trim_s[TS_JOIN_GAP]``). Returns (the length reference [m], its rate
+    [m/s], the WinderCommand's fields)."""
+    px, py, pz = uav[U_PX], uav[U_PY], uav[U_PZ]
+    vx, vy, vz = uav[U_VX], uav[U_VY], uav[U_VZ]
+    length_m, omega_rad_s = measured[M_LENGTH], measured[M_OMEGA]
+    drum_tension_n, elevation_rad = measured[M_TENSION], measured[M_ELEVATION]
+    a_target, min_slack = lbar_p[LB_A_TARGET], lbar_p[LB_MIN_SLACK]
+    lbar_m, rate, a, lbar_s[LS_ROOT] = lbar_kernel(px, py, pz, vx, vy, vz, a_target,
+                                                   lbar_p[LB_TAN_MIN], min_slack,
+                                                   lbar_s[LS_ROOT])
+    w = weight_estimate(trim_p, trim_s, dt_s, lbar_p[LB_W], drum_tension_n, elevation_rad,
                         length_m, pz)
     tension_trim(trim_p, trim_s, dt_s, a, px, py, pz, w, drum_tension_n)
-    lbar_m += trim_s[0]
-    rate += trim_s[1]
+    lbar_m += trim_s[TS_OFFSET]
+    rate += trim_s[TS_OFFSET_RATE]
     room = 0.0
-    if trim_p[9] > 0.0:
-        room, trim_s[12] = lead_room_from(px, py, pz, trim_p[18], min_slack, trim_s[12])
+    if trim_p[TP_LEAD_ACC] > 0.0:
+        room, trim_s[TS_ROOM_ROOT] = lead_room_from(px, py, pz, trim_p[TP_LEAD_TAN_MIN],
+                                                    min_slack, trim_s[TS_ROOM_ROOT])
         room -= lbar_m
     # L-bar's least slack is the vehicle's governor's margin, not room to stop in
     stop_lead(trim_p, trim_s, dt_s, px, py, pz, vx, vy, vz, lbar_m - min_slack, room,
               elevation_rad)
-    lbar_m += trim_s[4]
-    rate += trim_s[5]
-    needed = floor_length_m(fix_x, fix_y, fix_z, trim_p[19] * a_target, trim_p[14])
+    lbar_m += trim_s[TS_LEAD]
+    rate += trim_s[TS_LEAD_RATE]
+    needed = floor_length_m(fix[F_X], fix[F_Y], fix[F_Z],
+                            trim_p[TP_FLOOR_TENSION_RATIO] * a_target, trim_p[TP_FLOOR])
     slack_floor(trim_p, trim_s, dt_s, lbar_m, needed)
     # a join's gap after the floor: it defers what the floor pays out too (on the lumped
     # line the winder's fix, thrown by the line's motion, asked 2 m/s at an in-air start
     # and snapped the line at 92 N); the over-tension pay-out stays the backstop
-    lbar_m += trim_s[7]
-    rate += trim_s[8]
+    lbar_m += trim_s[TS_FLOOR]
+    rate += trim_s[TS_FLOOR_RATE]
     # the join's gap defers a pay-out and never winds the line in: a reference falling
     # into it (a first estimate settling lower) takes it, the measured length held
-    gap = -join_m
+    gap = -fix[F_JOIN]
+    join_rate_m_s = fix[F_JOIN_RATE]
     if gap > 0.0 and lbar_m - length_m < gap:
         gap = max(lbar_m - length_m, 0.0)
         join_rate_m_s = -rate if gap > 0.0 else 0.0
-    trim_s[13] = max(gap, 0.0)
+    trim_s[TS_JOIN_GAP] = max(gap, 0.0)
     lbar_m -= gap
     rate += join_rate_m_s
     cmd = winder_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, lbar_m,
                      rate)
-    return lbar_m, rate, root, cmd
+    return lbar_m, rate, cmd

@@ -224,3 +224,40 @@ def test_stack_never_taut_and_lockstep_kept(stack):
 def test_stack_status_rate_in_simulated_time(stack):
     times = [t for t, _, _ in stack["status"] if 1.0 <= t <= 19.0]
     assert len(times) / 18.0 == pytest.approx(20.0, rel=0.05)
+
+
+# ------------------------------------------------- the ground station's own parameters
+
+def test_ground_params_are_checked_and_default_to_the_defaults(tmp_path):
+    """``up --ground-params``: a scenario's tables, each field checked; none: defaults."""
+    import argparse
+
+    from groundstation.station_params import GroundStationParams
+    from groundstation.winder_control import WinderControlParams
+    from tuav_sitl.up import add_arguments, ground_params
+    from tuavdefs.paramspec import ParameterError
+
+    ap = argparse.ArgumentParser()
+    add_arguments(ap)
+    assert ground_params(ap.parse_args([])) == GroundStationParams()
+    good = tmp_path / "gs.toml"
+    good.write_text('[winder_control]\nlaw = "tension"\n[winch]\ntension_limit_n = 25.0\n')
+    got = ground_params(ap.parse_args(["--ground-params", str(good)]))
+    assert got.winder_control == WinderControlParams(law="tension")
+    assert got.winch.tension_limit_n == 25.0
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[winder_control]\nlaw = "rope"\n')
+    with pytest.raises(ParameterError, match="law"):
+        ground_params(ap.parse_args(["--ground-params", str(bad)]))
+
+
+def test_up_hands_the_ground_station_its_law(tmp_path):
+    """``up --ground-params`` with ``law = "tension"``: the ground-station process runs the
+    tension law (its log, and its STATUSTEXT in the vehicle's tlog, name the law its
+    winder host dispatches on), and the run folder keeps the file it was given."""
+    out = _session("tests.netns.ground_law_session", str(tmp_path), timeout_s=300)
+    assert out["rc"] == 0, out["stderr"]
+    assert "law tension" in out["gs_log"]
+    assert "winch: tension law" in out["statustexts"]
+    assert 'law = "tension"' in out["gs_toml"]
+    assert out["left"] == []

@@ -1042,7 +1042,7 @@ def test_a_slack_line_is_not_paid_out_to_a_report_that_runs_away(runaway):
     assert not b.winch.slack_hold and "winch: line pulled, following L-bar again" in b.notices
     # and an operator's DO_WINCH RELAXED ends it too: the line rejoins L-bar
     b.winch.set_uav(((4.0, 1.0, 3.0), (0.0, 0.0, 0.0)))
-    b.winch.slack_hold = True
+    b.winch.relaxed.slack_hold = True
     assert b.command(request(mavlink2.WINCH_RELAXED)).result == ACK
     assert not b.winch.slack_hold
     b.tension = 1.0

@@ -23,7 +23,7 @@ import sys
 import time
 import tomllib
 from pathlib import Path
-from typing import NamedTuple, TextIO
+from typing import TYPE_CHECKING, NamedTuple, TextIO
 
 from tuav_sitl.locations import Home, parse_home
 from tuavdefs import component_link as cl
@@ -38,6 +38,9 @@ from tuavdefs.gcs import (
 )
 from tuavdefs.params import SystemParams, TetherParams, VehicleParams, WinderParams
 from tuavdefs.paramspec import ParameterError, load_toml, to_dict
+
+if TYPE_CHECKING:
+    from groundstation.station_params import GroundStationParams
 
 #: The plant's GNSS receivers (sitl.sensors.GnssPreset's values) and what the companion may
 #: fly on (companion.estimator.ESTIMATOR_KINDS), spelled out so that the command line
@@ -299,6 +302,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     "[vehicle] at top level) replacing the default paper vehicle")
     ap.add_argument("--tether", default=None, metavar="FILE", help="tether TOML")
     ap.add_argument("--winder", default=None, metavar="FILE", help="winder TOML")
+    ap.add_argument("--ground-params", default=None, metavar="FILE",
+                    help="the ground station's parameters TOML: [winder_control] (law = "
+                         "paper | tension), [lbar], [winch], as a scenario's tables")
     ap.add_argument("--plant-params", default=None, metavar="FILE",
                     help="the plant's truth where it differs from the controllers' model "
                          "(the parameters above): a system TOML whose fields replace the "
@@ -401,6 +407,15 @@ def _system_params(args: argparse.Namespace) -> SystemParams:
     return params
 
 
+def ground_params(args: argparse.Namespace) -> GroundStationParams:
+    """The ground station's parameters: ``--ground-params``, else the defaults."""
+    from groundstation.station_params import GroundStationParams
+
+    if args.ground_params is None:
+        return GroundStationParams()
+    return load_toml(GroundStationParams, Path(args.ground_params))
+
+
 def plant_params(args: argparse.Namespace, model: SystemParams) -> SystemParams:
     """The plant's truth: ``model`` (the controllers' parameters) with the fields of
     ``--plant-params`` replacing its own, table by table."""
@@ -483,6 +498,7 @@ def run_up(args: argparse.Namespace) -> int:
     try:
         params = _system_params(args)
         truth = plant_params(args, params)
+        ground = ground_params(args)
     except ParameterError as exc:
         print(f"tuav-sitl up: bad parameter: {exc}", file=sys.stderr)
         return 2
@@ -533,6 +549,7 @@ def run_up(args: argparse.Namespace) -> int:
     # the plant's truth (params.toml, what `plot` imports) and the controllers' model
     (run_dir / "params.toml").write_text(_to_toml(to_dict(truth)))
     (run_dir / "model.toml").write_text(_to_toml(to_dict(params)))
+    (run_dir / "groundstation.toml").write_text(_to_toml(to_dict(ground)))
     if parm_text is not None:
         (run_dir / "companion.parm").write_text(parm_text)
     faults_args: list[str] = []
@@ -593,7 +610,8 @@ def run_up(args: argparse.Namespace) -> int:
     if speedup != 1.0:
         comp_args += ["--telemetry-batch", repr(TELEMETRY_BATCH_S)]
     gs_args = ["-m", "groundstation", "--can", can, "--mavlink",
-               f"127.0.0.1:{ports.component}", "--signing-key-file", str(key_file), *common]
+               f"127.0.0.1:{ports.component}", "--signing-key-file", str(key_file),
+               "--control", str(run_dir / "groundstation.toml"), *common]
     if speedup != 1.0:
         # in lockstep the winch runs on the plant's time: a stall is no lost encoder
         gs_args += ["--clock", "frames"]

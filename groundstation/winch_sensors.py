@@ -1,0 +1,151 @@
+"""What the winch's own sensors say: the winch sensor node's frames (the line's length and
+speed, the load cell's tension and its sample clock, the node's heartbeat, the guide arm's
+exit angles), the axis's bus voltage and current, and the tether fix the station makes of
+length, tension and exit angles (``groundstation.tether_fix``)."""
+
+from __future__ import annotations
+
+import math
+
+from groundstation.lbar import LBarEstimator
+from groundstation.tether_fix import TetherFix, TetherFixer
+from tuavdefs import can_protocol as cp
+
+Vec3 = tuple[float, float, float]
+
+
+def wrap_ms(d_ms: int) -> int:
+    """A difference of two 16-bit millisecond clocks as the nearer of its two readings."""
+    d = d_ms & 0xFFFF
+    return d - 0x10000 if d >= 0x8000 else d
+
+
+class WinchSensors:
+    """The sensor node's latest readings and the tether fix made of them."""
+
+    def __init__(self, fixer: TetherFixer | None) -> None:
+        #: the tether fix (groundstation.tether_fix), on this station's own tether beliefs
+        self.fixer = fixer
+        self.fixes = 0
+        """Tether fixes computed."""
+        self.sensor_length_m = math.nan     # Winch_Length
+        self.sensor_speed_m_s = math.nan
+        self.tension_n = math.nan           # last finite Winch_Tension [N]
+        self.sensor_brake: bool | None = None
+        self.load_cell_healthy: bool | None = None
+        self.at_full_stop = False
+        self.voltage_v = math.nan           # the axis's bus
+        self.current_a = math.nan
+        self.sample_time_ms: int | None = None
+        self._sensor_clock_ms: int | None = None   # Sample_Time unwrapped [ms]
+        #: the last Winch_Exit_Angle: (azimuth [rad], elevation [rad], sample time [ms]
+        #: modulo 65536, valid), or None
+        self.exit_angle: tuple[float, float, int, bool] | None = None
+        self._clock_ms: int | None = None     # the winch's clock, unwrapped [ms]
+
+    @property
+    def sensor_clock_s(self) -> float | None:
+        """The winch sensor node's clock [s]: the last ``Winch_Tension`` Sample_Time,
+        unwrapped from its 16 bits, None before one came."""
+        c = self._sensor_clock_ms
+        return None if c is None else c * 1e-3
+
+    # ------------------------------------------------------------------ the frames
+
+    def on_bus_voltage_current(self, data: bytes) -> None:
+        self.voltage_v, self.current_a = cp.decode_bus_voltage_current(data)
+
+    def on_length(self, data: bytes) -> None:
+        length_m, speed_m_s = cp.decode_winch_length(data)
+        if math.isfinite(length_m) and math.isfinite(speed_m_s):
+            self.sensor_length_m, self.sensor_speed_m_s = length_m, speed_m_s
+
+    def on_tension(self, data: bytes) -> int | None:
+        """A ``Winch_Tension`` frame; returns the stamp of the one before (None: none)."""
+        last = self.sample_time_ms
+        tension_n, self.sensor_brake, self.sample_time_ms = cp.decode_winch_tension(data)
+        prev = self._sensor_clock_ms
+        if prev is None:
+            self._sensor_clock_ms = self.sample_time_ms
+        else:
+            self._sensor_clock_ms = prev + wrap_ms(self.sample_time_ms - prev)
+        if math.isfinite(tension_n):
+            self.tension_n = tension_n
+        return last
+
+    def on_heartbeat(self, data: bytes) -> None:
+        hb = cp.decode_winch_heartbeat(data)
+        self.load_cell_healthy = hb.load_cell_healthy
+        self.at_full_stop = hb.at_full_stop
+        self.sensor_brake = hb.brake_engaged
+
+    def on_exit_angle(self, data: bytes) -> bool:
+        """A ``Winch_Exit_Angle`` frame; returns False for a direction no guide arm can
+        read (below the ground, beyond the vertical, an azimuth off the circle): no fix
+        from it."""
+        az, el, stamp, valid = cp.decode_winch_exit_angle(data)
+        good = -math.pi <= az <= math.pi and -0.1 <= el <= 0.5 * math.pi
+        self.exit_angle = (az, el, stamp, valid and good)
+        return good
+
+    # ----------------------------------------------------------------- what they say
+
+    def line_leaves(self, ground_elevation_rad: float, window_s: float) -> bool:
+        """Whether the guide arm reads the line leaving the exit above the ground
+        (``ground_elevation_rad``) in a reading no older than ``window_s`` [s] against the
+        load cell's sample."""
+        ea = self.exit_angle
+        return bool(ea is not None and ea[3] and ea[1] >= ground_elevation_rad
+                    and self.sample_time_ms is not None
+                    and wrap_ms(self.sample_time_ms - ea[2]) <= 1e3 * window_s)
+
+    def _fix_inputs_valid(self, length_m: float) -> bool:
+        """Whether length, tension and a valid exit angle no older than ``max_age_s``
+        against the tension's sample are at hand for the tether fix."""
+        fixer, ea = self.fixer, self.exit_angle
+        if (fixer is None or ea is None or not ea[3] or self.sample_time_ms is None
+                or not (math.isfinite(length_m) and math.isfinite(self.tension_n))
+                or self.load_cell_healthy is False):
+            return False
+        return abs(wrap_ms(self.sample_time_ms - ea[2])) * 1e-3 <= fixer.p.max_age_s
+
+    def measured_position_m(self, length_m: float, lbar: LBarEstimator) -> Vec3 | None:
+        """The UAV's position [m] as the winder itself measures it (its tether fix's mean
+        from length ``length_m`` [m], tension and exit angles, the line taken as hanging
+        from the exit), None when the fix has no valid inputs: the slack floor's input
+        (docs/control.md §3), whatever the vehicle reports or fuses."""
+        if not self._fix_inputs_valid(length_m):
+            return None
+        fixer, ea = self.fixer, self.exit_angle
+        assert fixer is not None and ea is not None
+        # the tension as the trim low-passes it: a dynamic line's axial waves and snaps
+        # (0-20 N at 20-25 Hz) would otherwise swing the fix, and the floor, which pays
+        # out fast and takes back slowly, would ratchet the line out onto the ground
+        return fixer.suspended_end(length_m, lbar.drum_tension_n(self.tension_n), ea[0],
+                                   ea[1], lbar.weight_n_m())
+
+    def tether_fix(self, length_m: float, reported_m: Vec3 | None,
+                   uav_time_ms: int | None, lbar: LBarEstimator) -> TetherFix | None:
+        """The UAV's position from length, tension and exit angles now (``reported_m`` the
+        position the vehicle reports, ``uav_time_ms`` its time), or None when one is
+        missing, invalid or older than ``max_age_s`` against the tension's sample."""
+        fixer, ea = self.fixer, self.exit_angle
+        if not self._fix_inputs_valid(length_m):
+            return None
+        assert fixer is not None and ea is not None
+        az, el, stamp, _ = ea
+        if not fixer.readable(self.tension_n, el):
+            return None
+        pos, cov, ground = fixer.position(length_m, self.tension_n, az, el, reported_m,
+                                          lbar.weight_n_m())
+        self.fixes += 1
+        return TetherFix(pos, cov, self._unwrap_ms(stamp, uav_time_ms), ground)
+
+    def _unwrap_ms(self, stamp_ms: int, uav_time_ms: int | None) -> int:
+        """The winch's 16-bit clock [ms] as a full time: the nearest to the vehicle's
+        time of its last position (the same clock in the simulator), else carried on from
+        the last one unwrapped."""
+        ref = uav_time_ms if uav_time_ms is not None else self._clock_ms
+        full = stamp_ms if ref is None else ref + wrap_ms(stamp_ms - ref)
+        self._clock_ms = full
+        return full
