@@ -114,9 +114,12 @@ def _category(file: str, func: str) -> str:
                    "companion/attitude.py", "companion/actuators.py",
                    "companion/tether_model.py", "companion/planner.py",
                    "companion/reference.py", "companion/legs.py",
-                   "companion/navigation.py", "groundstation/winder_host.py",
+                   "companion/navigation.py", "companion/plan.py",
+                   "companion/governor.py", "groundstation/winder_host.py",
                    "groundstation/lbar.py", "groundstation/winder_control.py",
                    "groundstation/winch.py", "tuavdefs/airframe.py")):
+        return "control"
+    if "/companion/modes/" in f:
         return "control"
     if f.endswith(("socket.py", "selectors.py")):
         return "sockets"

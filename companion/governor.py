@@ -15,7 +15,7 @@ the tension); it gives:
   itself (:class:`BrakeRef`); at rest, whether a stopped plan may resume
   (:meth:`TetherGovernor.may_resume`) or where a vehicle beyond a braked drum moves in
   (:meth:`TetherGovernor.move_in_target`);
-- whether an over-tension has lasted long enough to move towards the winder
+- where an over-tension that has lasted moves the vehicle, towards the winder
   (:meth:`TetherGovernor.over_tension`).
 
 What a paused plan is and how it resumes is the navigator's (:mod:`companion.navigation`).
@@ -62,6 +62,9 @@ class GovernorSettings(Protocol):
     @property
     def tension_time_s(self) -> float:
         """How long the tension must stay above the limit first [s]."""
+    @property
+    def tension_step_m(self) -> float:
+        """How far towards the winder each over-tension move goes [m]."""
 
 
 #: The tether governor's jerk while its brake builds up [m/s^3].
@@ -304,21 +307,25 @@ class TetherGovernor:
         if speed_m_s is not None and math.isfinite(speed_m_s):
             self.winch_speed_m_s = float(speed_m_s)
 
-    def over_tension(self, t: float, tension_n: float | None, may_move: bool) -> bool:
-        """Whether the vehicle moves towards the winder now (at ``t`` [s]): every report
-        for ``tension_time_s`` has said the tension [N] (None: unknown) is above
-        ``tension_limit_n``, the vehicle ``may_move``, and the last such move is
-        :data:`TENSION_REPEAT_S` old."""
+    def over_tension(self, t: float, tension_n: float | None, may_move: bool,
+                     ref_pos: Vec3) -> Vec3 | None:
+        """Where the vehicle, its reference at ``ref_pos`` [m], moves now (at ``t`` [s])
+        for an over-tension: ``tension_step_m`` towards the winder (no lower than 1 m above
+        the gear unless already lower) when every report for ``tension_time_s`` has said
+        the tension [N] (None: unknown) is above ``tension_limit_n``, the vehicle
+        ``may_move``, and the last such move is :data:`TENSION_REPEAT_S` old; else None."""
         if tension_n is None or not tension_n > self.p.tension_limit_n:
             self._over_t = None
-            return False
+            return None
         if self._over_t is None:
             self._over_t = t
         if (not may_move or t - self._over_t < self.p.tension_time_s
                 or t - self._tension_move_t < TENSION_REPEAT_S):
-            return False
+            return None
         self._tension_move_t = t
-        return True
+        x, y, z = ref_pos
+        d = math.sqrt(x * x + y * y + z * z)
+        return towards_winder((x, y, z), d - self.p.tension_step_m, self.gear_height_m + 1.0)
 
     @property
     def reach_length_m(self) -> float:

@@ -176,19 +176,33 @@ def test_resume_and_move_in_for_a_reported_drum() -> None:
 
 
 def test_over_tension_lasting_then_repeating() -> None:
+    """An over-tension in every report for tension_time_s moves the vehicle
+    tension_step_m towards the winder along its line (not a snap, not while it may not
+    move, again only TENSION_REPEAT_S later), never lower than 1 m above the gear."""
     p = NavigationParams()
     gov = governor()
     over = p.tension_limit_n + 1.0
-    assert not gov.over_tension(0.0, over, True)
-    assert not gov.over_tension(p.tension_time_s - 0.01, over, True)
-    assert not gov.over_tension(p.tension_time_s - 0.005, p.tension_limit_n, True)  # a snap
-    assert not gov.over_tension(1.0, over, True)                      # starts again
-    assert gov.over_tension(1.0 + p.tension_time_s, over, True)
-    assert not gov.over_tension(1.0 + p.tension_time_s + 0.1, over, True)
+    here = radial(10.0, 0.0).pos_m
+
+    def move(t: float, tension: float | None, may: bool = True):
+        return gov.over_tension(t, tension, may, here)
+
+    assert move(0.0, over) is None
+    assert move(p.tension_time_s - 0.01, over) is None
+    assert move(p.tension_time_s - 0.005, p.tension_limit_n) is None   # a snap: reset
+    assert move(1.0, over) is None                                      # starts again
+    target = move(1.0 + p.tension_time_s, over)
+    assert math.dist(target, ZERO) == pytest.approx(10.0 - p.tension_step_m)
+    assert target[0] == pytest.approx(target[2]) and target[1] == 0.0  # on its line
+    assert move(1.0 + p.tension_time_s + 0.1, over) is None
     t = 1.0 + p.tension_time_s + TENSION_REPEAT_S
-    assert not gov.over_tension(t, over, False)                       # may not move now
-    assert gov.over_tension(t, over, True)
-    assert not gov.over_tension(t + 5.0, None, True)                  # unknown: reset
+    assert move(t, over, may=False) is None                             # may not move now
+    assert move(t, over) is not None
+    assert move(t + 5.0, None) is None                                  # unknown: reset
+    low = (20.0, 0.0, 0.5)
+    for k in range(3):
+        gov.over_tension(10.0 + k, over, True, low)
+    assert gov.over_tension(10.0 + 2 * TENSION_REPEAT_S, over, True, low)[2] == 0.5
 
 
 def test_slow_clock_follows_the_room_and_gives_it_back() -> None:
