@@ -18,7 +18,7 @@ the tension); it gives:
 - where an over-tension that has lasted moves the vehicle, towards the winder
   (:meth:`TetherGovernor.over_tension`).
 
-What a paused plan is and how it resumes is the navigator's (:mod:`companion.navigation`).
+What a paused plan is, and how it resumes, is the plan's (:mod:`companion.plan`).
 """
 
 from __future__ import annotations
