@@ -91,6 +91,7 @@ from groundstation.winch_axis import (
     AxisLink,
 )
 from groundstation.winch_bus import BusHealth
+from groundstation.winch_current import CurrentTension
 from groundstation.winch_modes import (
     BRAKED_MODES,
     JOIN_MARGIN_M,
@@ -184,7 +185,11 @@ class Winch:
         self.sensors = WinchSensors(
             TetherFixer(fp, tether.linear_density_kg_m * gravity_m_s2,
                         tether.youngs_modulus_pa * tether.section_area_m2, tether.diameter_m)
-            if fp.enabled else None)
+            if fp.enabled else None,
+            CurrentTension(self.p.motor_torque_constant_nm_a, winder.drum_radius_m,
+                           winder.viscous_friction_n_m_s_rad, host.controller.inertia_kg_m2,
+                           self.p.current_filter_s, host.dt_s),
+            self.p)
         self.fix_every = max(1, round(1.0 / (fp.rate_hz * host.dt_s)))
         self._frames_since_fix = 0
         #: the winder's axis as this host commands it (groundstation.winch_axis)
@@ -252,6 +257,8 @@ class Winch:
             handlers[cp.frame_id(node, cp.Cmd.HEARTBEAT)] = self._axis_heartbeat_frame
             handlers[cp.frame_id(node, cp.Cmd.GET_BUS_VOLTAGE_CURRENT)] = (
                 lambda wall_s, data: sensors.on_bus_voltage_current(data))
+            handlers[cp.frame_id(node, cp.Cmd.GET_IQ)] = (
+                lambda wall_s, data: sensors.on_iq(data))
             # what only a host sends: this process never hears its own frames, so these
             # come from a second host on the bus
             for cmd in HOST_COMMANDS:
@@ -505,6 +512,9 @@ class Winch:
         self._last_encoder_wall = wall_s
         self.length_m = pos_rev * _TWO_PI * self.r_w
         self.omega_rad_s = vel_rev_s * _TWO_PI
+        said = self.sensors.on_encoder(self.length_m, self.omega_rad_s)
+        if said is not None:
+            out.notices.append(said)
         if self.encoder_frames == 1:
             self.relaxed.hold_m = self.length_m
             axis.arm_pending = True

@@ -103,3 +103,18 @@ class WinchParams(Params):
         "line is pulled. A real climb with the line's bottom lying at the exit (near the "
         "vertical, on a line whose ground friction takes the pull) pays out up to 2.6 m "
         "so between two pulls", gt=0)
+    motor_torque_constant_nm_a: float = quantity(
+        0.1, "N*m/A", "the winder motor's torque constant as its datasheet gives it: the "
+        "current's tension T = (I dw/dt + beta w - Kt Iq) / r_w (groundstation/"
+        "winch_current.py) is as good as it", gt=0)
+    current_filter_s: float = quantity(
+        0.05, "s", "time constant of the low-pass on the current's tension (the encoder's "
+        "differenced rate in it is noisy)", ge=0)
+    load_cell_silence_s: float = quantity(
+        0.1, "s", "no Winch_Tension for this long (simulated time: encoder frames): the "
+        "load cell is silent and the motor's current gives the tension", gt=0)
+    tension_disagree_n: float = quantity(
+        5.0, "N", "the load cell and the current's tension further apart than this for "
+        "tension_disagree_s: the current gives the tension until they agree again", gt=0)
+    tension_disagree_s: float = quantity(
+        1.0, "s", "how long (simulated time) they must disagree", gt=0)

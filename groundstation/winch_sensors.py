@@ -1,14 +1,29 @@
 """What the winch's own sensors say: the winch sensor node's frames (the line's length and
 speed, the load cell's tension and its sample clock, the node's heartbeat, the guide arm's
-exit angles), the axis's bus voltage and current, and the tether fix the station makes of
-length, tension and exit angles (``groundstation.tether_fix``)."""
+exit angles), the axis's bus voltage and current and its motor's current, the tension the
+winch takes from them (:class:`TensionSource`), and the tether fix the station makes of
+length, the load cell's tension and exit angles (``groundstation.tether_fix``).
+
+The tension the winch acts on (the law's feed-forward, the over-tension pay-out, the slack
+guard, the ground pre-tension, ``WINCH_STATUS``) is the load cell's; the motor's current
+(``groundstation.winch_current``) takes its place while the load cell is silent (no
+``Winch_Tension`` for ``load_cell_silence_s`` of encoder frames), reports itself unhealthy,
+or disagrees with it by more than ``tension_disagree_n`` for ``tension_disagree_s``; each
+change of source is said. Without a current (no ``Get_Iq`` on the bus) the load cell's last
+reading stays the tension, as it always did. The tether fix takes the load cell alone."""
 
 from __future__ import annotations
 
+import enum
 import math
+
+from pymavlink.dialects.v20 import common as mavlink2
 
 from groundstation.lbar import LBarEstimator
 from groundstation.tether_fix import TetherFix, TetherFixer
+from groundstation.winch_current import CurrentTension
+from groundstation.winch_params import WinchParams
+from groundstation.winch_report import Notice, notice
 from tuavdefs import can_protocol as cp
 
 Vec3 = tuple[float, float, float]
@@ -20,17 +35,34 @@ def wrap_ms(d_ms: int) -> int:
     return d - 0x10000 if d >= 0x8000 else d
 
 
+class TensionSource(enum.Enum):
+    """Where the tension the winch acts on comes from."""
+
+    LOAD_CELL = "load cell"     #: the load cell at the fairlead (Winch_Tension)
+    CURRENT = "current"         #: the winder motor's current (Get_Iq), cruder
+
+
 class WinchSensors:
     """The sensor node's latest readings and the tether fix made of them."""
 
-    def __init__(self, fixer: TetherFixer | None) -> None:
+    def __init__(self, fixer: TetherFixer | None, current: CurrentTension,
+                 params: WinchParams) -> None:
         #: the tether fix (groundstation.tether_fix), on this station's own tether beliefs
         self.fixer = fixer
+        #: the tension from the motor's current (groundstation.winch_current)
+        self.current = current
+        self.p = params
+        #: where :attr:`tension_n` comes from now
+        self.source = TensionSource.LOAD_CELL
+        self._since_load_cell = 0           # encoder frames since the last Winch_Tension
+        self._disagree_frames = 0           # encoder frames in a row the two disagree
         self.fixes = 0
         """Tether fixes computed."""
         self.sensor_length_m = math.nan     # Winch_Length
         self.sensor_speed_m_s = math.nan
-        self.tension_n = math.nan           # last finite Winch_Tension [N]
+        #: the tension the winch acts on [N] (the load cell's, or the current's)
+        self.tension_n = math.nan
+        self.load_cell_n = math.nan         # last finite Winch_Tension [N]
         self.sensor_brake: bool | None = None
         self.load_cell_healthy: bool | None = None
         self.at_full_stop = False
@@ -69,9 +101,46 @@ class WinchSensors:
             self._sensor_clock_ms = self.sample_time_ms
         else:
             self._sensor_clock_ms = prev + wrap_ms(self.sample_time_ms - prev)
+        self._since_load_cell = 0
         if math.isfinite(tension_n):
-            self.tension_n = tension_n
+            self.load_cell_n = tension_n
+            if self.source is TensionSource.LOAD_CELL:
+                self.tension_n = tension_n
         return last
+
+    def on_iq(self, data: bytes) -> None:
+        """A ``Get_Iq`` frame: the motor's measured q-axis current."""
+        self.current.on_iq(cp.decode_iq(data).measured_a)
+
+    def on_encoder(self, length_m: float, omega_rad_s: float) -> Notice | None:
+        """An encoder frame (one control period): the current's estimate advanced and the
+        tension's source chosen (module docstring); returns the notice of a change."""
+        p, cur = self.p, self.current
+        cur.on_encoder(length_m, omega_rad_s)
+        self._since_load_cell += 1
+        lc, ct = self.load_cell_n, cur.tension_n
+        if math.isfinite(lc) and math.isfinite(ct) and abs(lc - ct) > p.tension_disagree_n:
+            self._disagree_frames += 1
+        else:
+            self._disagree_frames = 0
+        dt = cur.dt_s
+        silent = (self._since_load_cell * dt > p.load_cell_silence_s
+                  or self.load_cell_healthy is False or not math.isfinite(lc))
+        disagree = self._disagree_frames * dt > p.tension_disagree_s
+        source = (TensionSource.CURRENT if math.isfinite(ct) and (silent or disagree)
+                  else TensionSource.LOAD_CELL)
+        said = None
+        if source is not self.source:
+            self.source = source
+            why = "silent" if silent else "disagrees" if disagree else "back"
+            said = notice(mavlink2.MAV_SEVERITY_WARNING if source is TensionSource.CURRENT
+                          else mavlink2.MAV_SEVERITY_NOTICE,
+                          f"winch: load cell {why}, tension from {source.value}")
+        if source is TensionSource.CURRENT:
+            self.tension_n = ct
+        elif math.isfinite(lc):
+            self.tension_n = lc
+        return said
 
     def on_heartbeat(self, data: bytes) -> None:
         hb = cp.decode_winch_heartbeat(data)
@@ -104,7 +173,7 @@ class WinchSensors:
         against the tension's sample are at hand for the tether fix."""
         fixer, ea = self.fixer, self.exit_angle
         if (fixer is None or ea is None or not ea[3] or self.sample_time_ms is None
-                or not (math.isfinite(length_m) and math.isfinite(self.tension_n))
+                or not (math.isfinite(length_m) and math.isfinite(self.load_cell_n))
                 or self.load_cell_healthy is False):
             return False
         return abs(wrap_ms(self.sample_time_ms - ea[2])) * 1e-3 <= fixer.p.max_age_s
@@ -121,7 +190,7 @@ class WinchSensors:
         # the tension as the trim low-passes it: a dynamic line's axial waves and snaps
         # (0-20 N at 20-25 Hz) would otherwise swing the fix, and the floor, which pays
         # out fast and takes back slowly, would ratchet the line out onto the ground
-        return fixer.suspended_end(length_m, lbar.drum_tension_n(self.tension_n), ea[0],
+        return fixer.suspended_end(length_m, lbar.drum_tension_n(self.load_cell_n), ea[0],
                                    ea[1], lbar.weight_n_m())
 
     def tether_fix(self, length_m: float, reported_m: Vec3 | None,
@@ -134,9 +203,9 @@ class WinchSensors:
             return None
         assert fixer is not None and ea is not None
         az, el, stamp, _ = ea
-        if not fixer.readable(self.tension_n, el):
+        if not fixer.readable(self.load_cell_n, el):
             return None
-        pos, cov, ground = fixer.position(length_m, self.tension_n, az, el, reported_m,
+        pos, cov, ground = fixer.position(length_m, self.load_cell_n, az, el, reported_m,
                                           lbar.weight_n_m())
         self.fixes += 1
         return TetherFix(pos, cov, self._unwrap_ms(stamp, uav_time_ms), ground)

@@ -44,7 +44,10 @@ Reported values (what the replies carry):
 - ``Get_Torques``: target = :attr:`torque_command_nm` (after ramp and clamp, 0 when not
   enabled), estimate = the applied torque the plant passed to the last :meth:`tick` (which
   includes its speed cut-back).
-- ``Get_Iq``: the same two torques divided by the torque constant ``kt`` [N m/A].
+- ``Get_Iq``: the same two torques divided by the torque constant ``kt`` [N m/A]; cyclic
+  every ``iq_period_s`` (10 ms, each instant's before its encoder frame: the winder is
+  configured so, as ODrive's ``iq_msg_rate_ms``), the ground station's second, cruder
+  tension source (``groundstation/winch_current.py``).
 - ``Get_Bus_Voltage_Current``: the bus voltage from the last :meth:`tick` and the DC bus
   current of a lossless drive by power balance, ``I_bus = (tau_applied * omega +
   R_loss * Iq^2) / V_bus`` with ``omega = 2 pi vel`` [rad/s] and the copper-loss resistance
@@ -144,8 +147,9 @@ class OdriveAxis:
 
     Parameters: ``watchdog_timeout_s`` [s] (<= 0 disables), ``torque_limit_nm`` [N m] initial
     torque limit, ``vel_limit_rev_s`` [rev/s] initial velocity limit (stored for the plant),
-    ``torque_constant_nm_a`` [N m/A] maps currents to torques, ``heartbeat_period_s`` and
-    ``encoder_period_s`` [s] the default cyclic periods (<= 0 or None: not cyclic),
+    ``torque_constant_nm_a`` [N m/A] maps currents to torques, ``heartbeat_period_s``,
+    ``iq_period_s`` and ``encoder_period_s`` [s] the default cyclic periods (<= 0 or None:
+    not cyclic),
     ``cyclic`` extra or overriding periods by command id (any requestable message, e.g.
     ``{Cmd.GET_TORQUES: 0.01}``), ``control_mode``/``input_mode`` the modes at power-up,
     ``torque_ramp_rate_nm_s`` [N m/s] for input mode TORQUE_RAMP, ``loss_resistance_ohm``
@@ -156,6 +160,7 @@ class OdriveAxis:
                  torque_limit_nm: float = 5.0, vel_limit_rev_s: float = 20.0,
                  torque_constant_nm_a: float = 0.1, heartbeat_period_s: float | None = 0.1,
                  encoder_period_s: float | None = 0.01,
+                 iq_period_s: float | None = 0.01,
                  cyclic: Mapping[int, float | None] | None = None,
                  control_mode: int = ControlMode.POSITION,
                  input_mode: int = InputMode.PASSTHROUGH,
@@ -197,7 +202,10 @@ class OdriveAxis:
         self._last_feed_s: float | None = None
         self._last_tick_s: float | None = None
 
+        # (an instant's Get_Iq before its encoder frame: the host has the current of the
+        # instant when it answers the encoder frame)
         periods: dict[int, float | None] = {Cmd.HEARTBEAT: heartbeat_period_s,
+                                            Cmd.GET_IQ: iq_period_s,
                                             Cmd.GET_ENCODER_ESTIMATES: encoder_period_s}
         periods.update(cyclic or {})
         self._schedules: dict[int, CyclicSchedule] = {}

@@ -194,3 +194,28 @@ def test_spec_for_id():
     assert cp.spec_for_id(0x0AE, axis_node_id=5).name == "Set_Input_Torque"
     assert cp.spec_for_id(0x00D) is None  # Set_Input_Vel: not used here
     assert cp.spec_for_id(0x02E) is None  # another node
+
+
+def test_get_iq_from_the_plants_axis_on_a_real_bus_decodes_with_the_dbc(db):
+    """The plant's winder node sends Get_Iq cyclic (the ground station's second tension
+    source); the frame read off a python-can bus decodes with cantools to the motor's
+    applied torque over the torque constant."""
+    from sitl.odrive_axis import OdriveAxis
+    from tuavdefs.canbus import CanLink
+
+    node, host = CanLink("virtual:iq_frame"), CanLink("virtual:iq_frame")
+    try:
+        axis = OdriveAxis(torque_constant_nm_a=0.1)
+        node.send_frames(axis.tick(0.0, 3.0, -0.5, -0.42, 48.0))
+        frames = []
+        while (rx := host.recv(0.1)) is not None:
+            frames.append(rx)
+    finally:
+        node.close()
+        host.close()
+    iq = [f for f in frames if f.arbitration_id == cp.frame_id(0, cp.Cmd.GET_IQ)]
+    assert len(iq) == 1 and not iq[0].is_remote and len(iq[0].data) == 8
+    decoded = db.get_message_by_name("Get_Iq").decode(bytes(iq[0].data))
+    assert decoded["Iq_Measured"] == pytest.approx(-4.2, rel=1e-6)      # -0.42 N m / 0.1
+    assert decoded["Iq_Setpoint"] == 0.0                                # not armed
+    assert cp.decode_iq(bytes(iq[0].data)).measured_a == decoded["Iq_Measured"]

@@ -305,15 +305,19 @@ def test_cyclic_frame_timing_over_one_second():
     ids = [f.arbitration_id for f in frames]
     assert ids.count(frame_id(0, Cmd.HEARTBEAT)) == 10
     assert ids.count(frame_id(0, Cmd.GET_ENCODER_ESTIMATES)) == 100
-    assert len(frames) == 110
+    assert ids.count(frame_id(0, Cmd.GET_IQ)) == 100     # the winder's second tension source
+    assert len(frames) == 210
+    # each instant's Get_Iq comes before its encoder frame (the host answers that one)
+    enc = frame_id(0, Cmd.GET_ENCODER_ESTIMATES)
+    assert all(ids[i - 1] == frame_id(0, Cmd.GET_IQ) for i, f in enumerate(ids) if f == enc)
     assert not any(f.is_remote for f in frames)
     for f in frames:  # every cyclic frame decodes with the DBC
         decode(f)
 
 
 def test_cyclic_frames_are_evenly_spaced_and_configurable():
-    axis, _ = make(heartbeat_period_s=0.05, cyclic={Cmd.GET_TORQUES: 0.02,
-                                                     Cmd.GET_ENCODER_ESTIMATES: None})
+    axis, _ = make(heartbeat_period_s=0.05, iq_period_s=None,
+                   cyclic={Cmd.GET_TORQUES: 0.02, Cmd.GET_ENCODER_ESTIMATES: None})
     times = {}
     for t, fs in run_ticks(axis, 0.0, 1.0):
         for f in fs:
@@ -330,7 +334,7 @@ def test_cyclic_frames_are_evenly_spaced_and_configurable():
 def test_coarse_ticks_skip_missed_slots_without_bursts():
     axis, _ = make()
     counts = [len(axis.tick(t, 0, 0, 0, 48)) for t in (0.0, 0.5, 0.5005, 1.0)]
-    assert counts == [2, 2, 0, 2]
+    assert counts == [3, 3, 0, 3]            # heartbeat, Get_Iq, encoder
 
 
 @pytest.mark.parametrize(
@@ -391,7 +395,7 @@ def test_frames_for_other_nodes_are_ignored_and_node_id_is_honoured():
     host.arm(0.0)
     assert axis.enabled
     frames = axis.tick(0.0, 1.0, 2.0, 0.0, 48.0)
-    assert {f.arbitration_id for f in frames} == {0x0A1, 0x0A9}
+    assert {f.arbitration_id for f in frames} == {0x0A1, 0x0B4, 0x0A9}
     assert decode(axis.handle(0.0, 0x0B4, bytes(8), True)[0])["Iq_Setpoint"] == 0.0
     assert axis.handle(0.0, 0x0A1, bytes(8), True, is_extended=True) == []
 
@@ -452,12 +456,13 @@ def test_cyclic_outputs_are_the_schedules_by_their_definition(steps, enc_period)
     due) send exactly what the schedules' definition says, and WinchSensors.due tells."""
     axis = OdriveAxis(encoder_period_s=enc_period)
     sensors = WinchSensors()
-    ref: dict[str, dict] = {"hb": {}, "enc": {}, "data": {}, "whb": {}}
+    ref: dict[str, dict] = {"hb": {}, "iq": {}, "enc": {}, "data": {}, "whb": {}}
     t = 0.0
     for dt in steps:
         t += dt
         expected = [frame_id(0, cmd) for cmd, key, period in (
-            (Cmd.HEARTBEAT, "hb", 0.1), (Cmd.GET_ENCODER_ESTIMATES, "enc", enc_period))
+            (Cmd.HEARTBEAT, "hb", 0.1), (Cmd.GET_IQ, "iq", 0.01),
+            (Cmd.GET_ENCODER_ESTIMATES, "enc", enc_period))
             if _reference_due(ref[key], period, t)]
         assert [f.arbitration_id for f in axis.tick(t, 1.0, 0.0, 0.0, 48.0)] == expected
         data_due = _reference_due(ref["data"], 0.01, t)
@@ -494,8 +499,8 @@ def test_winder_node_sends_each_instants_sensor_frames_before_its_encoder_frame(
     assert len(with_encoder) == 100                            # 100 Hz of simulated time
     for b in with_encoder:
         assert b[:2] == [(sensor, cp.SensorCmd.WINCH_LENGTH), (sensor, cp.SensorCmd.WINCH_TENSION)]
-    # 100 Hz length, tension, encoder; 10 Hz two heartbeats; 50 Hz the exit angle
-    assert sum(len(b) for b in bursts) == node.frames_sent == 100 * 3 + 10 * 2 + 50
+    # 100 Hz length, tension, Get_Iq, encoder; 10 Hz two heartbeats; 50 Hz the exit angle
+    assert sum(len(b) for b in bursts) == node.frames_sent == 100 * 4 + 10 * 2 + 50
 
 
 def test_winder_node_ignores_29_bit_frames_of_other_protocols():

@@ -24,6 +24,7 @@ from groundstation.winch import (
     WinchOutput,
 )
 from groundstation.winch_link import WinchLinkClient, local_positions
+from groundstation.winch_sensors import TensionSource
 from groundstation.winder_control import WinderControlParams
 from groundstation.winder_host import WinderHost
 from sitl.odrive_axis import OdriveAxis, WinchSensors
@@ -513,6 +514,8 @@ class Bench:
         self.statuses: list[tuple[float, wm.WinchStatusReport]] = []
         self.notices: list[str] = []
         self.encoder_on = True
+        self.load_cell_on = True     # False: no Winch_Tension reaches the winch
+        self.load_cell_bias_n = 0.0  # what the load cell reads beyond the true tension
         self.host_on = True          # False: the winch's frames never reach the axis
         self.last_encoder_t = math.nan
 
@@ -550,8 +553,11 @@ class Bench:
                 frames = self.axis.tick(self.t, self.theta / two_pi, self.omega / two_pi,
                                         applied, 48.0)
                 frames += self.sensors.tick(self.t, self.length, self.omega * R_W,
-                                            self.tension, braked, False, False)
+                                            self.tension + self.load_cell_bias_n, braked,
+                                            False, False)
                 for f in frames:
+                    if f.arbitration_id == TENSION_ID and not self.load_cell_on:
+                        continue
                     if f.arbitration_id == ENC_ID:
                         if not self.encoder_on:
                             continue
@@ -1268,3 +1274,69 @@ def test_a_heavier_line_than_the_model_does_not_trip_the_tension_trim():
     for _ in range(100):
         host.update(length, 0.0, 1.6 * tension, pos, (0.0, 0.0, 0.0), math.atan(slope))
     assert lb.trim_state[0] > 0.1
+
+
+# ------------------------------------------------- the motor's current, a second source
+
+TENSION_ID = cp.frame_id(cp.WINCH_SENSOR_NODE_ID_DEFAULT, cp.SensorCmd.WINCH_TENSION)
+
+
+def _current_tension(b: Bench, seconds: float) -> list[float]:
+    out = []
+    for _ in range(round(seconds / 0.1)):
+        b.run(0.1)
+        out.append(b.winch.sensors.current.tension_n)
+    return out
+
+
+@pytest.mark.parametrize("tension_n", [2.0, 8.0])
+def test_the_motor_current_gives_the_drum_tension(tension_n):
+    """Against the plant's drum model (its inertia, friction and speed cut-back; the axis's
+    Get_Iq from the torque it applied), the drum holding a line at a constant tension: the
+    current's estimate (T = (I dw/dt + beta w - Kt Iq) / r_w on the station's own drum
+    model) is that tension within 0.3 N once settled, and it is the plant's frames that
+    bring it (a Get_Iq a control period)."""
+    b = Bench(14.0, tension_n=tension_n)
+    b.run(2.0)
+    est = _current_tension(b, 1.0)
+    assert b.winch.sensors.current.iq_frames >= 2.9 * 100 * 0.98
+    assert max(abs(t - tension_n) for t in est) < 0.3
+    assert b.winch.sensors.source is TensionSource.LOAD_CELL   # the load cell agrees
+    assert b.winch.tension_n == pytest.approx(tension_n, abs=0.2)
+
+
+def test_a_silent_load_cell_hands_the_tension_to_the_motor_current_and_back():
+    """No Winch_Tension for 0.1 s: the winch takes the current's tension (said), follows
+    the line's true tension with it (a pull raised from 5 to 9 N while the load cell is
+    silent: the over-tension and WINCH_STATUS see it), and takes the load cell back when it
+    speaks again (said)."""
+    b = Bench(14.0, tension_n=5.0)
+    b.run(2.0)
+    b.load_cell_on = False
+    b.run(0.3)
+    assert "winch: load cell silent, tension from current" in b.notices
+    assert b.winch.sensors.source is TensionSource.CURRENT
+    b.tension = 9.0
+    b.run(1.0)
+    assert b.winch.tension_n == pytest.approx(9.0, abs=0.5)
+    assert b.statuses[-1][1].tension_kg == pytest.approx(9.0 / G, abs=0.05)
+    b.load_cell_on = True
+    b.run(0.2)
+    assert "winch: load cell back, tension from load cell" in b.notices
+    assert b.winch.sensors.source is TensionSource.LOAD_CELL
+    assert b.winch.tension_n == pytest.approx(9.0, abs=0.2)
+
+
+def test_a_load_cell_that_disagrees_for_a_second_is_overruled_by_the_current():
+    """A load cell reading 12 N over the truth (a shifted zero): after tension_disagree_s
+    the current's tension takes over (said), within its model of the truth; a short
+    disagreement changes nothing."""
+    b = Bench(14.0, tension_n=5.0)
+    b.run(2.0)
+    b.load_cell_bias_n = 12.0
+    b.run(0.5)
+    assert b.winch.sensors.source is TensionSource.LOAD_CELL   # not yet: 0.5 s < 1 s
+    b.run(1.0)
+    assert "winch: load cell disagrees, tension from current" in b.notices
+    assert b.winch.sensors.source is TensionSource.CURRENT
+    assert b.winch.tension_n == pytest.approx(5.0, abs=1.0)
