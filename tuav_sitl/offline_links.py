@@ -13,8 +13,8 @@ message reaches its reader with its fields' resolution either way:
 - :class:`WireLinks` (``wire=True``) packs each message into its bytes and parses them with
   the receiving process's own parser (checksums checked), as over the link.
 
-The direct path hands ODOMETRY's position and covariance as doubles (the wire's are
-float32). The CAN frames are the one hop framed
+Both give bit-identical runs (``tests/test_offline_links.py``): every field's resolution
+is applied on the direct path, so it is exact. The CAN frames are the one hop framed
 in both modes: the winch's only entry is a frame (:class:`tuav_sitl.offline_ground.
 GroundStation`).
 """
@@ -31,6 +31,9 @@ from tuavdefs.frames import ned_to_enu
 
 #: LOCAL_POSITION_NED's six position and velocity fields (float32)
 _F32X6 = struct.Struct("<6f")
+#: ODOMETRY's position (x, y, z) and its covariance's nine entries (float32 on the wire)
+_F32X3 = struct.Struct("<3f")
+_F32X9 = struct.Struct("<9f")
 
 #: (position [m], velocity [m/s]) z-up, and the vehicle's time_boot_ms
 Report = tuple[tuple[tuple[float, ...], tuple[float, ...]], int]
@@ -51,11 +54,16 @@ class Links:
         return (f32[0:3], f32[3:6]), int(t_s * 1000)
 
     def odometry(self, fix: cl.ExternalPosition) -> cl.ExternalPosition | None:
-        """The winch's tether fix as the vehicle takes it from ODOMETRY's message object
-        (its time in whole microseconds, the covariance's upper triangle mirrored; position
-        and covariance as doubles, where the wire carries float32); None when the vehicle
-        would refuse it (:func:`tuavdefs.component_link.external_position`)."""
-        return cl.external_position(cl.odometry_message(fix))
+        """The winch's tether fix as the vehicle takes it from ODOMETRY: its time in whole
+        microseconds, position and covariance as float32, the covariance's upper triangle
+        mirrored; None when the vehicle would refuse it (:func:`tuavdefs.component_link.
+        external_position`). (The message object without its bytes: the same conversions
+        and checks as the autopilot's; the NED axes' swap and sign change commute with
+        the float32 rounding.)"""
+        pos = _F32X3.unpack(_F32X3.pack(*fix.pos_m))
+        c = _F32X9.unpack(_F32X9.pack(*fix.cov_m2[0], *fix.cov_m2[1], *fix.cov_m2[2]))
+        return cl.external_position(cl.odometry_message(cl.ExternalPosition(
+            fix.t_s, pos, (c[0:3], c[3:6], c[6:9]))))
 
 
 class WireLinks(Links):
