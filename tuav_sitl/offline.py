@@ -366,7 +366,7 @@ class OfflineRunner:
         self.line_log = (LineNodesLog(sc.duration_s, int(self.plant.model.lp[L_MAXN]) + 2)
                          if self.plant.model.lumped else None)
         bar = ProgressBar(sc.duration_s, progress)
-        faults = bool(sc.faults)
+        faults, mission = bool(sc.faults), sc.flies_mission
         wall0 = time.perf_counter()
         k = 0
         while True:
@@ -379,10 +379,11 @@ class OfflineRunner:
             if control:
                 out = self._control_period(t)                # sensors -> onboard step
                 self._record(t, out, k % n_wind == 0)        # the log's row
-                bar.update(t)
+                if progress is not None:
+                    bar.update(t)
                 if on_sample is not None:
                     on_sample(t)
-                if self._mission_over():
+                if mission and self._mission_over():
                     break
             if k >= n_steps:
                 break
@@ -473,12 +474,12 @@ class OfflineRunner:
         return nxt
 
     def _mission_over(self) -> bool:
-        """Whether a mission has ended: the vehicle landed and disarmed after flying."""
+        """Whether the mission has ended: the vehicle landed and disarmed after flying."""
         nav = self.companion.nav
         if nav.armed:
             self._was_armed = True
             return False
-        return self.sc.flies_mission and self._was_armed and nav.landed
+        return self._was_armed and nav.landed
 
     def _take_events(self, t: float) -> None:
         """The navigator's events since the last call, stamped ``t`` [s]; a DO_WINCH item
