@@ -7,7 +7,10 @@ the companion's simulator-link client does (:class:`companion.simlink_client.Bat
 offline, the companion sees the same sensor messages, with their resolution, as over the
 link.
 
-Offline the bytes never cross a wire, so :meth:`SensorFeed.read` skips what guards a wire
+With ``wire`` (``OfflineRunner(wire=True)``, :mod:`tuav_sitl.offline_links`) every batch's
+bytes are parsed as the companion's client parses its socket's (checksums checked,
+:meth:`companion.simlink_client.BatchDecoder.feed`). Without it (the default) the bytes
+never cross a wire, so :meth:`SensorFeed.read` skips what guards a wire
 (the frames' checksums) and what the onboard step does not read (HIL_STATE_QUATERNION: the
 runner hands the companion the plant's state itself, which flies on it only with
 ``EstimatorParams.kind`` "truth", and then no sensor feed is built): each frame's payload
@@ -32,15 +35,17 @@ _SENSOR = sl.MSG_HIL_SENSOR
 
 class SensorFeed:
     """The plant's batches every control period of ``period_s`` [s]; ``home`` is the
-    winder's (latitude deg, longitude deg, ground altitude m AMSL)."""
+    winder's (latitude deg, longitude deg, ground altitude m AMSL); ``wire`` whether each
+    batch's bytes are parsed as over the link (module docstring)."""
 
     def __init__(self, plant: Plant, noise: SensorNoise, home: tuple[float, float, float],
-                 period_s: float) -> None:
+                 period_s: float, wire: bool = False) -> None:
+        self.wire = wire
         suite = SensorSuite(noise, home)
         self.batches = SensorBatches(plant, suite, home, sl.control_period_us(1.0 / period_s),
                                      sl.control_period_us(suite.gps_rate_hz),
                                      sl.Encoder(sl.PLANT_SYSID, sl.PLANT_COMPID))
-        self.decoder = BatchDecoder(home)
+        self.decoder = BatchDecoder(home, truth=False)   # (as the companion on its estimate)
 
     def read(self, t_s: float) -> SimState:
         """The period's batch at ``t_s`` [s], decoded: its IMU sample, and its GNSS fix
@@ -48,6 +53,9 @@ class SensorFeed:
         (module docstring)."""
         batches, decoder = self.batches, self.decoder
         data = batches.batch(round(t_s * 1e6))
+        if self.wire:
+            (state,) = decoder.feed(bytes(data))
+            return state
         if batches.last_packed and not batches.last_gps:
             # the usual period, compiled: HIL_SENSOR's values as its frame carries them
             state = decoder.absorb((_SENSOR, batches.packer.sensor_values()))

@@ -1,0 +1,161 @@
+"""What an offline run records, into arrays allocated before it starts.
+
+:class:`SeriesLog`: one row of :data:`SERIES` per control period, packed as doubles into a
+(rows, columns) array sized for the whole run (a row past its end is dropped), split into
+the run's columns at the end. :class:`LineNodesLog`: the lumped tether's nodes at
+:data:`LINE_NODES_RATE_HZ`, float32, into a (frames, points, 3) array sized the same way.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+
+from sitl.plant import DRUM_ANGLE, DRUM_RATE, POS, QUAT, RATES, VEL
+from tuavdefs.frames import quat_to_euler
+
+if TYPE_CHECKING:
+    from companion.estimator import NavFilter
+    from companion.onboard import OnboardOutputs
+    from sitl.plant import Plant, TetherForces
+
+#: How often a run with the lumped tether records its nodes (``line_t``, ``line_nodes``):
+#: the animation's default frame rate [Hz].
+LINE_NODES_RATE_HZ = 15.0
+#: The time series logged at every control step, in the order of a row: (name, width),
+#: width 0 for a scalar.
+SERIES: tuple[tuple[str, int], ...] = (
+    ("t", 0), ("pos", 3), ("vel", 3), ("ref_pos", 3), ("ref_vel", 3), ("euler", 3),
+    ("att_cmd", 3), ("att_des", 3), ("rates", 3), ("thrust", 0), ("torque", 3),
+    ("rotor_cmd", 4), ("mixer_sat", 0), ("pos_sat", 0), ("d_hat", 3), ("v_pos", 0),
+    ("v_att", 0), ("v_win", 0), ("v_pos_raw", 0), ("v_att_raw", 0), ("length", 0),
+    ("lbar", 0), ("lbar_rate", 0), ("lbar_fresh", 0), ("drum_rate", 0),
+    ("winder_torque", 0), ("drum_tension", 0), ("top_tension", 0), ("regime", 0),
+    ("lowest", 0), ("wind", 3), ("tether_force", 3), ("tether_force_est", 3),
+    ("est_pos", 3), ("est_vel", 3), ("est_euler", 3), ("est_pos_sigma", 3))
+
+#: The flight controller's diagnostics logged for a control period without flight (on the
+#: ground): att_cmd and att_des; thrust and torque; mixer_sat, pos_sat, d_hat, v_pos, v_att.
+_GROUND_ATTITUDE = (math.nan,) * 6
+_GROUND_WRENCH = (math.nan,) * 4
+_GROUND_REST = (0.0, 0.0, math.nan, math.nan, math.nan, math.nan, math.nan)
+_NAN3 = (math.nan,) * 3
+#: The estimate's columns (est_pos, est_vel, est_euler, est_pos_sigma) without one.
+_NO_ESTIMATE = (math.nan,) * 12
+
+
+class WinderReadout(NamedTuple):
+    """What the log takes from the ground station's last winder period."""
+
+    lyapunov: float
+    """The torque law's Lyapunov function (NaN before its first command)."""
+    lbar_m: float
+    """L-bar, the length reference [m]."""
+    lbar_rate_m_s: float
+    """Its rate [m/s]."""
+    torque_n_m: float
+    """The torque the axis applies [N m]."""
+
+
+class SeriesLog:
+    """The run's :data:`SERIES`, ``n`` rows allocated up front; ``drum_radius_m`` turns the
+    drum's angle into the paid-out length; ``nav_filter`` the onboard filter whose position
+    sigma is logged (None: flying on the truth, no estimate columns)."""
+
+    def __init__(self, n: int, drum_radius_m: float, nav_filter: NavFilter | None) -> None:
+        self.n = n
+        self.i = 0
+        self.width = sum(max(w, 1) for _, w in SERIES)
+        self._data = np.empty((n, self.width))
+        self._buffer = memoryview(self._data).cast("B")
+        packer = struct.Struct(f"{self.width}d")
+        self._pack_into = packer.pack_into
+        self._row_bytes = packer.size
+        self._r_w = drum_radius_m
+        self._filter = nav_filter
+
+    def record(self, t_s: float, x: list[float], out: OnboardOutputs, fresh: bool,
+               winder: WinderReadout, forces: TetherForces,
+               wind_m_s: tuple[float, float, float]) -> None:
+        """The row of the control period at ``t_s`` [s]: the plant's state ``x`` (its
+        list), the onboard step's outputs, whether the winder computed L-bar in this
+        period (``fresh``), the winder's readout, the tether's forces and the wind."""
+        i = self.i
+        if i >= self.n:
+            return
+        self.i = i + 1
+        pos, vel, quat, rates = x[POS], x[VEL], x[QUAT], x[RATES]
+        state, fs, ref = out.state, out.flight, out.reference
+        if fs is not None:
+            po, ao = fs.position, fs.attitude
+            control = (*ao.attitude_cmd_rad, *po.attitude_rad, *rates, po.thrust_n,
+                       *ao.torque_n_m, *fs.rotor_commands, fs.mixer_saturated, po.saturated,
+                       *po.disturbance_m_s2, po.lyapunov, ao.lyapunov)
+            lyap_raw = (po.lyapunov_raw, ao.lyapunov_raw)
+            est = fs.tether_force_est_n
+        else:
+            control = (*_GROUND_ATTITUDE, *rates, *_GROUND_WRENCH, *out.rotor_commands,
+                       *_GROUND_REST)
+            lyap_raw, est = (math.nan, math.nan), _NAN3
+        ref_pos, ref_vel = ((ref.pos_m, ref.vel_m_s) if ref is not None
+                            else (_NAN3, _NAN3))
+        filt = self._filter
+        if filt is None or state is None:
+            estimate = _NO_ESTIMATE
+        else:
+            estimate = (*state.pos_m, *state.vel_m_s, *quat_to_euler(state.quat),
+                        *filt.position_sigma_m())
+        info = forces.info
+        self._pack_into(
+            self._buffer, i * self._row_bytes, t_s, *pos, *vel, *ref_pos, *ref_vel,
+            *quat_to_euler(tuple(quat)), *control, winder.lyapunov, *lyap_raw,
+            self._r_w * x[DRUM_ANGLE], winder.lbar_m, winder.lbar_rate_m_s, fresh,
+            x[DRUM_RATE], winder.torque_n_m, forces.drum_tension_n, forces.top_tension_n,
+            int(info.regime), info.lowest_point_height_m, *wind_m_s, *forces.on_uav_n, *est,
+            *estimate)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The columns: 1-D arrays for scalars, (rows, width) arrays for vectors."""
+        if not self.i:
+            return {}
+        # one pass over the rows; the columns are views of the result (a vector's
+        # (rows, width) view is column-major)
+        cols = np.ascontiguousarray(self._data[:self.i].T)
+        out: dict[str, np.ndarray] = {}
+        j = 0
+        for name, w in SERIES:
+            out[name] = cols[j] if w == 0 else cols[j:j + w].T
+            j += max(w, 1)
+        return out
+
+
+class LineNodesLog:
+    """The lumped tether's nodes (exit to attachment point) every 1/:data:`LINE_NODES_RATE_HZ`
+    of a run of ``duration_s`` [s], float32, padded with NaN to the ``points`` the line can
+    have at most."""
+
+    def __init__(self, duration_s: float, points: int) -> None:
+        n = int(duration_s * LINE_NODES_RATE_HZ) + 2
+        self._t = np.empty(n)
+        self._nodes = np.full((n, points, 3), np.nan, dtype=np.float32)
+        self.i = 0
+        self._next_s = 0.0
+
+    def record(self, t_s: float, plant: Plant) -> None:
+        """The nodes at ``t_s`` [s] when a frame is due."""
+        if t_s < self._next_s - 1e-9 or self.i >= len(self._t):
+            return
+        self._next_s += 1.0 / LINE_NODES_RATE_HZ
+        nodes = plant.line_nodes_m()
+        self._t[self.i] = t_s
+        self._nodes[self.i, :nodes.shape[0]] = nodes
+        self.i += 1
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """``line_t`` [s] and ``line_nodes`` [m] (frames, points, 3), none if no frame."""
+        if not self.i:
+            return {}
+        return {"line_t": self._t[:self.i].copy(), "line_nodes": self._nodes[:self.i].copy()}
