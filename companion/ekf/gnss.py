@@ -6,7 +6,7 @@ rejections). The receiver's position error can be a Gauss-Markov state (``b_p``,
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -182,7 +182,7 @@ class GnssControl:
     __slots__ = ("_p", "_mem", "_src", "_out", "_leave_const_pos", "_k", "_wander")
 
     def __init__(self, params: EstimatorParams, mem: FilterMemory, sources: AidSources,
-                 output: OutputPredictor, leave_const_pos: object) -> None:
+                 output: OutputPredictor, leave_const_pos: Callable[[], None]) -> None:
         self._p = params
         self._mem = mem
         self._src = sources
