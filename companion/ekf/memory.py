@@ -49,8 +49,7 @@ class FilterMemory:
         self.aid = self.w[W_AID:W_AID + N_AID_SOURCES * AID_COLS].reshape(
             N_AID_SOURCES, AID_COLS)
         #: the position variances [m^2] on P's diagonal (a view)
-        self.pos_var = self.P.reshape(-1)[IDX_P * (N_ERR + 1):(IDX_P + 2) * (N_ERR + 1) + 1:
-                                          N_ERR + 1]
+        self.pos_var = self.P.reshape(-1)[::N_ERR + 1][IDX_P:IDX_P + 3]
 
     def buffered(self) -> np.ndarray:
         """The ring buffer's filled rows (a view)."""
