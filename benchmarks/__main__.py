@@ -219,10 +219,10 @@ OFFLINE_SHARES = {
 
 
 def bench_estimator(quick: bool) -> list[Row]:
-    """The onboard navigation filter (companion/estimator.py), aligned on a still vehicle:
+    """The onboard navigation filter (companion/ekf/), aligned on a still vehicle:
     medians per step of an IMU predict alone, and of a predict with a GNSS fusion (a fix
     every step: the worst period) [us]."""
-    from companion.estimator import EstimatorParams, NavFilter
+    from companion.ekf import EstimatorParams, NavFilter
 
     g = 9.80665
     f = NavFilter(EstimatorParams(), g, (0.0, 0.2, -0.45))

@@ -32,7 +32,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.autopilot import Autopilot
 from companion.component_server import ComponentServer
-from companion.estimator import ESTIMATOR_KINDS, EstimatorParams
+from companion.ekf import ESTIMATOR_KINDS, EstimatorParams
 from companion.flight_controller import VehicleState
 from companion.flight_log import FlightLog, LogClock
 from companion.gains import FlightControlParams

@@ -57,7 +57,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from companion.dataflash import DataFlashWriter, LogFormat
-from companion.estimator import AidSource, EstimatorFlags, FilterHealth, HealthReason
+from companion.ekf import AidSource, EstimatorFlags, FilterHealth, HealthReason
 from tuavdefs.frames import (
     enu_to_ned,
     flu_to_frd,
@@ -68,7 +68,7 @@ from tuavdefs.frames import (
 from tuavdefs.simlink import SENSOR_ABS_PRESSURE, SENSOR_ACCEL, SENSOR_GYRO, SENSOR_MAG
 
 if TYPE_CHECKING:
-    from companion.estimator import FilterStatus
+    from companion.ekf import FilterStatus
     from companion.onboard import Companion, OnboardInputs, OnboardOutputs
     from companion.simlink_client import GpsFix, ImuSample
 

@@ -1,6 +1,6 @@
 """The onboard software in one step: what the flight computer does every control period.
 
-:class:`Companion` holds the navigation filter (:class:`companion.estimator.NavFilter`, fed
+:class:`Companion` holds the navigation filter (:class:`companion.ekf.NavFilter`, fed
 the IMU, barometer, magnetometer and GNSS), the navigation
 (:class:`companion.navigation.Navigator`: modes, arming, take-off, landing, guided targets,
 missions) and the flight control (:class:`companion.flight_controller.FlightController`),
@@ -22,7 +22,7 @@ import math
 from collections.abc import Callable
 from typing import NamedTuple
 
-from companion.estimator import AidSource, EstimatorParams, FilterStatus, NavFilter
+from companion.ekf import AidSource, EstimatorParams, FilterStatus, NavFilter
 from companion.failsafes import FailsafeParams, Failsafes
 from companion.flight_controller import FlightController, FlightStep, VehicleState
 from companion.gains import FlightControlParams

@@ -23,7 +23,7 @@ from typing import Any, NamedTuple
 from pymavlink.dialects.v20 import ardupilotmega
 from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.estimator import EstimatorFlags, FilterHealth, FilterStatus
+from companion.ekf import EstimatorFlags, FilterHealth, FilterStatus
 from companion.geofence import FenceStatus
 from companion.mavlink_io import MavlinkEndpoints, Peer
 from companion.mission_items import finite

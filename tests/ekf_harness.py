@@ -1,6 +1,6 @@
 """Sensor streams for the navigation filter's tests: analytic truth trajectories sampled
 through the plant's own sensor models (``sitl.sensors``), fed to a
-:class:`companion.estimator.NavFilter` as the companion would feed it."""
+:class:`companion.ekf.NavFilter` as the companion would feed it."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from companion.estimator import EstimatorParams, NavFilter
+from companion.ekf import EstimatorParams, NavFilter
 from sitl.sensors import NoiseSpec, SensorNoise, SensorSuite, specific_force_flu
 from tuavdefs.frames import euler_to_quat, quat_conjugate, quat_multiply, quat_normalize
 
@@ -215,7 +215,7 @@ def simulate(truth: Callable[[float], Truth], noise: SensorNoise, duration_s: fl
         run.vel_err.append(ev)
         run.att_err_rad.append(att_error_rad(tr.quat, q))
         e = np.concatenate([ep, ev])
-        P = filt._P[0:6, 0:6]
+        P = filt.covariance[0:6, 0:6]
         run.nees.append(float(e @ np.linalg.solve(P, e)))
     return run
 

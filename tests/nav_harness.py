@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from companion.estimator import EstimatorParams
+from companion.ekf import EstimatorParams
 from companion.flight_controller import VehicleState
 from companion.gains import FlightControlParams
 from companion.navigation import MotorState, NavigationParams

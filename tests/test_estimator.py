@@ -1,4 +1,4 @@
-"""The onboard navigation filter (companion/estimator.py) against independent truths:
+"""The onboard navigation filter (companion/ekf/) against independent truths:
 analytic trajectories sampled through the plant's own sensor models (tests/ekf_harness.py).
 
 Seeded and deterministic. What a static vehicle cannot tell apart (its horizontal
@@ -22,13 +22,17 @@ from ekf_harness import (
 )
 from jit_util import run_script
 
-from companion.estimator import (
+from companion.ekf import (
     IDX_BG,
     IDX_BP,
     N_ERR,
+    AidSourceKind,
+    AidSourcePolicy,
+    AidSourceStatus,
     EstimatorFlags,
     EstimatorParams,
     FilterHealth,
+    FusionOutcome,
     HealthReason,
     NavFilter,
 )
@@ -376,9 +380,73 @@ def test_a_persistent_offset_is_rejected_then_reset_to():
     assert abs(filt.state().pos_m[0] - 5.0) < 0.05
 
 
+def test_the_aid_source_policy_rejects_fails_and_resets_once_by_its_definition():
+    """The shared policy on one record, against its definition: rejected without a break
+    for fail_s it is failing; for reset_s a reset is due, exactly once (the reset restarts
+    the count); a fused sample ends the failure; a numerical refusal is neither."""
+    row = np.zeros(7)
+    pol = AidSourcePolicy(gate_sigma=5.0, timeout_s=1.0, fail_s=2.0, reset_s=5.0)
+    st = AidSourceStatus(AidSourceKind.GNSS_POS, pol, row)
+    assert st.record(0.0, FusionOutcome.FUSED) is False
+    assert st.in_use(1.0) and not st.in_use(1.01)
+    due, failing = [], []
+    for k in range(1, 81):                       # rejected from 0.1 s to 8 s
+        t = 0.1 * k
+        if st.record(t, FusionOutcome.REJECTED):
+            due.append(round(t, 6))
+            st.reset_done(t)
+        failing.append((round(t, 6), st.failing(t)))
+    # failing from 0.1 + fail_s; the reset due at 0.1 + reset_s, once in 8 s
+    assert [t for t, f in failing if f][0] == pytest.approx(2.1)
+    assert due == [pytest.approx(5.1)]
+    assert st.resets == 1 and st.time_last_fused == pytest.approx(5.1)
+    assert st.rejected and st.fail_since == pytest.approx(5.2)
+    st.record(8.1, FusionOutcome.NUMERIC)
+    assert st.numeric_refusals == 1 and st.fail_since == pytest.approx(5.2)
+    st.record(8.2, FusionOutcome.FUSED)
+    assert not st.rejected and not st.failing(20.0) and st.fail_since == math.inf
+
+
+def test_a_rejected_source_is_reset_once_and_its_record_says_so():
+    """GNSS fixes 5 m off for 8 s on a filter aligned at rest: its GNSS_POS record shows
+    the test ratio above 1 while rejected, failing after innovation_fail_s, and one reset
+    after gnss_reset_s (its time the last fused), the later fixes then passing."""
+    filt, t = _aligned_filter()
+    p = filt.params
+    suite = filt._suite
+    rec = filt.aid_sources[AidSourceKind.GNSS_POS]
+    assert rec is filt.aid_sources.gnss_pos and rec.resets == 0
+    assert 0.0 <= rec.test_ratio <= 1.0 and not rec.rejected
+    dt = 1.0 / IMU_HZ
+    q = (1.0, 0.0, 0.0, 0.0)
+    t0 = None
+    seen = []
+    for k in range(1, int(8.0 * IMU_HZ)):
+        tk = t + k * dt
+        imu = suite.imu((0.0, 0.0, G), (0.0, 0.0, 0.0), q, dt)
+        filt.predict(tk, imu.gyro_flu_rad_s, imu.accel_flu_m_s2)
+        if k % 25 == 0:
+            fix = suite.gps((5.0, 0.0, 20.0), (0.0, 0.0, 0.0), 0.1)
+            fused = filt.fuse_gnss(tk, *fix)
+            t0 = tk if t0 is None else t0
+            seen.append((tk - t0, fused, rec.test_ratio, rec.resets, rec.rejected,
+                         rec.failing(tk)))
+    # innovation = fix - estimate: 5 m east, the variance the filter's
+    assert seen[0][2] > 1.0 and not seen[0][1] and seen[0][4]
+    before = [s for s in seen if s[0] < p.gnss_reset_s]
+    assert all(not s[1] and s[2] > 1.0 and s[3] == 0 for s in before)
+    assert [s[5] for s in before] == [s[0] >= p.innovation_fail_s for s in before]
+    reset = [s for s in seen if s[3] == 1]
+    assert reset and reset[0][0] == pytest.approx(p.gnss_reset_s)
+    assert reset[0][1] and not reset[0][4] and not reset[0][5]
+    assert rec.resets == filt.gnss_resets == 1
+    assert all(s[1] and s[2] <= 1.0 for s in reset[1:])
+    assert filt.status().reasons & HealthReason.GNSS_REJECTED == HealthReason.NONE
+
+
 def test_non_finite_state_is_reported():
     filt, _ = _aligned_filter(seconds=2.0)
-    filt._x[3] = math.nan
+    filt._mem.x[3] = math.nan      # a fault injected into the state
     st = filt.status()
     assert st.health == FilterHealth.UNHEALTHY and st.reasons & HealthReason.NAN
     assert not st.flags & EstimatorFlags.ATTITUDE
@@ -408,7 +476,7 @@ sys.path.insert(0, "tests")
 from ekf_harness import circle, rtk_noise, simulate
 run = simulate(circle(), rtk_noise(3), 2.5)
 f = run.filt
-print(json.dumps({"x": f._x.tolist(), "P": f.covariance.diagonal().tolist()}))
+print(json.dumps({"x": f._mem.x.tolist(), "P": f.covariance.diagonal().tolist()}))
 """
 
 
@@ -431,8 +499,7 @@ def _align_in_air(accel_enu: tuple[float, float, float], in_air: bool) -> float:
     """The attitude error [rad] (angle of the rotation between estimate and truth) of a
     filter aligned while the vehicle accelerates at ``accel_enu`` [m/s^2], tilted 13 deg
     into a pull, exact sensors at 250 Hz and a 10 Hz fix (50 ms late)."""
-    from companion.estimator import _rot_py
-    from tuavdefs.frames import euler_to_quat
+    from tuavdefs.frames import euler_to_quat, quat_to_matrix
 
     g = 9.80665
     field = (0.2, 0.05, -0.4)
@@ -441,7 +508,7 @@ def _align_in_air(accel_enu: tuple[float, float, float], in_air: bool) -> float:
     if in_air:
         f.start_in_air()
     q = euler_to_quat(0.0, math.radians(13.0), 0.4)
-    r = np.array(_rot_py(q)).reshape(3, 3)
+    r = np.array(quat_to_matrix(q))
     spec = r.T @ (np.array(accel_enu) + (0.0, 0.0, g))
     mag = r.T @ np.array(field)
     a = np.array(accel_enu)
@@ -457,7 +524,7 @@ def _align_in_air(accel_enu: tuple[float, float, float], in_air: bool) -> float:
         if f.aligned:
             break
     assert f.aligned
-    re = np.array(_rot_py(f.state().quat)).reshape(3, 3)
+    re = np.array(quat_to_matrix(f.state().quat))
     return math.acos(max(-1.0, min(1.0, (np.trace(re.T @ r) - 1.0) / 2.0)))
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.estimator import (
+from companion.ekf import (
     AidSource,
     EstimatorFlags,
     EstimatorParams,

@@ -213,7 +213,7 @@ def test_the_stack_waits_for_the_plants_own_end(tmp_path):
 
 
 def test_up_names_the_gnss_presets_and_estimator_kinds_as_their_packages_do():
-    from companion.estimator import ESTIMATOR_KINDS
+    from companion.ekf import ESTIMATOR_KINDS
     from sitl.sensors import GnssPreset
     from tuav_sitl import up
 

@@ -29,7 +29,7 @@ from typing import Any, Self
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion import mission_file
-from companion.estimator import EstimatorParams
+from companion.ekf import EstimatorParams
 from companion.gains import FlightControlParams
 from companion.mission_protocol import MissionItem, degrees_to_e7, home_item
 from companion.navigation import NavigationParams, air_start_too_low_m

@@ -43,7 +43,7 @@ if TYPE_CHECKING:
     from groundstation.station_params import GroundStationParams
 
 #: The plant's GNSS receivers (sitl.sensors.GnssPreset's values) and what the companion may
-#: fly on (companion.estimator.ESTIMATOR_KINDS), spelled out so that the command line
+#: fly on (companion.ekf.ESTIMATOR_KINDS), spelled out so that the command line
 #: parses without importing the packages (a test checks they agree).
 GNSS_PRESETS = ("rtk", "gnss")
 ESTIMATOR_KINDS = ("ekf", "truth")
@@ -565,7 +565,7 @@ def run_up(args: argparse.Namespace) -> int:
     h = args.home
     home = [repr(h.lat_deg), repr(h.lon_deg), repr(h.alt_m)]
     common = ["--params", str(run_dir / "model.toml")]
-    from companion.estimator import EstimatorParams
+    from companion.ekf import EstimatorParams
     from sitl.sensors import GNSS_MODELS, GnssPreset
 
     # what the receiver's datasheet tells the vehicle's designers: its latency (ArduPilot's

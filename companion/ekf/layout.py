@@ -1,0 +1,95 @@
+"""Where everything the filter's kernels work on lives: the one place its layout is set.
+
+- the nominal state ``x`` (``X_*``) and the error state, the covariance's rows (``IDX_*``);
+- the ring buffer of past states (``BUF_*``);
+- the work array ``w`` (``W_*``): the nominal state, the error-state correction, the
+  delayed state, the rates, the output predictor's lag, the parameters the kernels read
+  (``PRM_*``) and one status row per aid source (``AID_*``), packed so that a kernel takes
+  a few arrays rather than dozens of arguments.
+
+A new state goes at the end of ``x`` and of the error state (adding to ``NX`` and
+``N_ERR``); a new aid source to :class:`companion.ekf.aid_source.AidSourceKind` (its row
+here follows); a new kernel parameter to the ``PRM_*`` list.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+
+class AidSourceKind(IntEnum):
+    """The measurements the filter fuses, each with its status row and record
+    (:class:`companion.ekf.aid_source.AidSourceStatus`); the value is the row."""
+
+    GNSS_POS = 0
+    """GNSS horizontal position (the 2 axes gated as one)."""
+    GNSS_HGT = 1
+    """GNSS height."""
+    GNSS_VEL = 2
+    """GNSS velocity (3 axes gated as one)."""
+    BARO = 3
+    """Barometric height."""
+    MAG = 4
+    """Magnetometer: the heading (1 axis) or the field's three axes [gauss]."""
+    TETHER = 5
+    """The winch's tether fix (3 axes gated as one on their Mahalanobis distance)."""
+    ZERO_VEL = 6
+    """The stationary constraint on the ground (zero velocity, the gear's height; ungated)."""
+    CONST_POS = 7
+    """Constant-position mode's held position (ungated)."""
+
+
+N_AID_SOURCES = len(AidSourceKind)
+
+# ----- the nominal state x
+#: position p [m] (ENU), velocity v [m/s], attitude q (w, x, y, z; body FLU -> inertial),
+#: gyro bias b_g [rad/s], accelerometer bias b_a [m/s^2], baro offset b_h [m],
+#: magnetometer bias b_m [gauss], GNSS receiver wander b_p [m].
+X_P, X_V, X_Q, X_BG, X_BA, X_BH, X_BM, X_BP = 0, 3, 6, 10, 13, 16, 17, 20
+NX = 23
+
+# ----- the error state (the covariance's rows)
+#: dp, dv, dtheta (a small rotation in the inertial frame), db_g, db_a, db_h, db_m, db_p.
+IDX_P, IDX_V, IDX_TH, IDX_BG, IDX_BA, IDX_BH, IDX_BM, IDX_BP = 0, 3, 6, 9, 12, 15, 16, 19
+N_ERR = 22
+
+# ----- the ring buffer of past states: one row per IMU step
+BUF_T, BUF_P, BUF_V = 0, 1, 4
+#: its columns: t [s], p [m] (3), v [m/s] (3)
+BUF_COLS = 7
+
+# ----- the parameters the kernels read (the work array's PRM block)
+(PRM_GRAV, PRM_GYRO_N, PRM_ACC_N, PRM_BG_W, PRM_BA_W, PRM_BH_W, PRM_DT_MAX, PRM_VAR_MIN,
+ PRM_BM_W, PRM_BP_TAU, PRM_BP_VAR_H, PRM_BP_VAR_V, PRM_OUT_TAU, PRM_GNSS_GATE_POS,
+ PRM_GNSS_GATE_VEL, PRM_GNSS_R_VEL, PRM_GNSS_FUSE_HGT, PRM_WANDER, PRM_BARO_R,
+ PRM_BARO_GATE, PRM_MAG_GATE, PRM_MAG_R_HEADING, PRM_MAG_R_3D, PRM_MAG_TILT,
+ PRM_MAG_COUPLE_X, PRM_MAG_COUPLE_Y, PRM_MAG_WITH_BIAS, PRM_EARTH_X, PRM_EARTH_Y,
+ PRM_EARTH_Z, PRM_HEADING_EARTH, PRM_TETHER_GATE) = range(32)
+N_PRM = 32
+
+# ----- one aid source's status row (the AID block: a row per AidSourceKind)
+#: innovation (up to 3 axes; measurement - predicted), its variance, the gate's test ratio
+#: (innovation^2 / (gate^2 variance), or the Mahalanobis distance^2 / gate^2: 1 at the gate)
+AID_INNOV, AID_INNOV_VAR, AID_TEST_RATIO = 0, 3, 6
+AID_COLS = 7
+
+# ----- the work array w
+W_X = 0
+W_DX = W_X + NX
+#: the (p, v) of the delayed state a fusion compares with
+W_DELAYED = W_DX + N_ERR
+#: bias-corrected rates [rad/s] (3), low-passed inertial acceleration [m/s^2] (3) and yaw
+#: rate [rad/s] (the prediction's; whether the vehicle manoeuvres)
+W_RATES = W_DELAYED + 6
+#: what the output still lags the filter by: position [m] (3), velocity [m/s] (3)
+W_LAG = W_RATES + 7
+#: the magnetometer's latest heading innovation [rad] (either fusion's; reported)
+W_HEADING_INNOV = W_LAG + 6
+W_PRM = W_HEADING_INNOV + 1
+W_AID = W_PRM + N_PRM
+W_SIZE = W_AID + N_AID_SOURCES * AID_COLS
+
+# ----- what a fusion kernel returns
+FUSED, REJECTED, NUMERIC = 1, 0, 8
+#: the GNSS kernel's bits: horizontal position, vertical position, velocity accepted
+ACC_POS_H, ACC_POS_V, ACC_VEL = 1, 2, 4

@@ -1,0 +1,184 @@
+"""The measurement update's kernels, shared by every fusion: the delayed state a
+measurement is compared with, one scalar (sequential) update, one dense-row update (with
+Schmidt's considered states), the injection of the correction into the nominal state,
+a 3 x 3 Cholesky factor, and the one writer of an aid source's status row."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from companion.ekf.layout import (
+    AID_COLS,
+    AID_INNOV,
+    AID_INNOV_VAR,
+    AID_TEST_RATIO,
+    BUF_P,
+    BUF_T,
+    IDX_BA,
+    IDX_BG,
+    IDX_BH,
+    IDX_BM,
+    IDX_BP,
+    IDX_TH,
+    W_AID,
+    X_BA,
+    X_BG,
+    X_BH,
+    X_BM,
+    X_BP,
+    X_Q,
+)
+from companion.ekf.rotation import expq_mul
+from tuavdefs.jit import njit
+
+
+@njit
+def set_aid_row(w: np.ndarray, kind: int, y0: float, y1: float, y2: float, s0: float,
+                s1: float, s2: float, test_ratio: float) -> None:
+    """Aid source ``kind``'s status row of the work array ``w``: its latest innovation
+    ``y*``, their variances ``s*`` (unused axes 0) and its test ratio."""
+    k = W_AID + kind * AID_COLS
+    w[k + AID_INNOV], w[k + AID_INNOV + 1], w[k + AID_INNOV + 2] = y0, y1, y2
+    w[k + AID_INNOV_VAR], w[k + AID_INNOV_VAR + 1], w[k + AID_INNOV_VAR + 2] = s0, s1, s2
+    w[k + AID_TEST_RATIO] = test_ratio
+
+
+@njit
+def delayed_state(buf: np.ndarray, meta: np.ndarray, x: np.ndarray, t_s: float,
+                  out: np.ndarray) -> None:
+    """``out`` = (p, v) at time ``t_s`` [s]: interpolated in the ring buffer, the oldest
+    entry if older, the current state if newer than the newest (or the buffer empty)."""
+    n, count, size = meta[0], meta[1], buf.shape[0]
+    newest = (n - 1) % size
+    if count == 0 or t_s >= buf[newest, BUF_T]:
+        for i in range(6):
+            out[i] = x[i]
+        return
+    later = newest
+    for m in range(1, count):
+        k = (newest - m) % size
+        if buf[k, BUF_T] <= t_s:
+            t0, t1 = buf[k, BUF_T], buf[later, BUF_T]
+            w = (t_s - t0) / (t1 - t0) if t1 > t0 else 1.0
+            for i in range(6):
+                out[i] = buf[k, BUF_P + i] + w * (buf[later, BUF_P + i] - buf[k, BUF_P + i])
+            return
+        later = k
+    for i in range(6):       # older than the buffer: its oldest entry
+        out[i] = buf[later, BUF_P + i]
+
+
+@njit
+def scalar_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: float,
+                  i0: int, h0: float, i1: int, h1: float, i2: int, h2: float,
+                  i3: int = -1, h3: float = 0.0) -> bool:
+    """One scalar measurement with up to four non-zero Jacobian entries ``h`` at error
+    indices ``i`` (-1: unused), innovation ``y`` (against the state before this batch's
+    corrections ``dx``, which it accumulates into) and noise variance ``r``. Updates ``P``
+    (symmetric by construction; refused if a variance it changes would fall below
+    ``var_min``). Returns whether it was applied."""
+    n = P.shape[0]
+    pht = np.zeros(n)
+    yy = y
+    for i, h in ((i0, h0), (i1, h1), (i2, h2), (i3, h3)):
+        if i >= 0:
+            yy -= h * dx[i]
+            for k in range(n):
+                pht[k] += P[k, i] * h
+    s = r
+    for i, h in ((i0, h0), (i1, h1), (i2, h2), (i3, h3)):
+        if i >= 0:
+            s += h * pht[i]
+    if not (s > 0.0) or not math.isfinite(s):
+        return False
+    inv = 1.0 / s
+    for k in range(n):
+        if pht[k] != 0.0 and P[k, k] - pht[k] * pht[k] * inv < var_min:
+            return False
+    for k in range(n):
+        dx[k] += pht[k] * inv * yy
+    for a in range(n):
+        ka = pht[a] * inv
+        for b in range(n):
+            P[a, b] -= ka * pht[b]
+    return True
+
+
+@njit
+def row_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: float,
+               h: np.ndarray, c0: int, c1: int) -> bool:
+    """:func:`scalar_update` with a dense Jacobian row ``h``; the error states ``c0`` to
+    ``c1 - 1`` are *considered*, not estimated (Schmidt's update: their gain is zero, their
+    uncertainty still enters the innovation's variance and their correlations are kept
+    right)."""
+    n = P.shape[0]
+    pht = P @ h
+    yy = y - float(h @ dx)
+    s = float(h @ pht) + r
+    if not (s > 0.0) or not math.isfinite(s):
+        return False
+    inv = 1.0 / s
+    for k in range(n):
+        if (pht[k] != 0.0 and not c0 <= k < c1
+                and P[k, k] - pht[k] * pht[k] * inv < var_min):
+            return False
+    for k in range(n):
+        if not c0 <= k < c1:
+            dx[k] += pht[k] * inv * yy
+    for a in range(n):
+        ka = pht[a] * inv
+        ca = c0 <= a < c1
+        for b in range(n):
+            if not (ca and c0 <= b < c1):
+                P[a, b] -= ka * pht[b]
+    return True
+
+
+@njit
+def inject(x: np.ndarray, dx: np.ndarray, buf: np.ndarray, meta: np.ndarray) -> None:
+    """Add the error-state correction ``dx`` to the nominal state (the attitude as
+    ``q <- Exp(dtheta) q``), and its position and velocity to the buffered past states;
+    ``dx`` is zeroed. The covariance's reset Jacobian is taken as the identity."""
+    for i in range(6):
+        x[i] += dx[i]
+    q = X_Q
+    x[q], x[q + 1], x[q + 2], x[q + 3] = expq_mul(dx[IDX_TH], dx[IDX_TH + 1],
+                                                  dx[IDX_TH + 2], x[q], x[q + 1],
+                                                  x[q + 2], x[q + 3])
+    for i in range(3):
+        x[X_BG + i] += dx[IDX_BG + i]
+        x[X_BA + i] += dx[IDX_BA + i]
+    x[X_BH] += dx[IDX_BH]
+    for i in range(3):
+        x[X_BM + i] += dx[IDX_BM + i]
+        x[X_BP + i] += dx[IDX_BP + i]
+    for m in range(meta[1]):
+        for i in range(6):
+            buf[m, BUF_P + i] += dx[i]
+    for i in range(dx.shape[0]):
+        dx[i] = 0.0
+
+
+
+@njit
+def cholesky3(s00: float, s01: float, s02: float, s11: float, s12: float, s22: float
+               ) -> tuple[bool, float, float, float, float, float, float]:
+    """The lower Cholesky factor of the symmetric 3 x 3 matrix of upper triangle ``s``:
+    (positive definite, l00, l10, l20, l11, l21, l22); False (and zeros) as soon as a
+    leading minor is not positive."""
+    if not s00 > 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    l00 = math.sqrt(s00)
+    l10, l20 = s01 / l00, s02 / l00
+    d11 = s11 - l10 * l10
+    if not d11 > 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    l11 = math.sqrt(d11)
+    l21 = (s12 - l20 * l10) / l11
+    d22 = s22 - l20 * l20 - l21 * l21
+    if not d22 > 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    return True, l00, l10, l20, l11, l21, math.sqrt(d22)
+
