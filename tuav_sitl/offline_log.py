@@ -18,7 +18,7 @@ from sitl.plant import DRUM_ANGLE, DRUM_RATE, POS, QUAT, RATES, VEL
 from tuavdefs.frames import quat_to_euler
 
 if TYPE_CHECKING:
-    from companion.estimator import NavFilter
+    from companion.ekf import NavFilter
     from companion.onboard import OnboardOutputs
     from sitl.plant import Plant, TetherForces
 
