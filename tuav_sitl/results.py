@@ -285,7 +285,7 @@ def write_results(out_md: Path, runs_dir: Path, figures: bool = True,
         f"and writes this file); {len(names)} runs took {wall:.0f} s of wall time on "
         f"{os.cpu_count()} cores ({platform.python_implementation()} "
         f"{platform.python_version()}, {platform.machine()}).",
-        "Metric definitions: `docs/usage.md` and `tuav_sitl/offline.py: compute_metrics`.",
+        "Metric definitions: `docs/usage.md` and `tuav_sitl/offline_metrics.py: compute_metrics`.",
         "",
         "## Targets",
         "",
