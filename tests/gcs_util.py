@@ -3,7 +3,9 @@ pymavlink helpers (waiting for a message, uploading a mission) used by them."""
 
 from __future__ import annotations
 
+import ctypes
 import re
+import signal
 import socket
 import subprocess
 import sys
@@ -22,6 +24,13 @@ def free_port(kind: int = socket.SOCK_STREAM) -> int:
     with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def die_with_parent() -> None:
+    """``preexec_fn`` for a test's child process: SIGTERM it when the test's process dies
+    (Linux ``PR_SET_PDEATHSIG``), so a worker killed mid-test (a timeout, ^C) leaves no
+    plant or companion behind, flying and using a core, for hours."""
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)   # 1: PR_SET_PDEATHSIG
 
 
 class Vehicle:
@@ -45,7 +54,8 @@ class Vehicle:
             plant_args += ["--speedup", speedup]
         with open(self.plant_log, "w") as out:
             self.plant = subprocess.Popen(plant_args, cwd=ROOT, stdout=out,
-                                          stderr=subprocess.STDOUT)
+                                          stderr=subprocess.STDOUT,
+                                          preexec_fn=die_with_parent)
         udp = ["--gcs-udp", f"127.0.0.1:{udp_port}"] if udp_port else ["--gcs-udp", "none"]
         if sim_relay is not None:
             sim_port = sim_relay(sim_port)
@@ -54,7 +64,7 @@ class Vehicle:
                 [sys.executable, "-m", "companion", "--sim", f"127.0.0.1:{sim_port}",
                  "--component-port", "0", "--gcs-tcp", "0", *udp, "--tlog", str(self.tlog),
                  "--param-file", str(self.param_file), *extra],
-                cwd=ROOT, stdout=out, stderr=subprocess.STDOUT)
+                cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, preexec_fn=die_with_parent)
         self.tcp_port = self._wait_ready()
 
     def _wait_ready(self, timeout_s: float = 60.0) -> int:
