@@ -120,7 +120,9 @@ class Navigator:
         self.plan = Plan(self)
         self._t = 0.0
         self._armed_on_ground_since: float | None = None
-        self._speed_override: float | None = None
+        #: the speed of planned moves set by DO_CHANGE_SPEED or a guided target [m/s]
+        #: (None: ``speed_m_s``'s)
+        self.speed_override_m_s: float | None = None
         self._pos: Vec3 = _ZERO3
         self._vel_now: Vec3 = _ZERO3
         self._quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
@@ -169,6 +171,21 @@ class Navigator:
         return quat_to_yaw(self._quat)
 
     @property
+    def yaw_rad(self) -> float:
+        """The vehicle's heading at the last step [rad]."""
+        return self._yaw
+
+    @property
+    def position_m(self) -> Vec3:
+        """The vehicle's position at the last step [m] (its estimate)."""
+        return self._pos
+
+    @property
+    def velocity_m_s(self) -> Vec3:
+        """The vehicle's velocity at the last step [m/s] (its estimate)."""
+        return self._vel_now
+
+    @property
     def flying(self) -> bool:
         """Armed and off the ground."""
         return self.armed and not self.landed
@@ -214,7 +231,8 @@ class Navigator:
     @property
     def speed_m_s(self) -> float:
         """Horizontal speed of planned moves now [m/s] (DO_CHANGE_SPEED overrides)."""
-        return self._speed_override if self._speed_override is not None else self.p.speed_m_s
+        override = self.speed_override_m_s
+        return override if override is not None else self.p.speed_m_s
 
     @property
     def landing(self) -> bool:
@@ -456,7 +474,7 @@ class Navigator:
             return None, MotorState.OFF
         return ref, MotorState.FLY
 
-    def _takeoff(self, target: Vec3, seq: int | None = None) -> None:
+    def begin_takeoff(self, target: Vec3, seq: int | None = None) -> None:
         """Climb from the ground to ``target`` [m] (for mission item ``seq``)."""
         self.landed = False
         self._armed_on_ground_since = None

@@ -119,7 +119,7 @@ class Plan:
         slow = self.vel is None and (script is not None or (
             leg is not None and not (leg.landing or leg.takeoff)))
         if slow:
-            notice = gov.slow_clock(self.nominal, self.nav._pos, self.nav._vel_now,
+            notice = gov.slow_clock(self.nominal, self.nav.position_m, self.nav.velocity_m_s,
                                     self.nav.position_sigma_m, dt)
             if notice is not None:
                 self.nav._emit(NavEvent.WARNING, notice)
@@ -136,7 +136,7 @@ class Plan:
     @property
     def leg_clock(self) -> float:
         """The legs' clock [s]: the vehicle's, less what the governor's slowing took."""
-        return self.nav._t - self.nav.governor.clock_lag
+        return self.nav.time_s - self.nav.governor.clock_lag
 
     def leg_velocity_ahead(self) -> Vec3 | None:
         """The velocity [m/s] the current leg's plan has :data:`GOVERNOR_LOOKAHEAD_S` on
@@ -159,7 +159,7 @@ class Plan:
             # within until it follows L-bar), and a snag there stops a climb, not a run
             return ref
         nav = self.nav
-        decision = nav.governor.check(ref, nav._pos, nav._vel_now, nav.position_sigma_m)
+        decision = nav.governor.check(ref, nav.position_m, nav.velocity_m_s, nav.position_sigma_m)
         if decision.verdict is Verdict.AT_REST:
             return self.at_rest(ref, decision.limit_m)
         if decision.verdict is Verdict.BRAKE:
@@ -209,13 +209,13 @@ class Plan:
         leg = self.leg
         holding = leg is not None and leg.tag is LegTag.HOLD
         if (self.paused and holding and leg.follower.done
-                and self.nav.governor.may_resume(p, self.nav._pos, lim)):
+                and self.nav.governor.may_resume(p, self.nav.position_m, lim)):
             paused = self.paused
             self.nav._emit(NavEvent.WARNING, Notice(TextKind.TETHER_RESUMING,
                                                     "Tether: room again, resuming"))
             self.ref = ref
             self.queue(paused)
-            return self.leg.follower.update(self.leg_clock, self.nav._pos)
+            return self.leg.follower.update(self.leg_clock, self.nav.position_m)
         target = (self.nav.governor.move_in_target(p, lim)
                   if holding and self.vel is None and self.script is None else None)
         if target is not None and math.dist(target, leg.follower.target_m or p) > 0.05:
@@ -233,7 +233,8 @@ class Plan:
         follows it)."""
         if self.script is not None:
             # on the script's clock: the vehicle's, less what the slowing took since it began
-            ref = self.script(t - (self.nav.governor.clock_lag - self.script_lag), self.nav._pos)
+            lag = self.nav.governor.clock_lag - self.script_lag
+            ref = self.script(t - lag, self.nav.position_m)
             x, y, z = ref.pos_m
             reach = self.nav.reach_m
             if not (z >= 0.0 and x * x + y * y + z * z <= reach * reach):   # NaN too
@@ -253,7 +254,7 @@ class Plan:
         leg = self.leg
         assert leg is not None
         follower = leg.follower
-        ref = follower.update(self.leg_clock, self.nav._pos)
+        ref = follower.update(self.leg_clock, self.nav.position_m)
         if follower.reached_t_s is not None and not leg.reported:
             leg.reported = True
             if leg.seq is not None and leg.tag is LegTag.MISSION:
@@ -268,7 +269,7 @@ class Plan:
         (:meth:`TetherGovernor.velocity_cap`)."""
         v = self.vel
         assert v is not None
-        v.cap, notice = self.nav.governor.velocity_cap(v.cmd, v.pos, self.nav._pos,
+        v.cap, notice = self.nav.governor.velocity_cap(v.cmd, v.pos, self.nav.position_m,
                                                        self.nav.position_sigma_m)
         if notice is not None:
             self.nav._emit(NavEvent.WARNING, notice)
@@ -292,7 +293,7 @@ class Plan:
     def current_ref(self) -> RefSample:
         """The last reference, or (none yet) the vehicle at rest where it is."""
         if self.ref is None:
-            return RefSample(self.nav._pos, _ZERO3, _ZERO3, _ZERO3, self.nav._yaw, 0.0)
+            return RefSample(self.nav.position_m, _ZERO3, _ZERO3, _ZERO3, self.nav.yaw_rad, 0.0)
         return self.ref
 
     def follower(self, speed: float, accept: float | None = None, hold_s: float = 0.0
@@ -321,7 +322,7 @@ class Plan:
             # stopped it at once (resumed, it began again: the chatter)
             self.nav.governor.s = self.nav.governor.slow_rate(
                 leg.follower.trajectory.sample(self.leg_clock), 1.0,
-                self.leg_velocity_ahead(), self.nav._pos, self.nav._vel_now,
+                self.leg_velocity_ahead(), self.nav.position_m, self.nav.velocity_m_s,
                 self.nav.position_sigma_m)[0]
 
     def queue(self, legs: list[Leg]) -> None:

@@ -146,7 +146,7 @@ class Auto:
             nav._emit(NavEvent.CURRENT, c.seq)
             if c.kind is NavKind.SPEED:
                 if c.speed_m_s is not None and c.speed_m_s > 0:
-                    nav._speed_override = c.speed_m_s
+                    nav.speed_override_m_s = c.speed_m_s
                 nav.mission_index += 1
                 continue
             if c.kind is NavKind.WINCH:
@@ -196,7 +196,7 @@ class Auto:
         if c.kind is NavKind.TAKEOFF:
             z = c.z_m if c.z_m is not None else nav.p.rtl_alt_m
             if nav.landed:
-                nav._takeoff((nav._pos[0], nav._pos[1], z), seq=c.seq)
+                nav.begin_takeoff((nav.position_m[0], nav.position_m[1], z), seq=c.seq)
             else:
                 # already flying: ArduCopter climbs to the altitude if below it
                 ref = nav.plan.current_ref()

@@ -46,11 +46,11 @@ class Guided:
             return Refusal(Reason.NOT_ARMED, "Takeoff: not armed")
         if not nav.landed:
             return Refusal(Reason.FLYING, "Takeoff: already flying")
-        target = (nav._pos[0], nav._pos[1], alt_m)
+        target = (nav.position_m[0], nav.position_m[1], alt_m)
         why = nav.check_target(target)
         if why is not None:
             return why
-        nav._takeoff(target)
+        nav.begin_takeoff(target)
         return None
 
     def goto(self, pos_m: Vec3, yaw_rad: float | None = None,
@@ -62,7 +62,7 @@ class Guided:
         if why is not None:
             return why
         if speed_m_s is not None and speed_m_s > 0 and math.isfinite(speed_m_s):
-            nav._speed_override = float(speed_m_s)
+            nav.speed_override_m_s = float(speed_m_s)
         nav.plan.vel = None
         nav.plan.fly_to(pos_m, yaw_rad)
         return None
@@ -88,7 +88,7 @@ class Guided:
             target.yaw = yaw_rad
         target.yaw_rate = yaw_rate_rad_s if (yaw_rate_rad_s is not None
                                              and math.isfinite(yaw_rate_rad_s)) else 0.0
-        plan.vel_deadline = nav._t + nav.p.guided_velocity_timeout_s
+        plan.vel_deadline = nav.time_s + nav.p.guided_velocity_timeout_s
         plan.vel_limited = False
         return None
 
@@ -155,7 +155,7 @@ class Guided:
         nav = self.nav
         if not (math.isfinite(speed_m_s) and speed_m_s > 0.0):
             return Refusal(Reason.BAD_VALUE, f"bad speed {speed_m_s}")
-        nav._speed_override = min(float(speed_m_s), 20.0)
+        nav.speed_override_m_s = min(float(speed_m_s), 20.0)
         leg = nav.plan.leg
         if nav.flying and leg is not None and not leg.landing and leg.tag is LegTag.GOTO:
             target = leg.follower.target_m

@@ -77,6 +77,6 @@ class Land:
                 if was_mission and nav.plan.leg is not None and nav.plan.leg.seq is not None:
                     nav._emit(NavEvent.REACHED, nav.plan.leg.seq)
                     nav._emit(NavEvent.MISSION_DONE, None)
-                nav._disarm()
+                nav.disarm()
         else:
             self._still_since = None
