@@ -512,7 +512,8 @@ class Winch:
         self._last_encoder_wall = wall_s
         self.length_m = pos_rev * _TWO_PI * self.r_w
         self.omega_rad_s = vel_rev_s * _TWO_PI
-        said = self.sensors.on_encoder(self.length_m, self.omega_rad_s)
+        said = self.sensors.on_encoder(self.length_m, self.omega_rad_s,
+                                       not (self.braked or axis.disarmed or axis.arm_pending))
         if said is not None:
             out.notices.append(said)
         if self.encoder_frames == 1:

@@ -16,7 +16,9 @@ constant (its datasheet's, within about 10 %), the drum's friction and inertia (
 controller's model) and the differenced rate all enter it, and at a drum radius of 0.1 m
 1 N of tension is only 0.1 N m, 1 A at Kt 0.1 N m/A. The winch uses it where the load
 cell cannot serve (:class:`groundstation.winch_sensors.TensionSource`): while the load
-cell is silent or reports itself unhealthy, and while the two disagree for long.
+cell is silent or reports itself unhealthy, and while the two disagree for long. It holds
+only while the motor drives the drum (closed loop, the brake released): braked, the brake
+takes the pull and the current says nothing of it.
 """
 
 from __future__ import annotations
@@ -55,8 +57,13 @@ class CurrentTension:
             self.iq_a = measured_a
             self.iq_frames += 1
 
-    def on_encoder(self, length_m: float, omega_rad_s: float) -> None:
-        """An encoder frame: the estimate advanced one period with the last current."""
+    def on_encoder(self, length_m: float, omega_rad_s: float, drives: bool) -> None:
+        """An encoder frame: the estimate advanced one period with the last current, while
+        the motor ``drives`` the drum (closed loop, no brake); otherwise it says nothing of
+        the line (the brake or a stop takes the pull) and the estimate is dropped."""
+        if not drives:
+            self._omega = self.tension_n = math.nan
+            return
         last, self._omega = self._omega, omega_rad_s
         if not (math.isfinite(self.iq_a) and math.isfinite(last)):
             return

@@ -1340,3 +1340,20 @@ def test_a_load_cell_that_disagrees_for_a_second_is_overruled_by_the_current():
     assert "winch: load cell disagrees, tension from current" in b.notices
     assert b.winch.sensors.source is TensionSource.CURRENT
     assert b.winch.tension_n == pytest.approx(5.0, abs=1.0)
+
+
+def test_a_braked_drum_leaves_the_tension_to_the_load_cell():
+    """HOLD: the brake takes the pull and the motor's current (0 A) says nothing of it: no
+    current's tension while braked, no disagreement, the load cell's 8 N kept; back in
+    RELAXED the current's tension returns with the closed loop."""
+    b = Bench(14.0, tension_n=8.0)
+    b.run(2.0)
+    assert b.command(request(mavlink2.WINCH_HOLD)).result == ACK
+    b.run(2.5)
+    assert math.isnan(b.winch.sensors.current.tension_n)
+    assert b.winch.sensors.source is TensionSource.LOAD_CELL
+    assert b.winch.tension_n == pytest.approx(8.0, abs=0.2)
+    assert not any("tension from current" in n for n in b.notices)
+    assert b.command(request(mavlink2.WINCH_RELAXED)).result == ACK
+    b.run(2.0)
+    assert b.winch.sensors.current.tension_n == pytest.approx(8.0, abs=0.3)
