@@ -47,8 +47,9 @@ of each and dispatching to the active one:
   L-bar's minimum slack (the *taut floor*), then hold that length.
 
 The shared parts have rooms of their own: the axis's CAN talk (arming, IDLE, re-arms,
-another host: ``groundstation/winch_axis.py``), the sensor node's readings and the tether
-fix (``groundstation/winch_sensors.py``), the bus's health
+another host: ``groundstation/winch_axis.py``), the sensor node's readings, the tether
+fix and the tension's source, the load cell or the motor's current
+(``groundstation/winch_sensors.py``, ``groundstation/winch_current.py``), the bus's health
 (``groundstation/winch_bus.py``), what the winch says and is asked
 (``groundstation/winch_report.py``), its settings (``groundstation/winch_params.py``).
 
