@@ -84,10 +84,8 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
         'float64',),
     ],
     'groundstation.winder_host.winder_step': [
-        ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
-        'float64', 'float64', 'float64[::1]', 'float64[::1]', 'float64', 'float64', 'float64',
-        'float64', 'float64', 'float64[::1]', 'float64[::1]', 'float64', 'float64', 'float64',
-        'float64', 'float64', 'float64',),
+        ('float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]',
+        'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64',),
     ],
     'sitl.batch.batch_kernel': [
         ('uint8[::1]', 'int64', 'bool', 'float64', 'float64', 'int64', 'int64', 'int64',
