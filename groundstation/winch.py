@@ -47,8 +47,9 @@ of each and dispatching to the active one:
   L-bar's minimum slack (the *taut floor*), then hold that length.
 
 The shared parts have rooms of their own: the axis's CAN talk (arming, IDLE, re-arms,
-another host: ``groundstation/winch_axis.py``), the sensor node's readings and the tether
-fix (``groundstation/winch_sensors.py``), the bus's health
+another host: ``groundstation/winch_axis.py``), the sensor node's readings, the tether
+fix and the tension's source, the load cell or the motor's current
+(``groundstation/winch_sensors.py``, ``groundstation/winch_current.py``), the bus's health
 (``groundstation/winch_bus.py``), what the winch says and is asked
 (``groundstation/winch_report.py``), its settings (``groundstation/winch_params.py``).
 
@@ -512,7 +513,8 @@ class Winch:
         self._last_encoder_wall = wall_s
         self.length_m = pos_rev * _TWO_PI * self.r_w
         self.omega_rad_s = vel_rev_s * _TWO_PI
-        said = self.sensors.on_encoder(self.length_m, self.omega_rad_s)
+        said = self.sensors.on_encoder(self.length_m, self.omega_rad_s,
+                                       not (self.braked or axis.disarmed or axis.arm_pending))
         if said is not None:
             out.notices.append(said)
         if self.encoder_frames == 1:

@@ -112,11 +112,14 @@ class WinchSensors:
         """A ``Get_Iq`` frame: the motor's measured q-axis current."""
         self.current.on_iq(cp.decode_iq(data).measured_a)
 
-    def on_encoder(self, length_m: float, omega_rad_s: float) -> Notice | None:
-        """An encoder frame (one control period): the current's estimate advanced and the
-        tension's source chosen (module docstring); returns the notice of a change."""
+    def on_encoder(self, length_m: float, omega_rad_s: float,
+                   motor_drives: bool) -> Notice | None:
+        """An encoder frame (one control period): the current's estimate advanced (while
+        the motor drives the drum: ``motor_drives``, and the sensor node reports the brake
+        released) and the tension's source chosen (module docstring); returns the notice
+        of a change."""
         p, cur = self.p, self.current
-        cur.on_encoder(length_m, omega_rad_s)
+        cur.on_encoder(length_m, omega_rad_s, motor_drives and self.sensor_brake is not True)
         self._since_load_cell += 1
         lc, ct = self.load_cell_n, cur.tension_n
         if math.isfinite(lc) and math.isfinite(ct) and abs(lc - ct) > p.tension_disagree_n:

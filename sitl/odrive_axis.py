@@ -45,7 +45,7 @@ Reported values (what the replies carry):
   enabled), estimate = the applied torque the plant passed to the last :meth:`tick` (which
   includes its speed cut-back).
 - ``Get_Iq``: the same two torques divided by the torque constant ``kt`` [N m/A]; cyclic
-  every ``iq_period_s`` (10 ms, each instant's before its encoder frame: the winder is
+  every ``iq_period_s`` (50 ms, each before the encoder frame of its instant: the winder is
   configured so, as ODrive's ``iq_msg_rate_ms``), the ground station's second, cruder
   tension source (``groundstation/winch_current.py``).
 - ``Get_Bus_Voltage_Current``: the bus voltage from the last :meth:`tick` and the DC bus
@@ -160,7 +160,7 @@ class OdriveAxis:
                  torque_limit_nm: float = 5.0, vel_limit_rev_s: float = 20.0,
                  torque_constant_nm_a: float = 0.1, heartbeat_period_s: float | None = 0.1,
                  encoder_period_s: float | None = 0.01,
-                 iq_period_s: float | None = 0.01,
+                 iq_period_s: float | None = 0.05,
                  cyclic: Mapping[int, float | None] | None = None,
                  control_mode: int = ControlMode.POSITION,
                  input_mode: int = InputMode.PASSTHROUGH,

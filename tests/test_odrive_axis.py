@@ -305,11 +305,12 @@ def test_cyclic_frame_timing_over_one_second():
     ids = [f.arbitration_id for f in frames]
     assert ids.count(frame_id(0, Cmd.HEARTBEAT)) == 10
     assert ids.count(frame_id(0, Cmd.GET_ENCODER_ESTIMATES)) == 100
-    assert ids.count(frame_id(0, Cmd.GET_IQ)) == 100     # the winder's second tension source
-    assert len(frames) == 210
-    # each instant's Get_Iq comes before its encoder frame (the host answers that one)
-    enc = frame_id(0, Cmd.GET_ENCODER_ESTIMATES)
-    assert all(ids[i - 1] == frame_id(0, Cmd.GET_IQ) for i, f in enumerate(ids) if f == enc)
+    assert ids.count(frame_id(0, Cmd.GET_IQ)) == 20      # the winder's second tension source
+    assert len(frames) == 130
+    # each Get_Iq comes just before the encoder frame of its instant (the host answers that)
+    iq = frame_id(0, Cmd.GET_IQ)
+    assert all(ids[i + 1] == frame_id(0, Cmd.GET_ENCODER_ESTIMATES)
+               for i, f in enumerate(ids) if f == iq)
     assert not any(f.is_remote for f in frames)
     for f in frames:  # every cyclic frame decodes with the DBC
         decode(f)
@@ -461,7 +462,7 @@ def test_cyclic_outputs_are_the_schedules_by_their_definition(steps, enc_period)
     for dt in steps:
         t += dt
         expected = [frame_id(0, cmd) for cmd, key, period in (
-            (Cmd.HEARTBEAT, "hb", 0.1), (Cmd.GET_IQ, "iq", 0.01),
+            (Cmd.HEARTBEAT, "hb", 0.1), (Cmd.GET_IQ, "iq", 0.05),
             (Cmd.GET_ENCODER_ESTIMATES, "enc", enc_period))
             if _reference_due(ref[key], period, t)]
         assert [f.arbitration_id for f in axis.tick(t, 1.0, 0.0, 0.0, 48.0)] == expected
@@ -499,8 +500,9 @@ def test_winder_node_sends_each_instants_sensor_frames_before_its_encoder_frame(
     assert len(with_encoder) == 100                            # 100 Hz of simulated time
     for b in with_encoder:
         assert b[:2] == [(sensor, cp.SensorCmd.WINCH_LENGTH), (sensor, cp.SensorCmd.WINCH_TENSION)]
-    # 100 Hz length, tension, Get_Iq, encoder; 10 Hz two heartbeats; 50 Hz the exit angle
-    assert sum(len(b) for b in bursts) == node.frames_sent == 100 * 4 + 10 * 2 + 50
+    # 100 Hz length, tension, encoder; 10 Hz two heartbeats; 50 Hz the exit angle; 20 Hz
+    # Get_Iq
+    assert sum(len(b) for b in bursts) == node.frames_sent == 100 * 3 + 10 * 2 + 50 + 20
 
 
 def test_winder_node_ignores_29_bit_frames_of_other_protocols():

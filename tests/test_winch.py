@@ -1295,11 +1295,11 @@ def test_the_motor_current_gives_the_drum_tension(tension_n):
     Get_Iq from the torque it applied), the drum holding a line at a constant tension: the
     current's estimate (T = (I dw/dt + beta w - Kt Iq) / r_w on the station's own drum
     model) is that tension within 0.3 N once settled, and it is the plant's frames that
-    bring it (a Get_Iq a control period)."""
+    bring it (a Get_Iq every 50 ms)."""
     b = Bench(14.0, tension_n=tension_n)
     b.run(2.0)
     est = _current_tension(b, 1.0)
-    assert b.winch.sensors.current.iq_frames >= 2.9 * 100 * 0.98
+    assert b.winch.sensors.current.iq_frames >= 2.9 * 20 * 0.98     # 20 Hz
     assert max(abs(t - tension_n) for t in est) < 0.3
     assert b.winch.sensors.source is TensionSource.LOAD_CELL   # the load cell agrees
     assert b.winch.tension_n == pytest.approx(tension_n, abs=0.2)
@@ -1340,3 +1340,20 @@ def test_a_load_cell_that_disagrees_for_a_second_is_overruled_by_the_current():
     assert "winch: load cell disagrees, tension from current" in b.notices
     assert b.winch.sensors.source is TensionSource.CURRENT
     assert b.winch.tension_n == pytest.approx(5.0, abs=1.0)
+
+
+def test_a_braked_drum_leaves_the_tension_to_the_load_cell():
+    """HOLD: the brake takes the pull and the motor's current (0 A) says nothing of it: no
+    current's tension while braked, no disagreement, the load cell's 8 N kept; back in
+    RELAXED the current's tension returns with the closed loop."""
+    b = Bench(14.0, tension_n=8.0)
+    b.run(2.0)
+    assert b.command(request(mavlink2.WINCH_HOLD)).result == ACK
+    b.run(2.5)
+    assert math.isnan(b.winch.sensors.current.tension_n)
+    assert b.winch.sensors.source is TensionSource.LOAD_CELL
+    assert b.winch.tension_n == pytest.approx(8.0, abs=0.2)
+    assert not any("tension from current" in n for n in b.notices)
+    assert b.command(request(mavlink2.WINCH_RELAXED)).result == ACK
+    b.run(2.0)
+    assert b.winch.sensors.current.tension_n == pytest.approx(8.0, abs=0.3)

@@ -742,7 +742,7 @@ MESSAGES: tuple[MessageSpec, ...] = (
           ("Input_Torque",), 4, encode_set_input_torque, decode_set_input_torque),
     _spec("Set_Limits", Cmd.SET_LIMITS, "axis", "host->axis", 8, None, False,
           ("Velocity_Limit", "Current_Limit"), 8, encode_set_limits, decode_set_limits),
-    _spec("Get_Iq", Cmd.GET_IQ, "axis", "axis->host", 8, 0.01, True,
+    _spec("Get_Iq", Cmd.GET_IQ, "axis", "axis->host", 8, 0.05, True,
           ("Iq_Setpoint", "Iq_Measured"), 8, encode_iq, decode_iq),
     _spec("Get_Bus_Voltage_Current", Cmd.GET_BUS_VOLTAGE_CURRENT, "axis", "axis->host", 8,
           None, True, ("Bus_Voltage", "Bus_Current"), 8,
