@@ -36,7 +36,7 @@ from companion.mission_items import ItemRefused, nav_commands
 from companion.navigation import FlightMode, NavCommand, NavEvent, NavKind, Refusal
 from companion.onboard import Companion, OnboardInputs, OnboardOutputs
 from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
-from groundstation.tether_fix import TetherFixParams
+from groundstation.tether_fix import TetherFix, TetherFixParams
 from groundstation.winch import Winch
 from groundstation.winder_host import WinderHost
 from sitl.exit_angle import ExitAngleSensor
@@ -424,7 +424,7 @@ class OfflineRunner:
                 bool(status.flags & mavlink2.MAV_WINCH_STATUS_HEALTHY))
             self._take_events(self._t)
 
-    def _tether_fix_to_vehicle(self, fix: Any) -> None:
+    def _tether_fix_to_vehicle(self, fix: TetherFix) -> None:
         """The winch's tether fix as ODOMETRY to the companion (if it takes it)."""
         ext = self.links.odometry(cl.ExternalPosition(fix.sample_time_ms * 1e-3, fix.pos_m,
                                                       fix.cov_m2))

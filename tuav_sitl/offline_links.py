@@ -16,7 +16,9 @@ message reaches its reader with its fields' resolution either way:
 Both give bit-identical runs (``tests/test_offline_links.py``): every field's resolution
 is applied on the direct path, so it is exact. The CAN frames are the one hop framed
 in both modes: the winch's only entry is a frame (:class:`tuav_sitl.offline_ground.
-GroundStation`).
+GroundStation`). Not yet through here: WINCH_STATUS and DO_WINCH reach the companion and the
+winch as the runner's doubles in both modes, where the component link carries float32
+fields (giving them their resolution moves every scenario's series).
 """
 
 from __future__ import annotations
