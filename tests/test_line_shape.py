@@ -5,19 +5,17 @@ elastic catenary; a weightless line: straight)."""
 
 from __future__ import annotations
 
-import functools
 import math
 
 import moorpy as mp
 import numpy as np
 import pytest
+from lumped_util import exit_reading, settled_exit
 
 from sitl.catenary import CatenaryRegime
-from sitl.kernel import max_line_nodes, pack_line_params
-from sitl.lumped import L_CN, L_CT, _drag, lay_line, line_state_size, relax
 from sitl.tether import Tether
 from tuavdefs import line_shape as ls
-from tuavdefs.params import EnvironmentParams, SystemParams, TetherParams
+from tuavdefs.params import EnvironmentParams, TetherParams
 
 G = 9.81
 TP = TetherParams()
@@ -25,10 +23,7 @@ RHO_AIR = EnvironmentParams().air_density_kg_m3
 MODEL = ls.LineModel.from_tether(TP, G, RHO_AIR)
 
 
-def _exit(f: np.ndarray) -> tuple[float, float, float]:
-    """(tension [N], azimuth, elevation [rad]) of a tension vector at the exit."""
-    return (float(np.linalg.norm(f)), math.atan2(f[1], f[0]),
-            math.atan2(f[2], math.hypot(f[0], f[1])))
+_exit = exit_reading
 
 
 def _moorpy(top: tuple[float, float, float], length_m: float, wind: tuple[float, float]):
@@ -89,41 +84,6 @@ def test_across_the_line_the_cross_flow_model_is_moorpys_line_in_a_current():
     assert max(errors) < 0.08
 
 
-@functools.cache
-def _lumped(top: tuple[float, float, float], length_m: float, wind: tuple[float, float]
-            ) -> tuple[float, float, float, float]:
-    """(tension [N], azimuth, elevation [rad] at the exit, the lowest node's height [m]) of
-    the plant's lumped line (60 segments on 60 m) held at ``top`` with ``length_m`` paid
-    out, settled by dynamic relaxation (12 s) in the uniform steady ``wind`` [m/s].
-
-    The plant's pull on the exit is its exit segment's pull less the weight of the
-    segment's lower half (which the ground carries), not less that half's drag: the line's
-    tension at the exit, what an arm at the fairlead reads, is taken here with that drag
-    too (in 12 m/s it turns the reading by up to 0.05 rad on the plant's 0.8-1.8 m exit
-    segment)."""
-    params = SystemParams().replace(tether=TetherParams(total_length_m=60.0, segments=60))
-    lp = pack_line_params(params)
-    n = max_line_nodes(params)
-    state = np.zeros(line_state_size(n))
-    scratch = np.zeros((5, state.size))
-    node_wind = np.zeros((n, 3))
-    node_wind[:, :2] = wind
-    top_wind = np.zeros(6)
-    top_wind[:2] = wind
-    cat = Tether(params.tether, G)
-    cat.forces(*top, length_m)
-    lay_line(state, lp, cat.shape(*top, length_m, 2001), length_m)
-    out = relax(state, scratch, lp, 2e-4, 60000, np.array([*top, 0.0, 0.0, 0.0]), length_m,
-                node_wind, top_wind, 0.998)
-    nodes = int(state[0])
-    low = np.array(state[1 + 6 * (nodes - 1): 4 + 6 * (nodes - 1)]) if nodes else np.array(top)
-    chord = low / np.linalg.norm(low)
-    half = 0.5 * (length_m - nodes * params.tether.total_length_m / params.tether.segments)
-    drag = _drag(lp[L_CN], lp[L_CT], half, *chord, *wind, 0.0)
-    lowest = min((state[3 + 6 * k] for k in range(nodes)), default=top[2])
-    return (*_exit(np.array(out[5:8]) + np.array(drag)), float(lowest))
-
-
 #: (top [m], slack [m], wind speed [m/s], its direction from the line's azimuth [rad])
 LUMPED_CASES = [((8.0, 4.0, 15.0), 0.8, 0.0, 0.0), ((8.0, 4.0, 15.0), 0.8, 3.0, 0.0),
                 ((8.0, 4.0, 15.0), 0.3, 6.0, 0.5 * math.pi), ((8.0, 4.0, 15.0), 0.8, 12.0, 0.0),
@@ -143,7 +103,7 @@ def test_against_the_plants_lumped_line_settled_in_a_steady_wind():
         az = math.atan2(top[1], top[0]) + turn
         wind = (speed * math.cos(az), speed * math.sin(az))
         length = math.dist(top, (0.0, 0.0, 0.0)) + slack
-        t0, psi, eps, lowest = _lumped(top, length, wind)
+        t0, psi, eps, lowest = settled_exit(top, length, wind)
         assert lowest > 0.0 and eps > 0.03, "the case must be a line clear of the ground"
         x = ls.inputs(length, t0, psi, eps, MODEL, wind)
         err = math.dist(ls.end(MODEL, x), top)
@@ -203,7 +163,7 @@ def test_the_jacobian_predicts_the_lumped_line_in_a_changed_wind():
     az = math.atan2(top[1], top[0])
     u6 = (6.0 * math.cos(az), 6.0 * math.sin(az))
     u7 = (7.0 * math.cos(az), 7.0 * math.sin(az))
-    t0, psi, eps, _ = _lumped(top, length, u7)
+    t0, psi, eps, _ = settled_exit(top, length, u7)
     x6 = ls.inputs(length, t0, psi, eps, MODEL, u6)
     end6, J = ls.jacobian(MODEL, x6)
     err = np.array(end6) - np.array(top)
