@@ -26,8 +26,10 @@ def exit_reading(f: np.ndarray) -> tuple[float, float, float]:
 @functools.cache
 def settled_exit(top: tuple[float, float, float], length_m: float,
                  wind: tuple[float, float], density_factor: float = 1.0,
-                 drag_factor: float = 1.0) -> tuple[float, float, float, float]:
-    """(tension [N], azimuth, elevation [rad] at the exit, the lowest node's height [m]) of
+                 drag_factor: float = 1.0
+                 ) -> tuple[float, float, float, float, tuple[float, float, float]]:
+    """(tension [N], azimuth, elevation [rad] at the exit, the lowest node's height [m],
+    the line's pull on the top [N]: the top segment's, its upper half's weight and drag) of
     the plant's lumped line (60 segments on 60 m; its linear density and drag coefficients
     ``density_factor`` and ``drag_factor`` times the defaults) held at ``top`` with
     ``length_m`` paid out, settled by dynamic relaxation (12 s) in the uniform steady
@@ -63,4 +65,5 @@ def settled_exit(top: tuple[float, float, float], length_m: float,
     half = 0.5 * (length_m - nodes * tp.total_length_m / tp.segments)
     drag = _drag(lp[L_CN], lp[L_CT], half, *chord, *wind, 0.0)
     lowest = min((state[3 + 6 * k] for k in range(nodes)), default=top[2])
-    return (*exit_reading(np.array(out[5:8]) + np.array(drag)), float(lowest))
+    return (*exit_reading(np.array(out[5:8]) + np.array(drag)), float(lowest),
+            (float(out[0]), float(out[1]), float(out[2])))

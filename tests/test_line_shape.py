@@ -97,21 +97,27 @@ def test_against_the_plants_lumped_line_settled_in_a_steady_wind():
     elasticity) held still in 0-12 m/s along, across and oblique to lines of 8-36 m,
     suspended clear of the ground: with the lumped line's exit tension and angles the
     model's end is within 0.08 m of the truth (at most 0.5 % of the line's length; 1 cm in
-    calm air), where the windless line is metres off."""
-    errors, windless = [], []
+    calm air), where the windless line is metres off, and the line's pull on the vehicle
+    (the tension at its end) within 3 % and 0.02 N of the lumped line's."""
+    errors, windless, pulls = [], [], []
     for top, slack, speed, turn in LUMPED_CASES:
         az = math.atan2(top[1], top[0]) + turn
         wind = (speed * math.cos(az), speed * math.sin(az))
         length = math.dist(top, (0.0, 0.0, 0.0)) + slack
-        t0, psi, eps, lowest = settled_exit(top, length, wind)
+        t0, psi, eps, lowest, pull = settled_exit(top, length, wind)
         assert lowest > 0.0 and eps > 0.03, "the case must be a line clear of the ground"
         x = ls.inputs(length, t0, psi, eps, MODEL, wind)
-        err = math.dist(ls.end(MODEL, x), top)
+        end, tension = ls.top(MODEL, x)
+        err = math.dist(end, top)
         errors.append(err)
         assert err < 0.08 and err < 0.005 * length
+        pull_err = math.dist(tension, tuple(-f for f in pull))
+        pulls.append(pull_err)
+        assert pull_err < 0.03 * math.hypot(*pull) + 0.02
         windless.append(math.dist(ls.end(MODEL, ls.inputs(length, t0, psi, eps, MODEL)),
                                   top))
-    print("lumped: model error [m]", np.round(errors, 3), "windless", np.round(windless, 2))
+    print("lumped: model error [m]", np.round(errors, 3), "windless", np.round(windless, 2),
+          "pull error [N]", np.round(pulls, 3))
     assert max(windless) > 2.0
 
 
@@ -163,7 +169,7 @@ def test_the_jacobian_predicts_the_lumped_line_in_a_changed_wind():
     az = math.atan2(top[1], top[0])
     u6 = (6.0 * math.cos(az), 6.0 * math.sin(az))
     u7 = (7.0 * math.cos(az), 7.0 * math.sin(az))
-    t0, psi, eps, _ = settled_exit(top, length, u7)
+    t0, psi, eps, _, _ = settled_exit(top, length, u7)
     x6 = ls.inputs(length, t0, psi, eps, MODEL, u6)
     end6, J = ls.jacobian(MODEL, x6)
     err = np.array(end6) - np.array(top)

@@ -288,7 +288,7 @@ def test_the_fix_in_wind_is_consistent_on_the_lumped_line():
         wind = (speed * math.cos(heading), speed * math.sin(heading))
         density = 1.0 + p.weight_uncertainty_fraction * rng.standard_normal()
         drag = max(1.0 + p.drag_uncertainty_fraction * rng.standard_normal(), 0.2)
-        t0, psi, eps, lowest = settled_exit(top, length, wind, density, drag)
+        t0, psi, eps, lowest, _ = settled_exit(top, length, wind, density, drag)
         if lowest <= 0.0 or eps < p.ground_elevation_rad:
             continue                                    # the line touches the ground
         bias = rng.normal(0.0, p.angle_bias_rad, 2)

@@ -172,24 +172,25 @@ def _slope(z: float, tx: float, ty: float, tz: float, w: float, c: float, ux: fl
 
 
 @njit
-def wind_end(length_m: float, t0_n: float, azimuth_rad: float, elevation_rad: float,
+def line_top(length_m: float, t0_n: float, azimuth_rad: float, elevation_rad: float,
              w_n_m: float, drag_n_s2_m3: float, wind_x_m_s: float, wind_y_m_s: float,
              ea_n: float, reference_height_m: float, shear_exponent: float,
-             min_height_m: float, steps: int) -> tuple[float, float, float]:
-    """The far end [m] of the line (module docstring) of unstretched length ``length_m``
-    [m] leaving the exit in the true direction (``azimuth_rad``, ``elevation_rad``) with
-    tension ``t0_n`` [N], under its weight ``w_n_m`` [N/m] and the drag ``drag_n_s2_m3``
-    |U_n| U_n of the wind (``wind_x_m_s``, ``wind_y_m_s``) at ``reference_height_m`` [m],
-    sheared with ``shear_exponent`` above ``min_height_m`` [m]: ``steps`` RK4 steps, or the
-    closed form :func:`uniform_end` without drag."""
+             min_height_m: float, steps: int
+             ) -> tuple[float, float, float, float, float, float]:
+    """(the far end [m], the tension vector there [N], pointing on along the line: the line
+    pulls the vehicle with its opposite) of the line of :func:`wind_end` (same arguments):
+    ``steps`` RK4 steps, or the closed form without drag (its tension ``T(L) = T0 e0 - f
+    L``). The line's pull on the vehicle, ``-T(L)``, is what its accelerometer feels of
+    the tether."""
     L = max(length_m, 0.0)
     t0 = max(t0_n, 1e-9)
-    if drag_n_s2_m3 <= 0.0 or (wind_x_m_s == 0.0 and wind_y_m_s == 0.0):
-        return uniform_end(L, t0, azimuth_rad, elevation_rad, 0.0, 0.0, -w_n_m, ea_n)
     ce = math.cos(elevation_rad)
     tx = t0 * ce * math.cos(azimuth_rad)
     ty = t0 * ce * math.sin(azimuth_rad)
     tz = t0 * math.sin(elevation_rad)
+    if drag_n_s2_m3 <= 0.0 or (wind_x_m_s == 0.0 and wind_y_m_s == 0.0):
+        e = uniform_end(L, t0, azimuth_rad, elevation_rad, 0.0, 0.0, -w_n_m, ea_n)
+        return (e[0], e[1], e[2], tx, ty, tz + w_n_m * L)
     stretch = 1.0 / ea_n if ea_n > 0.0 and math.isfinite(ea_n) else 0.0
     c, ux, uy = drag_n_s2_m3, wind_x_m_s, wind_y_m_s
     zr, sh, zm = reference_height_m, shear_exponent, min_height_m
@@ -210,7 +211,24 @@ def wind_end(length_m: float, t0_n: float, azimuth_rad: float, elevation_rad: fl
         tx += k * (a[3] + 2.0 * b[3] + 2.0 * d[3] + e[3])
         ty += k * (a[4] + 2.0 * b[4] + 2.0 * d[4] + e[4])
         tz += k * (a[5] + 2.0 * b[5] + 2.0 * d[5] + e[5])
-    return (px, py, pz)
+    return (px, py, pz, tx, ty, tz)
+
+
+@njit
+def wind_end(length_m: float, t0_n: float, azimuth_rad: float, elevation_rad: float,
+             w_n_m: float, drag_n_s2_m3: float, wind_x_m_s: float, wind_y_m_s: float,
+             ea_n: float, reference_height_m: float, shear_exponent: float,
+             min_height_m: float, steps: int) -> tuple[float, float, float]:
+    """The far end [m] of the line (module docstring) of unstretched length ``length_m``
+    [m] leaving the exit in the true direction (``azimuth_rad``, ``elevation_rad``) with
+    tension ``t0_n`` [N], under its weight ``w_n_m`` [N/m] and the drag ``drag_n_s2_m3``
+    |U_n| U_n of the wind (``wind_x_m_s``, ``wind_y_m_s``) at ``reference_height_m`` [m],
+    sheared with ``shear_exponent`` above ``min_height_m`` [m]: ``steps`` RK4 steps, or the
+    closed form :func:`uniform_end` without drag (:func:`line_top`)."""
+    r = line_top(length_m, t0_n, azimuth_rad, elevation_rad, w_n_m, drag_n_s2_m3,
+                 wind_x_m_s, wind_y_m_s, ea_n, reference_height_m, shear_exponent,
+                 min_height_m, steps)
+    return (r[0], r[1], r[2])
 
 
 @njit
@@ -348,6 +366,17 @@ def end(model: LineModel, x: np.ndarray) -> Vec3:
     return _end_at(np.ascontiguousarray(x, dtype=np.float64), float(model.ea_n),
                    float(model.reference_height_m), float(model.shear_exponent),
                    float(model.min_height_m), int(model.steps))
+
+
+def top(model: LineModel, x: np.ndarray) -> tuple[Vec3, Vec3]:
+    """(the far end [m], the tension there [N]) of ``model``'s line at the inputs ``x``
+    (:func:`inputs`; :func:`line_top`)."""
+    r = line_top(max(float(x[0]), 0.0), float(x[1]), float(x[2] - x[8]),
+                 float(x[3] - x[9]), max(float(x[6]), 0.0), max(float(x[7]), 0.0),
+                 float(x[4]), float(x[5]), float(model.ea_n),
+                 float(model.reference_height_m), float(model.shear_exponent),
+                 float(model.min_height_m), int(model.steps))
+    return (r[0], r[1], r[2]), (r[3], r[4], r[5])
 
 
 def jacobian(model: LineModel, x: np.ndarray, relative_step: float = 1e-6
