@@ -1,7 +1,8 @@
 """The ground station's tether fix (groundstation/tether_fix.py) against independent truths:
 the plant's own catenary solver (sitl.tether, MoorPy-compatible) for the UAV's position, a
 numerical integration of the loaded line for the closed form, the plant's exit-angle sensor
-for the noise, and the fix's covariance against its actual errors (NEES)."""
+for the noise, and the fix's covariance against its actual errors (NEES), on the catenary
+and, given the wind, on the plant's lumped line settled in it (tests/lumped_util.py)."""
 
 from __future__ import annotations
 
