@@ -184,9 +184,7 @@ class Winch:
         fp = fix_params or TetherFixParams()
         #: the sensor node's readings and the tether fix (groundstation.winch_sensors)
         self.sensors = WinchSensors(
-            TetherFixer(fp, tether.linear_density_kg_m * gravity_m_s2,
-                        tether.youngs_modulus_pa * tether.section_area_m2, tether.diameter_m)
-            if fp.enabled else None,
+            TetherFixer.for_tether(fp, tether, gravity_m_s2) if fp.enabled else None,
             CurrentTension(self.p.motor_torque_constant_nm_a, winder.drum_radius_m,
                            winder.viscous_friction_n_m_s_rad, host.controller.inertia_kg_m2,
                            self.p.current_filter_s, host.dt_s),

@@ -1,7 +1,8 @@
 """The ground station's tether fix (groundstation/tether_fix.py) against independent truths:
 the plant's own catenary solver (sitl.tether, MoorPy-compatible) for the UAV's position, a
 numerical integration of the loaded line for the closed form, the plant's exit-angle sensor
-for the noise, and the fix's covariance against its actual errors (NEES)."""
+for the noise, and the fix's covariance against its actual errors (NEES), on the catenary
+and, given the wind, on the plant's lumped line settled in it (tests/lumped_util.py)."""
 
 from __future__ import annotations
 
@@ -9,12 +10,14 @@ import math
 
 import numpy as np
 import pytest
+from lumped_util import settled_exit
 from scipy.integrate import solve_ivp
 
-from groundstation.tether_fix import TetherFixer, TetherFixParams, line_end
+from groundstation.tether_fix import TetherFixer, TetherFixParams
 from sitl.catenary import CatenaryRegime
 from sitl.exit_angle import ExitAngleSensor, ExitAngleSensorParams
 from sitl.tether import Tether
+from tuavdefs.line_shape import line_end
 from tuavdefs.params import TetherParams
 
 G = 9.81
@@ -259,3 +262,54 @@ def test_the_weights_standard_deviation_covers_its_distance_to_the_estimate():
     w, s = f.weight(2.0 * W)
     assert w == pytest.approx((2.0 - band) * W)
     assert s >= band * W
+
+
+#: (UAV position [m], slack [m]) of the lumped line's consistency check
+LUMPED_GEOMETRIES = [((8.0, 4.0, 15.0), 0.8), ((0.0, -14.0, 25.0), 1.0),
+                     ((-5.0, -5.0, 35.0), 0.5), ((4.0, 3.0, 6.0), 0.2),
+                     ((15.0, 5.0, 14.0), 0.6), ((-10.0, 3.0, 20.0), 1.2)]
+
+
+def test_the_fix_in_wind_is_consistent_on_the_lumped_line():
+    """The fix given the wind as estimated (the truth plus an error of 1 m/s per axis, its
+    stated covariance) on the plant's lumped line settled in a steady wind of 0-12 m/s
+    from any direction, the line's weight and drag drawn from the fix's priors about its
+    beliefs (3 % and 25 %), the arm's biases (3 mrad) and every reading's noise drawn from
+    theirs: the NEES of the fix against the truth is chi-square(3)'s (mean within 2-4.5,
+    at least 88 % of the fixes within its 95 % bound), where the windless fix's is
+    hundreds."""
+    rng = np.random.default_rng(7)
+    p = TetherFixParams(wind_shear_exponent=0.0)        # the truth's wind is uniform
+    fixer = TetherFixer(p, W, EA, TP.diameter_m)
+    nees, windless = [], []
+    for k in range(18):
+        top, slack = LUMPED_GEOMETRIES[k % len(LUMPED_GEOMETRIES)]
+        length = math.dist(top, (0.0, 0.0, 0.0)) + slack
+        speed, heading = rng.uniform(0.0, 12.0), rng.uniform(-math.pi, math.pi)
+        wind = (speed * math.cos(heading), speed * math.sin(heading))
+        density = 1.0 + p.weight_uncertainty_fraction * rng.standard_normal()
+        drag = max(1.0 + p.drag_uncertainty_fraction * rng.standard_normal(), 0.2)
+        t0, psi, eps, lowest, _ = settled_exit(top, length, wind, density, drag)
+        if lowest <= 0.0 or eps < p.ground_elevation_rad:
+            continue                                    # the line touches the ground
+        bias = rng.normal(0.0, p.angle_bias_rad, 2)
+        for _ in range(4):
+            sigma_t = math.hypot(p.tension_noise_n, p.tension_noise_fraction * t0)
+            reading = (length + rng.normal(0.0, p.length_noise_m),
+                       t0 + rng.normal(0.0, sigma_t),
+                       psi + bias[0] + rng.normal(0.0, p.angle_noise_rad),
+                       eps + bias[1] + rng.normal(0.0, p.angle_noise_rad))
+            estimate = (wind[0] + rng.standard_normal(), wind[1] + rng.standard_normal())
+            pos, cov, ground = fixer.position(*reading, wind_m_s=estimate)
+            assert not ground
+            e = np.subtract(pos, top)
+            nees.append(float(e @ np.linalg.solve(np.array(cov), e)))
+            pos0, cov0, _ = fixer.position(*reading)
+            e0 = np.subtract(pos0, top)
+            windless.append(float(e0 @ np.linalg.solve(np.array(cov0), e0)))
+    nees = np.array(nees)
+    print("lumped NEES: n", nees.size, "mean", nees.mean(), "within 7.81",
+          np.mean(nees <= 7.81), "windless mean", np.mean(windless))
+    assert nees.size >= 48
+    assert 2.0 <= nees.mean() <= 4.5
+    assert np.mean(nees <= 7.81) >= 0.88
