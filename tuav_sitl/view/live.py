@@ -6,13 +6,14 @@ vehicle's pose, the paid-out length, the rotor commands; the tether's tensions a
 computed from them as ``tuav-sitl plot`` imports an up run,
 :func:`tuav_sitl.up_series.build_series`; the tether's shape the lumped line's nodes of
 ``tether_nodes.csv``, or the plant's catenary) and the companion's ``flight.tlog`` (its
-estimate in ``LOCAL_POSITION_NED``, the receiver's fix in ``GPS_RAW_INT`` with its
-accuracy, ``STATUSTEXT``). Nothing in the stack waits for it: the processes write their
-files whatever it does, and when it falls behind it takes what has accumulated in one
-chunk. Its sinks are always the run folder's ``recording.rrd``, and with ``--viewer
-native`` Rerun's native viewer (spawned), with ``--viewer web`` a gRPC server on
-127.0.0.1 and Rerun's web viewer on a localhost URL. SIGTERM (or SIGINT) ends it after a
-last read of both files.
+estimate in ``LOCAL_POSITION_NED``, with its covariance in ``LOCAL_POSITION_NED_COV``; the
+receiver's fix in ``GPS_RAW_INT`` with its accuracy; the winch's tether fix, ``ODOMETRY``,
+with its covariance; ``STATUSTEXT``), every :data:`POLL_S`. Nothing in the stack waits for
+it: the processes write their files whatever it does, and when it falls behind it takes
+what has accumulated in one chunk. Its sinks are always the run folder's
+``recording.rrd``, and with ``--viewer native`` Rerun's native viewer (spawned), with
+``--viewer web`` a gRPC server on 127.0.0.1 and Rerun's web viewer on a localhost URL.
+SIGTERM (or SIGINT) ends it after a last read of both files.
 
 ``python -m tuav_sitl.view.live RUN_DIR [--viewer none|native|web] ...``
 """
@@ -23,7 +24,6 @@ import argparse
 import contextlib
 import os
 import signal
-import struct
 import subprocess
 import sys
 import time
@@ -52,7 +52,6 @@ MAX_CHUNK_ROWS = 2000
 #: The STATUSTEXT severities (MAV_SEVERITY) at or below which a message is an error, a
 #: warning.
 _SEVERITY_ERROR, _SEVERITY_WARNING, _SEVERITY_DEBUG = 3, 4, 7
-_TLOG_STAMP = struct.Struct(">Q")
 _MAGIC_V2, _MAGIC_V1 = 0xFD, 0xFE
 
 
