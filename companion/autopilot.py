@@ -378,6 +378,8 @@ class Autopilot:
             if msg.get_srcComponent() != cl.WINCH_COMPONENT_ID:
                 continue
             if msg.get_type() == "ODOMETRY":    # the tether fix: for the filter alone
+                if self.io.tlog is not None:    # (and the tlog: the live view draws it)
+                    self.io.tlog.write(msg.get_msgbuf())
                 fix = cl.external_position(msg)
                 if fix is not None and self._external_sink is not None:
                     self._external_sink(fix)

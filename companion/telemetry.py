@@ -86,6 +86,7 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "SYSTEM_TIME": 0.5, "EKF_STATUS_REPORT": 2.0, "RAW_IMU": 2.0, "SCALED_IMU": 2.0,
     "SCALED_PRESSURE": 2.0, "NAV_CONTROLLER_OUTPUT": 2.0, "RC_CHANNELS": 2.0,
     "SERVO_OUTPUT_RAW": 2.0, "WIND": 1.0, "WINCH_STATUS": 20.0,
+    "LOCAL_POSITION_NED_COV": 2.0,
 }
 #: Messages another component sends that the autopilot forwards on each link's schedule
 #: (as ArduPilot streams its winch's status).
@@ -99,7 +100,8 @@ DUE_TOLERANCE_S = 1e-6
 STREAM_GROUPS: dict[int, tuple[str, ...]] = {
     M.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "GPS_RAW_INT", "MISSION_CURRENT",
                                         "NAV_CONTROLLER_OUTPUT"),
-    M.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
+    M.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED",
+                                 "LOCAL_POSITION_NED_COV"),
     M.MAV_DATA_STREAM_RC_CHANNELS: ("RC_CHANNELS", "SERVO_OUTPUT_RAW"),
     M.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
     M.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
@@ -240,7 +242,8 @@ class TelemetryStreams:
         ready, home = self.ready(), self.home_set()
         newly_home, self._home_reported = home and not self._home_reported, home
         # what is not sent yet (ArduPilot has no local position before its EKF gives one)
-        withheld = {"HOME_POSITION": not home, "LOCAL_POSITION_NED": not ready}
+        withheld = {"HOME_POSITION": not home, "LOCAL_POSITION_NED": not ready,
+                    "LOCAL_POSITION_NED_COV": not ready}
         for peer in links:
             st = self._link(peer)
             frames: list[bytes] = []
@@ -342,7 +345,8 @@ class TelemetryStreams:
             if not self.home_set():
                 return M.MAV_RESULT_TEMPORARILY_REJECTED
             self.io.send(self.home_position(), peer)
-        elif mid == M.MAVLINK_MSG_ID_LOCAL_POSITION_NED and not self.ready():
+        elif mid in (M.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+                     M.MAVLINK_MSG_ID_LOCAL_POSITION_NED_COV) and not self.ready():
             return M.MAV_RESULT_TEMPORARILY_REJECTED
         elif _MSG_NAMES.get(mid) in FORWARDED:
             data = self._forwarded.get(_MSG_NAMES[mid])
@@ -369,6 +373,8 @@ class TelemetryStreams:
             x, y, z = enu_to_ned(tm.pos_m)
             vx, vy, vz = enu_to_ned(tm.vel_m_s)
             return M.MAVLink_local_position_ned_message(boot_ms, x, y, z, vx, vy, vz)
+        if name == "LOCAL_POSITION_NED_COV":
+            return self._local_position_cov(tm)
         if name == "GLOBAL_POSITION_INT":
             lat, lon, alt = local_enu_to_global(tm.pos_m, self.origin)
             vn = enu_to_ned(tm.vel_m_s)
@@ -432,6 +438,26 @@ class TelemetryStreams:
             frm = math.degrees(math.atan2(-w[0], -w[1])) % 360.0 if speed > 0 else 0.0
             return APM.MAVLink_wind_message(frm, speed, w[2])
         raise KeyError(name)
+
+    @staticmethod
+    def _local_position_cov(tm: Telemetry) -> Any:
+        """LOCAL_POSITION_NED_COV: the estimate (NED) with the filter's position and
+        velocity variances [m^2, m^2/s^2] on the covariance's diagonal; the entries the
+        filter does not report NaN (the whole first entry NaN, "unknown", when flying on
+        the simulator's state)."""
+        x, y, z = enu_to_ned(tm.pos_m)
+        vx, vy, vz = enu_to_ned(tm.vel_m_s)
+        cov = [math.nan] * 45
+        e = tm.ekf
+        if e is not None:
+            # the upper triangle of the 9x9 (x y z vx vy vz ax ay az) row by row: the
+            # diagonal's k-th entry is at 9k - k(k-1)/2; NED from (east, north, up)
+            sig = (*enu_to_ned(e.pos_sigma_m), *enu_to_ned(e.vel_sigma_m_s))
+            for k, s in enumerate(sig):
+                cov[9 * k - k * (k - 1) // 2] = s * s
+        return M.MAVLink_local_position_ned_cov_message(
+            int(tm.t_s * 1e6), M.MAV_ESTIMATOR_TYPE_AUTOPILOT, x, y, z, vx, vy, vz,
+            math.nan, math.nan, math.nan, cov)
 
     def _nav_output(self, tm: Telemetry) -> Any:
         """NAV_CONTROLLER_OUTPUT: the attitude flown (roll, pitch, yaw [deg]; this

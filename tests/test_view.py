@@ -36,6 +36,7 @@ from tuav_sitl.view.recording import (  # noqa: E402
     nav_event_texts,
     write_recording,
 )
+from tuavdefs.component_link import TETHER_FIX_RATE_HZ  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTROL_HZ = 250.0
@@ -66,6 +67,121 @@ def read_back(path: Path) -> tuple[Counter, set[str], dict[str, list]]:
             tether += [(_seconds(a), np.array(b[0])) for a, b in zip(t, strips, strict=True)]
     tether.sort(key=lambda x: x[0])
     return rows, static, {"tether": tether}
+
+
+def entity_column(path: Path, entity: str, column: str) -> tuple[np.ndarray, list]:
+    """(times [s], values) of one column of one entity, in time order, read back with
+    rerun's own reader."""
+    out: list[tuple[float, object]] = []
+    for chunk in RrdReader(path).stream():
+        if chunk.is_static or chunk.entity_path != "/" + entity:
+            continue
+        batch = chunk.to_record_batch()
+        names = batch.schema.names
+        t = batch.column(names.index("sim")).to_pylist()
+        v = batch.column(names.index(column)).to_pylist()
+        out += [(_seconds(a), b) for a, b in zip(t, v, strict=True)]
+    out.sort(key=lambda x: x[0])
+    return np.array([x[0] for x in out]), [x[1] for x in out]
+
+
+@pytest.fixture(scope="module")
+def denied(tmp_path_factory) -> dict:
+    """hover-gnss-loss (on the filter, fusing the winch's tether fixes) for 6 s,
+    recorded."""
+    sc = load_scenario("hover-gnss-loss").replace(duration_s=6.0)
+    result = OfflineRunner(sc).run()
+    out = tmp_path_factory.mktemp("denied")
+    rrd = write_recording(out / RECORDING_NAME, sc.name, sc, result.series)
+    return {"series": result.series, "rrd": rrd}
+
+
+def test_the_tether_fixes_are_drawn_at_their_rate(denied):
+    """world/fixes/tether: a point per fix the vehicle received (the winch's 10 Hz), at
+    the fix's sample time, where the runner handed it over, and its 3-sigma ellipsoid."""
+    s, rrd = denied["series"], denied["rrd"]
+    t, pts = entity_column(rrd, Entity.TETHER_FIX, "Points3D:positions")
+    assert len(t) == len(s["tether_fix_t"])
+    assert abs(len(t) - 6.0 * TETHER_FIX_RATE_HZ) <= 2
+    np.testing.assert_allclose(np.diff(t), 1.0 / TETHER_FIX_RATE_HZ, atol=1e-3)
+    np.testing.assert_allclose(t, s["tether_fix_t"], atol=1e-6)
+    np.testing.assert_allclose(np.array([p[0] for p in pts]), s["tether_fix_pos"],
+                               atol=1e-5)
+    # each fix near the truth at its sample time (within its own 3 sigma and 5 cm)
+    truth = np.column_stack([np.interp(t, s["t"], s["pos"][:, i]) for i in range(3)])
+    err = np.abs(np.array([p[0] for p in pts]) - truth)
+    assert (err <= 3.0 * s["tether_fix_sigma"] + 0.05).all()
+    ta, half = entity_column(rrd, Entity.TETHER_FIX + "/accuracy", "Ellipsoids3D:half_sizes")
+    assert len(ta) == len(t)
+    np.testing.assert_allclose(np.array([h[0] for h in half]), 3.0 * s["tether_fix_sigma"],
+                               rtol=1e-6)
+
+
+def test_the_estimates_ellipsoid_is_three_sigma(denied):
+    """world/estimate/ellipsoid: at every control period with an estimate, centred on
+    it, its half-sizes three standard deviations."""
+    s, rrd = denied["series"], denied["rrd"]
+    ok = np.isfinite(s["est_pos_sigma"]).all(axis=1) & np.isfinite(s["est_pos"]).all(axis=1)
+    t, half = entity_column(rrd, Entity.ELLIPSOID, "Ellipsoids3D:half_sizes")
+    _, centres = entity_column(rrd, Entity.ELLIPSOID, "Ellipsoids3D:centers")
+    assert len(t) == ok.sum() > 0.9 * len(s["t"])
+    np.testing.assert_allclose(t, s["t"][ok], atol=1e-6)
+    np.testing.assert_allclose(np.array([h[0] for h in half]), 3.0 * s["est_pos_sigma"][ok],
+                               rtol=1e-6)
+    np.testing.assert_allclose(np.array([c[0] for c in centres]), s["est_pos"][ok],
+                               atol=1e-5)
+
+
+def test_the_live_view_draws_the_tlogs_tether_fixes_and_ellipsoid(tmp_path):
+    """The live view's reading of flight.tlog: the winch's ODOMETRY (as the winch encodes
+    it) becomes world/fixes/tether with its 3-sigma ellipsoid, the companion's
+    LOCAL_POSITION_NED_COV (as its telemetry builds it) the estimate's ellipsoid, both in
+    the z-up frame; other messages are skipped, a copy per link is drawn once."""
+    import struct
+    from types import SimpleNamespace
+
+    from companion.telemetry import Telemetry, TelemetryStreams
+    from tuav_sitl.view.live import LiveView
+    from tuav_sitl.view.recording import new_stream
+    from tuavdefs import component_link as cl
+    from tuavdefs.params import SystemParams
+
+    winch, autopilot = cl.new_mavlink(cl.WINCH_COMPONENT_ID), cl.new_mavlink(1)
+    frames = []
+    fixes = [(0.1 * k, (3.0 + 0.1 * k, -2.0, 9.0), (0.04, 0.09, 0.01)) for k in range(1, 6)]
+    for t, pos, var in fixes:
+        cov = tuple(tuple(var[i] if i == j else 0.0 for j in range(3)) for i in range(3))
+        frames.append(cl.odometry_message(cl.ExternalPosition(t, pos, cov)).pack(winch))
+    est = [(0.5 * k, (1.0 * k, 2.0, 10.0), (0.3, 0.2, 0.1)) for k in range(1, 4)]
+    for t, pos, sig in est:
+        tm = Telemetry(t, pos, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.5,
+                       ekf=SimpleNamespace(pos_sigma_m=sig, vel_sigma_m_s=(0.1, 0.1, 0.1)))
+        msg = TelemetryStreams._local_position_cov(tm)
+        frames += [msg.pack(autopilot)] * 2          # sent on two links
+        frames.append(autopilot.attitude_encode(int(t * 1e3), 0, 0, 0, 0, 0, 0)
+                      .pack(autopilot))                # not drawn: skipped
+    (tmp_path / "flight.tlog").write_bytes(b"".join(struct.pack(">Q", 1) + bytes(f)
+                                                    for f in frames))
+    rrd = tmp_path / RECORDING_NAME
+    rec = new_stream("live")
+    rec.save(str(rrd))
+    view = LiveView(rec, tmp_path, SystemParams(), (47.0, 8.0, 400.0))
+    view.poll()
+    view.close()
+    rec.flush()
+    rec.disconnect()
+    t, pts = entity_column(rrd, Entity.TETHER_FIX, "Points3D:positions")
+    np.testing.assert_allclose(t, [f[0] for f in fixes], atol=1e-6)
+    np.testing.assert_allclose([p[0] for p in pts], [f[1] for f in fixes], atol=1e-5)
+    _, half = entity_column(rrd, Entity.TETHER_FIX + "/accuracy", "Ellipsoids3D:half_sizes")
+    np.testing.assert_allclose([h[0] for h in half],
+                               [3.0 * np.sqrt(f[2]) for f in fixes], rtol=1e-5)
+    t, half = entity_column(rrd, Entity.ELLIPSOID, "Ellipsoids3D:half_sizes")
+    _, centres = entity_column(rrd, Entity.ELLIPSOID, "Ellipsoids3D:centers")
+    np.testing.assert_allclose(t, [e[0] for e in est], atol=1e-6)
+    np.testing.assert_allclose([c[0] for c in centres], [e[1] for e in est], atol=1e-5)
+    np.testing.assert_allclose([h[0] for h in half], [3.0 * np.array(e[2]) for e in est],
+                               rtol=1e-5)
 
 
 @pytest.fixture(scope="module")
@@ -237,6 +353,12 @@ def test_up_view_web_serves_the_live_view_and_records(tmp_path):
     # the estimate against the truth interpolated at its instants
     assert 0 < rows.get("/plots/error/estimate_x", 0) <= rows["/" + Entity.ESTIMATE]
     assert rows.get("/" + Entity.GNSS_FIX, 0) > 0
+    # the winch's tether fixes (ODOMETRY at 10 Hz, recorded in the tlog) and the filter's
+    # ellipsoid (LOCAL_POSITION_NED_COV at 2 Hz), at their rates over the n / 50 s flown
+    flown_s = n / 50.0
+    assert 0.5 * flown_s * 10.0 <= rows.get("/" + Entity.TETHER_FIX, 0) <= flown_s * 10.0 + 5
+    assert rows.get("/" + Entity.TETHER_FIX + "/accuracy", 0) == rows["/" + Entity.TETHER_FIX]
+    assert 0.5 * flown_s * 2.0 <= rows.get("/" + Entity.ELLIPSOID, 0) <= flown_s * 2.0 + 2
     assert rows.get("/" + Entity.STATUS, 0) > 0
     assert f"{n} truth rows" in out["view_log"]
     if "shot" in out:

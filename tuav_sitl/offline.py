@@ -64,6 +64,7 @@ from tuav_sitl.offline_log import (
     SERIES,
     LineNodesLog,
     SeriesLog,
+    TetherFixLog,
     WinderReadout,
 )
 from tuav_sitl.offline_metrics import GROUND_REGIMES, compute_metrics
@@ -365,6 +366,7 @@ class OfflineRunner:
                              self.companion.filter)
         self.line_log = (LineNodesLog(sc.duration_s, int(self.plant.model.lp[L_MAXN]) + 2)
                          if self.plant.model.lumped else None)
+        self.fix_log = TetherFixLog(sc.duration_s, cl.TETHER_FIX_RATE_HZ)
         bar = ProgressBar(sc.duration_s, progress)
         faults, mission = bool(sc.faults), sc.flies_mission
         wall0 = time.perf_counter()
@@ -430,6 +432,7 @@ class OfflineRunner:
                                                       fix.cov_m2))
         if ext is not None:
             self.companion.external_position(ext)
+            self.fix_log.record(ext.t_s, ext.pos_m, ext.cov_m2)
 
     def _control_period(self, t: float) -> OnboardOutputs:
         """The control period at ``t`` [s]: the script's requests, the onboard step on what
@@ -518,6 +521,7 @@ class OfflineRunner:
             metrics["faults"] = self.fault_log
         if self.line_log is not None:
             series |= self.line_log.arrays()
+        series |= self.fix_log.arrays()
         reached = [(int(v), ts) for kind, v, ts in self.nav_events if kind is NavEvent.REACHED]
         if self._waypoints:
             metrics["waypoints_reached"] = [{"index": seq - 1, "t_s": round(ts, 3)}

@@ -4,6 +4,7 @@
 (rows, columns) array sized for the whole run (a row past its end is dropped), split into
 the run's columns at the end. :class:`LineNodesLog`: the lumped tether's nodes at
 :data:`LINE_NODES_RATE_HZ`, float32, into a (frames, points, 3) array sized the same way.
+:class:`TetherFixLog`: the winch's tether fixes as the vehicle received them.
 """
 
 from __future__ import annotations
@@ -159,3 +160,30 @@ class LineNodesLog:
         if not self.i:
             return {}
         return {"line_t": self._t[:self.i].copy(), "line_nodes": self._nodes[:self.i].copy()}
+
+
+class TetherFixLog:
+    """The winch's tether fixes the vehicle received (at most the winch's
+    :data:`tuavdefs.component_link.TETHER_FIX_RATE_HZ`, in a run of ``duration_s`` [s]):
+    their sample times [s], positions [m] and standard deviations along x, y, z [m]."""
+
+    def __init__(self, duration_s: float, rate_hz: float) -> None:
+        n = int(duration_s * rate_hz) + 2
+        self._rows = np.empty((n, 7))
+        self.i = 0
+
+    def record(self, t_s: float, pos_m: tuple[float, float, float],
+               cov_m2: tuple[tuple[float, float, float], ...]) -> None:
+        """A fix: its sample time [s], position [m] and covariance [m^2]."""
+        if self.i < len(self._rows):
+            self._rows[self.i] = (t_s, *pos_m, *(math.sqrt(cov_m2[k][k]) for k in range(3)))
+            self.i += 1
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """``tether_fix_t`` [s], ``tether_fix_pos`` [m], ``tether_fix_sigma`` [m]; none if
+        no fix came."""
+        if not self.i:
+            return {}
+        r = self._rows[:self.i]
+        return {"tether_fix_t": r[:, 0].copy(), "tether_fix_pos": r[:, 1:4].copy(),
+                "tether_fix_sigma": r[:, 4:7].copy()}

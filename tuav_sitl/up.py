@@ -376,6 +376,8 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          "viewer where there is a display (auto, the default), else or with "
                          "'web' its web viewer on a localhost URL the banner prints; every "
                          "run records recording.rrd in its folder with or without it")
+    ap.add_argument("--no-recording", action="store_true",
+                    help="no recording.rrd (nor the process that writes it); not with --view")
     out = ap.add_mutually_exclusive_group()
     out.add_argument("--headless", action="store_true",
                      help="print only errors and the log folder (no banner, no status)")
@@ -475,6 +477,9 @@ def run_up(args: argparse.Namespace) -> int:
     """Start, supervise and stop the stack; returns the exit code."""
     from tuav_sitl.view import INSTALL_HINT, available
 
+    if args.view is not None and args.no_recording:
+        print("tuav-sitl up: --view records; drop --no-recording", file=sys.stderr)
+        return 2
     if args.view is not None and not available():
         print(f"tuav-sitl up: --view: {INSTALL_HINT}", file=sys.stderr)
         return 2
@@ -636,7 +641,8 @@ def run_up(args: argparse.Namespace) -> int:
     code = 0
     from tuav_sitl.view.live import start_live_view, stop_live_view
 
-    live = start_live_view(run_dir, args.view, args.instance, h) if available() else None
+    live = (start_live_view(run_dir, args.view, args.instance, h)
+            if available() and not args.no_recording else None)
     try:
         stack.start_recorder("candump", ["-m", "tuav_sitl", "candump", "-s", "2", "--can", can,
                                          "--interval", repr(RECORDER_INTERVAL_S),

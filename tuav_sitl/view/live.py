@@ -6,13 +6,14 @@ vehicle's pose, the paid-out length, the rotor commands; the tether's tensions a
 computed from them as ``tuav-sitl plot`` imports an up run,
 :func:`tuav_sitl.up_series.build_series`; the tether's shape the lumped line's nodes of
 ``tether_nodes.csv``, or the plant's catenary) and the companion's ``flight.tlog`` (its
-estimate in ``LOCAL_POSITION_NED``, the receiver's fix in ``GPS_RAW_INT`` with its
-accuracy, ``STATUSTEXT``). Nothing in the stack waits for it: the processes write their
-files whatever it does, and when it falls behind it takes what has accumulated in one
-chunk. Its sinks are always the run folder's ``recording.rrd``, and with ``--viewer
-native`` Rerun's native viewer (spawned), with ``--viewer web`` a gRPC server on
-127.0.0.1 and Rerun's web viewer on a localhost URL. SIGTERM (or SIGINT) ends it after a
-last read of both files.
+estimate in ``LOCAL_POSITION_NED``, with its covariance in ``LOCAL_POSITION_NED_COV``; the
+receiver's fix in ``GPS_RAW_INT`` with its accuracy; the winch's tether fix, ``ODOMETRY``,
+with its covariance; ``STATUSTEXT``), every :data:`POLL_S`. Nothing in the stack waits for
+it: the processes write their files whatever it does, and when it falls behind it takes
+what has accumulated in one chunk. Its sinks are always the run folder's
+``recording.rrd``, and with ``--viewer native`` Rerun's native viewer (spawned), with
+``--viewer web`` a gRPC server on 127.0.0.1 and Rerun's web viewer on a localhost URL.
+SIGTERM (or SIGINT) ends it after a last read of both files.
 
 ``python -m tuav_sitl.view.live RUN_DIR [--viewer none|native|web] ...``
 """
@@ -23,7 +24,6 @@ import argparse
 import contextlib
 import os
 import signal
-import struct
 import subprocess
 import sys
 import time
@@ -39,14 +39,19 @@ from tuav_sitl.view import RECORDING_NAME, ViewUnavailableError, rerun_module
 TRUTH_KEPT_S = 10.0
 #: What the estimates' comparison with the truth logs (the error plots only).
 ERROR_PLOT_COLUMNS = ("errors",)
-#: How often the files are read [s of wall time].
-POLL_S = 0.1
+#: How often the files are read [s of wall time]: each read logs what came meanwhile in
+#: one call per entity, so the recorder's cost is mostly per read, not per row.
+POLL_S = 0.5
+#: The tlog's messages the view draws (the others are skipped undecoded): the estimate
+#: (LOCAL_POSITION_NED, with its covariance LOCAL_POSITION_NED_COV), the fixes (GPS_RAW_INT,
+#: the winch's ODOMETRY), the messages (STATUSTEXT).
+TLOG_MESSAGES = ("LOCAL_POSITION_NED", "LOCAL_POSITION_NED_COV", "GPS_RAW_INT", "ODOMETRY",
+                 "STATUSTEXT")
 #: Truth rows handed to the logger at most at once (a backlog is logged in such chunks).
 MAX_CHUNK_ROWS = 2000
 #: The STATUSTEXT severities (MAV_SEVERITY) at or below which a message is an error, a
 #: warning.
 _SEVERITY_ERROR, _SEVERITY_WARNING, _SEVERITY_DEBUG = 3, 4, 7
-_TLOG_STAMP = struct.Struct(">Q")
 _MAGIC_V2, _MAGIC_V1 = 0xFD, 0xFE
 
 
@@ -96,23 +101,33 @@ class TruthTail(LineTail):
 
     def read(self, max_rows: int = MAX_CHUNK_ROWS) -> dict[str, np.ndarray] | None:
         """The columns of the complete rows written since the last call (at most
-        ``max_rows``; None if there are none yet)."""
-        rows: list[list[float]] = []
-        for line in self.lines(max_rows + (self.header is None)):
-            parts = line.strip().split(",")
-            if self.header is None:
-                self.header = parts
-                continue
-            if len(parts) != len(self.header):
-                continue
-            try:
-                rows.append([float(p) for p in parts])
-            except ValueError:
-                continue
-        if not rows or self.header is None:
+        ``max_rows``; None if there are none yet). Rows that are not numbers, or not as
+        many as the header's columns, are skipped."""
+        lines = self.lines(max_rows + (self.header is None))
+        if self.header is None and lines:
+            self.header = lines.pop(0).strip().split(",")
+        if not lines or self.header is None:
             return None
-        data = np.array(rows, dtype=float)
+        width = len(self.header)
+        try:     # the whole chunk converted at once (numpy's parser, not a float() a value)
+            data = np.array(",".join(lines).split(","), dtype=float).reshape(-1, width)
+        except ValueError:
+            data = np.array([row for row in (_floats(line, width) for line in lines)
+                             if row is not None], dtype=float).reshape(-1, width)
+        if not len(data):
+            return None
         return {name: np.ascontiguousarray(data[:, i]) for i, name in enumerate(self.header)}
+
+
+def _floats(line: str, width: int) -> list[float] | None:
+    """The ``width`` numbers of a CSV line, or None."""
+    parts = line.strip().split(",")
+    if len(parts) != width:
+        return None
+    try:
+        return [float(p) for p in parts]
+    except ValueError:
+        return None
 
 
 class NodesTail(LineTail):
@@ -149,12 +164,15 @@ class NodesTail(LineTail):
 
 class TlogTail:
     """The messages of a growing ``.tlog`` (each frame after its 8-byte big-endian
-    microsecond stamp), decoded by pymavlink as they are completed."""
+    microsecond stamp), decoded by pymavlink as they are completed; with ``wanted``
+    (message names) only those are decoded, the others skipped by their header's id."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, wanted: tuple[str, ...] | None = None) -> None:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
         self.path = path
+        self.wanted = (None if wanted is None else
+                       frozenset(getattr(mavlink, f"MAVLINK_MSG_ID_{n}") for n in wanted))
         self._file: Any = None
         self._buf = bytearray()
         self._mav = mavlink.MAVLink(None)
@@ -170,24 +188,27 @@ class TlogTail:
         self._buf += self._file.read()
         out: list[Any] = []
         buf = self._buf
+        wanted = self.wanted
         i = 0
-        while len(buf) - i >= 8 + 3:
+        while len(buf) - i >= 8 + 10:
             magic = buf[i + 8]
             if magic == _MAGIC_V2:
-                if len(buf) - i < 8 + 3:
-                    break
                 n = 12 + buf[i + 9] + (13 if buf[i + 10] & 0x01 else 0)
+                msg_id = buf[i + 15] | buf[i + 16] << 8 | buf[i + 17] << 16
             elif magic == _MAGIC_V1:
                 n = 8 + buf[i + 9]
+                msg_id = buf[i + 13]
             else:
                 i += 1           # lost the framing: look for the next frame
                 continue
             if len(buf) - i < 8 + n:
                 break
-            frame = bytes(buf[i + 8:i + 8 + n])
+            start = i + 8
             i += 8 + n
+            if wanted is not None and msg_id not in wanted:
+                continue
             try:
-                msg = self._mav.decode(bytearray(frame))
+                msg = self._mav.decode(bytearray(buf[start:start + n]))
             except Exception:   # a corrupt frame: skipped as a ground station would
                 continue
             if msg is not None:
@@ -209,17 +230,19 @@ class LiveView:
     def __init__(self, rec: Any, run_dir: Path, params: Any,
                  home: tuple[float, float, float]) -> None:
         from sitl.truth_log import NODES_NAME
+        from tuav_sitl.up_series import build_series
         from tuav_sitl.view.recording import SceneLogger
         from tuavdefs.params import TetherModel
 
         self.params = params
         self.home = home
+        self._build_series = build_series   # (imported here: not in the flight's time)
         lumped = params.tether.kind == TetherModel.LUMPED
         self.logger = SceneLogger(rec, params, lumped=lumped,
                                   ground_half_m=_ground_half_m(params))
         self.truth = TruthTail(run_dir / "truth.csv")
         self.nodes = NodesTail(run_dir / NODES_NAME) if lumped else None
-        self.tlog = TlogTail(run_dir / "flight.tlog")
+        self.tlog = TlogTail(run_dir / "flight.tlog", wanted=TLOG_MESSAGES)
         self.t_s = 0.0            # the latest simulated time seen [s]
         self.rows = 0
         self.vehicle_system = 1
@@ -231,14 +254,12 @@ class LiveView:
 
     def poll(self) -> int:
         """Log what the files hold beyond the last call; returns the truth rows logged."""
-        from tuav_sitl.up_series import build_series
-
         logged = 0
         while True:
             chunk = self.truth.read()
             if chunk is None:
                 break
-            series = build_series(chunk, self.params)
+            series = self._build_series(chunk, self.params)
             self.logger.log_series(series)
             self._keep_truth(series["t"], series["pos"])
             self.t_s = float(series["t"][-1])
@@ -254,14 +275,16 @@ class LiveView:
         return logged
 
     def _messages(self, msgs: list[Any]) -> None:
-        from tuav_sitl.view.recording import Entity, LogLevel
+        from tuav_sitl.view.recording import Entity
+        from tuavdefs.component_link import external_position
         from tuavdefs.frames import global_to_local_enu
 
         est_t: list[float] = []
         est: list[tuple[float, float, float]] = []
-        fix_t: list[float] = []
-        fix: list[tuple[float, float, float]] = []
-        acc: list[tuple[float, float, float]] = []
+        cov_t: list[float] = []
+        cov: list[tuple[float, ...]] = []
+        fixes: dict[str, tuple[list[float], list[Any], list[Any]]] = {
+            Entity.GNSS_FIX: ([], [], []), Entity.TETHER_FIX: ([], [], [])}
         for msg in msgs:
             kind = msg.get_type()
             if msg.get_srcSystem() != self.vehicle_system:
@@ -276,35 +299,57 @@ class LiveView:
             if kind == "LOCAL_POSITION_NED" and msg.get_srcComponent() == 1:
                 est_t.append(boot * 1e-3)
                 est.append((msg.y, msg.x, -msg.z))      # NED to the z-up frame
+            elif kind == "LOCAL_POSITION_NED_COV":
+                c = msg.covariance     # the diagonal's x, y, z (NED) [m^2]: index 9k - k(k-1)/2
+                cov_t.append(msg.time_usec * 1e-6)
+                cov.append((msg.y, msg.x, -msg.z, c[9], c[0], c[17]))
+            elif kind == "ODOMETRY":   # the winch's tether fix (compid 169)
+                fix = external_position(msg)
+                if fix is not None:
+                    ts, pos, acc = fixes[Entity.TETHER_FIX]
+                    ts.append(fix.t_s)
+                    pos.append(fix.pos_m)
+                    acc.append([fix.cov_m2[i][i] ** 0.5 for i in range(3)])
             elif kind == "GPS_RAW_INT" and msg.fix_type >= 3:
-                t = msg.time_usec * 1e-6 or self.t_s     # simulated time [us]
-                fix_t.append(t)
-                fix.append(global_to_local_enu(msg.lat * 1e-7, msg.lon * 1e-7,
+                ts, pos, acc = fixes[Entity.GNSS_FIX]
+                ts.append(msg.time_usec * 1e-6 or self.t_s)     # simulated time [us]
+                pos.append(global_to_local_enu(msg.lat * 1e-7, msg.lon * 1e-7,
                                                msg.alt * 1e-3, self.home))
                 h = getattr(msg, "h_acc", 0) * 1e-3
                 v = getattr(msg, "v_acc", 0) * 1e-3
                 acc.append((h, h, v))
             elif kind == "STATUSTEXT":
-                key = (msg.get_srcComponent(), bytes(msg.get_payload()))
-                if key in self._recent_texts:
-                    continue
-                self._recent_texts = [*self._recent_texts[-15:], key]
-                sev = int(msg.severity)
-                level = (LogLevel.ERROR if sev <= _SEVERITY_ERROR else
-                         LogLevel.WARN if sev == _SEVERITY_WARNING else
-                         LogLevel.DEBUG if sev >= _SEVERITY_DEBUG else LogLevel.INFO)
-                text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode(
-                    "utf-8", "replace")
-                self.logger.log_text(self.t_s, text.rstrip("\x00"), level)
+                self._status_text(msg)
             if boot is not None and kind != "STATUSTEXT":
                 self.t_s = max(self.t_s, boot * 1e-3)
         if est:
             self.logger.log_series({"t": np.array(est_t), "est_pos": np.array(est)})
             self._pending_est += list(zip(est_t, est, strict=True))
+        if cov:
+            c = np.array(cov)
+            self.logger.log_estimate_ellipsoids(np.array(cov_t), c[:, :3],
+                                                np.sqrt(c[:, 3:]))
         self._estimate_errors()
-        if fix:
-            self.logger.log_fixes(Entity.GNSS_FIX, np.array(fix_t), np.array(fix),
-                                  accuracy_m=np.array(acc))
+        for path, (ts, pos, acc) in fixes.items():
+            if ts:
+                self.logger.log_fixes(path, np.array(ts), np.array(pos),
+                                      accuracy_m=np.array(acc))
+
+    def _status_text(self, msg: Any) -> None:
+        """A STATUSTEXT into the text log (once, though the tlog has it once per link)."""
+        from tuav_sitl.view.recording import LogLevel
+
+        key = (msg.get_srcComponent(), bytes(msg.get_payload()))
+        if key in self._recent_texts:
+            return
+        self._recent_texts = [*self._recent_texts[-15:], key]
+        sev = int(msg.severity)
+        level = (LogLevel.ERROR if sev <= _SEVERITY_ERROR else
+                 LogLevel.WARN if sev == _SEVERITY_WARNING else
+                 LogLevel.DEBUG if sev >= _SEVERITY_DEBUG else LogLevel.INFO)
+        text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode(
+            "utf-8", "replace")
+        self.logger.log_text(self.t_s, text.rstrip("\x00"), level)
 
     def _keep_truth(self, t: np.ndarray, pos: np.ndarray) -> None:
         """The truth's last :data:`TRUTH_KEPT_S` seconds, to compare the estimates with."""
@@ -462,6 +507,7 @@ def main(argv: list[str] | None = None) -> int:
     where = (web_viewer_url(args.web_port, url) if args.viewer == "web" else
              "the native viewer" if args.viewer == "native" else "no viewer")
     print(f"live view: recording {run_dir / RECORDING_NAME}; {where}", flush=True)
+    cpu0 = time.process_time()     # (the imports and the viewer's start before it)
     while not stop["now"]:
         view.poll()
         time.sleep(POLL_S)
@@ -469,7 +515,8 @@ def main(argv: list[str] | None = None) -> int:
     view.poll()
     view.close()
     rec.flush()
-    print(f"live view: {view.rows} truth rows up to {view.t_s:.2f} s recorded", flush=True)
+    print(f"live view: {view.rows} truth rows up to {view.t_s:.2f} s recorded; "
+          f"{time.process_time() - cpu0:.2f} s of CPU after the start", flush=True)
     if args.viewer == "web":
         with contextlib.suppress(Exception):
             rec.disconnect()

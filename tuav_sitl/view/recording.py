@@ -315,15 +315,21 @@ class SceneLogger:
                 rec.send_columns(Entity.ESTIMATE, indexes=self._time(t[ok]),
                                  columns=rr.Points3D.columns(positions=est[ok]))
             if "est_pos_sigma" in s:
-                sig = np.asarray(s["est_pos_sigma"], float)
-                ok &= _finite_rows(sig)
-                if ok.any():
-                    rec.send_columns(Entity.ELLIPSOID, indexes=self._time(t[ok]),
-                                     columns=rr.Ellipsoids3D.columns(
-                                         centers=est[ok], half_sizes=3.0 * sig[ok]))
+                self.log_estimate_ellipsoids(t, est, np.asarray(s["est_pos_sigma"], float))
         if "pos" in s:
             self._shapes_and_path(t, np.asarray(s["pos"], float),
                                   np.asarray(s["length"], float) if "length" in s else None)
+
+    def log_estimate_ellipsoids(self, t: np.ndarray, est: np.ndarray,
+                                sigma: np.ndarray) -> None:
+        """The estimate's 3-sigma ellipsoids: times [s], centres (the estimate) [m] and
+        its position's standard deviations along x, y, z [m] (rows with a NaN skipped)."""
+        t, est, sigma = (np.asarray(a, float) for a in (t, est, sigma))
+        ok = _finite_rows(est, sigma)
+        if ok.any():
+            self.rec.send_columns(Entity.ELLIPSOID, indexes=self._time(t[ok]),
+                                  columns=self.rr.Ellipsoids3D.columns(
+                                      centers=est[ok], half_sizes=3.0 * sigma[ok]))
 
     def _error_plots(self, t: np.ndarray, s: Mapping[str, np.ndarray]) -> None:
         for path, a, b, axis in ERROR_PLOTS:
@@ -443,7 +449,8 @@ def log_run(logger: SceneLogger, series: Mapping[str, np.ndarray],
         logger.log_line_nodes(series["line_t"], series["line_nodes"])
     for name, path in (("gnss_fix", Entity.GNSS_FIX), ("tether_fix", Entity.TETHER_FIX)):
         if f"{name}_t" in series:
-            logger.log_fixes(path, series[f"{name}_t"], series[f"{name}_pos"])
+            logger.log_fixes(path, series[f"{name}_t"], series[f"{name}_pos"],
+                             accuracy_m=series.get(f"{name}_sigma"))
     for t, text, level in events:
         logger.log_text(t, text, level)
 
