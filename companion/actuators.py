@@ -14,12 +14,15 @@ import math
 import numpy as np
 
 from tuavdefs.airframe import allocation_matrix, rotor_speed_setpoints
-from tuavdefs.jit import njit
+from tuavdefs.jit import F64, array, njit, record, vec
 from tuavdefs.params import VehicleParams
 
 
 class ActuatorModel:
     """Modelled rotor speeds and the wrench they make."""
+
+    #: The type of :attr:`packed` (:class:`tuavdefs.jit.Signature` texts).
+    RECORD = record(vec(4, F64), array(2), array(), array())
 
     def __init__(self, vehicle: VehicleParams, dt_s: float,
                  initial_speed_rad_s: float = 0.0) -> None:
@@ -44,6 +47,16 @@ class ActuatorModel:
     def advance(self) -> None:
         """Move the modelled speeds one control step toward the held set-points."""
         advance_kernel(self.speeds, self._setpoints, self._decay)
+
+    @property
+    def packed(self) -> tuple[tuple[float, float, float, float], np.ndarray, np.ndarray,
+                              np.ndarray]:
+        """This model for a compiled step (:attr:`RECORD`): (k_f, the lag's decay over a
+        step, the least and greatest rotor speed [rad/s]), the allocation matrix, the
+        modelled speeds and the held set-points [rad/s] (updated in place)."""
+        v = self.vehicle
+        return ((v.rotor_thrust_coeff, self._decay, v.rotor_speed_min_rad_s,
+                 v.rotor_speed_max_rad_s), self._a, self.speeds, self._setpoints)
 
     def wrench(self) -> tuple[float, tuple[float, float, float]]:
         """(collective thrust [N], body torques [N m]) of the modelled rotor speeds."""

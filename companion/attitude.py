@@ -34,7 +34,7 @@ from scipy.linalg import expm
 
 from companion.gains import FlightControlParams
 from tuavdefs.frames import wrap_pi
-from tuavdefs.jit import njit
+from tuavdefs.jit import array, njit, record
 
 Vec3 = tuple[float, float, float]
 Mat3 = tuple[float, float, float, float, float, float, float, float, float]  # row-major
@@ -157,6 +157,9 @@ def _mtv(m: Mat3, x0: float, x1: float, x2: float) -> tuple[float, float, float]
 class AttitudeController:
     """Backstepping attitude controller with a command filter on the desired attitude."""
 
+    #: The type of :attr:`packed` (:class:`tuavdefs.jit.Signature` texts).
+    RECORD = record(array(), array(), array(2), array(), array(), array())
+
     def __init__(self, gains: FlightControlParams, inertia_diag: Vec3,
                  rate_damping_n_m_s: float, dt_s: float) -> None:
         self.gains = gains
@@ -229,12 +232,19 @@ class AttitudeController:
         """
         f = self.filter
         achieved = achieved_torque_n_m is not None
-        r = attitude_law(self.params(), f.coeffs, f.state, self.xi_eta, self.xi_w,
-                         self.tau_hat, *attitude_rad,
-                          *body_rates_rad_s, *desired_rad, f.initialised, achieved,
-                          *(achieved_torque_n_m if achieved else (0.0, 0.0, 0.0)))
+        r = attitude_law(self.packed, _vec3(attitude_rad), _vec3(body_rates_rad_s),
+                         _vec3(desired_rad), f.initialised, achieved,
+                         _vec3(achieved_torque_n_m) if achieved else (0.0, 0.0, 0.0))
         f.initialised = True
         return attitude_output(r)
+
+    @property
+    def packed(self) -> tuple[np.ndarray, ...]:
+        """What :func:`attitude_law` takes of this controller (:attr:`RECORD`): the packed
+        parameters (:meth:`params`), the command filter's coefficients and state, and
+        xi_eta, xi_w, tau_hat (the states updated in place)."""
+        f = self.filter
+        return self.params(), f.coeffs, f.state, self.xi_eta, self.xi_w, self.tau_hat
 
 
 def attitude_output(r: tuple[Any, ...]) -> AttitudeOutput:
@@ -242,19 +252,29 @@ def attitude_output(r: tuple[Any, ...]) -> AttitudeOutput:
     return AttitudeOutput._make(r)
 
 
+def _vec3(v: Any) -> Vec3:
+    """Three floats as a tuple (a compiled law's vector)."""
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
 @njit
-def attitude_law(p: np.ndarray, fc: np.ndarray, fs: np.ndarray, xi_eta: np.ndarray,
-                 xi_w: np.ndarray, tau_hat: np.ndarray, eta0: float, eta1: float,
-                 eta2: float, om0: float, om1: float, om2: float, des0: float,
-                 des1: float, des2: float,
-                 initialised: bool, achieved: bool, ta0: float, ta1: float, ta2: float
+def attitude_law(controller: tuple[np.ndarray, ...], eta: Vec3, omega: Vec3,
+                 desired: Vec3, initialised: bool, achieved: bool, tau_achieved: Vec3
                  ) -> tuple[Any, ...]:
-    """One step of :class:`AttitudeController` (the law of the module docstring), in
-    scalars: advances the command filter ``fs`` (started at rest at the desired attitude
-    unless ``initialised``), the compensation ``xi_eta``, ``xi_w`` and the disturbance-
-    torque estimate ``tau_hat`` in place; returns the fields of an :class:`AttitudeOutput`.
-    ``p`` = (J, c, K3, K4, decay of xi_w, decay of xi_eta over one step, the step [s],
-    Gamma_tau, the bound on tau_hat)."""
+    """One step of :class:`AttitudeController` (the law of the module docstring) for the
+    attitude ``eta`` (Z-Y-X Euler angles) [rad], body rates ``omega`` [rad/s] and the
+    desired attitude [rad]; ``controller`` is its :attr:`~AttitudeController.packed`
+    record: ``p`` = (J, c, K3, K4, decay of xi_w, decay of xi_eta over one step, the step
+    [s], Gamma_tau, the bound on tau_hat), the command filter's coefficients ``fc`` and
+    state ``fs`` (started at rest at the desired attitude unless ``initialised``), the
+    compensation ``xi_eta``, ``xi_w`` and the disturbance-torque estimate ``tau_hat``,
+    the states advanced in place. ``tau_achieved`` [N m] is the torque the rotors give
+    (when ``achieved``). Returns the fields of an :class:`AttitudeOutput`."""
+    p, fc, fs, xi_eta, xi_w, tau_hat = controller
+    eta0, eta1, eta2 = eta
+    om0, om1, om2 = omega
+    des0, des1, des2 = desired
+    ta0, ta1, ta2 = tau_achieved
     j0, j1, j2, c = p[0], p[1], p[2], p[3]
     k30, k31, k32, k40, k41, k42 = p[4], p[5], p[6], p[7], p[8], p[9]
     if initialised:

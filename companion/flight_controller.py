@@ -7,7 +7,9 @@ reports), the backstepping position loop, the command-filtered attitude loop, th
 the controller's model of its own motors (docs/control.md).
 
 One step is one compiled call (:func:`flight_step`) through the same kernels the
-components run on their own, on their parameters and states.
+components run on their own, on their parameters and states: the period's inputs as one
+packed record of numbers (:data:`IN_*` indices) and one of flags (:data:`FL_*`), then each
+component's public packed view (its ``packed`` record), its arrays updated in place.
 """
 
 from __future__ import annotations
@@ -24,10 +26,9 @@ from companion.reference import RefSample
 from companion.tether_model import TetherModel, WinchReport, estimate_kernel
 from tuavdefs.airframe import Mixer, mix_kernel, rotor_speed_setpoints
 from tuavdefs.frames import Quat, Vec3, quat_to_euler, quat_to_euler_kernel, quat_to_matrix_kernel
-from tuavdefs.jit import entry_point, njit
+from tuavdefs.jit import BOOL, Signature, entry_point, njit, vec
 from tuavdefs.params import TetherParams, VehicleParams
 
-_ZERO3 = (0.0, 0.0, 0.0)
 #: Records built as the tuples they are (tuple.__new__), without their Python-level
 #: constructors: the step's results, every control period
 _new = tuple.__new__
@@ -52,6 +53,21 @@ class FlightStep(NamedTuple):
     tether_force_est_n: Vec3
 
 
+#: :func:`flight_step`'s period inputs (a tuple of floats), by index: the step [s], the
+#: vehicle's position [m], velocity [m/s], attitude quaternion (w, x, y, z) and body rates
+#: [rad/s], the reference's position, velocity, acceleration and yaw [rad], the winch's
+#: paid-out length at the step [m] and its tension [N] (when measured).
+(IN_DT, IN_POS, IN_VEL, IN_QUAT, IN_RATES, IN_REF_POS, IN_REF_VEL, IN_REF_ACC, IN_REF_YAW,
+ IN_LENGTH, IN_TENSION, N_IN) = (0, 1, 4, 7, 11, 14, 17, 20, 23, 24, 25, 26)
+#: :func:`flight_step`'s flags (a tuple of bools), by index: the tension is measured, the
+#: tether model is on, the command filter was initialised, the motors are armed.
+FL_MEASURED, FL_USE_TETHER, FL_INITIALISED, FL_ARMED, N_FLAGS = range(5)
+#: :func:`flight_step`'s (and :func:`flight_commands`') arguments, declared once.
+STEP_SIGNATURE = Signature(vec(N_IN), vec(N_FLAGS, BOOL), TetherModel.RECORD,
+                           PositionController.RECORD, AttitudeController.RECORD,
+                           Mixer.RECORD, ActuatorModel.RECORD)
+
+
 class FlightController:
     """Reference + state -> rotor commands, at ``gains.rate_hz``."""
 
@@ -73,11 +89,8 @@ class FlightController:
         # load (or compile) the step's machine code now, not at the first control step (a
         # process with deadlines must not wait for it there), and call it without numba's
         # dispatch: the arguments' types never change
-        at = (0.0, 0.0, 10.0)
-        example = (self.dt_s, *at, *_ZERO3, 1.0, 0.0, 0.0, 0.0, *_ZERO3, *at, *_ZERO3,
-                   *_ZERO3, 0.0, 12.0, True, 1.0, True, False, True, *self._components())
-        self._step = entry_point(flight_step, *example)
-        self._commands = entry_point(flight_commands, example)
+        self._step = entry_point(flight_step, STEP_SIGNATURE)
+        self._commands = entry_point(flight_commands, STEP_SIGNATURE)
 
     def set_gains(self, gains: FlightControlParams) -> None:
         """Fly with ``gains`` from the next step on (a ground station changed a parameter),
@@ -114,76 +127,68 @@ class FlightController:
                  armed: bool = True) -> tuple[float, float, float, float]:
         """The rotor commands of :meth:`update` (the same step, the same states after
         it) without its diagnostics, which the control loop does not need."""
-        return self._commands(self._arguments(t_s, state, ref, armed))
+        return self._commands(*self._arguments(t_s, state, ref, armed))
 
     def _arguments(self, t_s: float, state: VehicleState, ref: RefSample, armed: bool
                    ) -> tuple[Any, ...]:
-        """:func:`flight_step`'s arguments for the step at ``t_s`` [s]; the command
-        filter counts as initialised from then on."""
+        """:func:`flight_step`'s arguments (:data:`STEP_SIGNATURE`) for the step at ``t_s``
+        [s]; the command filter counts as initialised from then on."""
         g, winch = self.gains, self.winch
         tension = winch.tension_n if g.use_measured_tension else None
         measured = tension is not None
         f = self.attitude.filter
-        args = (self.dt_s, *state.pos_m, *state.vel_m_s, *state.quat, *state.rates_rad_s,
-                *ref.pos_m, *ref.vel_m_s, *ref.acc_m_s2, ref.yaw_rad, winch.length_at(t_s),
-                measured, tension if measured else 0.0, g.use_tether_model, f.initialised,
-                bool(armed), *self._components())
+        inputs = (self.dt_s, *state.pos_m, *state.vel_m_s, *state.quat, *state.rates_rad_s,
+                  *ref.pos_m, *ref.vel_m_s, *ref.acc_m_s2, ref.yaw_rad, winch.length_at(t_s),
+                  tension if measured else 0.0)
+        flags = (measured, g.use_tether_model, f.initialised, bool(armed))
         f.initialised = True
-        return args
-
-    def _components(self) -> tuple[Any, ...]:
-        """What :func:`flight_step` takes from the components: their scalar parameters,
-        then their packed parameters and states (arrays, updated in place)."""
-        tm, pc, ac, mx, act = (self.tether_model, self.position, self.attitude, self.mixer,
-                               self.actuators)
-        f, v = ac.filter, act.vehicle
-        return (tm.w, tm.taut_stiffness_n, v.rotor_thrust_coeff, act._decay,
-                v.rotor_speed_min_rad_s, v.rotor_speed_max_rad_s, pc.params(), pc._state,
-                ac.params(), f.coeffs, f.state, ac.xi_eta, ac.xi_w, ac.tau_hat, mx._inv,
-                mx.params(),
-                act._a, act.speeds, act._setpoints)
+        return (inputs, flags, self.tether_model.packed, self.position.packed,
+                self.attitude.packed, self.mixer.packed, self.actuators.packed)
 
 
 @njit
-def flight_step(dt_s: float, px: float, py: float, pz: float, vx: float, vy: float,
-                vz: float, qw: float, qx: float, qy: float, qz: float, wx: float, wy: float,
-                wz: float, rpx: float, rpy: float, rpz: float, rvx: float, rvy: float,
-                rvz: float, rax: float, ray: float, raz: float, ref_yaw: float,
-                length_m: float, measured: bool, tension_n: float, use_tether: bool,
-                initialised: bool, armed: bool, w_n_m: float, taut_stiffness_n: float,
-                kf: float, decay: float, speed_min: float, speed_max: float,
-                pos_p: np.ndarray, pos_s: np.ndarray, att_p: np.ndarray,
-                filt_c: np.ndarray, filt_s: np.ndarray, xi_eta: np.ndarray,
-                xi_w: np.ndarray, tau_hat: np.ndarray, mix_inv: np.ndarray, mix_p: np.ndarray,
-                alloc: np.ndarray, speeds: np.ndarray, setpoints: np.ndarray
-                ) -> tuple[Any, ...]:
-    """:meth:`FlightController.update` in scalars, on the components' packed parameters
-    and states (updated in place): the onboard tether model, the modelled rotors' wrench,
-    the position loop, the attitude loop, the mixer and the motor model's step. Returns
-    (commands, mixer saturated, position_law's and attitude_law's results, tether force)."""
-    q = (qw, qx, qy, qz)
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = quat_to_matrix_kernel(q)
+def flight_step(inputs: tuple[float, ...], flags: tuple[bool, ...],
+                tether: tuple[float, float], position: tuple[np.ndarray, np.ndarray],
+                attitude: tuple[np.ndarray, ...], mixer: tuple[np.ndarray, np.ndarray],
+                actuators: tuple[Any, ...]) -> tuple[Any, ...]:
+    """:meth:`FlightController.update` on the period's ``inputs`` and ``flags``
+    (:data:`IN_*`, :data:`FL_*`) and the components' packed records (their arrays updated
+    in place): the onboard tether model, the modelled rotors' wrench, the position loop,
+    the attitude loop, the mixer and the motor model's step. Returns (commands, mixer
+    saturated, position_law's and attitude_law's results, tether force)."""
+    dt_s = inputs[IN_DT]
+    pos = (inputs[IN_POS], inputs[IN_POS + 1], inputs[IN_POS + 2])
+    vel = (inputs[IN_VEL], inputs[IN_VEL + 1], inputs[IN_VEL + 2])
+    q = (inputs[IN_QUAT], inputs[IN_QUAT + 1], inputs[IN_QUAT + 2], inputs[IN_QUAT + 3])
+    rates = (inputs[IN_RATES], inputs[IN_RATES + 1], inputs[IN_RATES + 2])
+    ref_pos = (inputs[IN_REF_POS], inputs[IN_REF_POS + 1], inputs[IN_REF_POS + 2])
+    ref_vel = (inputs[IN_REF_VEL], inputs[IN_REF_VEL + 1], inputs[IN_REF_VEL + 2])
+    ref_acc = (inputs[IN_REF_ACC], inputs[IN_REF_ACC + 1], inputs[IN_REF_ACC + 2])
+    kf, decay, speed_min, speed_max = actuators[0]
+    alloc, speeds, setpoints = actuators[1], actuators[2], actuators[3]
+    rotation = quat_to_matrix_kernel(q)
     ftx, fty, ftz = 0.0, 0.0, 0.0
-    if use_tether:
-        ftx, fty, ftz, _, _, _ = estimate_kernel(w_n_m, taut_stiffness_n, px, py, pz,
-                                                 length_m, measured, tension_n)
+    if flags[FL_USE_TETHER]:
+        ftx, fty, ftz, _, _, _ = estimate_kernel(tether[0], tether[1], pos[0], pos[1],
+                                                 pos[2], inputs[IN_LENGTH],
+                                                 flags[FL_MEASURED], inputs[IN_TENSION])
     u_ach, ta0, ta1, ta2 = wrench_kernel(alloc, kf, speeds)
-    po = position_law(pos_p, pos_s, dt_s, px, py, pz, vx, vy, vz, rpx, rpy, rpz, rvx, rvy,
-                      rvz, rax, ray, raz, ref_yaw, r00, r01, r02, r10, r11, r12, r20, r21,
-                      r22, ftx, fty, ftz, True, u_ach)
-    roll, pitch, yaw = quat_to_euler_kernel(q)
-    des_roll, des_pitch, des_yaw = po[1]
-    ao = attitude_law(att_p, filt_c, filt_s, xi_eta, xi_w, tau_hat, roll, pitch, yaw, wx,
-                      wy, wz, des_roll, des_pitch, des_yaw, initialised, True, ta0, ta1, ta2)
+    po = position_law(position, dt_s, pos, vel, ref_pos, ref_vel, ref_acc,
+                      inputs[IN_REF_YAW], rotation, (ftx, fty, ftz), True, u_ach)
+    ao = attitude_law(attitude, quat_to_euler_kernel(q), rates, po[1],
+                      flags[FL_INITIALISED], True, (ta0, ta1, ta2))
     tx, ty, tz = ao[0]
-    c0, c1, c2, c3, saturated = mix_kernel(mix_inv, mix_p, po[0], tx, ty, tz)
-    rotor_speed_setpoints(setpoints, c0, c1, c2, c3, armed, speed_min, speed_max)
+    c0, c1, c2, c3, saturated = mix_kernel(mixer[0], mixer[1], po[0], tx, ty, tz)
+    rotor_speed_setpoints(setpoints, c0, c1, c2, c3, flags[FL_ARMED], speed_min, speed_max)
     advance_kernel(speeds, setpoints, decay)
     return (c0, c1, c2, c3), saturated, po, ao, (ftx, fty, ftz)
 
 
 @njit
-def flight_commands(args: tuple[Any, ...]) -> tuple[float, float, float, float]:
-    """``flight_step(*args)`` (the same updates in place) returning only the rotor
-    commands: no diagnostics to hand back to Python."""
-    return flight_step(*args)[0]
+def flight_commands(inputs: tuple[float, ...], flags: tuple[bool, ...],
+                    tether: tuple[float, float], position: tuple[np.ndarray, np.ndarray],
+                    attitude: tuple[np.ndarray, ...], mixer: tuple[np.ndarray, np.ndarray],
+                    actuators: tuple[Any, ...]) -> tuple[float, float, float, float]:
+    """:func:`flight_step` (the same updates in place) returning only the rotor commands:
+    no diagnostics to hand back to Python."""
+    return flight_step(inputs, flags, tether, position, attitude, mixer, actuators)[0]

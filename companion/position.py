@@ -34,7 +34,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from companion.gains import FlightControlParams
-from tuavdefs.jit import njit
+from tuavdefs.jit import array, njit, record
 
 Vec3 = tuple[float, float, float]
 
@@ -65,6 +65,9 @@ class PositionController:
     The gains and limits are packed for the compiled law (:func:`position_law`), again
     whenever one of the attributes they come from is replaced.
     """
+
+    #: The type of :attr:`packed` (:class:`tuavdefs.jit.Signature` texts).
+    RECORD = record(array(), array())
 
     def __init__(self, gains: FlightControlParams, mass_kg: float, gravity_m_s2: float,
                  max_total_thrust_n: float, min_total_thrust_n: float = 0.0,
@@ -134,13 +137,20 @@ class PositionController:
         :class:`companion.actuators.ActuatorModel`); without it the limited command is
         taken as achieved.
         """
-        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation
         achieved = achieved_thrust_n is not None
-        r = position_law(self.params(), self._state, dt_s, *pos, *vel, *ref_pos, *ref_vel,
-                          *ref_acc, ref_yaw_rad, r00, r01, r02, r10, r11, r12, r20, r21,
-                          r22, *tether_force_n, achieved,
-                          achieved_thrust_n if achieved else 0.0)
+        r = position_law(self.packed, float(dt_s), _vec3(pos), _vec3(vel), _vec3(ref_pos),
+                         _vec3(ref_vel), _vec3(ref_acc), float(ref_yaw_rad),
+                         (_vec3(rotation[0]), _vec3(rotation[1]), _vec3(rotation[2])),
+                         _vec3(tether_force_n), achieved,
+                         float(achieved_thrust_n) if achieved else 0.0)
         return position_output(r)
+
+    @property
+    def packed(self) -> tuple[np.ndarray, np.ndarray]:
+        """What :func:`position_law` takes of this controller (:attr:`RECORD`): the packed
+        gains and limits (:meth:`params`) and the state (d_hat, xi1, xi2; updated in
+        place)."""
+        return self.params(), self._state
 
     def params(self) -> np.ndarray:
         """The gains and limits packed for :func:`position_law`."""
@@ -156,17 +166,31 @@ def position_output(r: tuple[Any, ...]) -> PositionOutput:
     return PositionOutput._make(r)
 
 
+def _vec3(v: Any) -> Vec3:
+    """Three floats as a tuple (a compiled law's vector)."""
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
 @njit
-def position_law(p: np.ndarray, s: np.ndarray, dt_s: float, px: float, py: float,
-                 pz: float, vx: float, vy: float, vz: float, rpx: float, rpy: float,
-                 rpz: float, rvx: float, rvy: float, rvz: float, rax: float, ray: float,
-                 raz: float, yaw: float, r00: float, r01: float, r02: float, r10: float,
-                 r11: float, r12: float, r20: float, r21: float, r22: float, ftx: float,
-                 fty: float, ftz: float, achieved: bool, u_ach: float
-                 ) -> tuple[Any, ...]:
-    """One step of :class:`PositionController` (the law of the module docstring), in
-    scalars: updates d_hat, xi1, xi2 in ``s`` in place; returns the fields of a
-    :class:`PositionOutput`. ``p`` holds the packed parameters."""
+def position_law(controller: tuple[np.ndarray, np.ndarray], dt_s: float, pos: Vec3,
+                 vel: Vec3, ref_pos: Vec3, ref_vel: Vec3, ref_acc: Vec3, yaw: float,
+                 rotation: tuple[Vec3, Vec3, Vec3], tether_force: Vec3, achieved: bool,
+                 u_ach: float) -> tuple[Any, ...]:
+    """One step of :class:`PositionController` (the law of the module docstring) of
+    ``dt_s`` [s]: ``controller`` its :attr:`~PositionController.packed` record (the
+    packed parameters; d_hat, xi1, xi2, updated in place); position [m], velocity [m/s],
+    the reference's position, velocity, acceleration and yaw [rad], the rotation matrix's
+    rows (body -> inertial), the modelled tether pull [N], and whether the collective
+    thrust the rotors achieve, ``u_ach`` [N], is known. Returns the fields of a
+    :class:`PositionOutput`."""
+    p, s = controller
+    px, py, pz = pos
+    vx, vy, vz = vel
+    rpx, rpy, rpz = ref_pos
+    rvx, rvy, rvz = ref_vel
+    rax, ray, raz = ref_acc
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation
+    ftx, fty, ftz = tether_force
     m = p[P_M]
     k1x, k1y, k1z = p[P_K1], p[P_K1 + 1], p[P_K1 + 2]
     k2x, k2y, k2z = p[P_K2], p[P_K2 + 1], p[P_K2 + 2]

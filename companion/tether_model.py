@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from tuavdefs.jit import njit
+from tuavdefs.jit import njit, vec
 
 
 class TetherEstimate(NamedTuple):
@@ -77,11 +77,20 @@ class TetherModel:
     """Inextensible catenary of weight ``w_n_m`` [N/m] between the winder exit (origin) and
     the UAV, with a frictionless ground at the exit's level."""
 
+    #: The type of :attr:`packed` (:class:`tuavdefs.jit.Signature` texts).
+    RECORD = vec(2)
+
     def __init__(self, w_n_m: float, taut_stiffness_n: float = 1.0e5) -> None:
         if not w_n_m > 0:
             raise ValueError("w_n_m: must be > 0")
         self.w = w_n_m
         self.taut_stiffness_n = taut_stiffness_n  # EA used only if the line is taut
+
+    @property
+    def packed(self) -> tuple[float, float]:
+        """This model for a compiled step (:attr:`RECORD`): the line's weight [N/m] and
+        the stiffness used when it is taut [N]."""
+        return self.w, self.taut_stiffness_n
 
     def estimate(self, pos_m: tuple[float, float, float], length_m: float,
                  drum_tension_n: float | None = None) -> TetherEstimate:

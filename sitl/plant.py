@@ -89,7 +89,7 @@ from sitl.wind import WindModel, wind_kernel
 from sitl.winder import WinderModel
 from tuavdefs.airframe import command_to_rotor_speed, rotor_speed_setpoints
 from tuavdefs.frames import euler_to_quat, quat_rotate, quat_to_euler
-from tuavdefs.jit import entry_point
+from tuavdefs.jit import BOOL, F64, I64, Signature, array, entry_point, record
 from tuavdefs.params import SystemParams, TetherModel, WindParams
 from tuavdefs.paramspec import ParameterError
 
@@ -128,27 +128,38 @@ def _rk4_step(x: np.ndarray, scratch: np.ndarray, dt: float, p: np.ndarray,
 ADVANCE_DONE, ADVANCE_GROUND, ADVANCE_NOISE = 0, 1, 2
 
 
+#: :func:`advance_kernel`'s inputs, held over its steps: the four rotor commands in
+#: [0, 1], armed, the winder motor's torque request [N m] and whether it is enabled.
+INPUTS_RECORD = record(F64, F64, F64, F64, BOOL, F64, BOOL)
+#: :func:`advance_kernel`'s stepping: the step [s], the lumped line's RK4 sub-steps a
+#: step, the rotors' least and greatest speed [rad/s].
+STEPPING_RECORD = record(F64, I64, F64, F64)
+#: :func:`advance_kernel`'s air: the wind at the UAV (and the part the same at every
+#: height), whether it varies, and the wind model's packed state.
+AIR_RECORD = record(array(), BOOL, WindModel.RECORD)
+
+
 @njit
-def advance_kernel(x: np.ndarray, t_s: float, dt: float, n: int, p: np.ndarray,
-                   c0: float, c1: float, c2: float, c3: float, armed: bool,
-                   speed_min: float, speed_max: float, setpoints: np.ndarray,
-                   winder_cmd_n_m: float, winder_enabled: bool, wind: np.ndarray,
-                   warm: np.ndarray, wind_varies: bool, line: np.ndarray, lp: np.ndarray,
-                   line_scratch: np.ndarray, node_wind: np.ndarray, n_sub: int,
-                   wind_p: np.ndarray, gusts: np.ndarray, wind_s: np.ndarray,
-                   noise: np.ndarray, noise_next: np.ndarray) -> tuple[int, int, float, float]:
-    """Up to ``n`` plant steps of ``dt`` [s] from time ``t_s`` [s] with the inputs held,
-    ``x`` updated in place. The rotor commands ``c0..c3`` in [0, 1] (and ``armed``) set the
-    rotors' speed set-points (:func:`tuavdefs.airframe.rotor_speed_setpoints` for the
-    speed range [``speed_min``, ``speed_max``] [rad/s], into ``setpoints``); each step
-    samples the wind (when it varies:
-    :func:`sitl.wind.wind_kernel` on the model's packed state, into ``wind``), takes
-    :func:`_rk4_step`, then projects the drum's angle and rate (brake, hard stops:
-    :meth:`sitl.winder.WinderModel.project`). With the lumped line (``p[P_LUMPED]``), each
-    step is ``n_sub`` coupled RK4 sub-steps of the UAV and ``line`` (:func:`_lumped_step`)
-    and the line's pull at the state reached is left in ``warm``. Returns (steps
-    completed, why it stopped (``ADVANCE_*``), the time after them [s], the drum rate
-    before a step that ended on the ground [rad/s])."""
+def advance_kernel(x: np.ndarray, t_s: float, n: int, inputs: tuple, stepping: tuple,
+                   model: tuple, air: tuple) -> tuple[int, int, float, float]:
+    """Up to ``n`` plant steps from time ``t_s`` [s] with the ``inputs`` held
+    (:data:`INPUTS_RECORD`), ``x`` updated in place; ``stepping`` (:data:`STEPPING_RECORD`)
+    gives the step ``dt`` [s], ``model`` is :attr:`PlantModel.packed` (updated in place),
+    ``air`` :data:`AIR_RECORD`. The rotor commands ``c0..c3`` in [0, 1] (and ``armed``)
+    set the rotors' speed set-points (:func:`tuavdefs.airframe.rotor_speed_setpoints` for
+    the speed range [``speed_min``, ``speed_max``] [rad/s], into ``setpoints``); each step
+    samples the wind (when it varies: :func:`sitl.wind.wind_kernel` on the model's packed
+    state, into ``wind``), takes :func:`_rk4_step`, then projects the drum's angle and rate
+    (brake, hard stops: :meth:`sitl.winder.WinderModel.project`). With the lumped line
+    (``p[P_LUMPED]``), each step is ``n_sub`` coupled RK4 sub-steps of the UAV and
+    ``line`` (:func:`_lumped_step`) and the line's pull at the state reached is left in
+    ``warm``. Returns (steps completed, why it stopped (``ADVANCE_*``), the time after
+    them [s], the drum rate before a step that ended on the ground [rad/s])."""
+    c0, c1, c2, c3, armed, winder_cmd_n_m, winder_enabled = inputs
+    dt, n_sub, speed_min, speed_max = stepping
+    p, lp, warm, line, line_scratch, node_wind, setpoints = model
+    wind, wind_varies, wind_model = air
+    wind_p, gusts, wind_s, noise, noise_next = wind_model
     rotor_speed_setpoints(setpoints, c0, c1, c2, c3, armed, speed_min, speed_max)
     scratch = np.empty((6, N_STATES))
     braked = not winder_enabled
@@ -280,6 +291,11 @@ def specific_force_kernel(x: np.ndarray, p: np.ndarray, wind_e: float, wind_n: f
                                dx[5] + g + p[P_CONTACT_Z]))
 
 
+#: :func:`_truth_kernel`'s and :func:`specific_force_kernel`'s arguments.
+TRUTH_SIGNATURE = Signature(array(), array(), F64, F64, F64, F64)
+SPECIFIC_FORCE_SIGNATURE = Signature(array(), array(), F64, F64, F64, array(), F64)
+
+
 class PlantInputs(NamedTuple):
     """Everything the actuators are told during one step.
 
@@ -297,6 +313,9 @@ class PlantInputs(NamedTuple):
 class PlantModel:
     """Parameters digested for the state derivative, plus the tether solver (warm start) and
     the lumped line's state (``line``, used when ``lumped``)."""
+
+    #: The type of :attr:`packed` (:class:`tuavdefs.jit.Signature` texts).
+    RECORD = record(array(), array(), array(), array(), array(2), array(2), array())
 
     def __init__(self, params: SystemParams) -> None:
         self.params = params
@@ -323,6 +342,17 @@ class PlantModel:
         self.line = np.zeros(line_state_size(n_max))
         self.line_scratch = np.zeros((5, line_state_size(n_max)))
         self.node_wind = np.zeros((n_max, 3))
+        #: the rotors' speed set-points [rad/s] the kernels hold over a step
+        self.setpoints = np.zeros(4)
+
+    @property
+    def packed(self) -> tuple[np.ndarray, ...]:
+        """The model for the compiled steps (:attr:`RECORD`, every array updated in
+        place): the packed parameters, the lumped line's parameters, the tether's
+        auxiliary array (``warm``), the line's state and its RK4 stages, the air at its
+        nodes, the rotors' speed set-points."""
+        return (self.p, self.lp, self.warm, self.line, self.line_scratch, self.node_wind,
+                self.setpoints)
 
     def rotor_setpoints(self, u: PlantInputs) -> tuple[float, ...]:
         """Rotor-speed set-points [rad/s] for the commands in ``u``."""
@@ -369,6 +399,11 @@ def initial_state(model: PlantModel, position_m: Sequence[float] | None = None,
     return x
 
 
+#: :func:`advance_kernel`'s arguments.
+ADVANCE_SIGNATURE = Signature(array(), F64, I64, INPUTS_RECORD, STEPPING_RECORD,
+                              PlantModel.RECORD, AIR_RECORD)
+
+
 class Plant:
     """The integrated truth model, stepped at a fixed rate.
 
@@ -404,9 +439,9 @@ class Plant:
                 f"sub-steps a plant step, at most {MAX_LUMPED_SUBSTEPS}; use the "
                 "catenary, or a heavier, less stiff or more coarsely segmented line")
         self._segment_m = float(self.model.lp[L_LS])
-        self._speed_min = self.params.vehicle.rotor_speed_min_rad_s
-        self._speed_max = self.params.vehicle.rotor_speed_max_rad_s
-        self._setpoints = np.zeros(4)
+        veh = self.params.vehicle
+        self._stepping = (float(dt_s), int(self._n_sub), veh.rotor_speed_min_rad_s,
+                          veh.rotor_speed_max_rad_s)
         #: What each rotor gives of its command (1: all; a failed motor less: sitl.faults).
         self.rotor_gains: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
         #: The velocity [m/s] (ENU) the ground has taken from the UAV on touching down since
@@ -418,16 +453,9 @@ class Plant:
         # load (or compile) the kernels' machine code now, not in the first step, and call
         # it without numba's dispatch (the arguments' types never change)
         m = self.model
-        self._advance = entry_point(advance_kernel, self.x, 0.0, float(dt_s), 1, m.p, 0.0,
-                                    0.0, 0.0, 0.0, False, self._speed_min, self._speed_max,
-                                    self._setpoints, 0.0, False, self._wind, m.warm, False,
-                                    m.line, m.lp, m.line_scratch, m.node_wind, 1,
-                                    *self.wind.kernel_args)
-        tether = m.tether
-        self._truth = entry_point(_truth_kernel, self.x, m.p, tether.ea_n, tether.w_n_per_m,
-                                  0.0, 0.0)
-        self._specific_force = entry_point(specific_force_kernel, self.x, m.p, 0.0, 0.0,
-                                           0.0, m.warm, m.g)
+        self._advance = entry_point(advance_kernel, ADVANCE_SIGNATURE)
+        self._truth = entry_point(_truth_kernel, TRUTH_SIGNATURE)
+        self._specific_force = entry_point(specific_force_kernel, SPECIFIC_FORCE_SIGNATURE)
         if m.lumped:
             self.lay_line()
 
@@ -451,17 +479,18 @@ class Plant:
         gains = self.rotor_gains
         if gains != (1.0, 1.0, 1.0, 1.0):
             c0, c1, c2, c3 = c0 * gains[0], c1 * gains[1], c2 * gains[2], c3 * gains[3]
-        command, enabled = winder_torque_n_m, winder_enabled
+        enabled = winder_enabled
         m, dt, wind = self.model, self.dt_s, self.wind
         varies = not wind.constant
         x = np.array(self.x, dtype=float)   # a new array each call, as the kernel wants it
         t = self.t_s
+        # (the entry point converts the numbers to the kernel's float and bool)
+        inputs = (c0, c1, c2, c3, bool(armed), winder_torque_n_m, bool(enabled))
+        model = m.packed
         while True:
-            # (the entry point converts the numbers to the kernel's float and bool)
             done, why, t, omega_before = self._advance(
-                x, t, dt, n, m.p, c0, c1, c2, c3, armed, self._speed_min, self._speed_max,
-                self._setpoints, command, enabled, self._wind, m.warm, varies, m.line, m.lp,
-                m.line_scratch, m.node_wind, self._n_sub, *wind.kernel_args)
+                x, t, n, inputs, self._stepping, model,
+                (self._wind, varies, wind.kernel_args))
             if why == ADVANCE_DONE:
                 break
             n -= done
@@ -610,8 +639,8 @@ class Plant:
         if self.model.lumped:
             return self._line_forces()
         tether = self.model.tether
-        r = self._truth(self.x, self.model.p, tether.ea_n, tether.w_n_per_m, tether._hf0,
-                        tether._vf0)
+        hf0, vf0 = tether.warm_start
+        r = self._truth(self.x, self.model.p, tether.ea_n, tether.w_n_per_m, hf0, vf0)
         if not r[-1]:   # an invalid state or no convergence: forces() raises, saying which
             x = self.x
             return tether.forces(float(x[0]), float(x[1]), float(x[2]), self.tether_length_m)
@@ -649,7 +678,7 @@ class Plant:
         if steps > 0:
             relax(m.line, m.line_scratch, m.lp, self.dt_s / self._n_sub, steps, top, length,
                   m.node_wind, self._wind, 0.995)
-        _line_forces(x, m.line, m.p, m.lp, self._setpoints, 0.0, False, self._wind,
+        _line_forces(x, m.line, m.p, m.lp, m.setpoints, 0.0, False, self._wind,
                      m.node_wind, m.warm, np.empty((6, N_STATES)), m.line_scratch)
 
     def line_nodes_m(self) -> np.ndarray:

@@ -23,7 +23,7 @@ from sitl.catenary import (
     catenary_profile,
 )
 from sitl.pymath import hypot2
-from tuavdefs.jit import entry_point
+from tuavdefs.jit import F64, Signature, entry_point
 from tuavdefs.params import TetherParams
 
 __all__ = ["Tether", "TetherForces", "tether_forces_kernel"]
@@ -69,8 +69,7 @@ class Tether:
         self.last_info: CatenaryInfo | None = None
         # the solve's machine code, loaded now and called without numba's dispatch (its
         # arguments are always floats)
-        self._solve = entry_point(tether_forces_kernel, 1.0, 0.0, 1.0, 2.0, self.ea_n,
-                                  self.w_n_per_m, 0.0, 0.0)
+        self._solve = entry_point(tether_forces_kernel, SOLVE_SIGNATURE)
 
     def reset_warm_start(self) -> None:
         """Forget the previous solution: the next solve starts cold."""
@@ -148,6 +147,8 @@ class Tether:
 
 #: Relative Newton step at which a solve stops (catenary_end_forces' default).
 _TOL = 1e-8
+#: :func:`tether_forces_kernel`'s arguments.
+SOLVE_SIGNATURE = Signature(F64, F64, F64, F64, F64, F64, F64, F64)
 
 
 @njit

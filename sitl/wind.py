@@ -43,6 +43,7 @@ import numpy as np
 
 from sitl._jit import njit
 from sitl.pymath import hypot3
+from tuavdefs.jit import I64, array, record
 from tuavdefs.params import WindParams, WindProfile
 
 __all__ = [
@@ -287,6 +288,9 @@ class WindModel:
     ``dt_s`` [s] is the physics step: every :meth:`sample` advances the turbulence filters
     by exactly one step. The same parameters (and seed) always give the same sequence.
     """
+
+    #: The type of :attr:`kernel_args` (:class:`tuavdefs.jit.Signature` texts).
+    RECORD = record(array(), array(2), array(), array(), array(1, I64))
 
     def __init__(self, params: WindParams, dt_s: float) -> None:
         dt_s = float(dt_s)

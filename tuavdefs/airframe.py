@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tuavdefs.jit import njit
+from tuavdefs.jit import array, njit, record
 from tuavdefs.params import VehicleParams
 
 Vec4 = tuple[float, float, float, float]
@@ -128,6 +128,15 @@ class Mixer:
         if self._t_min is not f[0] or self._t_max is not f[1] or self.vehicle is not f[2]:
             self._pack()
         return self._p
+
+    #: The type of :attr:`packed` (:class:`tuavdefs.jit.Signature` texts).
+    RECORD = record(array(2), array())
+
+    @property
+    def packed(self) -> tuple[np.ndarray, np.ndarray]:
+        """What :func:`mix_kernel` takes of this mixer (:attr:`RECORD`): the allocation
+        matrix's inverse and the packed parameters (:meth:`params`)."""
+        return self._inv, self.params()
 
     def rotor_thrusts(self, thrust_n: float, torque_n_m: tuple[float, float, float]
                       ) -> np.ndarray:

@@ -172,24 +172,67 @@ def njit(fn: F) -> F:
     return dispatcher  # type: ignore[no-any-return]
 
 
-def entry_point(kernel: F, *example_args: Any) -> F:
-    """The machine code of the compiled ``kernel`` for the types of ``example_args``
-    (loaded from the cache, or compiled, now), as a callable that skips numba's dispatch.
+# --- declared signatures: the argument types of an entry point, written once ------------
+
+#: Type texts (:func:`parse_type`) for declaring a kernel's arguments (:class:`Signature`).
+F64 = "float64"
+I64 = "int64"
+BOOL = "bool"
+
+
+def vec(n: int, of: str = F64) -> str:
+    """The text of a tuple of ``n`` values of one type (a packed record of numbers)."""
+    return f"UniTuple({of}, {n})"
+
+
+def array(ndim: int = 1, of: str = F64) -> str:
+    """The text of a C-contiguous ``ndim``-dimensional array of ``of``."""
+    return f"{of}[{', '.join([':'] * (ndim - 1) + ['::1'])}]"
+
+
+def record(*fields: str) -> str:
+    """The text of a tuple whose fields have the given types (a packed record: the
+    components' arrays and numbers a kernel takes together, one per concern)."""
+    return f"Tuple(({''.join(f + ', ' for f in fields)}))"
+
+
+class Signature(tuple):  # type: ignore[type-arg]
+    """A kernel's argument types, declared once as texts (:func:`parse_type`): what its
+    entry point is compiled for (:func:`entry_point`) and what its callers pass."""
+
+    def __new__(cls, *texts: str) -> Signature:
+        return super().__new__(cls, texts)
+
+    def types(self) -> tuple[Any, ...]:
+        """The numba types (numba must be importable)."""
+        return parse_signature(self)
+
+
+def entry_point(kernel: F, *declared: Any) -> F:
+    """The machine code of the compiled ``kernel`` for its declared :class:`Signature`
+    (``entry_point(kernel, SIGNATURE)``; loaded from the cache, or compiled, now), as a
+    callable that skips numba's dispatch. (Given example arguments instead of a
+    signature, for the types of those: the older form, for call sites not yet declared.)
 
     Calling a numba function resolves the types of all its arguments and looks the
     specialisation up at every call: about 30 ns an argument, a microsecond for a kernel
     of fifty. A call site whose argument types never change can call the specialisation
     directly. numba still converts each argument to its declared type (a number to the
-    float, int or bool it stands for), but checks little else: an array of another dtype
-    or rank there would be undefined behaviour, so use this only where the arrays are the
-    caller's own. Without numba (or if numba's internals moved) ``kernel`` itself.
+    float, int or bool it stands for, a record's fields alike), but checks little else:
+    an array of another dtype or rank there would be undefined behaviour, and so is a
+    record that is not a tuple (a list), so use this only where the arrays and records
+    are the caller's own. Without numba (or if numba's internals moved) ``kernel``
+    itself.
     """
-    if _njit is None:
+    if _njit is None or not _is_compiled(kernel):
         return kernel
+    if len(declared) == 1 and isinstance(declared[0], Signature):
+        # a declaration that does not parse or compile is a mistake: said here, not hidden
+        return kernel.compile(declared[0].types())  # type: ignore[attr-defined, no-any-return]
     try:
         from numba.core.typing.typeof import Purpose, typeof
 
-        sig = tuple(typeof(a, Purpose.argument) for a in example_args)
+        sig = tuple(typeof(a, Purpose.argument) for a in declared)
         return kernel.compile(sig)  # type: ignore[attr-defined, no-any-return]
     except Exception:  # noqa: BLE001 - any failure: the plain dispatcher still works
         return kernel
