@@ -29,23 +29,22 @@ from sitl._jit import JIT, njit
 from sitl.plant import Plant, quat_rotate_kernel, specific_force_kernel
 from sitl.pymath import hypot2
 from sitl.sensors import (
-    _BLOCK,
     _ISA_EXP,
     _P_ENABLED,
-    _P_GM_SIGMA,
-    _P_GM_TAU,
-    _P_SIGMA,
-    _P_WALK,
     ISA_LAPSE_K_M,
     ISA_P0_HPA,
     ISA_R_J_KG_K,
     ISA_RHO0_KG_M3,
     ISA_T0_K,
+    NoiseState,
     SensorSuite,
+    TruthBuffer,
+    channel_commit,
+    channel_read,
 )
 from tuavdefs import simlink as sl
 from tuavdefs.frames import Q_FLU_FROM_FRD, Q_NED_FROM_ENU, quat_multiply
-from tuavdefs.jit import entry_point
+from tuavdefs.jit import BOOL, F64, I64, Signature, array, entry_point, record, vec
 
 # (the link's constants as globals of this module, so that the compiled code's cache key
 # holds their values: tuavdefs.jit.dependency_digest)
@@ -57,7 +56,6 @@ _SATELLITES = sl.GPS_SATELLITES_VISIBLE
 round_clamp = njit(sl.round_clamp)
 wrap_lon = njit(sl.wrap_lon)
 _quat_multiply = njit(quat_multiply)
-_gm_coefficients = njit(_sensors.gauss_markov_coefficients)
 _truth_push = njit(_sensors.truth_push)
 _truth_at = njit(_sensors.truth_at)
 
@@ -89,37 +87,6 @@ def _layout(cls: type) -> list[int]:
         kind, size = _STRUCT_CODES[char]
         codes += [kind * 16 + size] * int(count or 1)
     return [len(codes), *codes]
-
-
-@njit
-def _read(c: int, dim: int, t0: float, t1: float, t2: float, dt: float, draws: np.ndarray,
-          bias: np.ndarray, gm: np.ndarray, cursor: np.ndarray, params: np.ndarray,
-          new_bias: np.ndarray, new_gm: np.ndarray, out: np.ndarray) -> None:
-    """:meth:`sitl.sensors.NoisyChannel.read` of channel ``c`` (``dim`` axes of the truth
-    ``t0, t1, t2``) into ``out``, its bias and Gauss-Markov error after the read into
-    ``new_bias[c]``, ``new_gm[c]``; the state itself is committed by the caller."""
-    if params[c, _P_ENABLED] == 0.0:   # disabled: the truth
-        out[0], out[1], out[2] = t0, t1, t2
-        return
-    i = cursor[c]
-    sigma, walk, gm_sigma = params[c, _P_SIGMA], params[c, _P_WALK], params[c, _P_GM_SIGMA]
-    k = walk * math.sqrt(dt) if walk > 0.0 else 0.0
-    phi, q = 0.0, 0.0
-    if gm_sigma > 0.0:
-        phi, q = _gm_coefficients(gm_sigma, params[c, _P_GM_TAU], dt)
-    for a in range(dim):
-        b = bias[c, a]
-        if walk > 0.0:
-            b = b + k * draws[c, i, 0, a]
-        new_bias[c, a] = b
-        t = t0 if a == 0 else (t1 if a == 1 else t2)
-        if gm_sigma > 0.0:
-            g = phi * gm[c, a] + q * draws[c, i, 2, a]
-            new_gm[c, a] = g
-            out[a] = t + b + g + sigma * draws[c, i, 1, a]
-        else:
-            new_gm[c, a] = gm[c, a]
-            out[a] = t + b + sigma * draws[c, i, 1, a]
 
 
 @njit
@@ -203,30 +170,44 @@ def _frame(out: np.ndarray, pos: int, seq: int, sysid: int, compid: int, msg: np
     return p + 2
 
 
+#: :func:`batch_kernel`'s scratch: the messages' layouts and (id, CRC extra), their float
+#: and integer field values, the channels' bias and Gauss-Markov error after a read, the
+#: delayed truth (6), one float32 and its bits.
+SCRATCH_RECORD = record(array(2, I64), array(2, I64), array(2), array(2, I64), array(2),
+                        array(2), array(), array(1, "float32"), array(1, "uint32"))
+#: :func:`batch_kernel`'s request: the batch's time [us], whether HIL_GPS is due and its
+#: channels' interval [s], the other channels' interval [s], the first frame's sequence
+#: number, the system and component ids.
+REQUEST_RECORD = record(I64, BOOL, F64, F64, I64, I64, I64)
+#: :func:`batch_kernel`'s arguments.
+BATCH_SIGNATURE = Signature(array(1, "uint8"), REQUEST_RECORD,
+                            record(array(), array(), array()), vec(3), array(),
+                            NoiseState.RECORD, TruthBuffer.RECORD, SCRATCH_RECORD)
+
+
 @njit
-def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: float,
-                 seq: int, sysid: int, compid: int, x: np.ndarray, p: np.ndarray,
-                 wind_e: float, wind_n: float, wind_u: float, warm: np.ndarray,
-                 consts: np.ndarray, draws: np.ndarray, bias: np.ndarray, gm: np.ndarray,
-                 cursor: np.ndarray, params: np.ndarray, truth_t: np.ndarray,
-                 truth_pv: np.ndarray, truth_ring: np.ndarray, layouts: np.ndarray,
-                 msgs: np.ndarray, fv: np.ndarray, iv: np.ndarray, new_bias: np.ndarray,
-                 new_gm: np.ndarray, truth: np.ndarray, f32: np.ndarray, u32: np.ndarray
-                 ) -> tuple[int, int]:
-    """The batch for the plant's state ``x`` at ``t_us`` [us] into ``out``, as
-    :meth:`sitl.simlink_server.SimLinkServer` builds it interpreted: HIL_GPS if
-    ``gps_due`` (its channels read ``gps_dt`` [s] after the last fix), then
+def batch_kernel(out: np.ndarray, request: tuple, plant: tuple[np.ndarray, ...],
+                 wind: tuple[float, float, float], consts: np.ndarray, noise: tuple,
+                 truth_buffer: tuple, scratch: tuple) -> tuple[int, int]:
+    """The batch of ``request`` (:data:`REQUEST_RECORD`) into ``out``, as
+    :meth:`sitl.simlink_server.SimLinkServer` builds it interpreted: at ``t_us`` [us],
+    HIL_GPS if ``gps_due`` (its channels read ``gps_dt`` [s] after the last fix), then
     HIL_STATE_QUATERNION and HIL_SENSOR (its channels read ``dt`` [s] after the last),
-    sequence numbers from ``seq``; the noise channels' state (``draws``, ``bias``, ``gm``,
-    ``cursor``, ``params``: :class:`sitl.sensors.NoiseState`) advanced, the state's
-    position and velocity recorded in the truth buffer (``truth_t``, ``truth_pv``,
-    ``truth_ring``: :class:`sitl.sensors.TruthBuffer`), from which HIL_GPS reads the truth
-    of ``consts[_K_LATENCY_US]`` earlier. Returns (bytes
-    written, a bit for each channel whose block it used up, to be refilled now:
+    the frames numbered from ``seq``, from ``sysid``, ``compid``;
+    ``plant`` = (its state ``x``, packed parameters ``p``, tether array ``warm``),
+    ``wind`` its air at the UAV (east, north, up) [m/s]; the noise channels' state
+    (:class:`sitl.sensors.NoiseState`) advanced, the state's position and velocity
+    recorded in the truth buffer (:class:`sitl.sensors.TruthBuffer`), from which HIL_GPS
+    reads the truth of ``consts[_K_LATENCY_US]`` earlier. Returns (bytes written, a bit
+    for each channel whose block it used up, to be refilled now:
     :meth:`sitl.sensors.NoisyChannel.refill`), or (0, 0) when this is not the usual case,
-    nothing changed. ``layouts``, ``msgs``:
-    :class:`BatchPacker`'s description of the messages; ``fv``, ``iv``, ``new_bias``,
-    ``new_gm``, ``truth`` (6), ``f32``/``u32`` (one float32 and its bits): scratch."""
+    nothing changed. ``scratch``: :data:`SCRATCH_RECORD`, :class:`BatchPacker`'s."""
+    t_us, gps_due, gps_dt, dt, seq, sysid, compid = request
+    x, p, warm = plant
+    wind_e, wind_n, wind_u = wind
+    draws, bias, gm, cursor, params = noise
+    truth_t, truth_pv, truth_ring = truth_buffer
+    layouts, msgs, fv, iv, new_bias, new_gm, truth, f32, u32 = scratch
     reads = 0b0001111 | (0b1110000 if gps_due else 0)
     for j in range(19):
         if not math.isfinite(x[j]):
@@ -242,13 +223,13 @@ def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: f
     if gps_due:   # HIL_GPS, of the truth latency_us earlier
         _truth_at(float(t_us), consts[_K_LATENCY_US], truth_t, truth_pv, newest, count,
                   truth)
-        _read(_GPS_H, 2, truth[0], truth[1], 0.0, gps_dt, draws, bias, gm, cursor, params,
+        channel_read(_GPS_H, 2, truth[0], truth[1], 0.0, gps_dt, draws, bias, gm, cursor, params,
               new_bias, new_gm, r)
         ge, gn = r[0], r[1]
-        _read(_GPS_V, 1, truth[2], 0.0, 0.0, gps_dt, draws, bias, gm, cursor, params,
+        channel_read(_GPS_V, 1, truth[2], 0.0, 0.0, gps_dt, draws, bias, gm, cursor, params,
               new_bias, new_gm, r)
         gu = r[0]
-        _read(_GPS_VEL, 3, truth[3], truth[4], truth[5], gps_dt, draws, bias, gm, cursor,
+        channel_read(_GPS_VEL, 3, truth[3], truth[4], truth[5], gps_dt, draws, bias, gm, cursor,
               params, new_bias, new_gm, r)
         vn, ve, vd = r[1], r[0], -r[2]
         g_f, g_i = fv[_GPS], iv[_GPS]
@@ -306,19 +287,19 @@ def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: f
     # HIL_SENSOR
     h_f, h_i = fv[_SENSOR], iv[_SENSOR]
     h_i[0] = t_us
-    _read(_ACCEL, 3, fx, fy, fz, dt, draws, bias, gm, cursor, params, new_bias,
+    channel_read(_ACCEL, 3, fx, fy, fz, dt, draws, bias, gm, cursor, params, new_bias,
           new_gm, r)
     h_f[1], h_f[2], h_f[3] = r[0], -r[1], -r[2]
-    _read(_GYRO, 3, wx, wy, wz, dt, draws, bias, gm, cursor, params, new_bias,
+    channel_read(_GYRO, 3, wx, wy, wz, dt, draws, bias, gm, cursor, params, new_bias,
           new_gm, r)
     h_f[4], h_f[5], h_f[6] = r[0], -r[1], -r[2]
     me, mn, mu = quat_rotate_kernel((qw, -qx, -qy, -qz), (consts[_K_FIELD_E],
                                                              consts[_K_FIELD_N],
                                                              consts[_K_FIELD_U]))
-    _read(_MAG, 3, me, mn, mu, dt, draws, bias, gm, cursor, params, new_bias,
+    channel_read(_MAG, 3, me, mn, mu, dt, draws, bias, gm, cursor, params, new_bias,
           new_gm, r)
     h_f[7], h_f[8], h_f[9] = r[0], -r[1], -r[2]
-    _read(_BARO, 1, pressure_hpa, 0.0, 0.0, dt, draws, bias, gm, cursor, params, new_bias,
+    channel_read(_BARO, 1, pressure_hpa, 0.0, 0.0, dt, draws, bias, gm, cursor, params, new_bias,
           new_gm, r)
     baro = r[0]
     if baro < 0.0:   # (the interpreter's power of a negative number is complex)
@@ -333,13 +314,9 @@ def batch_kernel(out: np.ndarray, t_us: int, gps_due: bool, gps_dt: float, dt: f
     used_up = 0
     truth_ring[0], truth_ring[1] = newest, count
     for c in range(7):
-        if (reads >> c) & 1 != 0 and params[c, _P_ENABLED] != 0.0:
-            for a in range(3):
-                bias[c, a] = new_bias[c, a]
-                gm[c, a] = new_gm[c, a]
-            cursor[c] += 1
-            if cursor[c] == _BLOCK:
-                used_up |= 1 << c
+        if ((reads >> c) & 1 != 0 and params[c, _P_ENABLED] != 0.0
+                and channel_commit(c, bias, gm, cursor, new_bias, new_gm)):
+            used_up |= 1 << c
     pos = 0
     for m in range(3):
         if m != _GPS or gps_due:
@@ -390,21 +367,16 @@ class BatchPacker:
         self._u32 = self._f32.view(np.uint32)
         self._out = np.zeros(_OUT_BYTES, dtype=np.uint8)
         self._view = memoryview(self._out)   # type: ignore[arg-type]
-        st = sensors.noise_state
-        tb = sensors.truth_buffer
-        self._state = (st.draws, st.bias, st.gm, st.cursor, st.params, tb.time_us,
-                       tb.pos_vel, tb.ring)
+        self._noise = tuple(sensors.noise_state)
+        self._truth_buffer = tuple(sensors.truth_buffer)
         self._scratch = (self._layouts, self._msgs, self._fv, self._iv, self._new_bias,
                          self._new_gm, np.zeros(6), self._f32, self._u32)
-        m = plant.model
         # HIL_SENSOR's payload: time_usec, 13 floats, fields_updated, id (sensor_values)
         if _layout(_MESSAGES[_SENSOR]) != [16, _UNSIGNED * 16 + 8,
                                            *[_FLOAT * 16 + 4] * 13, _UNSIGNED * 16 + 4,
                                            _UNSIGNED * 16 + 1]:
             raise RuntimeError("HIL_SENSOR's layout is not the one sensor_values reads")
-        self._kernel = entry_point(batch_kernel, self._out, 0, False, 0.0, 0.0, 0, 0, 0,
-                                   plant.x, m.p, 0.0, 0.0, 0.0, m.warm, consts, *self._state,
-                                   *self._scratch)
+        self._kernel = entry_point(batch_kernel, BATCH_SIGNATURE)
 
     def pack(self, t_us: int, gps_dt_s: float | None) -> memoryview | None:
         """The batch for the plant's current state at ``t_us`` [us] (with HIL_GPS, its
@@ -415,12 +387,11 @@ class BatchPacker:
             return None
         p = self.plant
         m = p.model
-        w = p.wind_m_s
         gps = gps_dt_s is not None
         n, used_up = self._kernel(
-            self._out, t_us, gps, gps_dt_s if gps else 0.0, self.dt_s, mav.seq,
-            mav.srcSystem, mav.srcComponent, p.x, m.p, w[0], w[1], w[2], m.warm,
-            self._consts, *self._state, *self._scratch)
+            self._out, (t_us, gps, gps_dt_s if gps else 0.0, self.dt_s, mav.seq,
+                        mav.srcSystem, mav.srcComponent), (p.x, m.p, m.warm),
+            p.wind_m_s, self._consts, self._noise, self._truth_buffer, self._scratch)
         if n == 0:
             return None
         if used_up:

@@ -45,12 +45,14 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
+from sitl._jit import njit
 from sitl.plant import ROTORS, VEL, Plant, PlantInputs, rhs
 from tuavdefs.frames import Quat, Vec3, ned_to_enu, quat_conjugate, quat_rotate
+from tuavdefs.jit import F64, I64, Signature, array, entry_point, record
 from tuavdefs.simlink import HOME_DEFAULT
 
 # ----- the International Standard Atmosphere (troposphere)
@@ -382,6 +384,9 @@ class NoiseState(NamedTuple):
     cursor: np.ndarray
     params: np.ndarray
 
+    #: Its type for a compiled kernel (:class:`tuavdefs.jit.Signature` texts).
+    RECORD = record(array(4), array(2), array(2), array(1, I64), array(2))
+
     @classmethod
     def empty(cls, n: int) -> NoiseState:
         """Arrays for ``n`` channels, all zero."""
@@ -423,17 +428,18 @@ class NoisyChannel:
         self.enabled = enabled
         self._rng = rng
         st = NoiseState.empty(1) if state is None else state
+        self._state, self._slot = st, slot
+        # the read's results before they are committed, and the reading
+        self._out = np.zeros(_MAX_DIM)
+        shape = st.bias.shape
+        self._scratch = (np.zeros(shape), np.zeros(shape), self._out)
+        self._step: Any = None    # channel_step's entry point, taken at the first read
         self._block = st.draws[slot, :, :, :dim]
         self._bias_a = st.bias[slot, :dim]
         self._gm_a = st.gm[slot, :dim]
         self._cursor = st.cursor[slot:slot + 1]
         st.params[slot] = (1.0 if enabled else 0.0, spec.sigma, spec.bias_walk,
                            spec.gm_sigma, spec.gm_tau_s)
-        self._z: list | None = None   # the block as lists (for the interpreter)
-        self._sigma = spec.sigma
-        self._walk = spec.bias_walk
-        self._gm_sigma = spec.gm_sigma
-        self._gm_tau = spec.gm_tau_s
         #: Draws per axis and sample taken from the stream.
         self._k = _DRAWS if spec.gauss_markov else 2
         if enabled:
@@ -457,40 +463,91 @@ class NoisyChannel:
         """Draw the next block of the stream (the last one is used up)."""
         self._block[:, :self._k, :] = self._rng.standard_normal((_BLOCK, self._k, self.dim))
         self._cursor[0] = 0
-        self._z = None
-
-    def _draw(self) -> list:
-        """This sample's draws: [bias walk per axis, white noise per axis, Gauss-Markov per
-        axis]."""
-        i = int(self._cursor[0])
-        z = self._z
-        if z is None:
-            z = self._z = self._block.tolist()
-        if i + 1 < _BLOCK:
-            self._cursor[0] = i + 1
-        else:
-            self.refill()
-        return z[i]  # type: ignore[no-any-return]
 
     def read(self, truth: Sequence[float], dt_s: float) -> tuple[float, ...]:
-        """One reading of ``truth`` taken ``dt_s`` [s] after the previous one."""
+        """One reading of ``truth`` taken ``dt_s`` [s] after the previous one
+        (:func:`channel_read`, then its state committed)."""
         if not self.enabled:
             return tuple(float(v) for v in truth)
-        z_walk, z_noise, z_gm = self._draw()
-        sigma = self._sigma
-        bias = self._bias_a.tolist()
-        if self._walk > 0.0:
-            k = self._walk * math.sqrt(dt_s)
-            bias = [b + k * z for b, z in zip(bias, z_walk, strict=True)]
-            self._bias_a[:] = bias
-        if self._gm_sigma > 0.0:
-            phi, q = gauss_markov_coefficients(self._gm_sigma, self._gm_tau, dt_s)
-            gm = [phi * x + q * z for x, z in zip(self._gm_a.tolist(), z_gm, strict=True)]
-            self._gm_a[:] = gm
-            return tuple([float(t) + b + g + sigma * z
-                          for t, b, g, z in zip(truth, bias, gm, z_noise, strict=True)])
-        return tuple([float(t) + b + sigma * z
-                      for t, b, z in zip(truth, bias, z_noise, strict=True)])
+        dim = self.dim
+        t0 = float(truth[0])
+        t1 = float(truth[1]) if dim > 1 else 0.0
+        t2 = float(truth[2]) if dim > 2 else 0.0
+        out, step = self._out, self._step
+        if step is None:
+            step = self._step = entry_point(channel_step, CHANNEL_STEP_SIGNATURE)
+        if step(self._slot, dim, t0, t1, t2, float(dt_s), self._state, self._scratch):
+            self.refill()
+        return tuple(out[:dim].tolist())
+
+
+#: :func:`channel_step`'s arguments: the channel, its axes, the truth, the interval [s],
+#: the :class:`NoiseState`, the scratch (bias and Gauss-Markov error read, the reading).
+CHANNEL_STEP_SIGNATURE = Signature(I64, I64, F64, F64, F64, F64, NoiseState.RECORD,
+                                   record(array(2), array(2), array()))
+
+
+@njit
+def channel_step(c: int, dim: int, t0: float, t1: float, t2: float, dt: float,
+                 state: tuple, scratch: tuple) -> bool:
+    """:func:`channel_read` of channel ``c`` of ``state`` (a :class:`NoiseState`) into
+    ``scratch`` = (new bias, new Gauss-Markov error, reading), committed
+    (:func:`channel_commit`); whether its block of draws is used up (to refill now)."""
+    draws, bias, gm, cursor, params = state
+    new_bias, new_gm, out = scratch
+    channel_read(c, dim, t0, t1, t2, dt, draws, bias, gm, cursor, params, new_bias, new_gm,
+                 out)
+    return channel_commit(c, bias, gm, cursor, new_bias, new_gm)
+
+
+@njit
+def channel_commit(c: int, bias: np.ndarray, gm: np.ndarray, cursor: np.ndarray,
+                   new_bias: np.ndarray, new_gm: np.ndarray) -> bool:
+    """Channel ``c``'s read committed: its bias and Gauss-Markov error are those of the
+    read, its cursor on the next sample; whether its block of draws is used up."""
+    for a in range(bias.shape[1]):
+        bias[c, a] = new_bias[c, a]
+        gm[c, a] = new_gm[c, a]
+    cursor[c] += 1
+    return cursor[c] == _BLOCK
+
+
+@njit
+def channel_read(c: int, dim: int, t0: float, t1: float, t2: float, dt: float,
+                 draws: np.ndarray, bias: np.ndarray, gm: np.ndarray, cursor: np.ndarray,
+                 params: np.ndarray, new_bias: np.ndarray, new_gm: np.ndarray,
+                 out: np.ndarray) -> None:
+    """The reading of channel ``c`` of a :class:`NoiseState` (``draws`` .. ``params``),
+    ``dim`` axes of the truth ``t0, t1, t2``, taken ``dt`` [s] after its last, into
+    ``out``: truth + bias (walked) + Gauss-Markov error (stepped) + white noise, on the
+    cursor's draws; its bias and Gauss-Markov error after the read into ``new_bias[c]``,
+    ``new_gm[c]``. The state itself is committed by the caller (:meth:`NoisyChannel.read`
+    at once; the compiled batch, :mod:`sitl.batch`, once the whole batch is known good)."""
+    if params[c, _P_ENABLED] == 0.0:   # disabled: the truth
+        out[0], out[1], out[2] = t0, t1, t2
+        return
+    i = cursor[c]
+    sigma, walk, gm_sigma = params[c, _P_SIGMA], params[c, _P_WALK], params[c, _P_GM_SIGMA]
+    k = walk * math.sqrt(dt) if walk > 0.0 else 0.0
+    phi, q = 0.0, 0.0
+    if gm_sigma > 0.0:
+        phi, q = _gm_coefficients(gm_sigma, params[c, _P_GM_TAU], dt)
+    for a in range(dim):
+        b = bias[c, a]
+        if walk > 0.0:
+            b = b + k * draws[c, i, 0, a]
+        new_bias[c, a] = b
+        t = t0 if a == 0 else (t1 if a == 1 else t2)
+        if gm_sigma > 0.0:
+            g = phi * gm[c, a] + q * draws[c, i, 2, a]
+            new_gm[c, a] = g
+            out[a] = t + b + g + sigma * draws[c, i, 1, a]
+        else:
+            new_gm[c, a] = gm[c, a]
+            out[a] = t + b + sigma * draws[c, i, 1, a]
+
+
+_gm_coefficients = njit(gauss_markov_coefficients)
 
 
 # ----- the truth buffer of the GNSS latency
@@ -507,6 +564,9 @@ class TruthBuffer(NamedTuple):
     time_us: np.ndarray
     pos_vel: np.ndarray
     ring: np.ndarray
+
+    #: Its type for a compiled kernel (:class:`tuavdefs.jit.Signature` texts).
+    RECORD = record(array(), array(2), array(1, I64))
 
     @classmethod
     def empty(cls) -> TruthBuffer:

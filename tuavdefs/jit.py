@@ -208,6 +208,12 @@ class Signature(tuple):  # type: ignore[type-arg]
         return parse_signature(self)
 
 
+#: The entry points made so far, by (kernel, signature): numba's own look-up of a compiled
+#: specialisation costs half a millisecond, and objects built often (a sensor channel)
+#: take theirs at construction.
+_ENTRIES: dict[tuple[Any, Signature], Any] = {}
+
+
 def entry_point(kernel: F, *declared: Any) -> F:
     """The machine code of the compiled ``kernel`` for its declared :class:`Signature`
     (``entry_point(kernel, SIGNATURE)``; loaded from the cache, or compiled, now), as a
@@ -224,11 +230,18 @@ def entry_point(kernel: F, *declared: Any) -> F:
     are the caller's own. Without numba (or if numba's internals moved) ``kernel``
     itself.
     """
+    declaration = len(declared) == 1 and isinstance(declared[0], Signature)
+    if declaration:
+        entry = _ENTRIES.get((kernel, declared[0]))
+        if entry is not None:
+            return entry  # type: ignore[no-any-return]
     if _njit is None or not _is_compiled(kernel):
         return kernel
-    if len(declared) == 1 and isinstance(declared[0], Signature):
-        # a declaration that does not parse or compile is a mistake: said here, not hidden
-        return kernel.compile(declared[0].types())  # type: ignore[attr-defined, no-any-return]
+    if declaration:
+        # a declaration that does not parse or compile is a mistake: said here
+        entry = _ENTRIES[kernel, declared[0]] = kernel.compile(  # type: ignore[attr-defined]
+            declared[0].types())
+        return entry  # type: ignore[no-any-return]
     try:
         from numba.core.typing.typeof import Purpose, typeof
 
