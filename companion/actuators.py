@@ -34,8 +34,8 @@ class ActuatorModel:
 
     def reset(self, speeds_rad_s: np.ndarray | tuple[float, ...]) -> None:
         """Start from known rotor speeds [rad/s] (e.g. hover trim)."""
-        self.speeds = np.array(speeds_rad_s, dtype=float)
-        self._setpoints = self.speeds.copy()
+        self.speeds[:] = speeds_rad_s      # (in place: a packed record holding them stays
+        self._setpoints[:] = self.speeds   # good)
 
     def command(self, commands: tuple[float, ...], armed: bool = True) -> None:
         """The commands just sent; they hold until the next call to :meth:`advance`."""

@@ -182,10 +182,14 @@ class AttitudeController:
         the estimate's bound, packed for the compiled law (:func:`attitude_law`)."""
         decay_eta = np.exp(-self.k3 * self.dt_s)
         gn = self.gains
-        self._p = np.concatenate([self.j, [float(self.c)], self.k3, self.k4, self._decay_w,
-                                  decay_eta, [self.dt_s],
-                                  gn.att_disturbance_gain_n_m_rad,
-                                  [gn.att_disturbance_limit_n_m]]).astype(float)
+        p = np.concatenate([self.j, [float(self.c)], self.k3, self.k4, self._decay_w,
+                            decay_eta, [self.dt_s], gn.att_disturbance_gain_n_m_rad,
+                            [gn.att_disturbance_limit_n_m]]).astype(float)
+        old = getattr(self, "_p", None)
+        if old is not None and old.shape == p.shape:
+            old[:] = p     # in place: a packed record holding it stays good
+        else:
+            self._p = p
         self._packed_from = (self.j, self.c, self.k3, self.k4, self._decay_w, self.dt_s,
                              self.gains)
 
@@ -218,9 +222,9 @@ class AttitudeController:
         """Start the command filter at rest at ``attitude_rad``; clear the compensation and
         the disturbance-torque estimate."""
         self.filter.reset(np.array(attitude_rad))
-        self.xi_eta = np.zeros(3)
-        self.xi_w = np.zeros(3)
-        self.tau_hat = np.zeros(3)
+        self.xi_eta[:] = 0.0      # (in place: a packed record holding them stays good)
+        self.xi_w[:] = 0.0
+        self.tau_hat[:] = 0.0
 
     def update(self, attitude_rad: Vec3, body_rates_rad_s: Vec3, desired_rad: Vec3,
                achieved_torque_n_m: Vec3 | None = None) -> AttitudeOutput:

@@ -86,6 +86,7 @@ class FlightController:
         self.tether_model = TetherModel(tether.weight_per_length_n_m(gravity_m_s2),
                                         tether.axial_stiffness_n)
         self.winch = WinchReport()
+        self._records = self._packed_records()
         # load (or compile) the step's machine code now, not at the first control step (a
         # process with deadlines must not wait for it there), and call it without numba's
         # dispatch: the arguments' types never change
@@ -103,12 +104,14 @@ class FlightController:
         self.gains = gains
         self.position.set_gains(gains)
         self.attitude.set_gains(gains)
+        self._records = self._packed_records()
 
     def reset(self, state: VehicleState, rotor_speeds_rad_s: tuple[float, ...]) -> None:
         """Start from the vehicle's current attitude and rotor speeds (e.g. hover trim)."""
         self.attitude.reset(quat_to_euler(state.quat))
         self.actuators.reset(rotor_speeds_rad_s)
         self.position.reset()
+        self._records = self._packed_records()
 
     def winch_report(self, t_s: float, length_m: float, speed_m_s: float,
                      tension_n: float | None) -> None:
@@ -142,8 +145,14 @@ class FlightController:
                   tension if measured else 0.0)
         flags = (measured, g.use_tether_model, f.initialised, bool(armed))
         f.initialised = True
-        return (inputs, flags, self.tether_model.packed, self.position.packed,
-                self.attitude.packed, self.mixer.packed, self.actuators.packed)
+        return (inputs, flags, *self._records)
+
+    def _packed_records(self) -> tuple[Any, ...]:
+        """The components' packed records (:data:`STEP_SIGNATURE` after the flags), taken
+        again whenever :meth:`set_gains` or :meth:`reset` may have changed one: the
+        components change their parameters through those, and their states in place."""
+        return (self.tether_model.packed, self.position.packed, self.attitude.packed,
+                self.mixer.packed, self.actuators.packed)
 
 
 @njit

@@ -80,11 +80,14 @@ class PositionController:
         self.u_max = gains.max_thrust_fraction * max_total_thrust_n
         self.u_min = min_total_thrust_n
         self._state = np.zeros(9)     # d_hat, xi1, xi2
+        self._p = np.zeros(N_PARAMS)
         self._pack()
 
     def _pack(self) -> None:
+        """The gains and limits into the packed array (in place: a packed record holding
+        it stays good)."""
         gn = self.gains
-        p = np.zeros(N_PARAMS)
+        p = self._p
         p[P_M], p[P_G], p[P_U_MAX], p[P_U_MIN] = self.m, self.g, self.u_max, self.u_min
         p[P_FZ_MIN] = self.u_min if self.u_min > 0 else 1e-3 * self.m * self.g
         p[P_TAN_TILT] = math.tan(gn.max_tilt_rad)
@@ -93,7 +96,6 @@ class PositionController:
         p[P_K2:P_K2 + 3] = gn.pos_k2_1_s
         p[P_GAM:P_GAM + 3] = gn.disturbance_gain_1_s2
         p[P_DRAG:P_DRAG + 3] = self.drag
-        self._p = p
         self._packed_from = (self.gains, self.m, self.g, self.u_max, self.u_min, self.drag)
 
     @property
