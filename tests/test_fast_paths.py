@@ -32,7 +32,7 @@ from sitl.trim import hover_trim
 from sitl.truth_log import TRUTH_COLUMNS, TruthLog
 from tuavdefs import frames as fr
 from tuavdefs import simlink as sl
-from tuavdefs.jit import JIT, entry_point, njit
+from tuavdefs.jit import BOOL, F64, JIT, Signature, array, entry_point, njit, record
 from tuavdefs.params import GustParams, SystemParams, TetherParams, WindParams
 
 
@@ -165,15 +165,25 @@ def test_the_links_mavlink_packing_and_parsing_are_pymavlinks():
 
 
 def test_an_entry_point_is_the_kernel():
+    """An entry point made from a declared signature gives the kernel's results and its
+    updates in place, a record's fields converted as loose arguments are; a declaration
+    the kernel cannot be compiled for is said at once."""
     @njit
-    def kernel(a: float, flag: bool, out: np.ndarray) -> float:
+    def kernel(a: float, rec: tuple, out: np.ndarray) -> float:
+        flag, (scale, arr) = rec
         out[0] += a
-        return a * 2.0 if flag else -a
+        arr[0] += 1.0
+        return a * scale if flag else -a
 
-    out = np.zeros(1)
-    fast = entry_point(kernel, 1.0, True, out)
-    assert fast(3, 1, out) == kernel(3.0, True, out) == 6.0   # ints converted
-    assert fast(2.5, False, out) == -2.5 and out[0] == 8.5
+    out, arr = np.zeros(1), np.zeros(2)
+    sig = Signature(F64, record(BOOL, record(F64, array())), array())
+    fast = entry_point(kernel, sig)
+    assert entry_point(kernel, sig) is fast
+    assert fast(3, (1, (2, arr)), out) == kernel(3.0, (True, (2.0, arr)), out) == 6.0
+    assert fast(2.5, (False, (2.0, arr)), out) == -2.5 and out[0] == 8.5 and arr[0] == 3.0
+    if JIT:
+        with pytest.raises(Exception):   # noqa: B017 - numba's typing error, whichever
+            entry_point(kernel, Signature(F64, F64, array()))
 
 
 # ----------------------------------------------------------------- the simulator link

@@ -138,6 +138,36 @@ def test_every_entry_of_the_manifest_is_a_kernel_with_its_argument_count():
             assert jit.signature_text(jit.parse_signature(texts)) == texts
 
 
+#: The declared entry points: (module, kernel, its Signature's name).
+DECLARED = (("companion.flight_controller", "flight_step", "STEP_SIGNATURE"),
+            ("companion.flight_controller", "flight_commands", "STEP_SIGNATURE"),
+            ("sitl.plant", "advance_kernel", "ADVANCE_SIGNATURE"),
+            ("sitl.plant", "_truth_kernel", "TRUTH_SIGNATURE"),
+            ("sitl.plant", "specific_force_kernel", "SPECIFIC_FORCE_SIGNATURE"),
+            ("sitl.tether", "tether_forces_kernel", "SOLVE_SIGNATURE"),
+            ("sitl.batch", "batch_kernel", "BATCH_SIGNATURE"),
+            ("sitl.sensors", "channel_step", "CHANNEL_STEP_SIGNATURE"))
+
+
+def test_each_declared_signature_is_the_manifests_entry_as_written():
+    """A kernel's declared signature (tuavdefs.jit.Signature) is written in the manifest's
+    own spelling (it reads back to the same texts), has a type for each parameter, and is
+    the manifest's entry for that kernel: what load_kernels makes machine code before a
+    process is ready is what its entry point asks for."""
+    import importlib
+    import inspect
+
+    entries = jit.manifest()
+    for module, kernel_name, sig_name in DECLARED:
+        mod = importlib.import_module(module)
+        kernel, sig = getattr(mod, kernel_name), getattr(mod, sig_name)
+        assert isinstance(sig, jit.Signature)
+        assert len(sig) == len(inspect.signature(kernel.py_func).parameters), kernel_name
+        assert jit.signature_text(sig.types()) == tuple(sig), kernel_name
+        assert tuple(sig) in entries.get(f"{module}.{kernel_name}", ()), (
+            f"{module}.{kernel_name}: python -m tuav_sitl.kernel_manifest")
+
+
 def test_type_texts_read_back_as_the_types():
     import numpy as np
     from numba.core.typing.typeof import Purpose, typeof
