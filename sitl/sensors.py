@@ -464,6 +464,14 @@ class NoisyChannel:
         self._block[:, :self._k, :] = self._rng.standard_normal((_BLOCK, self._k, self.dim))
         self._cursor[0] = 0
 
+    def load(self) -> Any:
+        """Take the reading's compiled step (:func:`channel_step`'s entry point: loaded
+        from numba's cache, or compiled, now) if this channel has not yet; the first
+        :meth:`read` takes it otherwise."""
+        if self._step is None:
+            self._step = entry_point(channel_step, CHANNEL_STEP_SIGNATURE)
+        return self._step
+
     def read(self, truth: Sequence[float], dt_s: float) -> tuple[float, ...]:
         """One reading of ``truth`` taken ``dt_s`` [s] after the previous one
         (:func:`channel_read`, then its state committed)."""
@@ -475,7 +483,7 @@ class NoisyChannel:
         t2 = float(truth[2]) if dim > 2 else 0.0
         out, step = self._out, self._step
         if step is None:
-            step = self._step = entry_point(channel_step, CHANNEL_STEP_SIGNATURE)
+            step = self.load()
         if step(self._slot, dim, t0, t1, t2, float(dt_s), self._state, self._scratch):
             self.refill()
         return tuple(out[:dim].tolist())
@@ -680,6 +688,9 @@ class SensorSuite:
         self.gps_velocity = NoisyChannel(n.gps_velocity, 3, streams[6], on, st, 6)
         self.channels = (self.accel, self.gyro, self.mag, self.baro_channel,
                          self.gps_horizontal, self.gps_vertical, self.gps_velocity)
+        if on:   # the reading's machine code now, not at a first read in a process's loop
+            for ch in self.channels:
+                ch.load()
         self._field_enu = ned_to_enu(tuple(float(v) for v in self.earth_field_ned_gauss))
         #: Past truth for the GNSS latency (:meth:`record_truth`).
         self.truth_buffer = TruthBuffer.empty()
