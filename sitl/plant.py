@@ -453,6 +453,7 @@ class Plant:
         # load (or compile) the kernels' machine code now, not in the first step, and call
         # it without numba's dispatch (the arguments' types never change)
         m = self.model
+        self._model_record = m.packed   # (its arrays are the model's for good)
         self._advance = entry_point(advance_kernel, ADVANCE_SIGNATURE)
         self._truth = entry_point(_truth_kernel, TRUTH_SIGNATURE)
         self._specific_force = entry_point(specific_force_kernel, SPECIFIC_FORCE_SIGNATURE)
@@ -486,10 +487,9 @@ class Plant:
         t = self.t_s
         # (the entry point converts the numbers to the kernel's float and bool)
         inputs = (c0, c1, c2, c3, bool(armed), winder_torque_n_m, bool(enabled))
-        model = m.packed
         while True:
             done, why, t, omega_before = self._advance(
-                x, t, n, inputs, self._stepping, model,
+                x, t, n, inputs, self._stepping, self._model_record,
                 (self._wind, varies, wind.kernel_args))
             if why == ADVANCE_DONE:
                 break
