@@ -259,32 +259,6 @@ def test_set_gains_changes_the_attitude_filter_keeping_its_state():
     assert out[0].attitude != out[1].attitude
 
 
-def test_the_commands_only_step_is_the_full_step():
-    """FlightController.commands (the control loop's entry) gives update()'s rotor
-    commands and leaves every state as update() leaves it."""
-    p = SystemParams()
-    fcs = [FlightController(FlightControlParams(), p.vehicle, p.tether, 9.81) for _ in "ab"]
-    rng = np.random.default_rng(11)
-    for k in range(300):
-        t = 0.004 * k
-        state = VehicleState(tuple(rng.uniform(-0.5, 0.5, 3) + (6.0, 2.0, 12.0)),
-                             tuple(rng.uniform(-0.5, 0.5, 3)),
-                             euler_to_quat(*rng.uniform(-0.3, 0.3, 3)),
-                             tuple(rng.uniform(-0.3, 0.3, 3)))
-        ref = RefSample((6.0, 2.0, 12.0), (0.3, 0.0, 0.0), (0.0, 0.1, 0.0), (0.0, 0.0, 0.0),
-                        float(rng.uniform(-3.0, 3.0)), 0.0)
-        if k == 0:
-            for fc in fcs:
-                fc.reset(state, (440.0,) * 4)
-        if k % 7 == 0:
-            for fc in fcs:
-                fc.winch_report(t, 14.0 + 0.01 * k, 0.1, 2.0)
-        armed = k % 50 != 49
-        assert fcs[0].commands(t, state, ref, armed) == fcs[1].update(
-            t, state, ref, armed).rotor_commands
-        assert _states(fcs[0]) == _states(fcs[1])
-
-
 def test_the_compiled_slowing_target_is_its_python_to_the_bit():
     """The tether governor's slowing target (companion.governor.slow_target, compiled)
     gives the same bits as its own Python source interpreted, over legs moving in every
