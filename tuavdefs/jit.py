@@ -192,7 +192,10 @@ def array(ndim: int = 1, of: str = F64) -> str:
 
 def record(*fields: str) -> str:
     """The text of a tuple whose fields have the given types (a packed record: the
-    components' arrays and numbers a kernel takes together, one per concern)."""
+    components' arrays and numbers a kernel takes together, one per concern), spelt as
+    :func:`type_text` spells it (fields all of one type make numba's ``UniTuple``)."""
+    if fields and all(f == fields[0] for f in fields):
+        return vec(len(fields), fields[0])
     return f"Tuple(({''.join(f + ', ' for f in fields)}))"
 
 
