@@ -43,22 +43,18 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
         'float64', 'float64',),
     ],
     'companion.flight_controller.flight_commands': [
-        ('Tuple((float64, float64, float64, float64, float64, float64, float64, float64, '
-        'float64, float64, float64, float64, float64, float64, float64, float64, float64, '
-        'float64, float64, float64, float64, float64, float64, float64, float64, bool, '
-        'float64, bool, bool, bool, float64, float64, float64, float64, float64, float64, '
-        'float64[::1], float64[::1], float64[::1], float64[::1], float64[:, ::1], '
-        'float64[::1], float64[::1], float64[::1], float64[:, ::1], float64[::1], '
-        'float64[:, ::1], float64[::1], float64[::1], ))',),
+        ('UniTuple(float64, 26)', 'UniTuple(bool, 4)', 'UniTuple(float64, 2)',
+        'UniTuple(float64[::1], 2)',
+        'Tuple((float64[::1], float64[::1], float64[:, ::1], float64[::1], float64[::1], '
+        'float64[::1], ))', 'Tuple((float64[:, ::1], float64[::1], ))',
+        'Tuple((UniTuple(float64, 4), float64[:, ::1], float64[::1], float64[::1], ))',),
     ],
     'companion.flight_controller.flight_step': [
-        ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
-        'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
-        'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
-        'float64', 'bool', 'float64', 'bool', 'bool', 'bool', 'float64', 'float64', 'float64',
-        'float64', 'float64', 'float64', 'float64[::1]', 'float64[::1]', 'float64[::1]',
-        'float64[::1]', 'float64[:, ::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]',
-        'float64[:, ::1]', 'float64[::1]', 'float64[:, ::1]', 'float64[::1]', 'float64[::1]',),
+        ('UniTuple(float64, 26)', 'UniTuple(bool, 4)', 'UniTuple(float64, 2)',
+        'UniTuple(float64[::1], 2)',
+        'Tuple((float64[::1], float64[::1], float64[:, ::1], float64[::1], float64[::1], '
+        'float64[::1], ))', 'Tuple((float64[:, ::1], float64[::1], ))',
+        'Tuple((UniTuple(float64, 4), float64[:, ::1], float64[::1], float64[::1], ))',),
     ],
     'companion.governor.slow_target': [
         ('UniTuple(float64, 3)', 'UniTuple(float64, 3)', 'UniTuple(float64, 3)',
@@ -80,12 +76,12 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
         'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64',),
     ],
     'sitl.batch.batch_kernel': [
-        ('uint8[::1]', 'int64', 'bool', 'float64', 'float64', 'int64', 'int64', 'int64',
-        'float64[::1]', 'float64[::1]', 'float64', 'float64', 'float64', 'float64[::1]',
-        'float64[::1]', 'float64[:, :, :, ::1]', 'float64[:, ::1]', 'float64[:, ::1]',
-        'int64[::1]', 'float64[:, ::1]', 'float64[::1]', 'float64[:, ::1]', 'int64[::1]',
-        'int64[:, ::1]', 'int64[:, ::1]', 'float64[:, ::1]', 'int64[:, ::1]', 'float64[:, ::1]',
-        'float64[:, ::1]', 'float64[::1]', 'float32[::1]', 'uint32[::1]',),
+        ('uint8[::1]', 'Tuple((int64, bool, float64, float64, int64, int64, int64, ))',
+        'UniTuple(float64[::1], 3)', 'UniTuple(float64, 3)', 'float64[::1]',
+        'Tuple((float64[:, :, :, ::1], float64[:, ::1], float64[:, ::1], int64[::1], '
+        'float64[:, ::1], ))', 'Tuple((float64[::1], float64[:, ::1], int64[::1], ))',
+        'Tuple((int64[:, ::1], int64[:, ::1], float64[:, ::1], int64[:, ::1], float64[:, '
+        '::1], float64[:, ::1], float64[::1], float32[::1], uint32[::1], ))',),
     ],
     'sitl.catenary._solve': [
         ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
@@ -120,15 +116,22 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
         ('float64[::1]', 'float64[::1]', 'float64', 'float64', 'float64', 'float64',),
     ],
     'sitl.plant.advance_kernel': [
-        ('float64[::1]', 'float64', 'float64', 'int64', 'float64[::1]', 'float64', 'float64',
-        'float64', 'float64', 'bool', 'float64', 'float64', 'float64[::1]', 'float64', 'bool',
-        'float64[::1]', 'float64[::1]', 'bool', 'float64[::1]', 'float64[::1]',
-        'float64[:, ::1]', 'float64[:, ::1]', 'int64', 'float64[::1]', 'float64[:, ::1]',
-        'float64[::1]', 'float64[::1]', 'int64[::1]',),
+        ('float64[::1]', 'float64', 'int64',
+        'Tuple((float64, float64, float64, float64, bool, float64, bool, ))',
+        'Tuple((float64, int64, float64, float64, ))',
+        'Tuple((float64[::1], float64[::1], float64[::1], float64[::1], float64[:, ::1], '
+        'float64[:, ::1], float64[::1], ))',
+        'Tuple((float64[::1], bool, Tuple((float64[::1], float64[:, ::1], float64[::1], '
+        'float64[::1], int64[::1], )), ))',),
     ],
     'sitl.plant.specific_force_kernel': [
         ('float64[::1]', 'float64[::1]', 'float64', 'float64', 'float64', 'float64[::1]',
         'float64',),
+    ],
+    'sitl.sensors.channel_step': [
+        ('int64', 'int64', 'float64', 'float64', 'float64', 'float64',
+        'Tuple((float64[:, :, :, ::1], float64[:, ::1], float64[:, ::1], int64[::1], '
+        'float64[:, ::1], ))', 'Tuple((float64[:, ::1], float64[:, ::1], float64[::1], ))',),
     ],
     'sitl.tether.tether_forces_kernel': [
         ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
