@@ -202,8 +202,7 @@ def tension_step(px: float, py: float, pz: float, vx: float, vy: float, vz: floa
     place): L-bar and its rate at the UAV's reported position and velocity (the rate is
     the feed-forward), the line's weight estimate, the set-point
     (:func:`tension_setpoint_n`), the length bounds (below: the straight distance plus
-    ``min_slack`` plus the UAV's stopping distance along its outward radial speed, at most
-    the longest line still off the ground; above: L-bar or that line, plus
+    ``min_slack``; above: L-bar or the longest line still off the ground, plus
     ``length_bound_m``), then :func:`tension_law`. Returns (the length the drum is asked
     to be at: the measured length plus its lag behind the speed set-point, the speed
     set-point [m/s], the exit-angle root for next time, the WinderCommand's fields)."""
@@ -222,12 +221,12 @@ def tension_step(px: float, py: float, pz: float, vx: float, vy: float, vz: floa
     setpoint = tension_setpoint_n(law_p, a, h, v, w)
     dist = math.sqrt(px * px + py * py + pz * pz)
     radial = (px * vx + py * vy + pz * vz) / dist if dist > 1e-6 else 0.0
-    out = max(radial, 0.0)
-    stop = 0.0
-    if trim_p[9] > 0.0:         # the stop lead's reaction time and braking
-        stop = out * trim_p[8] + out * out / (2.0 * trim_p[9])
+    # no stopping distance in the lower bound: the drum renders to the pull, so the
+    # vehicle's governor does not count on the length paid out ahead of it (docs/control.md
+    # §8.3); near the vertical, slack held ahead left the line's lower end unloaded, and
+    # the dynamic line whipped taut there (the lumped mission: 52.7 N at 18 cm of slack)
     room, trim_s[12] = lead_room_from(px, py, pz, trim_p[18], min_slack, trim_s[12])
-    low = dist + min_slack + min(stop, max(room - dist - min_slack, 0.0))
+    low = dist + min_slack
     high = max(lbar_m, room) + law_p[Q_BOUND_M]
     trim_s[13] = 0.0            # no join: the law has no length reference to jump
     cmd = tension_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, setpoint,
