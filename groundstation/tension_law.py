@@ -39,6 +39,11 @@ import math
 import numpy as np
 
 from groundstation.lbar import (
+    TP_LEAD_TAN_MIN,
+    TP_TRIM_FILTER,
+    TS_JOIN_GAP,
+    TS_ROOM_ROOT,
+    TS_TENSION,
     expected_drum_tension_n,
     lbar_kernel,
     lead_room_from,
@@ -257,10 +262,11 @@ def tension_step(px: float, py: float, pz: float, vx: float, vy: float, vz: floa
                                         min_slack, root_guess)
     # the drum tension as the tension trim low-passes it (the weight estimate's and the
     # winch's tether fix's input)
-    if trim_s[2] == trim_s[2] and trim_p[4] > 0.0:
-        trim_s[2] += (1.0 - math.exp(-dt_s / trim_p[4])) * (drum_tension_n - trim_s[2])
+    if trim_s[TS_TENSION] == trim_s[TS_TENSION] and trim_p[TP_TRIM_FILTER] > 0.0:
+        trim_s[TS_TENSION] += (1.0 - math.exp(-dt_s / trim_p[TP_TRIM_FILTER])) * (
+            drum_tension_n - trim_s[TS_TENSION])
     else:
-        trim_s[2] = drum_tension_n
+        trim_s[TS_TENSION] = drum_tension_n
     w = weight_estimate(trim_p, trim_s, dt_s, w_n_m, drum_tension_n, elevation_rad,
                         length_m, pz)
     h = math.hypot(px, py)
@@ -272,7 +278,8 @@ def tension_step(px: float, py: float, pz: float, vx: float, vy: float, vz: floa
     # vehicle's governor does not count on the length paid out ahead of it (docs/control.md
     # §8.3); near the vertical, slack held ahead left the line's lower end unloaded, and
     # the dynamic line whipped taut there (the lumped mission: 52.7 N at 18 cm of slack)
-    room, trim_s[12] = lead_room_from(px, py, pz, trim_p[18], min_slack, trim_s[12])
+    room, trim_s[TS_ROOM_ROOT] = lead_room_from(px, py, pz, trim_p[TP_LEAD_TAN_MIN],
+                                                min_slack, trim_s[TS_ROOM_ROOT])
     # the least slack in proportion to the chord's horizontal share (at least 0.4 of it):
     # near the vertical a line with min_slack hangs its lower end unloaded (the load
     # cell reads nothing) and the dynamic line whips taut; the set-point loop, its gain
@@ -280,7 +287,7 @@ def tension_step(px: float, py: float, pz: float, vx: float, vy: float, vz: floa
     low = dist + min_slack * max(h / dist, 0.4) if dist > 1e-6 else min_slack
     law_s[Z_STIFFNESS] = taut_line_stiffness_n_m(law_s[Z_SETPOINT], w, h, v)
     high = max(lbar_m, room) + law_p[Q_BOUND_M]
-    trim_s[13] = 0.0            # no join: the law has no length reference to jump
+    trim_s[TS_JOIN_GAP] = 0.0            # no join: the law has no length reference to jump
     cmd = tension_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, setpoint,
                       rate, low, radial, high, lbar_m)
     return length_m + law_s[Z_LAG], law_s[Z_SPEED], root, cmd
