@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import Enum
+from enum import Enum, IntEnum
 from typing import Protocol
 
 from companion.reference import RefSample, _new
@@ -43,7 +43,7 @@ class GovernorSettings(Protocol):
 
     @property
     def tether_governor(self) -> int:
-        """1: on; 0: off."""
+        """A :class:`GovernorMode` value."""
     @property
     def tether_brake_acc_m_s2(self) -> float:
         """The deceleration it brakes at and assumes of the vehicle [m/s^2]."""
@@ -65,6 +65,18 @@ class GovernorSettings(Protocol):
     @property
     def tension_step_m(self) -> float:
         """How far towards the winder each over-tension move goes [m]."""
+
+
+class GovernorMode(IntEnum):
+    """What the governor counts on from the winder (``tether_governor``,
+    TUAV_TETH_GOV)."""
+
+    OFF = 0         #: no governor
+    LENGTH = 1      #: the winder tracks a length (its law "paper"): the room is the
+                    #: length it reported, where it may stop at any moment
+    TENSION = 2     #: the winder holds the line's tension (its law "tension"): a free
+                    #: drum pays out whatever the vehicle pulls, so the room is the whole
+                    #: tether, or the length a braked drum holds
 
 
 #: The tether governor's jerk while its brake builds up [m/s^3].
@@ -293,7 +305,12 @@ class TetherGovernor:
     @property
     def enabled(self) -> bool:
         """Whether the governor is on (``tether_governor``)."""
-        return bool(self.p.tether_governor)
+        return self.mode is not GovernorMode.OFF
+
+    @property
+    def mode(self) -> GovernorMode:
+        """What the governor counts on from the winder (``tether_governor``)."""
+        return GovernorMode(self.p.tether_governor)
 
     # ----- what the winch reports
 
@@ -339,13 +356,16 @@ class TetherGovernor:
     @property
     def limit_m(self) -> float:
         """Distance [m] from the winder the governor keeps the stopping point of the
-        reference and of the vehicle within: the length the drum last reported (it may
-        stop there at any moment: a snag, a lost bus's watchdog; while winding in, where
-        it would be :data:`WIND_IN_LEAD_S` on), or the whole tether before any report,
-        less ``tether_margin_m`` (moving outward, :meth:`check` keeps ``tether_sigma_k``
+        reference and of the vehicle within: with :attr:`GovernorMode.LENGTH`, the length
+        the drum last reported (it may stop there at any moment: a snag, a lost bus's
+        watchdog; while winding in, where it would be :data:`WIND_IN_LEAD_S` on), or the
+        whole tether before any report; with :attr:`GovernorMode.TENSION` the whole
+        tether (a free drum renders to the pull: its speed follows the vehicle's
+        reported radial speed, docs/control.md §8); a braked drum's length in both; less
+        ``tether_margin_m`` (moving outward, :meth:`check` keeps ``tether_sigma_k``
         times the estimate's position standard deviation more)."""
         length = self.tether_length_m
-        if self.winch_length_m is not None:
+        if self.winch_length_m is not None and self.mode is not GovernorMode.TENSION:
             length = min(length, self.winch_length_m
                          + WIND_IN_LEAD_S * min(self.winch_speed_m_s, 0.0))
         if self.locked_length_m is not None:

@@ -39,6 +39,11 @@ import math
 import numpy as np
 
 from groundstation.lbar import (
+    TP_LEAD_TAN_MIN,
+    TP_TRIM_FILTER,
+    TS_JOIN_GAP,
+    TS_ROOM_ROOT,
+    TS_TENSION,
     expected_drum_tension_n,
     lbar_kernel,
     lead_room_from,
@@ -53,8 +58,8 @@ from tuavdefs.jit import njit
 N_TENSION_PARAMS = 25
 # indices of its state
 (Z_STARTED, Z_TENSION, Z_SETPOINT, Z_SPEED, Z_ACC, Z_LAG, Z_SPEED_RAW, Z_FEEDBACK,
- Z_FF) = range(9)
-N_TENSION_STATE = 9
+ Z_FF, Z_STIFFNESS) = range(10)
+N_TENSION_STATE = 10
 
 
 #: Time constant [s] of the low-pass on the line speed's feed-forward (dL-bar/dt from the
@@ -70,12 +75,41 @@ def _inertia(p: np.ndarray, length_m: float) -> float:
 
 
 @njit
+def gain_scale(p: np.ndarray, stiffness_n_m: float) -> float:
+    """The set-point loop's gain over ``g_T`` for a line of stiffness ``stiffness_n_m``
+    [N/m] (0: unknown): 1 up to the stiffness the gain is designed for
+    (``line_stiffness_n_m``), ``kappa_0 / kappa`` above it, so that ``g_T kappa``, the
+    loop's bandwidth, stays below the filters' (docs/control.md §8.3)."""
+    if stiffness_n_m > p[Q_STIFFNESS]:
+        return p[Q_STIFFNESS] / stiffness_n_m
+    return 1.0
+
+
+@njit
+def taut_line_stiffness_n_m(tension_n: float, w_n_m: float, h_m: float, v_m: float) -> float:
+    """dT/dL [N/m] of a taut, shallow-sag line at fixed ends holding ``tension_n`` [N] at
+    the winder, spanning ``h_m`` across and ``v_m`` up, weighing ``w_n_m`` [N/m]: a
+    string under the load ``q = w h / d`` across its chord ``d`` at tension ``T`` has
+    the slack ``q^2 d^3 / (24 T^2)``, so ``dT/dL = 12 T^3 / (q^2 d^3)``, with ``T`` the
+    geometric mean of the exit's tension and the top's (the exit's plus the weight
+    ``w v``): within 15 % of MoorPy's catenary where the line is stiff (tens of N/m and
+    more), within 40 % where it sags (tests/test_tension_law.py); 0 where there is no
+    chord."""
+    d = math.hypot(h_m, v_m)
+    q = w_n_m * h_m / d if d > 0.0 else 0.0
+    if q <= 0.0 or tension_n <= 0.0:
+        return 0.0
+    t = math.sqrt(tension_n * (tension_n + w_n_m * v_m))
+    return 12.0 * t * t * t / (q * q * d * d * d)
+
+
+@njit
 def tension_speed(p: np.ndarray, tension_n: float, setpoint_n: float,
-                  ff_rate_m_s: float) -> float:
+                  ff_rate_m_s: float, scale: float = 1.0) -> float:
     """The force loops' line speed [m/s] (positive paying out): the feed-forward
-    ``ff_rate_m_s`` plus ``sigma(T)`` (the set-point loop, and the snap ceiling's steeper
-    pay-out above ``T_ceil``)."""
-    sigma = p[Q_GAIN] * (tension_n - setpoint_n)
+    ``ff_rate_m_s`` plus ``sigma(T)`` (the set-point loop, its gain ``g_T`` times
+    ``scale``, and the snap ceiling's steeper pay-out above ``T_ceil``)."""
+    sigma = scale * p[Q_GAIN] * (tension_n - setpoint_n)
     over = tension_n - p[Q_CEIL]
     if over > 0.0:
         sigma += p[Q_CEIL_GAIN] * over
@@ -113,7 +147,7 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     else:
         s[Z_TENSION] = tension_n
     t_f, t_sp = s[Z_TENSION], s[Z_SETPOINT]
-    v0 = tension_speed(p, t_f, t_sp, ff_rate_m_s)
+    v0 = tension_speed(p, t_f, t_sp, ff_rate_m_s, gain_scale(p, s[Z_STIFFNESS]))
     k_b = p[Q_K_BOUND]
     # the slack floor's recovery: a line pulling less than the floor says nothing of how
     # much of it hangs slack; the length the UAV's position asks does, and is wound in
@@ -179,16 +213,34 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
 
 
 @njit
+def slack_tension_n(w_n_m: float, h_m: float, v_m: float, slack_m: float) -> float:
+    """The exit tension [N] at which a taut, shallow-sag line spanning ``h_m`` across and
+    ``v_m`` up, weighing ``w_n_m`` [N/m], has ``slack_m`` [m] of slack (the string of
+    :func:`taut_line_stiffness_n_m`: the geometric mean ``T_m`` of its exit's and top's
+    tension has ``q^2 d^3 / (24 T_m^2)`` of slack); inf where nothing hangs across."""
+    d = math.hypot(h_m, v_m)
+    q = w_n_m * h_m / d if d > 0.0 else 0.0
+    if q <= 0.0 or slack_m <= 0.0:
+        return math.inf
+    tm2 = q * q * d * d * d / (24.0 * slack_m)
+    wv = w_n_m * v_m
+    return 0.5 * (math.sqrt(wv * wv + 4.0 * tm2) - wv)
+
+
+@njit
 def tension_setpoint_n(p: np.ndarray, a_m: float, h_m: float, v_m: float,
-                       w_n_m: float) -> float:
+                       w_n_m: float, min_slack_m: float) -> float:
     """The tension set-point [N]: the exit tension of L-bar's catenary (parameter ``a_m``
     [m], spanning ``h_m`` across and ``v_m`` up, weighing ``w_n_m`` [N/m]) times the
-    margin, between the slack floor and the set-point's cap (the floor where that
-    catenary is degenerate: the UAV above the winder, or low and far)."""
+    margin, at most the tension at which the line keeps ``min_slack_m`` [m] of slack
+    (:func:`slack_tension_n`: near the vertical L-bar's catenary asks tens of newtons of
+    a nearly straight line), between the slack floor and the set-point's cap (the floor
+    where that catenary is degenerate: the UAV above the winder, or low and far)."""
     t_hat = expected_drum_tension_n(a_m, h_m, v_m, w_n_m)
     if not math.isfinite(t_hat):
         return p[Q_FLOOR]
-    return min(max(p[Q_MARGIN] * t_hat, p[Q_FLOOR]), p[Q_SP_MAX])
+    t_sp = min(p[Q_MARGIN] * t_hat, slack_tension_n(w_n_m, h_m, v_m, min_slack_m))
+    return min(max(t_sp, p[Q_FLOOR]), p[Q_SP_MAX])
 
 
 @njit
@@ -202,8 +254,7 @@ def tension_step(px: float, py: float, pz: float, vx: float, vy: float, vz: floa
     place): L-bar and its rate at the UAV's reported position and velocity (the rate is
     the feed-forward), the line's weight estimate, the set-point
     (:func:`tension_setpoint_n`), the length bounds (below: the straight distance plus
-    ``min_slack`` plus the UAV's stopping distance along its outward radial speed, at most
-    the longest line still off the ground; above: L-bar or that line, plus
+    ``min_slack``; above: L-bar or the longest line still off the ground, plus
     ``length_bound_m``), then :func:`tension_law`. Returns (the length the drum is asked
     to be at: the measured length plus its lag behind the speed set-point, the speed
     set-point [m/s], the exit-angle root for next time, the WinderCommand's fields)."""
@@ -211,25 +262,32 @@ def tension_step(px: float, py: float, pz: float, vx: float, vy: float, vz: floa
                                         min_slack, root_guess)
     # the drum tension as the tension trim low-passes it (the weight estimate's and the
     # winch's tether fix's input)
-    if trim_s[2] == trim_s[2] and trim_p[4] > 0.0:
-        trim_s[2] += (1.0 - math.exp(-dt_s / trim_p[4])) * (drum_tension_n - trim_s[2])
+    if trim_s[TS_TENSION] == trim_s[TS_TENSION] and trim_p[TP_TRIM_FILTER] > 0.0:
+        trim_s[TS_TENSION] += (1.0 - math.exp(-dt_s / trim_p[TP_TRIM_FILTER])) * (
+            drum_tension_n - trim_s[TS_TENSION])
     else:
-        trim_s[2] = drum_tension_n
+        trim_s[TS_TENSION] = drum_tension_n
     w = weight_estimate(trim_p, trim_s, dt_s, w_n_m, drum_tension_n, elevation_rad,
                         length_m, pz)
     h = math.hypot(px, py)
     v = max(pz, 0.0)
-    setpoint = tension_setpoint_n(law_p, a, h, v, w)
+    setpoint = tension_setpoint_n(law_p, a, h, v, w, min_slack)
     dist = math.sqrt(px * px + py * py + pz * pz)
     radial = (px * vx + py * vy + pz * vz) / dist if dist > 1e-6 else 0.0
-    out = max(radial, 0.0)
-    stop = 0.0
-    if trim_p[9] > 0.0:         # the stop lead's reaction time and braking
-        stop = out * trim_p[8] + out * out / (2.0 * trim_p[9])
-    room, trim_s[12] = lead_room_from(px, py, pz, trim_p[18], min_slack, trim_s[12])
-    low = dist + min_slack + min(stop, max(room - dist - min_slack, 0.0))
+    # no stopping distance in the lower bound: the drum renders to the pull, so the
+    # vehicle's governor does not count on the length paid out ahead of it (docs/control.md
+    # §8.3); near the vertical, slack held ahead left the line's lower end unloaded, and
+    # the dynamic line whipped taut there (the lumped mission: 52.7 N at 18 cm of slack)
+    room, trim_s[TS_ROOM_ROOT] = lead_room_from(px, py, pz, trim_p[TP_LEAD_TAN_MIN],
+                                                min_slack, trim_s[TS_ROOM_ROOT])
+    # the least slack in proportion to the chord's horizontal share (at least 0.4 of it):
+    # near the vertical a line with min_slack hangs its lower end unloaded (the load
+    # cell reads nothing) and the dynamic line whips taut; the set-point loop, its gain
+    # scaled to the stiff line there, holds the lower end at the floor's pull instead
+    low = dist + min_slack * max(h / dist, 0.4) if dist > 1e-6 else min_slack
+    law_s[Z_STIFFNESS] = taut_line_stiffness_n_m(law_s[Z_SETPOINT], w, h, v)
     high = max(lbar_m, room) + law_p[Q_BOUND_M]
-    trim_s[13] = 0.0            # no join: the law has no length reference to jump
+    trim_s[TS_JOIN_GAP] = 0.0            # no join: the law has no length reference to jump
     cmd = tension_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, setpoint,
                       rate, low, radial, high, lbar_m)
     return length_m + law_s[Z_LAG], law_s[Z_SPEED], root, cmd

@@ -102,7 +102,8 @@ class WinderControlParams(Params):
         "ground) it pays out", gt=0)
     line_stiffness_n_m: float = quantity(
         10.0, "N/m", "tension law: the line's stiffness kappa its Lyapunov function is "
-        "reported with (the law does not use it)", gt=0)
+        "reported with, and the stiffest line the set-point loop's gain is designed for "
+        "(stiffer, near the vertical, the gain falls as kappa_0 / kappa)", gt=0)
 
 
 class WinderCommand(NamedTuple):

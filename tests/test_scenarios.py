@@ -40,8 +40,12 @@ def test_the_paper_experiments_are_shipped():
 @pytest.mark.parametrize("name", NAMES)
 def test_tether_never_taut_never_on_the_ground_rotors_rarely_saturate(results, name):
     m = results[name].metrics
+    sc = results[name].scenario
     assert m["min_tether_slack_m"] > 0.0
-    if not results[name].scenario.flies_mission:   # a mission starts and ends on the ground
+    # a mission starts and ends on the ground; above 8 m/s of mean wind the line's own
+    # drag may lay it on the ground at the exit (issue 31: there it must stay controlled
+    # and never taut; hover-windy-lumped, 12 m/s)
+    if not sc.flies_mission and math.hypot(*sc.wind.steady_m_s) <= 8.0:
         assert m["tether_ground_contact_fraction"] == 0.0
     assert m["motor_saturation_fraction"] < 0.01
     s = results[name].series

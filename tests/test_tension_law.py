@@ -1,7 +1,8 @@
 """The tension-regulating winder law (groundstation/tension_law.py, docs/control.md §8)
 against independent truths: its Lyapunov identity on the drum and line model it was derived
 on, the dynamic (lumped) line's pull in the snap cases, MoorPy's catenary at the regulated
-tension in a steady hover; and the plant's load cell against its own definition."""
+tension in a steady hover; the plant's load cell against its own definition; and the
+vehicle's governor against the fence speed of the room each winder law gives."""
 
 from __future__ import annotations
 
@@ -11,6 +12,14 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+from companion.governor import (
+    GOVERNOR_SLOW_MARGIN_M,
+    GOVERNOR_SLOW_RAMP_S,
+    GovernorMode,
+    TetherGovernor,
+)
+from companion.navigation import NavigationParams
+from companion.reference import RefSample
 from groundstation import tension_law as tl
 from groundstation.winder_control import WinderController, WinderControlParams, WinderLaw
 from sitl.load_cell import LoadCell, LoadCellParams
@@ -170,6 +179,28 @@ def test_no_snap_in_a_crosswind_gust_on_the_lumped_line():
     assert _peak_ratio(res.series, 4.0) <= 1.5
 
 
+@pytest.mark.skipif(moorpy_catenary is None, reason="MoorPy is not installed")
+@pytest.mark.parametrize(("h", "v", "tension", "rel"), [
+    (2.0, 10.0, 1.0, 0.15), (1.86, 20.0, 1.0, 0.2), (2.0, 3.5, 1.5, 0.15),
+    (2.0, 10.0, 3.0, 0.15), (12.0, 20.0, 5.0, 0.4), (4.0, 10.0, 1.0, 0.45)])
+def test_the_gain_schedule_s_line_stiffness_against_moorpy(h, v, tension, rel):
+    """The law's estimate of dT/dL at fixed ends (its set-point gain falls with it) against
+    MoorPy's elastic catenary through the same ends, differentiated in its length: close
+    where the line is stiff (near the vertical), the order where it sags."""
+    tp = TetherParams()
+    ea, w = tp.axial_stiffness_n, tp.weight_per_length_n_m(9.81)
+
+    def exit_tension(length):
+        f = moorpy_catenary(h, v, length, ea, w, CB=0)
+        return math.hypot(f[0], f[1])
+
+    chord = math.hypot(h, v)
+    length = brentq(lambda x: exit_tension(x) - tension, chord * (1 + 1e-6), chord * 1.05)
+    dl = 1e-4 * (length - chord)
+    truth = (exit_tension(length - dl) - exit_tension(length + dl)) / (2.0 * dl)
+    assert tl.taut_line_stiffness_n_m(tension, w, h, v) == pytest.approx(truth, rel=rel)
+
+
 # ---------------------------------------------------------------- a steady hover
 @pytest.mark.skipif(moorpy_catenary is None, reason="MoorPy is not installed")
 def test_steady_hover_holds_the_set_point_and_moorpy_agrees_on_the_exit_angle():
@@ -224,3 +255,35 @@ def test_load_cell_lags_filters_and_is_noisy_as_specified():
     reads = np.array([noisy.read(k * 0.01, 5.0) for k in range(4000)])
     assert reads[100:].mean() == pytest.approx(5.0, abs=0.02)
     assert reads[100:].std() == pytest.approx(0.2, rel=0.1)
+
+
+# ---------------------------------------------------------------- the vehicle's governor
+@pytest.mark.parametrize("mode", [GovernorMode.LENGTH, GovernorMode.TENSION])
+def test_the_governor_counts_on_what_the_winder_guarantees(mode):
+    """A leg outward at 2 m/s near the vertical (2, 0, 10) m with the drum's reported
+    length 5 cm beyond the vehicle's distance: the length law's governor slows it to the
+    speed it can stop from in those 5 cm less its margins (ArduPilot's fence speed,
+    ``v t + v^2/2a <= r``); the tension law's does not (a free drum pays out what the
+    vehicle pulls), and both stop it at a braked drum's length."""
+    nav = NavigationParams(tether_governor=int(mode))
+    gov = TetherGovernor(nav, 50.0, 0.1)
+    pos = (2.0, 0.0, 10.0)
+    dist = math.dist(pos, (0.0, 0.0, 0.0))
+    u = tuple(x / dist for x in pos)
+    vel = tuple(2.0 * x for x in u)
+    leg = RefSample(pos, vel, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0)
+    gov.report(dist + 0.05, braked=False, speed_m_s=0.0)
+    rate, speed = gov.slow_rate(leg, 1.0, None, pos, vel, 0.0)
+    assert speed == pytest.approx(2.0)
+    # the stop from v inside r = 5 cm less the margins: v t + v^2 / 2a <= r
+    r = 0.05 - nav.tether_margin_m - GOVERNOR_SLOW_MARGIN_M
+    t_s = nav.tether_latency_s + GOVERNOR_SLOW_RAMP_S
+    a = nav.tether_brake_acc_m_s2
+    v_fence = a * (-t_s + math.sqrt(t_s * t_s + 2.0 * max(r, 0.0) / a))
+    if mode is GovernorMode.LENGTH:
+        assert rate * 2.0 <= v_fence + 0.02
+    else:
+        assert rate == 1.0
+    gov.report(dist + 0.05, braked=True, speed_m_s=0.0)
+    braked_rate, _ = gov.slow_rate(leg, 1.0, None, pos, vel, 0.0)
+    assert braked_rate * 2.0 <= v_fence + 0.02
