@@ -20,20 +20,17 @@ from matplotlib.figure import Figure
 from PIL import Image
 
 from tuav_sitl import animation as anim
-from tuav_sitl.figures import (
-    FIGURE_CAPTIONS,
-    FIGURE_NAMES,
+from tuav_sitl.figure_scene import (
     TetherDrawer,
-    build_figures,
-    length_error,
-    load_run,
-    make_figures,
     reached_indices,
     reference_geometry,
     snapshot_indices,
     spread_instants,
 )
+from tuav_sitl.figures import FIGURE_CAPTIONS, FIGURE_NAMES, build_figures, make_figures
+from tuav_sitl.figures_series import length_error
 from tuav_sitl.offline import run_scenario
+from tuav_sitl.run_data import load_run
 from tuav_sitl.scenario import load_scenario
 
 EXPECTED = ("states", "errors", "position_tracking", "attitude_tracking", "path_3d",
@@ -380,7 +377,7 @@ def test_a_lumped_run_draws_the_recorded_nodes(lumped_run):
 
 
 def test_envelope_keeps_every_bins_extremes_and_every_gap():
-    from tuav_sitl.figures import envelope
+    from tuav_sitl.figure_style import envelope
 
     rng = np.random.default_rng(5)
     n, bins = 50_001, 1000

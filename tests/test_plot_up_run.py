@@ -41,8 +41,9 @@ from pymavlink import mavutil
 from groundstation.lbar import LBarParams
 from tuav_sitl.candump_format import format_log
 from tuav_sitl.cli import main as cli_main
-from tuav_sitl.figures import load_run, reached_indices, reference_geometry
+from tuav_sitl.figure_scene import reached_indices, reference_geometry
 from tuav_sitl.offline import _to_toml
+from tuav_sitl.run_data import load_run
 from tuav_sitl.run_import import import_up_run, needs_import, read_truth
 from tuav_sitl.scenario import WaypointParams
 from tuav_sitl.tlog_read import read_tlog

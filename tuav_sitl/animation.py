@@ -25,20 +25,18 @@ from matplotlib.font_manager import FontProperties, findfont
 from matplotlib.ticker import MaxNLocator
 from PIL import Image, ImageDraw, ImageFont
 
-from tuav_sitl.figures import (
-    RunData,
+from tuav_sitl.figure_scene import (
     TetherDrawer,
     draw_goals,
     draw_ground,
     drawn_arm_m,
-    has_data,
-    load_run,
     quad_outline,
     reached_indices,
     reference_geometry,
     scene_bounds,
     set_scene,
 )
+from tuav_sitl.run_data import RunData, has_data, load_run
 
 __all__ = ["ANIMATION_SIZE_PX", "FPS", "MAX_FRAMES", "frame_plan", "make_animation"]
 

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 if TYPE_CHECKING:
-    from tuav_sitl.figures import RunData
+    from tuav_sitl.run_data import RunData
 
 __all__ = ["DrawProgress", "DrawResult", "draw_run"]
 
@@ -118,7 +118,8 @@ _RUN: tuple[str, RunData] | None = None
 
 
 def _figure(run_dir: str, name: str) -> list[Path]:
-    from tuav_sitl.figures import build_figures, load_run, save_figures
+    from tuav_sitl.figures import build_figures, save_figures
+    from tuav_sitl.run_data import load_run
 
     run = _RUN[1] if _RUN is not None and _RUN[0] == run_dir else load_run(Path(run_dir))
     return save_figures(build_figures(run.series, run.scenario, [name], run.metrics),
@@ -180,7 +181,8 @@ def draw_run(run_dir: Path, figures: bool = True, animation: bool = True,
     one; 0 draws everything here, one after the other); this process joins them once the
     animation is drawn. Progress goes to ``progress``.
     """
-    from tuav_sitl.figures import FIGURE_NAMES, load_run, missing_series
+    from tuav_sitl.figures import FIGURE_NAMES, missing_series
+    from tuav_sitl.run_data import load_run
 
     global _RUN
     run_dir = Path(run_dir)

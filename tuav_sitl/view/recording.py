@@ -482,7 +482,7 @@ def write_recording(path: Path, name: str, system: Any, series: Mapping[str, np.
 def write_run_recording(run_dir: Path) -> Path:
     """The recording of a ``tuav-sitl run`` folder (``timeseries.npz``, ``scenario.toml``)
     as ``RUN/recording.rrd``; returns its path."""
-    from tuav_sitl.figures import load_run
+    from tuav_sitl.run_data import load_run
 
     run = load_run(run_dir)
     return write_recording(Path(run_dir) / RECORDING_NAME, run.scenario.name, run.scenario,
