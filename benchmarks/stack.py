@@ -103,8 +103,8 @@ def _category(file: str, func: str) -> str:
                                          "groundstation/winch_link.py",
                                          "sitl/simlink_server.py", "tuavdefs/frames.py")):
         return "MAVLink"
-    if "/can/" in f or "/cantools/" in f or f.endswith((
-            "tuavdefs/canbus.py", "tuavdefs/can_protocol.py", "sitl/odrive_axis.py",
+    if "/can/" in f or "/cantools/" in f or "tuavdefs/can_protocol/" in f or f.endswith((
+            "tuavdefs/canbus.py", "sitl/odrive_axis.py",
             "sitl/winder_node.py")):
         return "CAN"
     if "/sitl/" in f and not f.endswith(("sitl/__main__.py", "sitl/plant_loop.py",
