@@ -241,7 +241,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print(f"companion: --goto refused: {why}", flush=True)
         autopilot.armed_changed()
 
-    onboard.on_start = on_start
     autopilot.on_gcs_heartbeat(lambda: onboard.gcs_heard(last_t[0]))
     autopilot.on_external_position(onboard.external_position)
     autopilot.streams.wind_source = onboard.wind_estimate
@@ -334,7 +333,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     truth.position_enu_m, truth.velocity_enu_m_s, truth.quaternion,
                     truth.body_rates_flu_rad_s),
                 sim.imu, sim.gps if sim.gps_updated else None)
-            out = onboard.step(inputs)
+            if onboard.begin(inputs):   # the first state: before the navigator's first step
+                on_start()
+            out = onboard.finish()
             cmds, armed, state = out.rotor_commands, out.armed, out.state
             client.send_actuators(sim.time_usec, cmds, armed=armed)
             if autopilot.flight_log is not None:   # its sensors, filter and events

@@ -90,20 +90,18 @@ class Navigator:
     """Modes, arming and the reference, stepped at every control period.
 
     ``gear_height_m`` is the height of the centre of mass when the vehicle rests on its
-    gear; ``tether_length_m`` the length on the full drum (reach check);
-    ``on_event(kind, value)`` hears what happens (also queued for :meth:`pop_events`).
+    gear; ``tether_length_m`` the length on the full drum (reach check). What happens is
+    queued for :meth:`pop_events`.
     """
 
     def __init__(self, params: NavigationParams, gear_height_m: float,
-                 tether_length_m: float,
-                 on_event: Callable[[NavEvent, object], None] | None = None) -> None:
+                 tether_length_m: float) -> None:
         #: the tether governor (companion/governor.py): the winch's reports, the slowing
         #: of legs and velocity targets, the brake
         self.governor = TetherGovernor(params, tether_length_m, gear_height_m)
         self.p = params
         self.gear_height_m = gear_height_m
         self.tether_length_m = tether_length_m
-        self.on_event = on_event
         self.mode = FlightMode.STABILIZE
         self.armed = False
         self.landed = True
@@ -148,9 +146,9 @@ class Navigator:
     def reboot(self) -> None:
         """Back to the power-on state (disarmed, STABILIZE, on the ground, no home, no
         reference), keeping what a reboot keeps: the parameters and the stored mission (and
-        the pre-arm check and the event listener it is wired to)."""
+        the pre-arm check it is wired to)."""
         mission, prearm = self.mission, self.prearm
-        self.__init__(self.p, self.gear_height_m, self.tether_length_m, self.on_event)
+        self.__init__(self.p, self.gear_height_m, self.tether_length_m)
         self.mission, self.prearm = mission, prearm
 
     # ----- state
@@ -288,8 +286,6 @@ class Navigator:
         if isinstance(value, Notice) and not self.texts.allow(value.kind, self._t):
             return
         self._events.append((kind, value))
-        if self.on_event is not None:
-            self.on_event(kind, value)
 
     # ----- checks
 

@@ -19,7 +19,6 @@ arrives on its links: never the plant's objects, parameters or rotor speeds.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import NamedTuple
 
 from companion.ekf import AidSource, EstimatorParams, FilterStatus, NavFilter
@@ -29,7 +28,6 @@ from companion.gains import FlightControlParams
 from companion.navigation import (
     FlightMode,
     MotorState,
-    NavEvent,
     NavigationParams,
     Navigator,
     Reason,
@@ -86,14 +84,14 @@ class OnboardOutputs(NamedTuple):
 class Companion:
     """Navigation and flight control stepped together at ``gains.rate_hz``.
 
-    ``params`` is the companion's own model of the system (vehicle, tether, environment);
-    ``goto`` [m], if the vehicle starts in the air, is flown to after the first step;
-    ``on_event(kind, value)`` hears the navigator's events.
+    ``params`` is the companion's own model of the system (vehicle, tether, environment).
+    A period is :meth:`step`, or :meth:`begin` then :meth:`finish` for a caller that acts
+    when the navigator starts (what :meth:`begin` returns); the navigator's events are
+    :meth:`Navigator.pop_events`.
     """
 
     def __init__(self, params: SystemParams, gains: FlightControlParams,
                  nav_params: NavigationParams, estimator: EstimatorParams | None = None, *,
-                 on_event: Callable[[NavEvent, object], None] | None = None,
                  failsafes: FailsafeParams | None = None) -> None:
         self.params = params
         veh = params.vehicle
@@ -114,8 +112,7 @@ class Companion:
         self._status: FilterStatus | None = None
         self._t_s = -math.inf               # the last period's time [s]
         self.flight = FlightController(gains, veh, params.tether, g)
-        self.nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m,
-                             on_event=on_event)
+        self.nav = Navigator(nav_params, veh.gear_height_m, params.tether.total_length_m)
         #: the link failsafes (a lost ground station, a lost winder)
         self.failsafes = Failsafes(failsafes or FailsafeParams(), self.nav)
         self.dt_s = 1.0 / gains.rate_hz
@@ -127,9 +124,9 @@ class Companion:
         #: estimate yet)
         self._hover_commands = (rotor_speed_to_command(self.hover_speed_rad_s, veh),) * 4
         self.started = False
-        #: called once, right after the first state started the navigator and before its
-        #: first step (the process announces home there, a script uploads its mission)
-        self.on_start: Callable[[], None] | None = None
+        #: the period :meth:`begin` opened: its time [s] and the state to fly on (None
+        #: before the first state)
+        self._period: tuple[float, VehicleState | None] = (-math.inf, None)
         self.nav.prearm = self._prearm
         #: ArduPilot's ARMING_CHECK bitmask: 0 skips the pre-arm checks, else they run
         self.arming_check = 1
@@ -157,8 +154,8 @@ class Companion:
         """Restart the onboard state as a reboot would (call it disarmed): a new navigation
         filter, aligning again before arming is allowed; the navigator at power-on with its
         parameters and stored mission (:meth:`Navigator.reboot`); the flight controller is
-        reset when it next flies; the next state starts the navigator again (and calls
-        :attr:`on_start`). The parameters stay, as in storage."""
+        reset when it next flies; the next state starts the navigator again (:meth:`begin`
+        returns True). The parameters stay, as in storage."""
         est = self.estimator_params
         g = self.params.environment.gravity_m_s2
         self.filter = (NavFilter(est, g, ned_to_enu(tuple(est.earth_field_ned_gauss)))
@@ -382,22 +379,35 @@ class Companion:
         return (rotor_speed_to_command(speed, veh),) * 4
 
     def step(self, inputs: OnboardInputs, diagnostics: bool = False) -> OnboardOutputs:
-        """One control period: the estimate, the navigator's reference, then the flight
-        controller's rotor commands (with its diagnostics if ``diagnostics``). Until the
-        first state, a vehicle the GNSS finds in the air hovers open loop, one on the
-        ground stays disarmed."""
+        """One control period: :meth:`begin` then :meth:`finish`."""
+        self.begin(inputs)
+        return self.finish(diagnostics)
+
+    def begin(self, inputs: OnboardInputs) -> bool:
+        """A control period's first half: the estimate; the first state starts the
+        navigator (:meth:`start`). Returns whether it started in this period: what a caller
+        does then (a script's mission, a goto, home announced) goes between this and
+        :meth:`finish`, before the navigator's first step."""
         t = inputs.t_s
         state = self.estimate(inputs)
+        self._period = (t, state)
+        if state is None or self.started:
+            return False
+        self.start(t, state)
+        return True
+
+    def finish(self, diagnostics: bool = False) -> OnboardOutputs:
+        """The period :meth:`begin` opened, completed: the navigator's reference, then the
+        flight controller's rotor commands (with its diagnostics if ``diagnostics``). Until
+        the first state, a vehicle the GNSS finds in the air hovers open loop, one on the
+        ground stays disarmed."""
+        t, state = self._period
         if state is None:
             self.steps += 1
             if self._airborne_at_boot:
                 return OnboardOutputs(self._open_loop_hover(t), MotorState.FLY, True, None,
                                       None, None)
             return OnboardOutputs(_STOPPED, MotorState.OFF, False, None, None, None)
-        if not self.started:
-            self.start(t, state)
-            if self.on_start is not None:
-                self.on_start()
         if self.filter is not None:
             self._ekf_failsafe(t)
         self.failsafes.check(t)

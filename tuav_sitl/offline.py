@@ -256,7 +256,6 @@ class OfflineRunner:
                                                      model.environment.gravity_m_s2),
                 accel_bias_sigma_m_s2=CALIBRATED_ACCEL_BIAS_SIGMA_M_S2)
         self.companion = Companion(model, sc.control, nav_params, estimator)
-        self.companion.on_start = self._on_start
         #: the last control period's time [s] (the navigator's events are stamped with it)
         self._t = 0.0
         self.reference: Reference | None = None
@@ -451,7 +450,9 @@ class OfflineRunner:
         else:
             inputs = _new(OnboardInputs, (t, _new(VehicleState, (
                 tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]), tuple(x[RATES]))), None, None))
-        out = self.companion.step(inputs, diagnostics=True)
+        if self.companion.begin(inputs):   # the first state: the script begins
+            self._on_start()
+        out = self.companion.finish(diagnostics=True)
         self._take_events(t)
         state = out.state
         if state is not None:   # LOCAL_POSITION_NED on the component link
