@@ -106,6 +106,11 @@ GOVERNOR_LOOKAHEAD_S = 0.5
 #: of GOVERNOR_SIGMA_SPEED_M_S, in proportion below), so that in a flight without a fault
 #: the brake is never needed.
 GOVERNOR_SLOW_MARGIN_M = 0.02
+#: The leg clock's rate limit below which a slowing is said, and the rate the clock and
+#: its limit must both be back above before the next one is (a hysteresis: a clock
+#: returning critically damped creeps towards 1 without ever rounding to it).
+GOVERNOR_SLOWING_SAID_BELOW = 0.999
+GOVERNOR_SLOWING_OVER_ABOVE = 0.9995
 
 
 @njit
@@ -438,10 +443,10 @@ class TetherGovernor:
         elif s_new <= 0.0:
             s_new, sd_new = 0.0, 0.0
         notice = None
-        if target < 0.999 and not self.slowed:
+        if target < GOVERNOR_SLOWING_SAID_BELOW and not self.slowed:
             self.slowed = True
             notice = _SLOWING
-        elif target >= 1.0 and s_new >= 1.0:
+        elif min(target, s_new) >= GOVERNOR_SLOWING_OVER_ABOVE:
             self.slowed = False
         self.clock_lag += (1.0 - 0.5 * (s + s_new)) * dt
         self.s, self.sd = s_new, sd_new

@@ -15,6 +15,7 @@ import pytest
 from companion.governor import (
     GOVERNOR_SLOW_MARGIN_M,
     GOVERNOR_SLOW_RAMP_S,
+    GOVERNOR_SLOWING_OVER_ABOVE,
     TENSION_REPEAT_S,
     TETHER_BRAKE_JERK_M_S3,
     TETHER_RESUME_ROOM_M,
@@ -225,3 +226,19 @@ def test_slow_clock_follows_the_room_and_gives_it_back() -> None:
     for _ in range(1000):
         gov.slow_clock(back, back.pos_m, ZERO, 0.0, 0.01)
     assert gov.s == pytest.approx(1.0, abs=1e-9) and gov.sd == pytest.approx(0.0, abs=1e-9)
+
+
+def test_each_slowing_of_the_clock_is_said_once() -> None:
+    """Out, back in, out again: two slowings, each said once, though the clock returning
+    critically damped never rounds to a rate of exactly 1 (the notice's hysteresis:
+    said below GOVERNOR_SLOWING_SAID_BELOW, over above GOVERNOR_SLOWING_OVER_ABOVE)."""
+    gov = governor()
+    gov.report(20.0, braked=False, speed_m_s=0.0)
+    out, back = radial(19.0, 2.0), radial(19.0, -2.0)
+    said = []
+    for nom, periods in ((out, 300), (back, 3000), (out, 300)):
+        notices = [gov.slow_clock(nom, nom.pos_m, ZERO, 0.0, 0.01) for _ in range(periods)]
+        said.append(sum(n is not None for n in notices))
+        if nom is back:
+            assert GOVERNOR_SLOWING_OVER_ABOVE <= gov.s < 1.0
+    assert said == [1, 0, 1]
