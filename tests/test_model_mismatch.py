@@ -8,6 +8,7 @@ import textwrap
 
 import pytest
 
+from groundstation.lbar import TS_WEIGHT
 from tuav_sitl.offline import OfflineRunner
 from tuav_sitl.scenario import load_scenario
 from tuavdefs.paramspec import ParameterError
@@ -98,7 +99,7 @@ def test_a_heavier_plant_than_the_controllers_believe_still_flies(tmp_path):
     assert m["motor_saturation_fraction"] < 0.01
     # the winder learnt the line's weight from its exit tension and angle (elastic
     # truth, inextensible estimate: within 5 %) and laid none of it on the ground
-    w_hat = host.lbar.trim_state[3]
+    w_hat = host.lbar.trim_state[TS_WEIGHT]
     assert w_hat == pytest.approx(0.051 * g, rel=0.05)
     assert m["tether_ground_contact_fraction"] == 0.0
     # and the mismatch is felt: the same run with the truth equal to the model tracks

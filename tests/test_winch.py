@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from groundstation import winch as wm
 from groundstation import winch_link
-from groundstation.lbar import LBarParams
+from groundstation.lbar import TS_LEAD, TS_OFFSET, TS_WEIGHT, LBarParams
 from groundstation.winch import (
     JOIN_MARGIN_M,
     REJOIN_ACC_M_S2,
@@ -879,7 +879,7 @@ def test_tension_trim_rides_out_a_snapping_load_cell():
             host.update(lbar, 0.0, expected, pos, vel)
         for k in range(300):      # 3 s at the winder's 100 Hz: 2 periods slack, 2 at 2x
             host.update(lbar, 0.0, 2.0 * expected if k % 4 >= 2 else 0.0, pos, vel)
-        paid[tau] = host.lbar.trim_state[0]
+        paid[tau] = host.lbar.trim_state[TS_OFFSET]
     assert tau == 0.0 and paid[0.0] > 0.3
     assert paid[LBarParams().tension_trim_filter_s] < 0.01
 
@@ -900,7 +900,7 @@ def test_tension_trim_pays_out_when_the_tether_is_tighter_than_its_model_says():
     assert 0.5 < expected < 20.0
     for _ in range(100):
         step = host.update(lbar, 0.0, expected, pos, vel)
-    assert step.lbar_m == pytest.approx(lbar, abs=1e-9) and lb.trim_state[0] == 0.0
+    assert step.lbar_m == pytest.approx(lbar, abs=1e-9) and lb.trim_state[TS_OFFSET] == 0.0
     for _ in range(50):   # 0.5 s at 1.2x the expected tension
         step = host.update(lbar, 0.0, 1.2 * expected, pos, vel)
     rate = lp.tension_trim_rate_m_s * (math.log(1.2) - lp.tension_trim_band)
@@ -973,7 +973,7 @@ def test_relaxed_holds_a_ground_pre_tension_while_the_uav_is_unknown_or_on_the_g
     # REJOIN_ACC_M_S2, and L-bar's law holds once it has (the old step set the drum paying
     # out faster than a lumped line takes it: slack at the exit, then a snap)
     lbar_high = host.lbar.length(high)[0]
-    lead = float(w.host.lbar.trim_state[4])
+    lead = float(w.host.lbar.trim_state[TS_LEAD])
     assert 0.0 <= lead < 0.1
     assert lbar_high - floor > JOIN_MARGIN_M
     gap = lbar_high + lead - w.reference()[0]
@@ -981,18 +981,18 @@ def test_relaxed_holds_a_ground_pre_tension_while_the_uav_is_unknown_or_on_the_g
     gaps = [gap]
     for k in range(600):
         encoder(w, 30.0 + k * DT, w.reference()[0])
-        gaps.append(lbar_high + float(w.host.lbar.trim_state[4]) - w.reference()[0])
+        gaps.append(lbar_high + float(w.host.lbar.trim_state[TS_LEAD]) - w.reference()[0])
     closing = [(a - b) / DT for a, b in zip(gaps, gaps[1:], strict=False)]
     assert max(closing) <= p.rejoin_rate_m_s + 1e-9
     assert max(b - a for a, b in zip(closing, closing[1:], strict=False)) <= (
         REJOIN_ACC_M_S2 * DT + 1e-9)      # (it slows down on sqrt(2 a gap))
     assert gaps[1] > 0.0 and gaps[-1] == pytest.approx(0.0, abs=1e-9)
-    lead = float(w.host.lbar.trim_state[4])
+    lead = float(w.host.lbar.trim_state[TS_LEAD])
     assert w.reference()[0] == pytest.approx(lbar_high + lead, abs=1e-5)
     tension(w, 36.0, 2.0)       # (pulled: 10 m more out is no slack for the guard)
     w.set_uav(UAV)
     encoder(w, 36.0, 13.5)
-    lead = float(w.host.lbar.trim_state[4])      # the stop lead, as above
+    lead = float(w.host.lbar.trim_state[TS_LEAD])      # the stop lead, as above
     assert w.reference()[0] == pytest.approx(host.lbar.length(UAV[0])[0] + lead, abs=1e-5)
     # without a pre-tension (or a load cell: the earlier test) it holds its length
     w2 = Winch(w.host, PARAMS.winder, PARAMS.tether, G, w.p.replace(ground_tension_n=0.0))
@@ -1095,7 +1095,7 @@ def test_a_join_never_winds_the_line_in():
         ref = w.reference()[0]
         assert ref >= min(start, lbar) - 1e-6, (k, ref, start, lbar)
     assert lbar < start - 0.1 and w.join_gap_m == 0.0
-    lead = float(host.lbar.trim_state[4])
+    lead = float(host.lbar.trim_state[TS_LEAD])
     assert ref == pytest.approx(lbar + lead, abs=1e-6)
 
 
@@ -1263,17 +1263,17 @@ def test_a_heavier_line_than_the_model_does_not_trip_the_tension_trim():
     tension = heavy * a * math.sqrt(1.0 + slope * slope)
     for _ in range(2000):   # 20 s at 100 Hz
         host.update(length, 0.0, tension, pos, (0.0, 0.0, 0.0), math.atan(slope))
-    assert lb.trim_state[3] == pytest.approx(heavy, rel=1e-3)
-    assert lb.trim_state[0] == 0.0
+    assert lb.trim_state[TS_WEIGHT] == pytest.approx(heavy, rel=1e-3)
+    assert lb.trim_state[TS_OFFSET] == 0.0
     # without the exit angle the model's weight is all it has: the heavy line reads tight
     blind = WinderHost(WinderControlParams(), lp, PARAMS.winder, PARAMS.tether, G)
     for _ in range(200):
         blind.update(length, 0.0, tension, pos, (0.0, 0.0, 0.0))
-    assert blind.lbar.trim_state[0] > 0.3   # 2 s at the trim's 0.2 m/s
+    assert blind.lbar.trim_state[TS_OFFSET] > 0.3   # 2 s at the trim's 0.2 m/s
     # a UAV farther than reported pulls harder than the heavy line explains: it pays out
     for _ in range(100):
         host.update(length, 0.0, 1.6 * tension, pos, (0.0, 0.0, 0.0), math.atan(slope))
-    assert lb.trim_state[0] > 0.1
+    assert lb.trim_state[TS_OFFSET] > 0.1
 
 
 # ------------------------------------------------- the motor's current, a second source
