@@ -71,9 +71,11 @@ from tuavdefs.can_protocol import (
     CanFrameError,
     Cmd,
     ControlMode,
+    Direction,
     Frame,
     InputMode,
     MessageSpec,
+    NodeKind,
     ODriveError,
     ProcedureResult,
     SensorCmd,
@@ -108,7 +110,7 @@ DROP_REASONS = (
 )
 """Reasons under which :attr:`OdriveAxis.counters` counts dropped frames."""
 
-_AXIS_SPECS: Mapping[int, MessageSpec] = {m.cmd_id: m for m in MESSAGES if m.node == "axis"}
+_AXIS_SPECS: Mapping[int, MessageSpec] = {m.cmd_id: m for m in MESSAGES if m.node is NodeKind.AXIS}
 _TIME_EPS_S = 1e-9
 _TWO_PI = 2.0 * math.pi
 
@@ -211,7 +213,7 @@ class OdriveAxis:
         self._schedules: dict[int, CyclicSchedule] = {}
         for cmd, period in periods.items():
             spec = _AXIS_SPECS.get(int(cmd))
-            if spec is None or spec.direction != "axis->host":
+            if spec is None or spec.direction is not Direction.AXIS_TO_HOST:
                 raise ValueError(f"command {cmd!r} is not an axis->host message")
             if period is not None and period > 0.0:
                 self._schedules[int(cmd)] = CyclicSchedule(period)
@@ -268,7 +270,7 @@ class OdriveAxis:
         spec = _AXIS_SPECS.get(cmd)
 
         # the axis's own transmit ids: requests are host frames, data frames are not
-        if spec is not None and spec.direction == "axis->host":
+        if spec is not None and spec.direction is Direction.AXIS_TO_HOST:
             if is_remote or len(data) == 0:
                 return [self._reply(cmd)]     # a poll: answered, not a feed
             self.counters["wrong_direction"] += 1

@@ -21,8 +21,9 @@ from tuavdefs.can_protocol import (
     split_id,
 )
 
-SENDER = {"host->axis": "Ground_Station", "axis->host": "ODrive_Axis0",
-          "sensor->host": "Winch_Sensors"}
+SENDER = {cp.Direction.HOST_TO_AXIS: "Ground_Station",
+          cp.Direction.AXIS_TO_HOST: "ODrive_Axis0",
+          cp.Direction.SENSOR_TO_HOST: "Winch_Sensors"}
 NAMES = [m.name for m in MESSAGES]
 
 
@@ -77,8 +78,8 @@ def test_message_table_facts():
     requestable = {m.name for m in MESSAGES if m.rtr}
     assert requestable == {"Heartbeat", "Get_Error", "Get_Encoder_Estimates", "Get_Iq",
                            "Get_Bus_Voltage_Current", "Get_Torques"}
-    assert all(m.direction == "axis->host" for m in MESSAGES if m.rtr)
-    assert {m.cmd_id for m in MESSAGES if m.node == "axis"} == {int(c) for c in Cmd}
+    assert all(m.direction is cp.Direction.AXIS_TO_HOST for m in MESSAGES if m.rtr)
+    assert {m.cmd_id for m in MESSAGES if m.node is cp.NodeKind.AXIS} == {int(c) for c in Cmd}
     assert ODriveError.WATCHDOG_TIMER_EXPIRED == 0x01000000
     assert ODriveError.ESTOP_REQUESTED == 0x02000000
 
@@ -179,7 +180,7 @@ def test_frame_ids():
 
 
 def test_sensor_node_never_collides_with_an_axis_node():
-    sensor_ids = {m.frame_id() for m in MESSAGES if m.node == "sensor"}
+    sensor_ids = {m.frame_id() for m in MESSAGES if m.node is cp.NodeKind.SENSOR}
     assert sensor_ids == {0x601, 0x602, 0x603, 0x604}
     whole_sensor_node = {frame_id(WINCH_SENSOR_NODE_ID_DEFAULT, c) for c in range(0x20)}
     for node in range(0x30):

@@ -71,7 +71,7 @@ class Winder:
                 return
             now = time.monotonic()
             spec = cp.spec_for_id(rx.arbitration_id)
-            if spec is not None and spec.direction == "host->axis":
+            if spec is not None and spec.direction is cp.Direction.HOST_TO_AXIS:
                 try:
                     value = spec.decode(rx.data)
                 except cp.CanFrameError:

@@ -40,8 +40,10 @@ __all__ = [
     "CanFrameError",
     "Cmd",
     "ControlMode",
+    "Direction",
     "Frame",
     "InputMode",
+    "NodeKind",
     "ODriveError",
     "ProcedureResult",
     "SensorCmd",
@@ -191,6 +193,21 @@ class WinchFlags(enum.IntFlag):
     LOAD_CELL_HEALTHY = 0x02
     AT_FULL_STOP = 0x04
     AT_EMPTY_STOP = 0x08
+
+
+class NodeKind(enum.StrEnum):
+    """The kind of node a message belongs to: the ODrive axis, or the winch's sensors."""
+
+    AXIS = "axis"
+    SENSOR = "sensor"
+
+
+class Direction(enum.StrEnum):
+    """Who sends a message to whom."""
+
+    HOST_TO_AXIS = "host->axis"
+    AXIS_TO_HOST = "axis->host"
+    SENSOR_TO_HOST = "sensor->host"
 
 
 class CanFrameError(ValueError):

@@ -12,7 +12,7 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from tuavdefs.can_protocol.codec import (
     decode_bus_voltage_current,
@@ -52,6 +52,8 @@ from tuavdefs.can_protocol.ids import (
     AXIS_NODE_ID_DEFAULT,
     WINCH_SENSOR_NODE_ID_DEFAULT,
     Cmd,
+    Direction,
+    NodeKind,
     SensorCmd,
     frame_id,
     split_id,
@@ -79,10 +81,6 @@ def dbc_path() -> Path:
     return Path(os.fspath(resource))  # type: ignore[arg-type]
 
 
-NodeKind = Literal["axis", "sensor"]
-Direction = Literal["host->axis", "axis->host", "sensor->host"]
-
-
 @dataclass(frozen=True)
 class MessageSpec:
     """One message of the bus.
@@ -108,7 +106,7 @@ class MessageSpec:
     def frame_id(self, node_id: int | None = None) -> int:
         """Arbitration id for ``node_id`` (default: the node kind's default node id)."""
         if node_id is None:
-            node_id = (AXIS_NODE_ID_DEFAULT if self.node == "axis"
+            node_id = (AXIS_NODE_ID_DEFAULT if self.node is NodeKind.AXIS
                        else WINCH_SENSOR_NODE_ID_DEFAULT)
         return frame_id(node_id, self.cmd_id)
 
@@ -120,44 +118,49 @@ def _spec(name: str, cmd_id: int, node: NodeKind, direction: Direction, dlc: int
                        min_len, encode, decode)
 
 
+# the table's columns, short
+_AXIS, _SENSOR = NodeKind.AXIS, NodeKind.SENSOR
+_TO_AXIS, _FROM_AXIS = Direction.HOST_TO_AXIS, Direction.AXIS_TO_HOST
+_FROM_SENSOR = Direction.SENSOR_TO_HOST
+
 MESSAGES: tuple[MessageSpec, ...] = (
-    _spec("Heartbeat", Cmd.HEARTBEAT, "axis", "axis->host", 8, 0.1, True,
+    _spec("Heartbeat", Cmd.HEARTBEAT, _AXIS, _FROM_AXIS, 8, 0.1, True,
           ("Axis_Error", "Axis_State", "Procedure_Result", "Trajectory_Done_Flag"), 7,
           encode_heartbeat, decode_heartbeat),
-    _spec("Estop", Cmd.ESTOP, "axis", "host->axis", 0, None, False, (), 0,
+    _spec("Estop", Cmd.ESTOP, _AXIS, _TO_AXIS, 0, None, False, (), 0,
           encode_estop, decode_estop),
-    _spec("Get_Error", Cmd.GET_ERROR, "axis", "axis->host", 8, None, True,
+    _spec("Get_Error", Cmd.GET_ERROR, _AXIS, _FROM_AXIS, 8, None, True,
           ("Active_Errors", "Disarm_Reason"), 8, encode_get_error, decode_get_error),
-    _spec("Set_Axis_State", Cmd.SET_AXIS_STATE, "axis", "host->axis", 8, None, False,
+    _spec("Set_Axis_State", Cmd.SET_AXIS_STATE, _AXIS, _TO_AXIS, 8, None, False,
           ("Axis_Requested_State",), 4, encode_set_axis_state, decode_set_axis_state),
-    _spec("Get_Encoder_Estimates", Cmd.GET_ENCODER_ESTIMATES, "axis", "axis->host", 8, 0.01,
+    _spec("Get_Encoder_Estimates", Cmd.GET_ENCODER_ESTIMATES, _AXIS, _FROM_AXIS, 8, 0.01,
           True, ("Pos_Estimate", "Vel_Estimate"), 8,
           encode_encoder_estimates, decode_encoder_estimates),
-    _spec("Set_Controller_Mode", Cmd.SET_CONTROLLER_MODE, "axis", "host->axis", 8, None, False,
+    _spec("Set_Controller_Mode", Cmd.SET_CONTROLLER_MODE, _AXIS, _TO_AXIS, 8, None, False,
           ("Control_Mode", "Input_Mode"), 8,
           encode_set_controller_mode, decode_set_controller_mode),
-    _spec("Set_Input_Torque", Cmd.SET_INPUT_TORQUE, "axis", "host->axis", 8, None, False,
+    _spec("Set_Input_Torque", Cmd.SET_INPUT_TORQUE, _AXIS, _TO_AXIS, 8, None, False,
           ("Input_Torque",), 4, encode_set_input_torque, decode_set_input_torque),
-    _spec("Set_Limits", Cmd.SET_LIMITS, "axis", "host->axis", 8, None, False,
+    _spec("Set_Limits", Cmd.SET_LIMITS, _AXIS, _TO_AXIS, 8, None, False,
           ("Velocity_Limit", "Current_Limit"), 8, encode_set_limits, decode_set_limits),
-    _spec("Get_Iq", Cmd.GET_IQ, "axis", "axis->host", 8, 0.05, True,
+    _spec("Get_Iq", Cmd.GET_IQ, _AXIS, _FROM_AXIS, 8, 0.05, True,
           ("Iq_Setpoint", "Iq_Measured"), 8, encode_iq, decode_iq),
-    _spec("Get_Bus_Voltage_Current", Cmd.GET_BUS_VOLTAGE_CURRENT, "axis", "axis->host", 8,
+    _spec("Get_Bus_Voltage_Current", Cmd.GET_BUS_VOLTAGE_CURRENT, _AXIS, _FROM_AXIS, 8,
           None, True, ("Bus_Voltage", "Bus_Current"), 8,
           encode_bus_voltage_current, decode_bus_voltage_current),
-    _spec("Clear_Errors", Cmd.CLEAR_ERRORS, "axis", "host->axis", 1, None, False,
+    _spec("Clear_Errors", Cmd.CLEAR_ERRORS, _AXIS, _TO_AXIS, 1, None, False,
           ("Identify",), 1, encode_clear_errors, decode_clear_errors),
-    _spec("Get_Torques", Cmd.GET_TORQUES, "axis", "axis->host", 8, None, True,
+    _spec("Get_Torques", Cmd.GET_TORQUES, _AXIS, _FROM_AXIS, 8, None, True,
           ("Torque_Target", "Torque_Estimate"), 8, encode_torques, decode_torques),
-    _spec("Winch_Heartbeat", SensorCmd.WINCH_HEARTBEAT, "sensor", "sensor->host", 2, 0.1,
+    _spec("Winch_Heartbeat", SensorCmd.WINCH_HEARTBEAT, _SENSOR, _FROM_SENSOR, 2, 0.1,
           False, ("Brake_Engaged", "Load_Cell_Healthy", "At_Full_Stop", "At_Empty_Stop",
                   "Counter"), 2, encode_winch_heartbeat, decode_winch_heartbeat),
-    _spec("Winch_Length", SensorCmd.WINCH_LENGTH, "sensor", "sensor->host", 8, 0.01, False,
+    _spec("Winch_Length", SensorCmd.WINCH_LENGTH, _SENSOR, _FROM_SENSOR, 8, 0.01, False,
           ("Line_Length", "Line_Speed"), 8, encode_winch_length, decode_winch_length),
-    _spec("Winch_Tension", SensorCmd.WINCH_TENSION, "sensor", "sensor->host", 8, 0.01, False,
+    _spec("Winch_Tension", SensorCmd.WINCH_TENSION, _SENSOR, _FROM_SENSOR, 8, 0.01, False,
           ("Tension", "Brake_Engaged", "Sample_Time"), 7, encode_winch_tension,
           decode_winch_tension),
-    _spec("Winch_Exit_Angle", SensorCmd.WINCH_EXIT_ANGLE, "sensor", "sensor->host", 8, 0.02,
+    _spec("Winch_Exit_Angle", SensorCmd.WINCH_EXIT_ANGLE, _SENSOR, _FROM_SENSOR, 8, 0.02,
           False, ("Azimuth", "Elevation", "Sample_Time", "Valid"), 7,
           encode_winch_exit_angle, decode_winch_exit_angle),
 )
@@ -165,9 +168,9 @@ MESSAGES: tuple[MessageSpec, ...] = (
 frames ``frame_id(sensor_node, cmd_id)``."""
 
 MESSAGES_BY_NAME: Mapping[str, MessageSpec] = {m.name: m for m in MESSAGES}
-_AXIS_BY_CMD: Mapping[int, MessageSpec] = {m.cmd_id: m for m in MESSAGES if m.node == "axis"}
+_AXIS_BY_CMD: Mapping[int, MessageSpec] = {m.cmd_id: m for m in MESSAGES if m.node is _AXIS}
 _SENSOR_BY_CMD: Mapping[int, MessageSpec] = {
-    m.cmd_id: m for m in MESSAGES if m.node == "sensor"}
+    m.cmd_id: m for m in MESSAGES if m.node is _SENSOR}
 
 
 def message_spec(name: str) -> MessageSpec:
