@@ -10,13 +10,13 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from tuav_sitl.figure_style import DPI
 from tuav_sitl.sweep import FailureKind, SweepParams
 
 #: The metrics whose distributions are drawn (when the table has them).
 CDF_METRICS = ("position_rmse_m", "position_max_error_m", "min_tether_slack_m",
                "tether_ground_contact_fraction", "motor_saturation_fraction",
                "estimate_position_rmse_m")
-DPI = 110
 
 
 def fig_cdfs(sweep: SweepParams, rows: list[dict[str, Any]]) -> Figure:
