@@ -204,6 +204,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         client = SimLinkClient(home=tuple(args.home), unix_path=args.sim, truth=on_truth)
     else:
         client = SimLinkClient(*args.sim, tuple(args.home), truth=on_truth)
+    # the start-up's objects (numpy, numba, pymavlink and their modules: most of the heap)
+    # move to the collector's permanent generation, so its full collections during the
+    # run no longer walk them: about a tenth of the loop's CPU (docs/performance.md). Done
+    # before connecting: the plant's clock starts when the companion connects, and this
+    # full collection takes tens of milliseconds (270 ms on a loaded host: 20-odd periods
+    # unanswered at every start)
+    gc.collect()
+    gc.freeze()
     try:
         client.connect(timeout_s=args.connect_timeout)
     except TimeoutError as exc:
@@ -298,10 +306,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     reason = "link closed"
     sim_fd = client.fileno()
     waiter = _Waiter(sim_fd)
-    # the start-up's objects (numpy, numba, pymavlink and their modules: most of the heap)
-    # move to the collector's permanent generation, so its full collections during the
-    # run no longer walk them: about a tenth of the loop's CPU (docs/performance.md)
-    gc.collect()
+    # what the set-up since made joins them (a freeze moves objects, it walks none)
     gc.freeze()
     try:
         while stop["signal"] is None:
