@@ -117,6 +117,27 @@ def test_the_tether_fixes_are_drawn_at_their_rate(denied):
                                rtol=1e-6)
 
 
+def test_the_gnss_fixes_are_drawn_at_the_receivers_rate(denied):
+    """world/fixes/gnss: a point per GNSS fix the vehicle received (before the scenario's
+    GNSS loss: the receiver's rate over the whole 6 s), at the fix's time, near the truth
+    there (within its own 3 sigma and 5 cm), and its 3-sigma ellipsoid."""
+    s, rrd = denied["series"], denied["rrd"]
+    rate_hz = load_scenario("hover-gnss-loss").sensors.noise_model().gps_rate_hz
+    t, pts = entity_column(rrd, Entity.GNSS_FIX, "Points3D:positions")
+    assert len(t) == len(s["gnss_fix_t"])
+    assert abs(len(t) - 6.0 * rate_hz) <= 2
+    np.testing.assert_allclose(np.diff(t), 1.0 / rate_hz, atol=1e-3)
+    np.testing.assert_allclose(t, s["gnss_fix_t"], atol=1e-6)
+    pos = np.array([p[0] for p in pts])
+    np.testing.assert_allclose(pos, s["gnss_fix_pos"], atol=1e-5)
+    truth = np.column_stack([np.interp(t, s["t"], s["pos"][:, i]) for i in range(3)])
+    assert (np.abs(pos - truth) <= 3.0 * s["gnss_fix_sigma"] + 0.05).all()
+    ta, half = entity_column(rrd, Entity.GNSS_FIX + "/accuracy", "Ellipsoids3D:half_sizes")
+    assert len(ta) == len(t)
+    np.testing.assert_allclose(np.array([h[0] for h in half]), 3.0 * s["gnss_fix_sigma"],
+                               rtol=1e-6)
+
+
 def test_the_estimates_ellipsoid_is_three_sigma(denied):
     """world/estimate/ellipsoid: at every control period with an estimate, centred on
     it, its half-sizes three standard deviations."""

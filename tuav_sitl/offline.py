@@ -366,6 +366,8 @@ class OfflineRunner:
         self.line_log = (LineNodesLog(sc.duration_s, int(self.plant.model.lp[L_MAXN]) + 2)
                          if self.plant.model.lumped else None)
         self.fix_log = TetherFixLog(sc.duration_s, cl.TETHER_FIX_RATE_HZ)
+        self.gnss_log = TetherFixLog(sc.duration_s, sc.sensors.noise_model().gps_rate_hz,
+                                     "gnss_fix")
         bar = ProgressBar(sc.duration_s, progress)
         faults, mission = bool(sc.faults), sc.flies_mission
         wall0 = time.perf_counter()
@@ -445,8 +447,11 @@ class OfflineRunner:
         # (the records built as the tuples they are: tuple.__new__)
         if sensors is not None:     # on its estimate: no truth onboard
             sim = sensors.read(t)
-            inputs = _new(OnboardInputs, (t, None, sim.imu,
-                                          sim.gps if sim.gps_updated else None))
+            gps = sim.gps if sim.gps_updated else None
+            inputs = _new(OnboardInputs, (t, None, sim.imu, gps))
+            if gps is not None and gps.fix_type >= 3:    # (the view draws them)
+                self.gnss_log.record_sigma(gps.time_usec * 1e-6, gps.position_enu_m,
+                                           (gps.eph_m, gps.eph_m, gps.epv_m))
         else:
             inputs = _new(OnboardInputs, (t, _new(VehicleState, (
                 tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]), tuple(x[RATES]))), None, None))
@@ -523,6 +528,7 @@ class OfflineRunner:
         if self.line_log is not None:
             series |= self.line_log.arrays()
         series |= self.fix_log.arrays()
+        series |= self.gnss_log.arrays()
         reached = [(int(v), ts) for kind, v, ts in self.nav_events if kind is NavEvent.REACHED]
         if self._waypoints:
             metrics["waypoints_reached"] = [{"index": seq - 1, "t_s": round(ts, 3)}

@@ -4,7 +4,8 @@
 (rows, columns) array sized for the whole run (a row past its end is dropped), split into
 the run's columns at the end. :class:`LineNodesLog`: the lumped tether's nodes at
 :data:`LINE_NODES_RATE_HZ`, float32, into a (frames, points, 3) array sized the same way.
-:class:`TetherFixLog`: the winch's tether fixes as the vehicle received them.
+:class:`TetherFixLog`: the winch's tether fixes as the vehicle received them (and, under
+the name ``gnss_fix``, the GNSS receiver's fixes).
 """
 
 from __future__ import annotations
@@ -165,12 +166,14 @@ class LineNodesLog:
 class TetherFixLog:
     """The winch's tether fixes the vehicle received (at most the winch's
     :data:`tuavdefs.component_link.TETHER_FIX_RATE_HZ`, in a run of ``duration_s`` [s]):
-    their sample times [s], positions [m] and standard deviations along x, y, z [m]."""
+    their sample times [s], positions [m] and standard deviations along x, y, z [m]. With
+    ``name`` "gnss_fix", the GNSS receiver's fixes (at most ``rate_hz``) likewise."""
 
-    def __init__(self, duration_s: float, rate_hz: float) -> None:
+    def __init__(self, duration_s: float, rate_hz: float, name: str = "tether_fix") -> None:
         n = int(duration_s * rate_hz) + 2
         self._rows = np.empty((n, 7))
         self.i = 0
+        self.name = name
 
     def record(self, t_s: float, pos_m: tuple[float, float, float],
                cov_m2: tuple[tuple[float, float, float], ...]) -> None:
@@ -179,11 +182,19 @@ class TetherFixLog:
             self._rows[self.i] = (t_s, *pos_m, *(math.sqrt(cov_m2[k][k]) for k in range(3)))
             self.i += 1
 
+    def record_sigma(self, t_s: float, pos_m: tuple[float, float, float],
+                     sigma_m: tuple[float, float, float]) -> None:
+        """A fix: its time [s], position [m] and standard deviations along x, y, z [m]."""
+        if self.i < len(self._rows):
+            self._rows[self.i] = (t_s, *pos_m, *sigma_m)
+            self.i += 1
+
     def arrays(self) -> dict[str, np.ndarray]:
-        """``tether_fix_t`` [s], ``tether_fix_pos`` [m], ``tether_fix_sigma`` [m]; none if
-        no fix came."""
+        """``NAME_t`` [s], ``NAME_pos`` [m], ``NAME_sigma`` [m] (``NAME``: "tether_fix",
+        or the name given); none if no fix came."""
         if not self.i:
             return {}
         r = self._rows[:self.i]
-        return {"tether_fix_t": r[:, 0].copy(), "tether_fix_pos": r[:, 1:4].copy(),
-                "tether_fix_sigma": r[:, 4:7].copy()}
+        name = self.name
+        return {f"{name}_t": r[:, 0].copy(), f"{name}_pos": r[:, 1:4].copy(),
+                f"{name}_sigma": r[:, 4:7].copy()}
