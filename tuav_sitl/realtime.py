@@ -80,8 +80,9 @@ def cpu_split(available: set[int] | None = None) -> dict[str, set[int]] | None:
 #: only keep it waiting, so ``up`` does not pass it (docs/performance.md).
 LOCKSTEP_SPIN_US = 200.0
 
-#: Processes that in lockstep only use CPU time the others leave (:func:`set_background`):
-#: the bus recorder, which reads in bursts and keeps each frame's kernel receive time.
+#: Processes that only use CPU time the others leave (:func:`set_background`; in lockstep
+#: and in real time): the bus recorder, which reads in bursts and keeps each frame's kernel
+#: receive time.
 BACKGROUND = frozenset({"candump"})
 
 #: Niceness in lockstep (:func:`set_nice`): the ground station's torque answers an encoder

@@ -651,14 +651,8 @@ def run_up(args: argparse.Namespace) -> int:
         stack.start("groundstation", gs_args, "groundstation: CAN")
         stack.start("companion", comp_args, "companion: connected")
         sched = "normal"
-        if speedup == 1.0 and not args.no_rt_priority:
-            from tuav_sitl.realtime import RT_PRIORITY, set_real_time
-
-            why = None
-            for name in ("plant", "companion", "groundstation"):
-                why = set_real_time(stack.procs[name].pid) or why
-            sched = (f"SCHED_FIFO priority {RT_PRIORITY}" if why is None
-                     else f"normal (SCHED_FIFO {why}; jitter may exceed 2 ms under load)")
+        if speedup == 1.0:
+            sched = _real_time(stack, not args.no_rt_priority)
         elif speedup != 1.0 and not args.no_pin:
             sched = _pin(stack)
         if not args.headless:
@@ -703,6 +697,33 @@ def run_up(args: argparse.Namespace) -> int:
         print("tuav-sitl up: stopped", flush=True)
     print(f"tuav-sitl up: logs in {run_dir}", flush=True)
     return code
+
+
+def _real_time(stack: Stack, fifo: bool) -> str:
+    """In real time: the bus recorder at idle priority (it keeps each frame's kernel receive
+    time, so it may read late), and with ``fifo`` the plant, the companion and the ground
+    station at SCHED_FIFO where permitted: at :data:`tuav_sitl.realtime.RT_PRIORITY`, or
+    at the user's rtprio limit (``RLIMIT_RTPRIO``) where that is lower. Returns the
+    banner's words for it."""
+    import resource
+
+    from tuav_sitl.realtime import BACKGROUND, RT_PRIORITY, set_background, set_real_time
+
+    for name, proc in stack.recorders.items():
+        if name in BACKGROUND:
+            set_background(proc.pid)    # (where refused it keeps the normal scheduling)
+    if not fifo:
+        return "normal (--no-rt-priority; the bus recorder at idle priority)"
+    pids = [stack.procs[name].pid for name in ("plant", "companion", "groundstation")]
+    why = None
+    for pid in pids:
+        why = set_real_time(pid) or why
+    if why is None:
+        return f"SCHED_FIFO priority {RT_PRIORITY}"
+    limit = resource.getrlimit(resource.RLIMIT_RTPRIO)[0]
+    if 1 <= limit < RT_PRIORITY and not any([set_real_time(pid, limit) for pid in pids]):
+        return f"SCHED_FIFO priority {limit} (the rtprio limit)"
+    return f"normal (SCHED_FIFO {why}; jitter may exceed 2 ms under load)"
 
 
 def _pin(stack: Stack) -> str:
