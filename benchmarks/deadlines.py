@@ -9,11 +9,19 @@ when the companion connects, and until the companion's first answer (its start-u
 period counts as missed: the goal (< 0.1 %) is about the periods *from the first answer*
 (``ServeSummary.missed_fraction``, "in service"), which the rows report; the start-up's
 periods are said beside them.
+
+``python -m benchmarks.deadlines [--quick]``: the rows of the real-time deadlines in one
+command — :mod:`benchmarks.view` (``up`` without a recorder, recording, ``--view web``;
+and its ``run circle`` ratio) and :mod:`benchmarks.flood` (a hover, each flood, all at
+once) — for a quiet host (about 25 minutes; root, for the private network namespace).
 """
 
 from __future__ import annotations
 
+import argparse
 import re
+import signal
+import sys
 from dataclasses import dataclass
 
 
@@ -58,3 +66,24 @@ def total(flights: list[PlantDeadlines]) -> PlantDeadlines:
     return PlantDeadlines(sum(f.missed_in_service for f in flights),
                           sum(f.periods_in_service for f in flights),
                           sum(f.missed for f in flights), sum(f.periods for f in flights))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Fly the view's and the floods' benchmarks and print their rows."""
+    from benchmarks.flood import bench_flood
+    from benchmarks.view import bench_view
+
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.deadlines", description=__doc__)
+    ap.add_argument("--quick", action="store_true", help="one short flight of each")
+    args = ap.parse_args(argv)
+    for r in [*bench_view(args.quick), *bench_flood(args.quick)]:
+        value = f"{r.value:12.4g}" if r.value == r.value else f"{'-':>12s}"
+        ref = f"{r.reference:10.3g}" if r.reference is not None else " " * 10
+        print(f"{r.name:64s} {value} {r.unit:10s} {ref}  {r.note}"
+              + (f"; goal {r.goal}" if r.goal else ""), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    sys.exit(main())
