@@ -312,10 +312,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         while stop["signal"] is None:
             # one wait for the plant's next batch, the ground stations and the winch
             buffered = client.has_buffered_state()
-            # (while ground-station messages wait and their budget allows, no wait at all;
-            # while it is spent, the plant's link and the winch's alone, until it is back)
-            ready = [] if buffered else waiter.wait(autopilot.watched(),
-                                                    autopilot.wait_s(SELECT_TIMEOUT_S))
+            ready = [] if buffered else waiter.wait(
+                autopilot.selectables(), 0.0 if autopilot.backlogged else SELECT_TIMEOUT_S)
             sim = None
             if buffered or sim_fd in ready:
                 try:

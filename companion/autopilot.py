@@ -70,15 +70,10 @@ from tuavdefs.mav_frames import global_to_local
 M = mavlink2
 
 _WINCH_ACK_TIMEOUT_S = 0.4
-#: Wall time the ground stations' messages may take [s] (reading and handling them,
-#: :meth:`Autopilot.receive`) in each :data:`BUDGET_WINDOW_S` of wall time, whatever the
-#: number of calls (ArduPilot's GCS receive takes 1 ms a loop): a flood costs a control
-#: period at most about this, and takes at most a quarter of a CPU from the control loop
-#: and the plant beside it. Time over the budget (a slow message, a long read) is paid
-#: back from the next window.
+#: Wall time one :meth:`Autopilot.receive` may spend handling ground-station messages [s]
+#: (ArduPilot's GCS receive takes 1 ms a loop): a flood costs the control period at most
+#: this, between two periods.
 RECEIVE_BUDGET_S = 0.001
-#: The window of :data:`RECEIVE_BUDGET_S` [s]: the control period at 250 Hz.
-BUDGET_WINDOW_S = 0.004
 #: Messages read and waiting beyond which the ground stations' sockets are not read.
 INBOX_MAX = 2000
 #: The shortest wall time between two STATUSTEXTs about refused (unsigned, badly signed,
@@ -161,11 +156,6 @@ class Autopilot:
         self._logged_mode: Any = None
         #: Ground-station messages read and not yet handled (:meth:`receive`'s budget).
         self._inbox: deque[tuple[Peer, Any]] = deque()
-        #: The budget's window: its start [s, time.perf_counter] and the time spent in it
-        #: (more than the budget: a debt the next windows pay) [s].
-        self._window_from = -math.inf
-        self._spent_s = 0.0
-        self._watch_winch: list[Any] = []
         #: Logs that ended (a full disk, a lost file, a cap) and are still to be said.
         self._logs_ended: deque[str] = deque()   # appended from the log writer's thread
         if endpoints.tlog is not None:
@@ -203,48 +193,14 @@ class Autopilot:
         comp = self.component.selectable if self.component is not None else None
         if gen != self._watch_gen or comp is not self._watch_comp:
             self._watch = [*self.io.sockets(), *([comp] if comp is not None else [])]
-            self._watch_winch = [comp] if comp is not None else []
             self._watch_gen, self._watch_comp = gen, comp
         return self._watch
-
-    def watched(self) -> list[Any]:
-        """What a control loop waits on now: :meth:`selectables` while the budget of
-        :meth:`receive` allows some work, else the component link's socket alone (a
-        flood's sockets then do not wake the loop until the budget is back:
-        :meth:`wait_s`). The same list object while neither changes."""
-        watch = self.selectables()
-        return watch if self._budget_left_s() > 0.0 else self._watch_winch
-
-    def _budget_left_s(self) -> float:
-        """What is left of :data:`RECEIVE_BUDGET_S` in this window [s] (negative: a debt);
-        a new window starts when the last has passed."""
-        now = time.perf_counter()
-        if self._window_from == -math.inf:       # the first call
-            self._window_from = now
-        windows = (now - self._window_from) // BUDGET_WINDOW_S
-        if windows >= 1.0:
-            self._window_from += windows * BUDGET_WINDOW_S
-            self._spent_s = max(0.0, self._spent_s - windows * RECEIVE_BUDGET_S)
-        return RECEIVE_BUDGET_S - self._spent_s
 
     @property
     def backlogged(self) -> bool:
         """Whether ground-station messages wait to be handled (a flood outran the budget
-        of :meth:`receive`) and the budget allows some now: call it again soon, without
-        waiting for a socket."""
-        return bool(self._inbox) and self._budget_left_s() > 0.0
-
-    def wait_s(self, longest_s: float) -> float:
-        """How long the caller may wait for input [s] (at most ``longest_s``): 0 while
-        messages wait and the budget allows some; while it is spent, until the window
-        that brings it back."""
-        left = self._budget_left_s()
-        if left > 0.0:
-            return 0.0 if self._inbox else longest_s
-        back_in = (self._window_from + BUDGET_WINDOW_S * math.ceil(-left / RECEIVE_BUDGET_S
-                                                                  + 1e-9)
-                   - time.perf_counter())
-        return min(longest_s, max(back_in, 0.0))
+        of :meth:`receive`): call it again soon, without waiting for a socket."""
+        return bool(self._inbox)
 
     def receive(self, ready: Iterable[Any]) -> None:
         """Take the input of the sockets in ``ready`` (found readable by a ``select`` on
@@ -252,18 +208,15 @@ class Autopilot:
         handled (commands answered) and the winch's routed at once; what they change in
         flight applies from the next control period. Call :meth:`service` after it.
 
-        Bounded, as ArduPilot bounds its receive: a call handles one waiting message and
-        more while the budget lasts, :data:`RECEIVE_BUDGET_S` of wall time (the sockets'
-        reading included) in each :data:`BUDGET_WINDOW_S` however often it is called; the
-        rest wait, in order, for the next (:attr:`backlogged`; a control loop waits on
-        :meth:`watched` for :meth:`wait_s`), and while :data:`INBOX_MAX` of them wait the
-        sockets are not read (TCP then pushes back on the sender; a UDP flood overflows the
-        kernel's buffer). The winch's messages are always read."""
-        start = time.perf_counter()
-        end = start + self._budget_left_s()
+        Bounded, as ArduPilot bounds its receive: messages are handled for at most
+        :data:`RECEIVE_BUDGET_S` of wall time a call; the rest wait, in order, for the next
+        (:attr:`backlogged`), and while :data:`INBOX_MAX` of them wait the sockets are not
+        read (TCP then pushes back on the sender; a UDP flood overflows the kernel's
+        buffer). The winch's messages are always read."""
         inbox = self._inbox
         if len(inbox) < INBOX_MAX:
             inbox.extend(self.io.receive(ready))
+        end = time.perf_counter() + RECEIVE_BUDGET_S
         while inbox:
             peer, msg = inbox.popleft()
             try:
@@ -272,9 +225,6 @@ class Autopilot:
                 self.log(f"error handling {msg.get_type()} from {peer}: {exc!r}")
             if time.perf_counter() >= end:
                 break
-        # (a debt of at most one window's budget: one slow message does not stall the rest)
-        self._spent_s = min(self._spent_s + time.perf_counter() - start,
-                            2.0 * RECEIVE_BUDGET_S)
         comp = self.component
         if comp is not None and comp.selectable in ready:
             self._from_winch(comp.poll())
