@@ -1,0 +1,90 @@
+"""The suite's CPU account: with ``TUAV_TEST_CPU=<file>`` set, every test's CPU time (its
+setup, call and teardown: the pytest process's own and its waited-for children's, from
+``resource.getrusage``) is written to ``<file>`` as a table, the heaviest first; off by
+default. On a shared machine wall time is noise; CPU seconds are what a test costs.
+
+A module-scoped fixture's work is counted in the test whose setup built it (and its
+teardown in the module's last test). A child process's CPU is counted when it is waited
+for: one left running past its test is counted in the test that reaps it."""
+
+from __future__ import annotations
+
+import os
+import resource
+import time
+from pathlib import Path
+
+import pytest
+
+CPU_ENV = "TUAV_TEST_CPU"
+_HEADER = "cpu_s\tself_s\tchildren_s\twall_s\tworker\ttest"
+
+
+def _cpu_s() -> tuple[float, float]:
+    """(this process's, its waited-for children's) user + system CPU [s]."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime, kids.ru_utime + kids.ru_stime
+
+
+def _table_path(config: pytest.Config) -> Path | None:
+    value = os.environ.get(CPU_ENV, "")
+    return Path(value) if value else None
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """On the controller (or a run without xdist): start an empty table."""
+    path = _table_path(config)
+    if path is not None and not hasattr(config, "workerinput"):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("")
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
+    """Around one test's setup, call and teardown: its CPU, one line appended."""
+    path = _table_path(item.config)
+    if path is None:
+        yield
+        return
+    own0, kids0 = _cpu_s()
+    t0 = time.perf_counter()
+    yield
+    own1, kids1 = _cpu_s()
+    wall = time.perf_counter() - t0
+    worker = getattr(item.config, "workerinput", {}).get("workerid", "-")
+    own, kids = own1 - own0, kids1 - kids0
+    line = f"{own + kids:.2f}\t{own:.2f}\t{kids:.2f}\t{wall:.2f}\t{worker}\t{item.nodeid}\n"
+    # one short write with O_APPEND per line: the workers' lines do not interleave
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        os.write(fd, line.encode())
+    finally:
+        os.close(fd)
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """On the controller: the lines sorted (heaviest first) under a header, the sums last."""
+    path = _table_path(session.config)
+    if path is None or hasattr(session.config, "workerinput") or not path.exists():
+        return
+    rows = [ln.split("\t") for ln in path.read_text().splitlines() if ln.strip()]
+    rows.sort(key=lambda r: -float(r[0]))
+    modules: dict[str, float] = {}
+    for r in rows:
+        module = r[5].split("::", 1)[0]
+        modules[module] = modules.get(module, 0.0) + float(r[0])
+    total = sum(modules.values())
+    out = [_HEADER, *("\t".join(r) for r in rows), "",
+           "# per module: cpu_s\tmodule",
+           *(f"# {cpu:.2f}\t{m}" for m, cpu in sorted(modules.items(), key=lambda kv: -kv[1])),
+           f"# total cpu_s {total:.2f} over {len(rows)} tests"]
+    path.write_text("\n".join(out) + "\n")
+
+
+def pytest_terminal_summary(terminalreporter, config: pytest.Config) -> None:
+    """Where the table went, and the sum."""
+    path = _table_path(config)
+    if path is not None and path.exists():
+        last = path.read_text().rstrip().splitlines()[-1:]
+        terminalreporter.write_line(f"CPU per test ({CPU_ENV}): {path}; {' '.join(last)}")
