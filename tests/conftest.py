@@ -5,12 +5,19 @@ default. On a shared machine wall time is noise; CPU seconds are what a test cos
 
 A module-scoped fixture's work is counted in the test whose setup built it (and its
 teardown in the module's last test). A child process's CPU is counted when it is waited
-for: one left running past its test is counted in the test that reaps it."""
+for: one left running past its test is counted in the test that reaps it.
+
+A run on several workers (``-n 2``, the suite's default) first compiles the numba kernels
+the cache lacks, once, before the workers start (:func:`tuav_sitl.warmup.compile_if_cold`,
+as ``up`` and ``run`` do): on a fresh clone the workers would otherwise each compile the
+kernels their first tests call, the same ones at once. Its CPU is the table's
+``(session warm-up)`` row. The tests of a cold cache use caches of their own."""
 
 from __future__ import annotations
 
 import os
 import resource
+import sys
 import time
 from pathlib import Path
 
@@ -32,12 +39,55 @@ def _table_path(config: pytest.Config) -> Path | None:
     return Path(value) if value else None
 
 
+def _line(cpu: tuple[float, float], wall_s: float, worker: str, name: str) -> str:
+    own, kids = cpu
+    return f"{own + kids:.2f}\t{own:.2f}\t{kids:.2f}\t{wall_s:.2f}\t{worker}\t{name}\n"
+
+
+def _append(path: Path, line: str) -> None:
+    # one short write with O_APPEND per line: the workers' lines do not interleave
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        os.write(fd, line.encode())
+    finally:
+        os.close(fd)
+
+
+#: The modules that take minutes, the longest first (tests/test_benchmarks.py about four
+#: minutes of a quiet host's wall time, the others one to two). The suite's workers take
+#: a whole module at a time, in the collection's order (pyproject's ``--dist loadscope
+#: --no-loadscope-reorder``): these first, so that no long one is left to start last while
+#: the other worker runs out of work.
+LONGEST_FIRST = ("test_benchmarks.py", "test_scenarios.py", "test_first_contact.py",
+                 "test_cold_start.py", "test_view.py", "test_view_live.py", "test_up.py")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The modules of :data:`LONGEST_FIRST` first, in its order; the rest as collected."""
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))   # a stable sort
+
+
 def pytest_configure(config: pytest.Config) -> None:
-    """On the controller (or a run without xdist): start an empty table."""
+    """On the controller (or a run without xdist): start an empty table; with workers to
+    come, compile what the numba cache lacks first."""
+    if hasattr(config, "workerinput"):
+        return
     path = _table_path(config)
-    if path is not None and not hasattr(config, "workerinput"):
+    if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text("")
+    if not getattr(config.option, "numprocesses", None) or config.option.collectonly:
+        return
+    own0, kids0 = _cpu_s()
+    t0 = time.perf_counter()
+    from tuav_sitl.warmup import compile_if_cold
+
+    compile_if_cold(sys.stderr)
+    own1, kids1 = _cpu_s()
+    if path is not None:
+        _append(path, _line((own1 - own0, kids1 - kids0), time.perf_counter() - t0, "-",
+                            "(session warm-up)"))
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -53,14 +103,7 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
     own1, kids1 = _cpu_s()
     wall = time.perf_counter() - t0
     worker = getattr(item.config, "workerinput", {}).get("workerid", "-")
-    own, kids = own1 - own0, kids1 - kids0
-    line = f"{own + kids:.2f}\t{own:.2f}\t{kids:.2f}\t{wall:.2f}\t{worker}\t{item.nodeid}\n"
-    # one short write with O_APPEND per line: the workers' lines do not interleave
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-    try:
-        os.write(fd, line.encode())
-    finally:
-        os.close(fd)
+    _append(path, _line((own1 - own0, kids1 - kids0), wall, worker, item.nodeid))
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
