@@ -16,6 +16,7 @@ import subprocess
 import tempfile
 import time
 import urllib.request
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -66,10 +67,12 @@ def image_spread(png: bytes) -> float:
 
 def screenshot(url: str, out: Path, size: tuple[int, int] = (1600, 900),
                settle_s: float = 240.0, still_s: float = 8.0,
-               loading_text: str = "Loading") -> Path:
+               loading_text: str = "Loading",
+               until: Callable[[bytes], bool] | None = None) -> Path:
     """Open ``url`` in headless Chromium and write a PNG of it to ``out`` once the page
-    no longer shows ``loading_text`` and has then stayed the same for ``still_s`` [s] (at
-    most ``settle_s`` [s] of waiting); returns ``out``."""
+    no longer shows ``loading_text`` and has then stayed the same for ``still_s`` [s], or
+    (a live page, which never stands still) as soon as ``until`` holds for the PNG; at
+    most ``settle_s`` [s] of waiting (then the last picture); returns ``out``."""
     exe = chromium()
     if exe is None:
         raise FileNotFoundError("chromium is not installed")
@@ -109,6 +112,8 @@ def screenshot(url: str, out: Path, size: tuple[int, int] = (1600, 900),
                 if loading_text in str(res[0].get("result", {}).get("value", "")):
                     last, last_change = b"", time.monotonic()
                     continue
+                if until is not None and until(shot):
+                    break
                 small = np.asarray(Image.open(io.BytesIO(shot)).convert("L").resize((160, 90)))
                 key = small.tobytes()
                 if key != last:

@@ -14,6 +14,34 @@ from pathlib import Path
 
 from tests.netns.up_session import processes_mentioning, up, wait_banner
 
+#: The live view's picture shows the scene: its grey levels spread (a blank page's are
+#: 0) and this many pixels of the tether's colour (tests/test_view.py asserts both).
+LIVE_SPREAD_MIN = 10.0
+LIVE_TETHER_PIXELS_MIN = 20
+#: The tether's colour in the view (RGB) and how near a pixel must be to count.
+TETHER_RGB = (140, 86, 75)
+TETHER_RGB_TOLERANCE = 30
+
+
+def picture(png: bytes) -> dict:
+    """What a screenshot of the live view holds: its grey-level spread and its count of
+    tether-coloured pixels."""
+    import numpy as np
+    from chromium_util import image_spread
+    from PIL import Image
+
+    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
+    return {"spread": image_spread(png),
+            "tether_pixels": int((np.abs(img - np.array(TETHER_RGB)).max(axis=2)
+                                  < TETHER_RGB_TOLERANCE).sum())}
+
+
+def shows_the_scene(shot: dict) -> bool:
+    """Whether :func:`picture`'s account of a screenshot shows the scene with its
+    tether."""
+    return (shot["spread"] > LIVE_SPREAD_MIN
+            and shot["tether_pixels"] > LIVE_TETHER_PIXELS_MIN)
+
 
 def main() -> int:
     logdir = Path(sys.argv[1])
@@ -39,28 +67,25 @@ def main() -> int:
                 time.sleep(1.0)
         out["http_status"] = status
         if shot_path is not None and url is not None:
+            shot_from = time.monotonic()
             sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-            from chromium_util import chromium, image_spread, screenshot
+            from chromium_util import chromium, screenshot
 
             if chromium() is not None:
-                import numpy as np
-                from PIL import Image
-
                 try:
-                    # a live scene never stands still: the picture once the viewer has
-                    # loaded and drawn for a while (not the 240 s a still page may take)
-                    png = screenshot(url, shot_path, size=(960, 540),
-                                     settle_s=120.0).read_bytes()
+                    # a live scene never stands still: the picture as soon as it shows
+                    # the scene with its tether (what test_view asserts of it), at most
+                    # after 120 s of drawing (not the 240 s a still page may take)
+                    png = screenshot(url, shot_path, size=(960, 540), settle_s=120.0,
+                                     until=lambda png: shows_the_scene(picture(png))
+                                     ).read_bytes()
                 except (TimeoutError, OSError, RuntimeError) as exc:
                     # a software-rendered live scene can outlast the capture's wait on a
                     # busy machine; the served recording's picture is test_view's
                     out["shot_error"] = repr(exc)
                 else:
-                    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
-                    out["shot"] = {
-                        "spread": image_spread(png),
-                        "tether_pixels": int((np.abs(img - np.array([140, 86, 75]))
-                                              .max(axis=2) < 30).sum())}
+                    out["shot"] = picture(png)
+                    out["shot_after_s"] = time.monotonic() - shot_from
         else:
             time.sleep(20.0)
     finally:
