@@ -15,9 +15,13 @@ from pathlib import Path
 from tests.netns.up_session import processes_mentioning, up, wait_banner
 
 #: The live view's picture shows the scene: its grey levels spread (a blank page's are
-#: 0) and this many pixels of the tether's colour (tests/test_view.py asserts both).
+#: 0) and this many pixels of the tether's colour (tests/test_view_live.py asserts both).
 LIVE_SPREAD_MIN = 10.0
 LIVE_TETHER_PIXELS_MIN = 20
+#: The least real time flown once the viewer is served [s]: the recording's rates are
+#: checked over the flight (the fixes, the filter's ellipsoid), which must not be only its
+#: start, however soon the picture is taken.
+MIN_FLIGHT_S = 20.0
 #: The tether's colour in the view (RGB) and how near a pixel must be to count.
 TETHER_RGB = (140, 86, 75)
 TETHER_RGB_TOLERANCE = 30
@@ -66,15 +70,15 @@ def main() -> int:
             except OSError:
                 time.sleep(1.0)
         out["http_status"] = status
+        shot_from = time.monotonic()
         if shot_path is not None and url is not None:
-            shot_from = time.monotonic()
             sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
             from chromium_util import chromium, screenshot
 
             if chromium() is not None:
                 try:
                     # a live scene never stands still: the picture as soon as it shows
-                    # the scene with its tether (what test_view asserts of it), at most
+                    # the scene with its tether (what test_view_live asserts), at most
                     # after 120 s of drawing (not the 240 s a still page may take)
                     png = screenshot(url, shot_path, size=(960, 540), settle_s=120.0,
                                      until=lambda png: shows_the_scene(picture(png))
@@ -86,8 +90,7 @@ def main() -> int:
                 else:
                     out["shot"] = picture(png)
                     out["shot_after_s"] = time.monotonic() - shot_from
-        else:
-            time.sleep(20.0)
+        time.sleep(max(0.0, MIN_FLIGHT_S - (time.monotonic() - shot_from)))
     finally:
         p.send_signal(signal.SIGINT)
         so, se = p.communicate(timeout=120)
