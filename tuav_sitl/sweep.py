@@ -34,7 +34,7 @@ import numpy as np
 
 from sitl.faults import NEVER_S, FaultParams
 from tuav_sitl.scenario import ScenarioParams, load_scenario
-from tuavdefs.params import GustParams
+from tuavdefs.params import GustParams, TetherModel
 from tuavdefs.paramspec import ParameterError, Params, load_toml, quantity, toml_line
 
 
@@ -56,11 +56,12 @@ class Quantity(enum.Enum):
     GUST_SPEED_M_S = "gust_speed_m_s"              #: one (1 - cos) gust along the wind [m/s]
     GUST_START_S = "gust_start_s"                  #: when that gust begins [s]
     GNSS = "gnss"                                  #: the GNSS receiver's preset (a label)
+    TETHER_MODEL = "tether_model"                  #: the truth's line model (a label)
 
     @property
     def is_label(self) -> bool:
         """Whether its values are labels (drawn only by ``choice``)."""
-        return self in (Quantity.TURBULENCE, Quantity.GNSS)
+        return self in (Quantity.TURBULENCE, Quantity.GNSS, Quantity.TETHER_MODEL)
 
     @property
     def bounds(self) -> tuple[float, float]:
@@ -170,6 +171,7 @@ class VaryParams(Params):
 _LABELS: dict[Quantity, tuple[str, ...]] = {
     Quantity.TURBULENCE: ("none", "light", "moderate", "severe"),
     Quantity.GNSS: ("rtk", "gnss"),
+    Quantity.TETHER_MODEL: tuple(m.value for m in TetherModel),
 }
 
 
@@ -339,6 +341,8 @@ def apply(sc: ScenarioParams, seed: int | None, drawn: dict[str, float | str | N
         if q in d:
             att[i] = float(d[q])
     veh = veh.replace(tether_attachment_m=tuple(att))
+    if Quantity.TETHER_MODEL in d:
+        teth = teth.replace(model=str(d[Quantity.TETHER_MODEL]))
     if (f := d.get(Quantity.TETHER_DENSITY_FACTOR)) is not None:
         teth = teth.replace(linear_density_kg_m=teth.linear_density_kg_m * f)
     if (f := d.get(Quantity.TETHER_DRAG_FACTOR)) is not None:
