@@ -384,7 +384,7 @@ class Navigator:
         """A failsafe's action: ``mode`` (RTL or LAND; a vehicle already landing keeps
         landing), said as a NavEvent.FAILSAFE."""
         self._emit(NavEvent.FAILSAFE, text)
-        if self.mode != FlightMode.LAND and self.mode != mode:
+        if self.mode != FlightMode.LAND and self.mode != mode and not self.landing:
             self.set_mode(mode)
 
     def takeoff(self, alt_m: float) -> Refusal | None:

@@ -336,7 +336,7 @@ class Companion:
 
     def _ekf_failsafe(self, t_s: float) -> None:
         """ArduCopter's EKF failsafe: an unhealthy filter for ``EKF_FAILSAFE_S`` in flight
-        lands the vehicle."""
+        lands the vehicle (one landing already goes on)."""
         nav = self.nav
         if self.navigation_healthy or not nav.flying:
             self._unhealthy_since = None
@@ -344,7 +344,9 @@ class Companion:
         if self._unhealthy_since is None:
             self._unhealthy_since = t_s
         elif (t_s - self._unhealthy_since >= EKF_FAILSAFE_S
-              and nav.mode != FlightMode.LAND):
+              and nav.mode != FlightMode.LAND and not nav.landing):
+            # (a vehicle already landing lands: a line lying on the ground at the touchdown
+            # gives no tether fix)
             nav.failsafe_land("EKF Failsafe: landing")
 
     def start(self, t_s: float, state: VehicleState) -> None:

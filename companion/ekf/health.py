@@ -77,6 +77,9 @@ class AidSource(IntFlag):
     """The winch's tether fix."""
     BARO = 4
     MAG = 8
+    PAD = 16
+    """At rest on its gear (the stationary constraint fused): the position last fused
+    holds, as nothing moves the vehicle."""
 
 
 @dataclass(frozen=True)
@@ -138,6 +141,21 @@ def _vec3(v: np.ndarray) -> Vec3:
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
+def _pad_holds(p: EstimatorParams, t: float, src: AidSources) -> bool:
+    """Whether the pad is a position source at ``t`` [s]: at rest on its gear (the
+    stationary constraint fused) the position the alignment or the last fix gave holds, as
+    the zero velocity keeps it from drifting; and leaving the pad it holds on the IMU's
+    dead reckoning, and on the tether fixes the climb gives, until a GNSS position is fused
+    again, for at most ``pad_hold_s`` (a line lying slack on the ground, friction holding
+    it, pulls nothing at the exit: no tether fix until the climb lifts it, and while it
+    lifts the fixes come and go)."""
+    rest = src.zero_vel
+    if rest.in_use(t):
+        return True
+    left = rest.time_last_fused
+    return t - left <= p.pad_hold_s and src.gnss_pos.time_last_fused < left
+
+
 def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P: np.ndarray,
                   heading_innovation_rad: float, src: AidSources,
                   const_pos: bool) -> FilterStatus:
@@ -159,7 +177,9 @@ def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P:
         gnss_pos = src.gnss_pos.in_use(t)
         gnss_vel = src.gnss_vel.in_use(t)
         tether = src.tether.in_use(t)
-        if not (gnss_pos or gnss_vel or tether):
+        pad = _pad_holds(p, t, src)
+        held = gnss_pos or tether or pad
+        if not (held or gnss_vel):
             reasons |= HealthReason.NO_GNSS
         for kind, reason in _REJECTED:
             if src[kind].failing(t):
@@ -170,6 +190,8 @@ def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P:
             sources |= AidSource.GNSS
         if tether:
             sources |= AidSource.TETHER
+        if pad:
+            sources |= AidSource.PAD
         baro = src.baro.in_use(t)
         if baro:
             sources |= AidSource.BARO
@@ -178,11 +200,11 @@ def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P:
         vert = baro or src.gnss_hgt.in_use(t)
         if finite:
             flags |= EstimatorFlags.ATTITUDE
-            if gnss_vel or tether:   # a position source makes velocity observable
+            if gnss_vel or held:   # a position source makes velocity observable
                 flags |= EstimatorFlags.VELOCITY_HORIZ | EstimatorFlags.VELOCITY_VERT
             elif vert:
                 flags |= EstimatorFlags.VELOCITY_VERT
-            if gnss_pos or tether:
+            if held:
                 # the fix is relative to the winder, whose global position is home
                 flags |= EstimatorFlags.POS_HORIZ_REL | EstimatorFlags.POS_HORIZ_ABS
             if vert:
@@ -195,7 +217,7 @@ def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P:
             flags |= EstimatorFlags.GPS_GLITCH
         if reasons:
             health = FilterHealth.UNHEALTHY
-        elif ((gnss_pos or tether)
+        elif (held
               and max(var[IDX_TH], var[IDX_TH + 1]) < p.converged_tilt_sigma_rad ** 2
               and var[IDX_TH + 2] < p.converged_yaw_sigma_rad ** 2):
             health = FilterHealth.HEALTHY

@@ -1,0 +1,120 @@
+"""The GNSS-denied take-off: the pad as a position source at rest and through the climb
+(the line lying slack on the ground gives no tether fix), and the lumped line's mission
+flown from the ground without GNSS (docs/estimation.md §10, *On the ground without
+GNSS*)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.ekf import AidSource, EstimatorParams, FilterHealth, HealthReason, NavFilter
+from tuav_sitl.offline import OfflineRunner
+from tuav_sitl.scenario import load_scenario
+from tuavdefs.frames import ned_to_enu
+
+PARKED = (2.0, 0.0, 0.2)
+RATE_HZ = 250
+
+
+def _parked_filter(params: EstimatorParams):
+    """A filter fed a still vehicle's IMU (white noise), baro and magnetometer, tether
+    fixes of the parked position for the first 3 s only, and the stationary constraint
+    while ``rest(t)``; returns the filter and a function running it to a time."""
+    rng = np.random.default_rng(5)
+    f = NavFilter(params, 9.81, ned_to_enu((0.2, 0.0, 0.45)))
+    cov = ((0.04, 0.0, 0.0), (0.0, 0.04, 0.0), (0.0, 0.0, 0.04))
+    clock = {"k": 0}
+
+    def run_to(t_end: float, rest: bool, fix: bool = False) -> float:
+        t = clock["k"] / RATE_HZ
+        while t < t_end:
+            k = clock["k"]
+            t = k / RATE_HZ
+            n = rng.normal(0.0, 0.06, 3)
+            f.predict(t, tuple(rng.normal(0.0, 5e-3, 3)), (n[0], n[1], 9.81 + n[2]))
+            f.fuse_baro(t, 100.0 + PARKED[2])
+            f.fuse_mag(t, (0.2, 0.0, -0.45))
+            if (fix or t < 3.0) and k % 25 == 0:
+                f.fuse_tether(t, t - 0.02, PARKED, cov)
+            if rest:
+                f.fuse_stationary(t)
+            clock["k"] = k + 1
+        return t
+
+    return f, run_to
+
+
+def test_the_pad_is_a_position_source_at_rest_and_through_the_take_off():
+    """Aligned on tether fixes, then none (a slack line on the ground): at rest the filter
+    stays healthy on the pad, its position within 2 cm; leaving the pad (no stationary
+    constraint) it holds for pad_hold_s and then, no fix having come, raises NO_GNSS;
+    tether fixes fused after leaving do not end the hold early."""
+    params = EstimatorParams(pad_hold_s=5.0)
+    f, run_to = _parked_filter(params)
+    t = run_to(12.0, rest=True)
+    st = f.status(t)
+    assert f.aligned and st.reasons == HealthReason.NONE
+    assert st.health == FilterHealth.HEALTHY
+    assert AidSource.PAD in st.sources and AidSource.TETHER not in st.sources
+    p = f.state().pos_m
+    assert math.hypot(p[0] - PARKED[0], p[1] - PARKED[1]) <= 0.02
+    t = run_to(15.0, rest=False)                  # armed: the constraint is no longer fused
+    st = f.status(t)
+    assert st.health == FilterHealth.HEALTHY and AidSource.PAD in st.sources
+    t = run_to(17.5, rest=False)                  # 5.5 s off the pad, no fix
+    st = f.status(t)
+    assert AidSource.PAD not in st.sources
+    assert st.reasons & HealthReason.NO_GNSS and st.health == FilterHealth.UNHEALTHY
+    # a second filter: fixes that come and go after leaving the pad (a line lifting off
+    # the ground) do not end the hold; past pad_hold_s they alone are the source
+    g, run_g = _parked_filter(params)
+    run_g(12.0, rest=True)
+    run_g(13.0, rest=False, fix=True)
+    t = run_g(15.0, rest=False)                   # the fixes stopped 2 s ago
+    st = g.status(t)
+    assert AidSource.PAD in st.sources and AidSource.TETHER not in st.sources
+    assert st.health == FilterHealth.HEALTHY
+    t = run_g(17.5, rest=False)
+    assert g.status(t).reasons & HealthReason.NO_GNSS
+    # without the hold only rest counts
+    h, run_h = _parked_filter(EstimatorParams(pad_hold_s=0.0))
+    run_h(12.0, rest=True)
+    t = run_h(12.5, rest=False)
+    assert h.status(t).reasons & HealthReason.NO_GNSS
+
+
+def _lumped_denied(**tables: dict) -> object:
+    """mission-gnss-denied with the lumped line as the truth (and ``tables`` merged in)."""
+    sc = load_scenario("mission-gnss-denied")
+    plant = sc.plant.replace(tether=sc.plant.tether.replace(model="lumped"))
+    sc = sc.replace(plant=plant, tether=sc.tether.replace(model="lumped"))
+    for name, fields in tables.items():
+        sc = sc.replace(**{name: getattr(sc, name).replace(**fields)})
+    return sc
+
+
+@pytest.mark.parametrize("home", [(2.0, 0.0, 0.0), (4.0, -3.0, 0.0)])
+def test_a_gnss_denied_take_off_on_the_lumped_line(home):
+    """The lumped line lies slack on the ground (friction takes its pull: the arm reads
+    nothing) except while the pre-tension pulls it straight: the filter aligns on that
+    fix, arms on the pad and climbs on it until the line lifts and the fixes come back,
+    with no EKF failsafe; the truth ends the climb within 0.5 m of the estimate. From
+    two places (the mission's and another offset)."""
+    sc = _lumped_denied(winder_control={"law": "tension"},
+                        navigation={"tether_governor": 2},
+                        initial={"position_m": home})
+    sc = sc.replace(duration_s=25.0)
+    runner = OfflineRunner(sc)
+    res = runner.run()
+    nav = runner.companion.nav
+    assert res.metrics["arming_refused"] is None
+    assert nav.armed and nav.flying
+    assert not [v for k, v, _ in runner.nav_events if k.value == "failsafe"]
+    st = runner.companion.filter.status()
+    assert AidSource.TETHER in st.sources
+    est, pos = res.series["est_pos"], res.series["pos"]
+    assert pos[-1][2] >= 8.0
+    assert math.dist(est[-1], pos[-1]) <= 0.5
