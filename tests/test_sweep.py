@@ -158,6 +158,23 @@ def test_wind_direction_is_where_it_blows_from():
     assert west.wind.steady_m_s == pytest.approx((4.0, 0.0, 0.0), abs=1e-12)
 
 
+def test_the_truths_line_model_is_drawn_and_the_controllers_keep_theirs():
+    """tether_model sets the truth's line model only (the plant's [tether]); the
+    controllers' model, and robustness-gnss's scenario file, stay as they are; the shipped
+    robustness-gnss flies the lumped line whatever the default truth."""
+    sc = load_scenario("circle-gnss")
+    assert sc.plant.tether.model == "catenary"
+    lumped = sw.apply(sc, None, {"tether_model": "lumped"})
+    assert lumped.plant.tether.model == "lumped"
+    assert lumped.tether == sc.tether
+    sweep, base = sw.load_sweep("robustness-gnss")
+    assert base.plant.tether.model == "catenary"
+    assert {sw.run_scenario_of(sweep, base, i).plant.tether.model for i in range(3)} == {
+        "lumped"}
+    with pytest.raises(ValueError):
+        sw.VaryParams(parameter="tether_model", distribution="choice", labels=("rope",))
+
+
 FAULTS = """\
 name = "faulty"
 scenario = "hover"
