@@ -101,8 +101,10 @@ def test_a_gnss_denied_take_off_on_the_lumped_line(home):
     """The lumped line lies slack on the ground (friction takes its pull: the arm reads
     nothing) except while the pre-tension pulls it straight: the filter aligns on that
     fix, arms on the pad and climbs on it until the line lifts and the fixes come back,
-    with no EKF failsafe; the truth ends the climb within 0.5 m of the estimate. From
-    two places (the mission's and another offset)."""
+    with no EKF failsafe; 25 s in, the vehicle is up and the truth within 1 m of the
+    estimate (the tracking target of a consumer receiver; the lumped line's fix scatters
+    by about 1 m, docs/estimation.md §10). From two places (the mission's and another
+    offset)."""
     sc = _lumped_denied(winder_control={"law": "tension"},
                         navigation={"tether_governor": 2},
                         initial={"position_m": home})
@@ -117,4 +119,4 @@ def test_a_gnss_denied_take_off_on_the_lumped_line(home):
     assert AidSource.TETHER in st.sources
     est, pos = res.series["est_pos"], res.series["pos"]
     assert pos[-1][2] >= 8.0
-    assert math.dist(est[-1], pos[-1]) <= 0.5
+    assert math.dist(est[-1], pos[-1]) <= 1.0
