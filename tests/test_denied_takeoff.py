@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.ekf import AidSource, EstimatorParams, FilterHealth, HealthReason, NavFilter
+from companion.ekf import AidSource, EstimatorParams, FilterHealth, HealthReason, NavFilter, health
 from tuav_sitl.offline import OfflineRunner
 from tuav_sitl.scenario import load_scenario
 from tuavdefs.frames import ned_to_enu
@@ -47,12 +47,13 @@ def _parked_filter(params: EstimatorParams):
     return f, run_to
 
 
-def test_the_pad_is_a_position_source_at_rest_and_through_the_take_off():
+def test_the_pad_is_a_position_source_at_rest_and_through_the_take_off(monkeypatch):
     """Aligned on tether fixes, then none (a slack line on the ground): at rest the filter
     stays healthy on the pad, its position within 2 cm; leaving the pad (no stationary
-    constraint) it holds for pad_hold_s and then, no fix having come, raises NO_GNSS;
+    constraint) it holds for PAD_HOLD_S (5 s here) and then, no fix having come, raises NO_GNSS;
     tether fixes fused after leaving do not end the hold early."""
-    params = EstimatorParams(pad_hold_s=5.0)
+    monkeypatch.setattr(health, "PAD_HOLD_S", 5.0)
+    params = EstimatorParams()
     f, run_to = _parked_filter(params)
     t = run_to(12.0, rest=True)
     st = f.status(t)
@@ -69,7 +70,7 @@ def test_the_pad_is_a_position_source_at_rest_and_through_the_take_off():
     assert AidSource.PAD not in st.sources
     assert st.reasons & HealthReason.NO_GNSS and st.health == FilterHealth.UNHEALTHY
     # a second filter: fixes that come and go after leaving the pad (a line lifting off
-    # the ground) do not end the hold; past pad_hold_s they alone are the source
+    # the ground) do not end the hold; past PAD_HOLD_S they alone are the source
     g, run_g = _parked_filter(params)
     run_g(12.0, rest=True)
     run_g(13.0, rest=False, fix=True)
@@ -80,7 +81,8 @@ def test_the_pad_is_a_position_source_at_rest_and_through_the_take_off():
     t = run_g(17.5, rest=False)
     assert g.status(t).reasons & HealthReason.NO_GNSS
     # without the hold only rest counts
-    h, run_h = _parked_filter(EstimatorParams(pad_hold_s=0.0))
+    monkeypatch.setattr(health, "PAD_HOLD_S", 0.0)
+    h, run_h = _parked_filter(params)
     run_h(12.0, rest=True)
     t = run_h(12.5, rest=False)
     assert h.status(t).reasons & HealthReason.NO_GNSS

@@ -141,19 +141,27 @@ def _vec3(v: np.ndarray) -> Vec3:
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
-def _pad_holds(p: EstimatorParams, t: float, src: AidSources) -> bool:
+#: Leaving the pad without GNSS, how long [s] its position holds as a source at most: a
+#: take-off dead-reckons from the pad on the IMU, baro and magnetometer, and on the
+#: tether fixes as they come (a line lying slack on the ground gives none until the climb
+#: lifts it, and while it lifts they come and go): on the lumped line they are back 7 s
+#: after arming, 7 m up (docs/estimation.md §10, *The pad as a position source*).
+PAD_HOLD_S = 15.0
+
+
+def _pad_holds(t: float, src: AidSources) -> bool:
     """Whether the pad is a position source at ``t`` [s]: at rest on its gear (the
     stationary constraint fused) the position the alignment or the last fix gave holds, as
     the zero velocity keeps it from drifting; and leaving the pad it holds on the IMU's
     dead reckoning, and on the tether fixes the climb gives, until a GNSS position is fused
-    again, for at most ``pad_hold_s`` (a line lying slack on the ground, friction holding
+    again, for at most :data:`PAD_HOLD_S` (a line lying slack on the ground, friction holding
     it, pulls nothing at the exit: no tether fix until the climb lifts it, and while it
     lifts the fixes come and go)."""
     rest = src.zero_vel
     if rest.in_use(t):
         return True
     left = rest.time_last_fused
-    return t - left <= p.pad_hold_s and src.gnss_pos.time_last_fused < left
+    return t - left <= PAD_HOLD_S and src.gnss_pos.time_last_fused < left
 
 
 def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P: np.ndarray,
@@ -177,7 +185,7 @@ def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P:
         gnss_pos = src.gnss_pos.in_use(t)
         gnss_vel = src.gnss_vel.in_use(t)
         tether = src.tether.in_use(t)
-        pad = _pad_holds(p, t, src)
+        pad = _pad_holds(t, src)
         held = gnss_pos or tether or pad
         if not (held or gnss_vel):
             reasons |= HealthReason.NO_GNSS

@@ -204,13 +204,6 @@ class EstimatorParams(Params):
         "the ground without GNSS: the estimate does not drift)", gt=0)
     stationary_interval_s: float = quantity(
         0.1, "s", "the stationary constraint's interval", gt=0)
-    pad_hold_s: float = quantity(
-        15.0, "s", "the pad as a position source: at rest on its gear (the stationary "
-        "constraint fused) the position last fused holds, and leaving it, until a GNSS "
-        "position is fused again, for at most this long (a take-off dead-reckons from the "
-        "pad on the IMU, baro and magnetometer, and the tether fixes as they come: a line "
-        "lying slack on the ground gives none until the climb lifts it, and while it "
-        "lifts they come and go; 0: only at rest)", ge=0)
     arming_settle_s: float = quantity(
         2.0, "s", "arming is refused (PreArm: EKF settling) until the filter has been "
         "aligned this long: on the ground its first second takes in the gear's height and "
