@@ -22,6 +22,7 @@ import math
 from typing import NamedTuple
 
 from companion.ekf import AidSource, EstimatorParams, FilterStatus, NavFilter
+from companion.ekf.drag import DragModel
 from companion.failsafes import FailsafeParams, Failsafes
 from companion.flight_controller import FlightController, FlightStep, VehicleState
 from companion.gains import FlightControlParams
@@ -98,9 +99,11 @@ class Companion:
         g = params.environment.gravity_m_s2
         est = estimator if estimator is not None else EstimatorParams()
         self.estimator_params = est
-        self.filter: NavFilter | None = (
-            NavFilter(est, g, ned_to_enu(tuple(est.earth_field_ned_gauss)))
-            if est.kind == "ekf" else None)
+        #: the vehicle's drag as the filter's drag fusion models it (the controllers'
+        #: vehicle model)
+        env = params.environment
+        self._drag_model = DragModel.from_vehicle(veh, env.air_density_kg_m3)
+        self.filter: NavFilter | None = self._new_filter()
         self.gps: GpsFix | None = None
         """The last GNSS fix received (what GPS_RAW_INT reports)."""
         self.imu: ImuSample | None = None
@@ -156,10 +159,7 @@ class Companion:
         parameters and stored mission (:meth:`Navigator.reboot`); the flight controller is
         reset when it next flies; the next state starts the navigator again (:meth:`begin`
         returns True). The parameters stay, as in storage."""
-        est = self.estimator_params
-        g = self.params.environment.gravity_m_s2
-        self.filter = (NavFilter(est, g, ned_to_enu(tuple(est.earth_field_ned_gauss)))
-                       if est.kind == "ekf" else None)
+        self.filter = self._new_filter()
         self._airborne_at_boot = None
         self._unhealthy_since = None
         self._healthy = self.filter is None
@@ -169,11 +169,23 @@ class Companion:
         self.started = False
         self._was_flying = False
 
+    def _new_filter(self) -> NavFilter | None:
+        """A navigation filter on the estimator's parameters (None: flying on the truth)."""
+        est = self.estimator_params
+        if est.kind != "ekf":
+            return None
+        return NavFilter(est, self.params.environment.gravity_m_s2,
+                         ned_to_enu(tuple(est.earth_field_ned_gauss)), self._drag_model)
+
     def wind_estimate(self) -> tuple[float, float, float]:
-        """The wind the position loop's disturbance estimate implies [m/s], z-up: the
-        horizontal disturbance read as linear drag in moving air (v + m d / D per axis;
-        what is left of the tether's pull after its model shows as wind too); zero on the
-        ground."""
+        """The onboard wind estimate [m/s], z-up (what WIND reports). With the filter's
+        drag fusion, its wind states (EKF3's). Otherwise the wind the position loop's
+        disturbance estimate implies: the horizontal disturbance read as linear drag in
+        moving air (v + m d / D per axis; what is left of the tether's pull after its
+        model shows as wind too), zero on the ground."""
+        f = self.filter
+        if f is not None and f.drag_fusion:
+            return f.wind_m_s
         if not self.nav.flying:
             return (0.0, 0.0, 0.0)
         d = self.flight.position.d_hat
@@ -220,6 +232,22 @@ class Companion:
                 off = quat_rotate(f.state().quat, self._attach_m)
                 pos = (pos[0] - off[0], pos[1] - off[1], pos[2] - off[2])
             f.fuse_tether(t_s, fix.t_s, pos, fix.cov_m2)
+
+    def _fuse_drag(self, t_s: float) -> None:
+        """The drag's specific force into the filter, in the air only, with the tether's
+        pull as the flight controller's (windless) tether model has it at the estimated
+        position, the winch's reported length and tension (the line's own drag is not in
+        it: docs/estimation.md §11)."""
+        f = self.filter
+        nav = self.nav
+        if not nav.flying:
+            f.fuse_drag(t_s, False, (0.0, 0.0, 0.0))
+            return
+        fc = self.flight
+        winch = fc.winch
+        pull = fc.tether_model.estimate(f.state().pos_m, winch.length_at(t_s),
+                                        winch.tension_n).force_n
+        f.fuse_drag(t_s, True, pull)
 
     def _announce_sources(self, sources: AidSource) -> None:
         """A STATUSTEXT (through the navigator's events) when the position sources change."""
@@ -322,6 +350,8 @@ class Companion:
             f.fuse_stationary(t, self.params.vehicle.gear_height_m)
         if self._external:
             self._fuse_external(t)
+        if f.drag_due(t):
+            self._fuse_drag(t)
         self._check_health(t)
         if gps is not None:
             if self._airborne_at_boot is None:
