@@ -14,7 +14,8 @@ fix). One module per concern:
 - :mod:`~companion.ekf.output`: the output predictor (what the vehicle flies on);
 - :mod:`~companion.ekf.aid_source`: one status record type, one gate/fail/reset policy;
 - one module per source: :mod:`~companion.ekf.gnss`, :mod:`~companion.ekf.baro`,
-  :mod:`~companion.ekf.mag`, :mod:`~companion.ekf.tether`,
+  :mod:`~companion.ekf.mag`, :mod:`~companion.ekf.tether`, :mod:`~companion.ekf.drag`
+  (the drag's specific force, with the wind states),
   :mod:`~companion.ekf.zero_velocity`, :mod:`~companion.ekf.const_pos`;
 - :mod:`~companion.ekf.alignment`: the initialisation;
 - :mod:`~companion.ekf.health`: health, flags, :class:`FilterStatus`;
