@@ -241,6 +241,14 @@ class EstimatorParams(Params):
     wind_walk_height_rate_scale: float = quantity(
         1.0, "s/m", "the wind's walk grows by this times the vertical speed (the wind "
         "changes with height; EKF3's EK3_WIND_PSCALE)", ge=0)
+    drag_tether_wind_shear: float = quantity(
+        1.0 / 7.0, "1", "drag fusion: the tether's pull from the winch's raw reading (length, "
+        "tension, exit angles) is the line's model in the wind states taken at the vehicle's "
+        "height and sheared below it with this power law (the ground station's belief, "
+        "open terrain)", ge=0, le=1)
+    drag_tether_max_age_s: float = quantity(
+        0.3, "s", "drag fusion: a raw tether reading older than this is not used (the "
+        "windless tether model's pull instead)", gt=0)
     wind_sigma_m_s: float = quantity(
         5.0, "m/s", "prior standard deviation of each wind state when drag fusion starts "
         "(the wind starts at 0)", gt=0)
