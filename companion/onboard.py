@@ -241,14 +241,14 @@ class Companion:
         direction and with the tension measured, ``-T(L)``; None without a fresh reading
         of a line leaving the exit above the ground."""
         r, f, est = self._reading, self.filter, self.estimator_params
-        if (r is None or f is None or abs(t_s - r.t_s) > est.drag_tether_max_age_s
+        if (r is None or f is None or abs(t_s - r.t_s) > est.drag.tether_max_age_s
                 or r.elevation_rad < _LINE_OFF_GROUND_RAD or not r.tension_n > 0.0):
             return None
         m = self._line
         u = f.wind_m_s
         top = line_top(r.length_m, r.tension_n, r.azimuth_rad, r.elevation_rad,
                        m.weight_n_m, m.drag_n_s2_m3, u[0], u[1], m.ea_n,
-                       max(pos_m[2], 1.0), est.drag_tether_wind_shear, 1.0, m.steps)
+                       max(pos_m[2], 1.0), est.drag.tether_wind_shear, 1.0, m.steps)
         return (-top[3], -top[4], -top[5])
 
     def _fuse_external(self, t_s: float) -> None:

@@ -431,16 +431,6 @@ class Winch:
         fix has no valid inputs: the slack floor's input (docs/control.md §3)."""
         return self.sensors.measured_position_m(self.length_m, self.host.lbar)
 
-    def tether_reading(self, fix: TetherFix) -> cl.TetherReading | None:
-        """The raw reading the tether fix ``fix`` was made of (the length, the load cell's
-        tension, the guide arm's angles, at the fix's sample time on the vehicle's clock),
-        None without a valid exit angle."""
-        ea, s = self.sensors.exit_angle, self.sensors
-        if ea is None or not ea[3]:
-            return None
-        return cl.TetherReading(fix.sample_time_ms * 1e-3, self.length_m, s.load_cell_n, ea[0],
-                             ea[1])
-
     def tether_fix(self) -> TetherFix | None:
         """The UAV's position from length, tension and exit angles now, or None when one
         is missing, invalid or older than ``max_age_s`` against the tension's sample."""

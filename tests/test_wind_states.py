@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.ekf import EstimatorParams, NavFilter
+from companion.ekf import DragFusionParams, EstimatorParams, NavFilter
 from companion.ekf.drag import DragModel, drag_prediction
 from companion.ekf.layout import (
     IDX_BA,
@@ -37,6 +37,7 @@ from tuavdefs.params import VehicleParams
 RHO = 1.225
 VEH = VehicleParams()
 MODEL = DragModel.from_vehicle(VEH, RHO)
+ON = DragFusionParams(enabled=True)
 
 
 def _prm() -> np.ndarray:
@@ -168,7 +169,7 @@ def _fly(truth, wind, duration_s, params, yaw_rate=0.0):
 def test_wind_inhibited_on_the_ground_and_before_drag_fusion():
     """Inhibited (EKF3's inhibitWindStates): zero covariance and no walk until drag fusion
     starts in the air; its prior then; zero again on the ground."""
-    params = params_for(rtk_noise(3), gnss_delay_s=0.0, drag_fusion=True)
+    params = params_for(rtk_noise(3), gnss_delay_s=0.0, drag=ON)
     wind = (0.0, 0.0, 0.0)
     f, _ = _fly(lambda t: ((0.0, 0.0, 20.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.3), wind,
                 1.9, params)
@@ -177,7 +178,7 @@ def test_wind_inhibited_on_the_ground_and_before_drag_fusion():
     assert not np.any(P[IDX_W:IDX_W + 2, :]) and not np.any(P[:, IDX_W:IDX_W + 2])
     f.fuse_drag(3.0, True, (0.0, 0.0, 0.0))
     assert f.wind_estimated
-    assert f.covariance[IDX_W, IDX_W] == pytest.approx(params.wind_sigma_m_s ** 2)
+    assert f.covariance[IDX_W, IDX_W] == pytest.approx(params.drag.wind_sigma_m_s ** 2)
     f.fuse_drag(3.1, False, (0.0, 0.0, 0.0))
     assert not f.wind_estimated and not np.any(f.covariance[IDX_W:IDX_W + 2, :])
     with pytest.raises(ValueError):
@@ -190,7 +191,7 @@ def test_wind_inhibited_on_the_ground_and_before_drag_fusion():
 def test_hover_learns_the_wind(wind, yaw):
     """A hover in a steady wind, tilted into it: the wind states converge to it (the
     drag's specific force at rest says the wind on both axes)."""
-    params = params_for(rtk_noise(3), gnss_delay_s=0.0, drag_fusion=True)
+    params = params_for(rtk_noise(3), gnss_delay_s=0.0, drag=ON)
     _, w = _fly(lambda t: ((5.0, 3.0, 20.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), yaw), wind,
                 25.0, params)
     late = w[w[:, 0] > 18.0, 1:3]
@@ -208,7 +209,7 @@ def test_circle_learns_the_wind():
         tr = circ(t)
         return tr.pos, tr.vel, tr.acc, quat_to_euler(tr.quat)[2]
 
-    params = params_for(rtk_noise(3), gnss_delay_s=0.0, drag_fusion=True)
+    params = params_for(rtk_noise(3), gnss_delay_s=0.0, drag=ON)
     _, w = _fly(truth, wind, 30.0, params)
     late = w[w[:, 0] > 20.0, 1:3]
     err = late - np.asarray(wind[:2])
@@ -224,7 +225,7 @@ def test_wind_reported_is_the_filters():
     from tuavdefs.params import SystemParams
 
     c = Companion(SystemParams(), FlightControlParams(), NavigationParams(),
-                  EstimatorParams(drag_fusion=True))
+                  EstimatorParams(drag=ON))
     c.filter._mem.x[X_W:X_W + 2] = (3.0, -4.0)
     assert c.wind_estimate() == (3.0, -4.0, 0.0)
     plain = Companion(SystemParams(), FlightControlParams(), NavigationParams(),
@@ -244,7 +245,7 @@ def test_wind_on_the_lumped_line_in_the_wind():
     sc = load_scenario("hover-gnss-loss").with_tether_model("lumped")
     sc = sc.replace(wind=sc.wind.replace(steady_m_s=(6.0, 0.0, 0.0), turbulence="light"),
                     duration_s=40.0, faults=(),
-                    estimator=sc.estimator.replace(drag_fusion=True))
+                    estimator=sc.estimator.replace(drag=ON))
     runner = OfflineRunner(sc)
     rows = []
     record = runner._record

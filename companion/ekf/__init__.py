@@ -32,9 +32,15 @@ from companion.ekf.health import (
     HealthReason,
 )
 from companion.ekf.layout import IDX_BG, IDX_BP, N_ERR, AidSourceKind
-from companion.ekf.params import ESTIMATOR_KINDS, MAG_FUSIONS, EstimatorParams, MagFusion
+from companion.ekf.params import (
+    ESTIMATOR_KINDS,
+    MAG_FUSIONS,
+    DragFusionParams,
+    EstimatorParams,
+    MagFusion,
+)
 
-__all__ = ["AidSource", "AidSourceKind", "AidSourcePolicy", "AidSourceStatus",
+__all__ = ["AidSource", "AidSourceKind", "AidSourcePolicy", "AidSourceStatus", "DragFusionParams",
            "ESTIMATOR_KINDS", "EstimatorFlags", "EstimatorParams", "FilterHealth",
            "FilterStatus", "FusionOutcome", "HealthReason", "IDX_BG", "IDX_BP", "MAG_FUSIONS",
            "MagFusion", "N_ERR", "NavFilter"]

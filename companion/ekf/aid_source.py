@@ -97,8 +97,8 @@ def policies(p: EstimatorParams) -> dict[AidSourceKind, AidSourcePolicy]:
                                     interval_from=IntervalFrom.ATTEMPT),
         k.CONST_POS: AidSourcePolicy(math.inf, math.inf, min_interval_s=CONST_POS_INTERVAL_S,
                                      interval_from=IntervalFrom.ATTEMPT),
-        k.DRAG: AidSourcePolicy(p.drag_gate_sigma, 10.0 * p.drag_interval_s,
-                                min_interval_s=p.drag_interval_s,
+        k.DRAG: AidSourcePolicy(p.drag.gate_sigma, 10.0 * p.drag.interval_s,
+                                min_interval_s=p.drag.interval_s,
                                 interval_from=IntervalFrom.ATTEMPT),
     }
 

@@ -11,7 +11,7 @@ horizontal wind states) the drag model is EKF3's, per body axis ``i`` (x, y):
                                                                coefficient [1/s])
 
 and the tether's pull ``F`` [N] (inertial) adds ``(R' F / m)_i``. The measurement is the
-bias-corrected specific force averaged over ``drag_interval_s`` (the prediction sums it),
+bias-corrected specific force averaged over ``drag.interval_s`` (the prediction sums it),
 against the current state; its Jacobian has the velocity, the attitude, the accelerometer
 bias and the wind. The coefficients are the controllers' vehicle model's
 (:meth:`DragModel.from_vehicle`: the quadratic drag area and linear drag the position
@@ -194,7 +194,7 @@ def fuse_drag_kernel(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.nda
 
 
 class DragControl:
-    """Fuses the drag's specific force every ``drag_interval_s`` while the vehicle flies;
+    """Fuses the drag's specific force every ``drag.interval_s`` while the vehicle flies;
     the wind states inhibited on the ground and before the first fusion."""
 
     __slots__ = ("_p", "_mem", "_st", "_k", "active")
@@ -211,9 +211,9 @@ class DragControl:
         prm[PRM_DRAG_MX] = model.mcoef_x_1_s
         prm[PRM_DRAG_MY] = model.mcoef_y_1_s
         prm[PRM_MASS_INV] = 1.0 / model.mass_kg
-        prm[PRM_DRAG_R] = params.drag_noise_m_s2 ** 2
+        prm[PRM_DRAG_R] = params.drag.noise_m_s2 ** 2
         prm[PRM_DRAG_GATE] = status.policy.gate_sigma
-        prm[PRM_WIND_HGT_SCALE] = params.wind_walk_height_rate_scale
+        prm[PRM_WIND_HGT_SCALE] = params.drag.wind_walk_height_rate_scale
         #: whether the wind states are estimated (not inhibited)
         self.active = False
         self._k = entry_point(fuse_drag_kernel, mem.w, mem.P, mem.buf, mem.meta, 0.0, 0.0,
@@ -246,8 +246,8 @@ class DragControl:
         m.x[X_W:X_W + 2] = 0.0
         m.P[IDX_W:IDX_W + 2, :] = 0.0
         m.P[:, IDX_W:IDX_W + 2] = 0.0
-        m.P[IDX_W, IDX_W] = m.P[IDX_W + 1, IDX_W + 1] = p.wind_sigma_m_s ** 2
-        m.prm[PRM_WIND_WALK] = p.wind_walk_m_s_sqrt_s
+        m.P[IDX_W, IDX_W] = m.P[IDX_W + 1, IDX_W + 1] = p.drag.wind_sigma_m_s ** 2
+        m.prm[PRM_WIND_WALK] = p.drag.wind_walk_m_s_sqrt_s
         self.active = True
 
     def _inhibit(self) -> None:

@@ -71,7 +71,7 @@ class NavFilter:
     magnetic field it assumes [gauss] in the inertial frame (east, north, up: the
     declination and inclination are in it). Times are the companion's [s], monotonic.
     ``drag`` is the vehicle's drag model (the controllers' vehicle's), which drag fusion
-    (``params.drag_fusion``) needs.
+    (``params.drag.enabled``) needs.
     """
 
     #: The state the vehicle flies on (:meth:`companion.ekf.output.OutputPredictor.state`):
@@ -112,9 +112,9 @@ class NavFilter:
         self._tether = (TetherControl(p, mem, src, out, cp.leave) if p.tether_aid
                         else None)
         self._zero_vel = ZeroVelocityControl(p, mem, src.zero_vel)
-        if p.drag_fusion and drag is None:
-            raise ValueError("drag_fusion: the filter needs the vehicle's drag model")
-        self._drag = (DragControl(p, mem, src.drag, drag) if p.drag_fusion else None)
+        if p.drag.enabled and drag is None:
+            raise ValueError("drag.enabled: the filter needs the vehicle's drag model")
+        self._drag = (DragControl(p, mem, src.drag, drag) if p.drag.enabled else None)
         self._align = Alignment(p, mem, src, self.gravity_m_s2, field)
         self._aligned = False
         #: when the filter aligned [s] (None: not yet)
@@ -289,9 +289,9 @@ class NavFilter:
 
     def fuse_drag(self, t_s: float, in_air: bool, tether_pull_n: Sequence[float]) -> bool:
         """The drag's specific force at ``t_s`` [s] (the IMU's since the last fusion, every
-        ``drag_interval_s``), with the tether's modelled pull on the vehicle [N]
+        ``drag.interval_s``), with the tether's modelled pull on the vehicle [N]
         (inertial); ``in_air`` False inhibits the wind states. Returns whether it was
-        fused (never without ``drag_fusion`` or before alignment)."""
+        fused (never without ``drag.enabled`` or before alignment)."""
         d = self._drag
         return d is not None and self._aligned and d.fuse(t_s, in_air, tether_pull_n)
 
