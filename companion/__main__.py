@@ -251,6 +251,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     autopilot.on_gcs_heartbeat(lambda: onboard.gcs_heard(last_t[0]))
     autopilot.on_external_position(onboard.external_position)
+    autopilot.on_tether_reading(onboard.tether_reading)
     autopilot.streams.wind_source = onboard.wind_estimate
     autopilot.streams.estimator_ready = onboard.estimator_ready
 

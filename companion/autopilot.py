@@ -147,6 +147,7 @@ class Autopilot:
         self._winch_sink: Callable[[Any], None] | None = None
         self._gcs_sink: Callable[[], None] | None = None
         self._external_sink: Callable[[Any], None] | None = None
+        self._reading_sink: Callable[[Any], None] | None = None
         self._watch: list[Any] = []
         self._watch_gen = -1
         self._watch_comp: Any = None
@@ -384,6 +385,11 @@ class Autopilot:
                 if fix is not None and self._external_sink is not None:
                     self._external_sink(fix)
                 continue
+            if msg.get_type() == "DEBUG_FLOAT_ARRAY":   # the fix's raw reading: likewise
+                reading = cl.tether_reading(msg)
+                if reading is not None and self._reading_sink is not None:
+                    self._reading_sink(reading)
+                continue
             if msg.get_type() == "COMMAND_ACK" and msg.command == M.MAV_CMD_DO_WINCH:
                 if self._mission_winch and msg.target_component == cl.AUTOPILOT_COMPONENT_ID:
                     seq = self._mission_winch.pop(0)
@@ -419,6 +425,11 @@ class Autopilot:
         """Call ``sink(fix)`` with every tether fix (``ODOMETRY``) the winch sends, as a
         :class:`tuavdefs.component_link.ExternalPosition`; malformed ones are dropped."""
         self._external_sink = sink
+
+    def on_tether_reading(self, sink: Callable[[Any], None]) -> None:
+        """Call ``sink(reading)`` with every raw tether reading (``DEBUG_FLOAT_ARRAY``
+        "TETHER") the winch sends, as a :class:`tuavdefs.component_link.TetherReading`."""
+        self._reading_sink = sink
 
     def on_winch_status(self, sink: Callable[[Any], None]) -> None:
         """Call ``sink(msg)`` with every WINCH_STATUS the winch sends."""

@@ -32,8 +32,8 @@ Records, and when they are written (simulated time):
   rotor outputs as PWM [us], channels 1-4), ``BARO`` (altitude above the boot's, pressure
   altitude AMSL [m], pressure [Pa], temperature, climb rate), ``MAG`` (the field [mGauss]),
   and the filter's ``XKF1`` (attitude, velocity, position from the origin, gyro bias),
-  ``XKF2`` (accelerometer bias, Earth field, magnetometer bias) and ``XKQ`` (attitude
-  quaternion, NED to body);
+  ``XKF2`` (accelerometer bias, the wind states, Earth field, magnetometer bias) and
+  ``XKQ`` (attitude quaternion, NED to body);
 - at each check of the filter's health (companion.onboard.HEALTH_CHECK_S): ``XKF3`` (the
   innovations of GNSS velocity and position, barometric height and magnetic heading),
   ``XKF4`` (the square roots of the test ratios x 100, the fault, timeout, solution and
@@ -461,8 +461,11 @@ class FlightLog:
         ax, ay, az = flu_to_frd(f.accel_bias_m_s2)
         en, ee, ed = enu_to_ned(f.earth_field_enu_gauss)
         bx, by, bz = flu_to_frd(f.mag_bias_gauss)
-        w.write("XKF2", t_us, 0, _i16(ax * 100.0), _i16(ay * 100.0), _i16(az * 100.0), 0,
-                0, _i16(en * 1e3), _i16(ee * 1e3), _i16(ed * 1e3), _i16(bx * 1e3),
+        # the wind states (zero without drag fusion, as EKF3's without its BCOEF)
+        vwn, vwe, _ = enu_to_ned(f.wind_m_s)
+        w.write("XKF2", t_us, 0, _i16(ax * 100.0), _i16(ay * 100.0), _i16(az * 100.0),
+                _i16(vwn * 100.0), _i16(vwe * 100.0), _i16(en * 1e3), _i16(ee * 1e3),
+                _i16(ed * 1e3), _i16(bx * 1e3),
                 _i16(by * 1e3), _i16(bz * 1e3), 0.0, 0.0, 0.0)
         w.write("XKQ", t_us, 0, *q_ned)
 

@@ -22,6 +22,7 @@ import math
 from typing import NamedTuple
 
 from companion.ekf import AidSource, EstimatorParams, FilterStatus, NavFilter
+from companion.ekf.drag import DragModel
 from companion.failsafes import FailsafeParams, Failsafes
 from companion.flight_controller import FlightController, FlightStep, VehicleState
 from companion.gains import FlightControlParams
@@ -37,8 +38,9 @@ from companion.navigation import (
 from companion.reference import RefSample
 from companion.simlink_client import GpsFix, ImuSample
 from tuavdefs.airframe import rotor_speed_to_command
-from tuavdefs.component_link import ExternalPosition
+from tuavdefs.component_link import ExternalPosition, TetherReading
 from tuavdefs.frames import ned_to_enu, quat_rotate
+from tuavdefs.line_shape import LineModel, line_top
 from tuavdefs.params import SystemParams
 
 _STOPPED = (0.0, 0.0, 0.0, 0.0)
@@ -49,6 +51,9 @@ _new = tuple.__new__
 EKF_FAILSAFE_S = 1.0
 #: How often the filter's health is checked [s] (5 Hz: within the failsafe's second).
 HEALTH_CHECK_S = 0.2
+#: A line leaving the exit below this elevation lies on the ground there [rad] (the ground
+#: station's ground_elevation_rad): its pull is not the suspended line's.
+_LINE_OFF_GROUND_RAD = 0.03
 
 
 class OnboardInputs(NamedTuple):
@@ -98,9 +103,15 @@ class Companion:
         g = params.environment.gravity_m_s2
         est = estimator if estimator is not None else EstimatorParams()
         self.estimator_params = est
-        self.filter: NavFilter | None = (
-            NavFilter(est, g, ned_to_enu(tuple(est.earth_field_ned_gauss)))
-            if est.kind == "ekf" else None)
+        #: the vehicle's drag as the filter's drag fusion models it (the controllers'
+        #: vehicle model)
+        env = params.environment
+        self._drag_model = DragModel.from_vehicle(veh, env.air_density_kg_m3)
+        #: the line as the companion believes it (its pull in the wind, for drag fusion)
+        self._line = LineModel.from_tether(params.tether, g, env.air_density_kg_m3)
+        #: the winch's latest raw tether reading (None: none yet)
+        self._reading: TetherReading | None = None
+        self.filter: NavFilter | None = self._new_filter()
         self.gps: GpsFix | None = None
         """The last GNSS fix received (what GPS_RAW_INT reports)."""
         self.imu: ImuSample | None = None
@@ -156,10 +167,7 @@ class Companion:
         parameters and stored mission (:meth:`Navigator.reboot`); the flight controller is
         reset when it next flies; the next state starts the navigator again (:meth:`begin`
         returns True). The parameters stay, as in storage."""
-        est = self.estimator_params
-        g = self.params.environment.gravity_m_s2
-        self.filter = (NavFilter(est, g, ned_to_enu(tuple(est.earth_field_ned_gauss)))
-                       if est.kind == "ekf" else None)
+        self.filter = self._new_filter()
         self._airborne_at_boot = None
         self._unhealthy_since = None
         self._healthy = self.filter is None
@@ -169,11 +177,23 @@ class Companion:
         self.started = False
         self._was_flying = False
 
+    def _new_filter(self) -> NavFilter | None:
+        """A navigation filter on the estimator's parameters (None: flying on the truth)."""
+        est = self.estimator_params
+        if est.kind != "ekf":
+            return None
+        return NavFilter(est, self.params.environment.gravity_m_s2,
+                         ned_to_enu(tuple(est.earth_field_ned_gauss)), self._drag_model)
+
     def wind_estimate(self) -> tuple[float, float, float]:
-        """The wind the position loop's disturbance estimate implies [m/s], z-up: the
-        horizontal disturbance read as linear drag in moving air (v + m d / D per axis;
-        what is left of the tether's pull after its model shows as wind too); zero on the
-        ground."""
+        """The onboard wind estimate [m/s], z-up (what WIND reports). With the filter's
+        drag fusion, its wind states (EKF3's). Otherwise the wind the position loop's
+        disturbance estimate implies: the horizontal disturbance read as linear drag in
+        moving air (v + m d / D per axis; what is left of the tether's pull after its
+        model shows as wind too), zero on the ground."""
+        f = self.filter
+        if f is not None and f.drag_fusion:
+            return f.wind_m_s
         if not self.nav.flying:
             return (0.0, 0.0, 0.0)
         d = self.flight.position.d_hat
@@ -207,6 +227,30 @@ class Companion:
         if len(self._external) < 16:      # bounded: a flood waits for the next step
             self._external.append(fix)
 
+    def tether_reading(self, reading: TetherReading) -> None:
+        """The raw reading a tether fix of the winch was made of (length, tension, exit
+        angles, at its sample time on the vehicle's clock): the tether's pull in the drag
+        fusion."""
+        self._reading = reading
+
+    def _line_pull(self, t_s: float, pos_m: tuple[float, float, float]
+                   ) -> tuple[float, float, float] | None:
+        """The line's pull on the vehicle [N] (inertial) from the latest raw reading: the
+        line's model (its weight and its drag in the filter's wind, taken at the vehicle's
+        height ``pos_m[2]`` [m] and sheared below it) integrated from the exit in the
+        direction and with the tension measured, ``-T(L)``; None without a fresh reading
+        of a line leaving the exit above the ground."""
+        r, f, est = self._reading, self.filter, self.estimator_params
+        if (r is None or f is None or abs(t_s - r.t_s) > est.drag.tether_max_age_s
+                or r.elevation_rad < _LINE_OFF_GROUND_RAD or not r.tension_n > 0.0):
+            return None
+        m = self._line
+        u = f.wind_m_s
+        top = line_top(r.length_m, r.tension_n, r.azimuth_rad, r.elevation_rad,
+                       m.weight_n_m, m.drag_n_s2_m3, u[0], u[1], m.ea_n,
+                       max(pos_m[2], 1.0), est.drag.tether_wind_shear, 1.0, m.steps)
+        return (-top[3], -top[4], -top[5])
+
     def _fuse_external(self, t_s: float) -> None:
         f = self.filter
         fixes, self._external = self._external, []
@@ -220,6 +264,24 @@ class Companion:
                 off = quat_rotate(f.state().quat, self._attach_m)
                 pos = (pos[0] - off[0], pos[1] - off[1], pos[2] - off[2])
             f.fuse_tether(t_s, fix.t_s, pos, fix.cov_m2)
+
+    def _fuse_drag(self, t_s: float) -> None:
+        """The drag's specific force into the filter, in the air only, with the tether's
+        pull from the winch's raw reading in the filter's wind (:meth:`_line_pull`), or
+        without one the flight controller's windless tether model at the estimated
+        position, the winch's reported length and tension (docs/estimation.md §11)."""
+        f = self.filter
+        nav = self.nav
+        if not nav.flying:
+            f.fuse_drag(t_s, False, (0.0, 0.0, 0.0))
+            return
+        fc = self.flight
+        winch = fc.winch
+        pos = f.state().pos_m
+        pull = self._line_pull(t_s, pos)
+        if pull is None:
+            pull = fc.tether_model.estimate(pos, winch.length_at(t_s), winch.tension_n).force_n
+        f.fuse_drag(t_s, True, pull)
 
     def _announce_sources(self, sources: AidSource) -> None:
         """A STATUSTEXT (through the navigator's events) when the position sources change."""
@@ -322,6 +384,8 @@ class Companion:
             f.fuse_stationary(t, self.params.vehicle.gear_height_m)
         if self._external:
             self._fuse_external(t)
+        if f.drag_due(t):
+            self._fuse_drag(t)
         self._check_health(t)
         if gps is not None:
             if self._airborne_at_boot is None:

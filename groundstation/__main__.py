@@ -117,6 +117,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         fix = out.fix
         if fix is not None and mav is not None:
             mav.tether_fix(fix.sample_time_ms * 1e-3, fix.pos_m, fix.cov_m2)
+            reading = winch.sensors.tether_reading(fix, winch.length_m)
+            if reading is not None:
+                mav.tether_reading(reading)
         st = out.status
         if st is not None and mav is not None:
             mav.winch_status(st.line_length_m, st.speed_m_s, st.tension_kg,

@@ -196,6 +196,11 @@ class WinchLinkClient:
         [m] and covariance [m^2] (z-up frame, origin at the winder)."""
         self._send(cl.odometry_message(cl.ExternalPosition(t_s, pos_m, cov_m2)))
 
+    def tether_reading(self, reading: cl.TetherReading) -> None:
+        """Send the raw reading a tether fix was made of as ``DEBUG_FLOAT_ARRAY`` "TETHER"
+        (:func:`tuavdefs.component_link.tether_reading_message`)."""
+        self._send(cl.tether_reading_message(reading))
+
     def command_ack(self, command: int, result: int, target_system: int,
                     target_component: int) -> None:
         """Send COMMAND_ACK (``result`` a MAV_RESULT) to the command's sender."""

@@ -25,6 +25,7 @@ from groundstation.winch_current import CurrentTension
 from groundstation.winch_params import WinchParams
 from groundstation.winch_report import Notice, notice
 from tuavdefs import can_protocol as cp
+from tuavdefs import component_link as cl
 
 Vec3 = tuple[float, float, float]
 
@@ -180,6 +181,16 @@ class WinchSensors:
                 or self.load_cell_healthy is False):
             return False
         return abs(wrap_ms(self.sample_time_ms - ea[2])) * 1e-3 <= fixer.p.max_age_s
+
+    def tether_reading(self, fix: TetherFix, length_m: float) -> cl.TetherReading | None:
+        """The raw reading the tether fix ``fix`` was made of (``length_m`` [m], the load
+        cell's tension, the guide arm's angles, at the fix's sample time on the vehicle's
+        clock), None without a valid exit angle."""
+        ea = self.exit_angle
+        if ea is None or not ea[3]:
+            return None
+        return cl.TetherReading(fix.sample_time_ms * 1e-3, length_m, self.load_cell_n, ea[0],
+                                ea[1])
 
     def measured_position_m(self, length_m: float, lbar: LBarEstimator) -> Vec3 | None:
         """The UAV's position [m] as the winder itself measures it (its tether fix's mean

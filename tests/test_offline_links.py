@@ -68,6 +68,23 @@ def test_odometry_as_the_autopilot_takes_it():
     assert direct.odometry(nan) is None and wire.odometry(nan) is None
 
 
+def test_tether_reading_as_the_autopilot_takes_it():
+    """The raw reading (DEBUG_FLOAT_ARRAY "TETHER"): the same without the bytes as
+    through them, at float32 and whole microseconds; not finite, refused."""
+    rng = random.Random(7)
+    direct, wire = Links(), WireLinks()
+    for _ in range(200):
+        r = cl.TetherReading(rng.uniform(0.0, 600.0), rng.uniform(0.0, 60.0),
+                             rng.uniform(0.0, 30.0), rng.uniform(-math.pi, math.pi),
+                             rng.uniform(-0.1, 1.5))
+        a, b = direct.tether_reading(r), wire.tether_reading(r)
+        assert repr(a) == repr(b)
+        assert a is not None and a.t_s == round(r.t_s * 1e6) * 1e-6
+        assert abs(a.length_m - r.length_m) < 1e-5 and a.length_m != r.length_m
+    bad = cl.TetherReading(1.0, 10.0, math.nan, 0.1, 0.2)
+    assert direct.tether_reading(bad) is None and wire.tether_reading(bad) is None
+
+
 def _short(name: str, seconds: float, **changes) -> object:
     sc = load_scenario(name)
     return sc.replace(duration_s=min(sc.duration_s, seconds),

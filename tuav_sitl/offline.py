@@ -431,6 +431,12 @@ class OfflineRunner:
         """The winch's tether fix as ODOMETRY to the companion (if it takes it)."""
         ext = self.links.odometry(cl.ExternalPosition(fix.sample_time_ms * 1e-3, fix.pos_m,
                                                       fix.cov_m2))
+        winch = self.ground.winch
+        reading = winch.sensors.tether_reading(fix, winch.length_m)
+        if reading is not None:
+            reading = self.links.tether_reading(reading)
+        if reading is not None:
+            self.companion.tether_reading(reading)
         if ext is not None:
             self.companion.external_position(ext)
             self.fix_log.record(ext.t_s, ext.pos_m, ext.cov_m2)

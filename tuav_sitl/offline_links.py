@@ -35,6 +35,7 @@ from tuavdefs.frames import ned_to_enu
 _F32X6 = struct.Struct("<6f")
 #: ODOMETRY's position (x, y, z) and its covariance's nine entries (float32 on the wire)
 _F32X3 = struct.Struct("<3f")
+_F32X1 = struct.Struct("<f")
 _F32X9 = struct.Struct("<9f")
 
 #: (position [m], velocity [m/s]) z-up, and the vehicle's time_boot_ms
@@ -68,6 +69,18 @@ class Links:
             fix.t_s, pos, (c[0:3], c[3:6], c[6:9]))))
 
 
+    def tether_reading(self, r: cl.TetherReading) -> cl.TetherReading | None:
+        """The winch's raw tether reading as the vehicle takes it from DEBUG_FLOAT_ARRAY:
+        its time in whole microseconds, its values as float32."""
+        return cl.tether_reading(cl.tether_reading_message(r._replace(
+            length_m=_f32(r.length_m), tension_n=_f32(r.tension_n),
+            azimuth_rad=_f32(r.azimuth_rad), elevation_rad=_f32(r.elevation_rad))))
+
+
+def _f32(v: float) -> float:
+    return _F32X1.unpack(_F32X1.pack(v))[0]
+
+
 class WireLinks(Links):
     """The component link's messages packed into MAVLink 2 frames and parsed by the
     receiving side's parser, as between the processes."""
@@ -94,3 +107,9 @@ class WireLinks(Links):
         data = cl.odometry_message(fix).pack(self._winch)
         msg, = self._companion.parse_buffer(data)
         return cl.external_position(msg)
+
+    def tether_reading(self, r: cl.TetherReading) -> cl.TetherReading | None:
+        """DEBUG_FLOAT_ARRAY "TETHER" packed as the winch's link sends it and parsed as the
+        autopilot takes it."""
+        msg, = self._companion.parse_buffer(cl.tether_reading_message(r).pack(self._winch))
+        return cl.tether_reading(msg)

@@ -8,7 +8,9 @@ autopilot ``MAV_AUTOPILOT_INVALID`` and type ``MAV_TYPE_WINCH`` so that ground s
 not take it for a second vehicle. MAVLink 2, signed with the vehicle's key when it has
 one (the companion hands the winch a new key with ``SETUP_SIGNING`` from component 1).
 The winch also sends its tether fix of the UAV's position as ``ODOMETRY``
-(:func:`odometry_message`, :func:`external_position`) at :data:`TETHER_FIX_RATE_HZ`.
+(:func:`odometry_message`, :func:`external_position`) at :data:`TETHER_FIX_RATE_HZ`, and
+with each fix the raw reading it was made of as ``DEBUG_FLOAT_ARRAY`` "TETHER"
+(:func:`tether_reading_message`, :func:`tether_reading`).
 """
 
 from __future__ import annotations
@@ -124,3 +126,46 @@ def external_position(msg: mavlink2.MAVLink_odometry_message) -> ExternalPositio
         return None
     return ExternalPosition(msg.time_usec * 1e-6, (pos[0], pos[1], pos[2]),
                             tuple(tuple(r) for r in cov))
+
+
+#: ``DEBUG_FLOAT_ARRAY.name`` of the winch's raw tether reading.
+TETHER_READING_NAME = "TETHER"
+
+
+class TetherReading(NamedTuple):
+    """What the winch measured of the line at one sample (the readings its tether fix is
+    made of): the sample's time on the vehicle's clock [s], the paid-out length [m], the
+    load cell's tension [N], the guide arm's exit azimuth and elevation [rad] (as read:
+    its biases in them; azimuth anticlockwise from east, elevation up from the
+    horizontal, the project's z-up frame)."""
+
+    t_s: float
+    length_m: float
+    tension_n: float
+    azimuth_rad: float
+    elevation_rad: float
+
+
+def tether_reading_message(r: TetherReading) -> mavlink2.MAVLink_debug_float_array_message:
+    """``DEBUG_FLOAT_ARRAY`` (350) named :data:`TETHER_READING_NAME`: ``time_usec`` the
+    sample's time, ``data[0:4]`` length [m], tension [N], exit azimuth and elevation [rad]
+    (the rest 0). MAVLink has no message for a tether's raw reading; this one carries a
+    named array of floats for a component's own data, which it is."""
+    data = [0.0] * 58
+    data[0:4] = (r.length_m, r.tension_n, r.azimuth_rad, r.elevation_rad)
+    return mavlink2.MAVLink_debug_float_array_message(
+        max(int(round(r.t_s * 1e6)), 0), TETHER_READING_NAME.encode(), 0, data)
+
+
+def tether_reading(msg: mavlink2.MAVLink_debug_float_array_message) -> TetherReading | None:
+    """The reading in a ``DEBUG_FLOAT_ARRAY`` (:func:`tether_reading_message`), or None when
+    the array is another or a value is not finite."""
+    name = msg.name
+    if isinstance(name, bytes):
+        name = name.decode(errors="replace")
+    if name.rstrip("\x00") != TETHER_READING_NAME:
+        return None
+    vals = [float(v) for v in msg.data[0:4]]
+    if not all(math.isfinite(v) for v in vals):
+        return None
+    return TetherReading(msg.time_usec * 1e-6, *vals)

@@ -14,7 +14,8 @@ fix). One module per concern:
 - :mod:`~companion.ekf.output`: the output predictor (what the vehicle flies on);
 - :mod:`~companion.ekf.aid_source`: one status record type, one gate/fail/reset policy;
 - one module per source: :mod:`~companion.ekf.gnss`, :mod:`~companion.ekf.baro`,
-  :mod:`~companion.ekf.mag`, :mod:`~companion.ekf.tether`,
+  :mod:`~companion.ekf.mag`, :mod:`~companion.ekf.tether`, :mod:`~companion.ekf.drag`
+  (the drag's specific force, with the wind states),
   :mod:`~companion.ekf.zero_velocity`, :mod:`~companion.ekf.const_pos`;
 - :mod:`~companion.ekf.alignment`: the initialisation;
 - :mod:`~companion.ekf.health`: health, flags, :class:`FilterStatus`;
@@ -31,9 +32,15 @@ from companion.ekf.health import (
     HealthReason,
 )
 from companion.ekf.layout import IDX_BG, IDX_BP, N_ERR, AidSourceKind
-from companion.ekf.params import ESTIMATOR_KINDS, MAG_FUSIONS, EstimatorParams, MagFusion
+from companion.ekf.params import (
+    ESTIMATOR_KINDS,
+    MAG_FUSIONS,
+    DragFusionParams,
+    EstimatorParams,
+    MagFusion,
+)
 
-__all__ = ["AidSource", "AidSourceKind", "AidSourcePolicy", "AidSourceStatus",
+__all__ = ["AidSource", "AidSourceKind", "AidSourcePolicy", "AidSourceStatus", "DragFusionParams",
            "ESTIMATOR_KINDS", "EstimatorFlags", "EstimatorParams", "FilterHealth",
            "FilterStatus", "FusionOutcome", "HealthReason", "IDX_BG", "IDX_BP", "MAG_FUSIONS",
            "MagFusion", "N_ERR", "NavFilter"]

@@ -97,6 +97,9 @@ def policies(p: EstimatorParams) -> dict[AidSourceKind, AidSourcePolicy]:
                                     interval_from=IntervalFrom.ATTEMPT),
         k.CONST_POS: AidSourcePolicy(math.inf, math.inf, min_interval_s=CONST_POS_INTERVAL_S,
                                      interval_from=IntervalFrom.ATTEMPT),
+        k.DRAG: AidSourcePolicy(p.drag.gate_sigma, 10.0 * p.drag.interval_s,
+                                min_interval_s=p.drag.interval_s,
+                                interval_from=IntervalFrom.ATTEMPT),
     }
 
 
@@ -190,7 +193,7 @@ class AidSources:
     (``sources.gnss_pos``)."""
 
     __slots__ = ("gnss_pos", "gnss_hgt", "gnss_vel", "baro", "mag", "tether", "zero_vel",
-                 "const_pos", "_by_kind")
+                 "const_pos", "drag", "_by_kind")
 
     def __init__(self, params: EstimatorParams, rows: np.ndarray) -> None:
         pol = policies(params)

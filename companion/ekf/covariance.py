@@ -18,6 +18,7 @@ from companion.ekf.layout import (
     IDX_BP,
     IDX_TH,
     IDX_V,
+    IDX_W,
     PRM_ACC_N,
     PRM_BA_W,
     PRM_BG_W,
@@ -28,6 +29,9 @@ from companion.ekf.layout import (
     PRM_BP_VAR_V,
     PRM_GRAV,
     PRM_GYRO_N,
+    PRM_WIND_HGT_SCALE,
+    PRM_WIND_WALK,
+    W_DRAG_SUM,
     W_PRM,
     W_RATES,
     W_X,
@@ -55,7 +59,8 @@ def predict_kernel(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarr
     [m/s^2] (body FLU), the covariance ``P`` propagated (``F P F' + Q``), the state stored
     in the ring buffer ``buf`` (``meta`` = next slot, entries); the rates block of ``w``:
     [0:3] the bias-corrected rates, [3:6] the inertial acceleration and [6] the yaw rate
-    [rad/s], low-passed over :data:`MANOEUVRE_TAU_S` (whether the vehicle manoeuvres)."""
+    [rad/s], low-passed over :data:`MANOEUVRE_TAU_S` (whether the vehicle manoeuvres); the
+    bias-corrected specific force's body x and y added to the drag fusion's sums."""
     x = w[W_X:]
     prm = w[W_PRM:]
     rates = w[W_RATES:]
@@ -78,6 +83,10 @@ def predict_kernel(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarr
     rates[4] += lp * (aiy - rates[4])
     rates[5] += lp * (aiz - rates[5])
     rates[6] += lp * (r20 * wx + r21 * wy + r22 * wz - rates[6])
+    drag = w[W_DRAG_SUM:]
+    drag[0] += fx
+    drag[1] += fy
+    drag[2] += 1.0
     for i, a in enumerate((aix, aiy, aiz)):
         x[i] += (x[X_V + i] + 0.5 * a * dt_s) * dt_s
         x[X_V + i] += a * dt_s
@@ -147,6 +156,13 @@ def predict_kernel(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarr
                 P[j, IDX_BP + i] *= phi
             var = prm[PRM_BP_VAR_H] if i < 2 else prm[PRM_BP_VAR_V]
             P[IDX_BP + i, IDX_BP + i] += var * (1.0 - phi * phi)
+    # the wind: a random walk, faster while climbing or descending (EKF3's
+    # EK3_WIND_PSCALE); none while its states are inhibited (walk 0)
+    walk = prm[PRM_WIND_WALK]
+    if walk > 0.0:
+        qw = (walk * (1.0 + prm[PRM_WIND_HGT_SCALE] * abs(x[X_V + 2]))) ** 2 * dt_s
+        P[IDX_W, IDX_W] += qw
+        P[IDX_W + 1, IDX_W + 1] += qw
     symmetrise(P)
     # the ring buffer of (t, p, v)
     k = meta[0]

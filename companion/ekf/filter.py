@@ -20,6 +20,7 @@ from companion.ekf.aid_source import AidSources
 from companion.ekf.alignment import Alignment
 from companion.ekf.baro import BaroControl
 from companion.ekf.const_pos import ConstPosControl
+from companion.ekf.drag import DragControl, DragModel
 from companion.ekf.gnss import GnssControl, usable_fix
 from companion.ekf.health import FilterStatus, filter_status
 from companion.ekf.layout import (
@@ -41,6 +42,7 @@ from companion.ekf.layout import (
     X_BH,
     X_BM,
     X_BP,
+    X_W,
 )
 from companion.ekf.mag import MagControl, finite_sample
 from companion.ekf.memory import FilterMemory
@@ -68,6 +70,8 @@ class NavFilter:
     ``gravity_m_s2`` is the filter's gravity [m/s^2]; ``earth_field_enu_gauss`` the Earth's
     magnetic field it assumes [gauss] in the inertial frame (east, north, up: the
     declination and inclination are in it). Times are the companion's [s], monotonic.
+    ``drag`` is the vehicle's drag model (the controllers' vehicle's), which drag fusion
+    (``params.drag.enabled``) needs.
     """
 
     #: The state the vehicle flies on (:meth:`companion.ekf.output.OutputPredictor.state`):
@@ -75,7 +79,8 @@ class NavFilter:
     state: Callable[[], VehicleState]
 
     def __init__(self, params: EstimatorParams, gravity_m_s2: float,
-                 earth_field_enu_gauss: tuple[float, float, float]) -> None:
+                 earth_field_enu_gauss: tuple[float, float, float],
+                 drag: DragModel | None = None) -> None:
         self.params = p = params
         self.gravity_m_s2 = float(gravity_m_s2)
         self.earth_field_enu_gauss = field = _vec3(earth_field_enu_gauss)
@@ -107,6 +112,9 @@ class NavFilter:
         self._tether = (TetherControl(p, mem, src, out, cp.leave) if p.tether_aid
                         else None)
         self._zero_vel = ZeroVelocityControl(p, mem, src.zero_vel)
+        if p.drag.enabled and drag is None:
+            raise ValueError("drag.enabled: the filter needs the vehicle's drag model")
+        self._drag = (DragControl(p, mem, src.drag, drag) if p.drag.enabled else None)
         self._align = Alignment(p, mem, src, self.gravity_m_s2, field)
         self._aligned = False
         #: when the filter aligned [s] (None: not yet)
@@ -130,8 +138,9 @@ class NavFilter:
 
     @property
     def covariance(self) -> np.ndarray:
-        """The error-state covariance (22 x 22, a copy): dp [m], dv [m/s], dtheta [rad]
-        (inertial axes), db_g [rad/s], db_a [m/s^2], db_h [m], db_m [gauss], db_p [m]."""
+        """The error-state covariance (24 x 24, a copy): dp [m], dv [m/s], dtheta [rad]
+        (inertial axes), db_g [rad/s], db_a [m/s^2], db_h [m], db_m [gauss], db_p [m],
+        dU [m/s] (east, north)."""
         return self._mem.P.copy()
 
     @property
@@ -159,6 +168,23 @@ class NavFilter:
     def baro_offset_m(self) -> float:
         """The barometer's height offset estimate [m] (above the alignment's reference)."""
         return float(self._mem.x[X_BH])
+
+    @property
+    def wind_m_s(self) -> Vec3:
+        """The wind states [m/s]: the velocity the air moves with (east, north; vertical
+        0). Zero until drag fusion starts; kept while inhibited on the ground."""
+        x = self._mem.x
+        return (float(x[X_W]), float(x[X_W + 1]), 0.0)
+
+    @property
+    def wind_estimated(self) -> bool:
+        """Whether the wind states are estimated now (drag fusion on, in the air)."""
+        return self._drag is not None and self._drag.active
+
+    @property
+    def drag_fusion(self) -> bool:
+        """Whether the filter fuses the drag's specific force (and has wind states)."""
+        return self._drag is not None
 
     @property
     def gnss_resets(self) -> int:
@@ -254,6 +280,20 @@ class NavFilter:
         self._align.add_tether_fix(fix[0], fix[1], cov_matrix(fix[2]))
         self._try_align(t_s)
         return False
+
+    def drag_due(self, t_s: float) -> bool:
+        """Whether :meth:`fuse_drag` would fuse (or start) at ``t_s`` [s] in the air: the
+        caller computes the tether's pull only then."""
+        d = self._drag
+        return d is not None and self._aligned and not self.aid_sources.drag.too_soon(t_s)
+
+    def fuse_drag(self, t_s: float, in_air: bool, tether_pull_n: Sequence[float]) -> bool:
+        """The drag's specific force at ``t_s`` [s] (the IMU's since the last fusion, every
+        ``drag.interval_s``), with the tether's modelled pull on the vehicle [N]
+        (inertial); ``in_air`` False inhibits the wind states. Returns whether it was
+        fused (never without ``drag.enabled`` or before alignment)."""
+        d = self._drag
+        return d is not None and self._aligned and d.fuse(t_s, in_air, tether_pull_n)
 
     def fuse_stationary(self, t_s: float, height_m: float | None = None) -> bool:
         """The vehicle is at rest on its gear at ``t_s`` [s] (the caller knows: landed and

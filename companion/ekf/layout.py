@@ -37,6 +37,9 @@ class AidSourceKind(IntEnum):
     """The stationary constraint on the ground (zero velocity, the gear's height; ungated)."""
     CONST_POS = 7
     """Constant-position mode's held position (ungated)."""
+    DRAG = 8
+    """The drag's specific force: the accelerometer's body x and y against the vehicle's
+    drag in the wind states' air and the tether's pull (2 axes gated as one)."""
 
 
 N_AID_SOURCES = len(AidSourceKind)
@@ -44,14 +47,17 @@ N_AID_SOURCES = len(AidSourceKind)
 # ----- the nominal state x
 #: position p [m] (ENU), velocity v [m/s], attitude q (w, x, y, z; body FLU -> inertial),
 #: gyro bias b_g [rad/s], accelerometer bias b_a [m/s^2], baro offset b_h [m],
-#: magnetometer bias b_m [gauss], GNSS receiver wander b_p [m].
-X_P, X_V, X_Q, X_BG, X_BA, X_BH, X_BM, X_BP = 0, 3, 6, 10, 13, 16, 17, 20
-NX = 23
+#: magnetometer bias b_m [gauss], GNSS receiver wander b_p [m], horizontal wind U [m/s]
+#: (the velocity the air moves with, east and north).
+X_P, X_V, X_Q, X_BG, X_BA, X_BH, X_BM, X_BP, X_W = 0, 3, 6, 10, 13, 16, 17, 20, 23
+NX = 25
 
 # ----- the error state (the covariance's rows)
-#: dp, dv, dtheta (a small rotation in the inertial frame), db_g, db_a, db_h, db_m, db_p.
-IDX_P, IDX_V, IDX_TH, IDX_BG, IDX_BA, IDX_BH, IDX_BM, IDX_BP = 0, 3, 6, 9, 12, 15, 16, 19
-N_ERR = 22
+#: dp, dv, dtheta (a small rotation in the inertial frame), db_g, db_a, db_h, db_m, db_p,
+#: dU (the wind's two horizontal axes).
+IDX_P, IDX_V, IDX_TH, IDX_BG, IDX_BA, IDX_BH, IDX_BM, IDX_BP, IDX_W = (0, 3, 6, 9, 12, 15, 16,
+                                                                     19, 22)
+N_ERR = 24
 
 # ----- the ring buffer of past states: one row per IMU step
 BUF_T, BUF_P, BUF_V = 0, 1, 4
@@ -64,8 +70,10 @@ BUF_COLS = 7
  PRM_GNSS_GATE_VEL, PRM_GNSS_R_VEL, PRM_GNSS_FUSE_HGT, PRM_WANDER, PRM_BARO_R,
  PRM_BARO_GATE, PRM_MAG_GATE, PRM_MAG_R_HEADING, PRM_MAG_R_3D, PRM_MAG_TILT,
  PRM_MAG_COUPLE_X, PRM_MAG_COUPLE_Y, PRM_MAG_WITH_BIAS, PRM_EARTH_X, PRM_EARTH_Y,
- PRM_EARTH_Z, PRM_HEADING_EARTH, PRM_TETHER_GATE) = range(32)
-N_PRM = 32
+ PRM_EARTH_Z, PRM_HEADING_EARTH, PRM_TETHER_GATE, PRM_WIND_WALK, PRM_WIND_HGT_SCALE,
+ PRM_DRAG_QX, PRM_DRAG_QY, PRM_DRAG_MX, PRM_DRAG_MY, PRM_MASS_INV, PRM_DRAG_R,
+ PRM_DRAG_GATE) = range(41)
+N_PRM = 41
 
 # ----- one aid source's status row (the AID block: a row per AidSourceKind)
 #: innovation (up to 3 axes; measurement - predicted), its variance, the gate's test ratio
@@ -85,7 +93,10 @@ W_RATES = W_DELAYED + 6
 W_LAG = W_RATES + 7
 #: the magnetometer's latest heading innovation [rad] (either fusion's; reported)
 W_HEADING_INNOV = W_LAG + 6
-W_PRM = W_HEADING_INNOV + 1
+#: the specific force's body x and y [m/s^2] (bias-corrected) summed over the IMU steps
+#: since the last drag fusion, and their count (the drag fusion takes their mean)
+W_DRAG_SUM = W_HEADING_INNOV + 1
+W_PRM = W_DRAG_SUM + 3
 W_AID = W_PRM + N_PRM
 W_SIZE = W_AID + N_AID_SOURCES * AID_COLS
 

@@ -41,7 +41,7 @@ from companion.ekf.layout import (
 )
 from companion.ekf.memory import FilterMemory
 from companion.ekf.params import EstimatorParams, MagFusion
-from companion.ekf.update import inject, row_update, scalar_update, set_aid_row
+from companion.ekf.update import dot, inject, mat_vec, row_update, scalar_update, set_aid_row
 from tuavdefs.frames import quat_to_matrix_kernel, wrap_pi
 from tuavdefs.jit import entry_point, njit
 
@@ -91,8 +91,8 @@ def fuse_mag_kernel(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndar
         for j, (a0, a1) in enumerate(((r00, r10), (r01, r11), (r02, r12))):
             h[IDX_BM + j] = (ey * a0 - ex * a1) / eh2
     r, gate = prm[PRM_MAG_R_HEADING], prm[PRM_MAG_GATE]
-    ph = P @ h
-    s = float(h @ ph) + r
+    ph = mat_vec(P, h)
+    s = dot(h, ph) + r
     ratio = y * y / (s * gate * gate)
     w[W_HEADING_INNOV] = y
     set_aid_row(w, _MAG, y, 0.0, 0.0, s, 0.0, 0.0, ratio)

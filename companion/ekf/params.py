@@ -27,6 +27,46 @@ class MagFusion(Enum):
 
 
 @dataclass(frozen=True)
+class DragFusionParams(Params):
+    """The drag's specific-force fusion and the wind states it makes observable
+    (``[estimator.drag]``; docs/estimation.md §11)."""
+
+    enabled: bool = quantity(
+        False, "", "fuse the accelerometer's body x and y against the vehicle's drag (its "
+        "ballistic and momentum-drag coefficients from the companion's vehicle model, as "
+        "EKF3's EK3_DRAG_BCOEF_X/Y and EK3_DRAG_MCOEF) and the tether's pull, and estimate "
+        "the horizontal wind as two states (EKF3's drag fusion; docs/estimation.md §11): "
+        "WIND is then the filter's")
+    noise_m_s2: float = quantity(
+        0.5, "m/s^2", "drag fusion: noise of the specific force's body x and y against the "
+        "drag model (vibration, gusts, the model's and the tether pull's error; EKF3's "
+        "EK3_DRAG_M_NSE)", gt=0)
+    interval_s: float = quantity(
+        0.1, "s", "drag fusion: the specific force averaged over this long, fused once per "
+        "interval", gt=0, le=1.0)
+    gate_sigma: float = quantity(
+        5.0, "1", "drag fusion: innovation gate [standard deviations] (the two axes as one)",
+        gt=0)
+    wind_walk_m_s_sqrt_s: float = quantity(
+        0.1, "m/s/sqrt(s)", "random walk of each horizontal wind state (the mean wind's "
+        "drift; EKF3's EK3_WIND_P_NSE, as a density)", gt=0)
+    wind_walk_height_rate_scale: float = quantity(
+        1.0, "s/m", "the wind's walk grows by this times the vertical speed (the wind "
+        "changes with height; EKF3's EK3_WIND_PSCALE)", ge=0)
+    tether_wind_shear: float = quantity(
+        1.0 / 7.0, "1", "drag fusion: the tether's pull from the winch's raw reading (length, "
+        "tension, exit angles) is the line's model in the wind states taken at the vehicle's "
+        "height and sheared below it with this power law (the ground station's belief, "
+        "open terrain)", ge=0, le=1)
+    tether_max_age_s: float = quantity(
+        0.3, "s", "drag fusion: a raw tether reading older than this is not used (the "
+        "windless tether model's pull instead)", gt=0)
+    wind_sigma_m_s: float = quantity(
+        5.0, "m/s", "prior standard deviation of each wind state when drag fusion starts "
+        "(the wind starts at 0)", gt=0)
+
+
+@dataclass(frozen=True)
 class EstimatorParams(Params):
     """The navigation filter's own model of its sensors, its gates and its health checks
     (docs/estimation.md). Noise densities are of continuous white noise; random walks are
@@ -219,4 +259,6 @@ class EstimatorParams(Params):
     tether_align_vel_sigma_m_s: float = quantity(
         0.5, "m/s", "velocity standard deviation when the filter aligns on a tether fix "
         "(no GNSS velocity): the vehicle is taken to be near rest", gt=0)
-
+    drag: DragFusionParams = quantity(
+        DragFusionParams(), "", "the drag's specific-force fusion and the wind states "
+        "(EKF3's drag fusion; docs/estimation.md §11)")

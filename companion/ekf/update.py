@@ -22,6 +22,7 @@ from companion.ekf.layout import (
     IDX_BM,
     IDX_BP,
     IDX_TH,
+    IDX_W,
     W_AID,
     X_BA,
     X_BG,
@@ -29,6 +30,7 @@ from companion.ekf.layout import (
     X_BM,
     X_BP,
     X_Q,
+    X_W,
 )
 from companion.ekf.rotation import expq_mul
 from tuavdefs.jit import njit
@@ -107,6 +109,37 @@ def scalar_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: fl
 
 
 @njit
+def mat_vec(P: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """``P h``: the block of the states before the wind's by one BLAS product of that
+    square block, the wind's rows and columns added by loops (so that every sum over the
+    other states is that of a filter without wind states, to the bit: BLAS groups its
+    rows by the matrix's size)."""
+    n, c = h.shape[0], IDX_W
+    out = np.empty(n)
+    out[:c] = np.ascontiguousarray(P[:c, :c]) @ np.ascontiguousarray(h[:c])
+    for j in range(c, n):
+        if h[j] != 0.0:
+            for k in range(c):
+                out[k] += P[k, j] * h[j]
+    for k in range(c, n):
+        acc = 0.0
+        for j in range(n):
+            acc += P[k, j] * h[j]
+        out[k] = acc
+    return out
+
+
+@njit
+def dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``a . b``, summed as :func:`mat_vec` sums."""
+    acc = float(np.ascontiguousarray(a[:IDX_W]) @ np.ascontiguousarray(b[:IDX_W]))
+    for j in range(IDX_W, a.shape[0]):
+        if a[j] != 0.0:
+            acc += a[j] * b[j]
+    return acc
+
+
+@njit
 def row_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: float,
                h: np.ndarray, c0: int, c1: int) -> bool:
     """:func:`scalar_update` with a dense Jacobian row ``h``; the error states ``c0`` to
@@ -114,9 +147,9 @@ def row_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: float
     uncertainty still enters the innovation's variance and their correlations are kept
     right)."""
     n = P.shape[0]
-    pht = P @ h
-    yy = y - float(h @ dx)
-    s = float(h @ pht) + r
+    pht = mat_vec(P, h)
+    yy = y - dot(h, dx)
+    s = dot(h, pht) + r
     if not (s > 0.0) or not math.isfinite(s):
         return False
     inv = 1.0 / s
@@ -154,6 +187,8 @@ def inject(x: np.ndarray, dx: np.ndarray, buf: np.ndarray, meta: np.ndarray) -> 
     for i in range(3):
         x[X_BM + i] += dx[IDX_BM + i]
         x[X_BP + i] += dx[IDX_BP + i]
+    x[X_W] += dx[IDX_W]
+    x[X_W + 1] += dx[IDX_W + 1]
     for m in range(meta[1]):
         for i in range(6):
             buf[m, BUF_P + i] += dx[i]

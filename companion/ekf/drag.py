@@ -1,0 +1,272 @@
+"""The drag's specific force, and the wind states it makes observable (EKF3's drag
+fusion; docs/estimation.md §11).
+
+A multirotor's thrust is along its body z axis, so its accelerometer's body x and y read
+only the other forces over the mass: the air's drag on the body and rotors and the
+tether's pull. With the air-relative velocity ``v_r = R'(v - U)`` (body FLU, ``U`` the
+horizontal wind states) the drag model is EKF3's, per body axis ``i`` (x, y):
+
+    a_i = -(rho / (2 B_i)) |v_r| v_r,i - M_i v_r,i            (B: ballistic coefficient
+                                                               [kg/m^2], M: momentum drag
+                                                               coefficient [1/s])
+
+and the tether's pull ``F`` [N] (inertial) adds ``(R' F / m)_i``. The measurement is the
+bias-corrected specific force averaged over ``drag.interval_s`` (the prediction sums it),
+against the current state; its Jacobian has the velocity, the attitude, the accelerometer
+bias and the wind. The coefficients are the controllers' vehicle model's
+(:meth:`DragModel.from_vehicle`: the quadratic drag area and linear drag the position
+loop's feed-forward uses), never the plant's.
+
+The wind states are inhibited (their covariance zero, no process noise: no other fusion
+moves them) on the ground and until drag fusion starts, as EKF3's ``inhibitWindStates``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from companion.ekf.aid_source import AidSourceStatus
+from companion.ekf.layout import (
+    FUSED,
+    IDX_BA,
+    IDX_TH,
+    IDX_V,
+    IDX_W,
+    N_ERR,
+    NUMERIC,
+    NX,
+    PRM_DRAG_GATE,
+    PRM_DRAG_MX,
+    PRM_DRAG_MY,
+    PRM_DRAG_QX,
+    PRM_DRAG_QY,
+    PRM_DRAG_R,
+    PRM_MASS_INV,
+    PRM_VAR_MIN,
+    PRM_WIND_HGT_SCALE,
+    PRM_WIND_WALK,
+    REJECTED,
+    W_DRAG_SUM,
+    W_DX,
+    W_PRM,
+    W_X,
+    X_Q,
+    X_V,
+    X_W,
+    AidSourceKind,
+)
+from companion.ekf.memory import FilterMemory
+from companion.ekf.output import take_up
+from companion.ekf.params import EstimatorParams
+from companion.ekf.update import dot, inject, mat_vec, row_update, set_aid_row
+from tuavdefs.frames import Vec3, quat_to_matrix_kernel
+from tuavdefs.jit import entry_point, njit
+
+_DRAG = int(AidSourceKind.DRAG)
+
+
+class DragModel(NamedTuple):
+    """The vehicle's drag as the filter models it (EKF3's names)."""
+
+    bcoef_x_kg_m2: float
+    """Ballistic coefficient along body x, mass / (C_d A) [kg/m^2] (EK3_DRAG_BCOEF_X;
+    inf: no quadratic drag)."""
+    bcoef_y_kg_m2: float
+    """The same along body y (EK3_DRAG_BCOEF_Y)."""
+    mcoef_x_1_s: float
+    """Momentum (rotor) drag along body x, linear drag / mass [1/s] (EK3_DRAG_MCOEF)."""
+    mcoef_y_1_s: float
+    """The same along body y."""
+    mass_kg: float
+    """The vehicle's mass [kg] (the tether's pull over it)."""
+    air_density_kg_m3: float
+
+    @classmethod
+    def from_vehicle(cls, vehicle: object, air_density_kg_m3: float) -> DragModel:
+        """From a vehicle model (``tuavdefs.params.VehicleParams``: ``mass_kg``,
+        ``drag_area_m2`` C_d A per body axis, ``drag_coeff_n_s_m`` linear drag per body
+        axis)."""
+        m = float(vehicle.mass_kg)                       # type: ignore[attr-defined]
+        area = vehicle.drag_area_m2                      # type: ignore[attr-defined]
+        lin = vehicle.drag_coeff_n_s_m                   # type: ignore[attr-defined]
+        return cls(m / area[0] if area[0] > 0 else math.inf,
+                   m / area[1] if area[1] > 0 else math.inf,
+                   float(lin[0]) / m, float(lin[1]) / m, m, float(air_density_kg_m3))
+
+
+@njit
+def drag_prediction(x: np.ndarray, prm: np.ndarray, tfx: float, tfy: float, tfz: float,
+                    h: np.ndarray) -> tuple[float, float]:
+    """The specific force's body x and y [m/s^2] the drag model predicts at the nominal
+    state ``x`` (parameters ``prm``) with the tether pulling ``tf*`` [N] (inertial), and
+    their Jacobian rows on the error state in ``h`` (2 x N_ERR, overwritten)."""
+    qw, qx, qy, qz = x[X_Q], x[X_Q + 1], x[X_Q + 2], x[X_Q + 3]
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = quat_to_matrix_kernel(
+        (qw, qx, qy, qz))
+    # the air-relative velocity, inertial (w) and body (b = R' w)
+    wx, wy, wz = x[X_V] - x[X_W], x[X_V + 1] - x[X_W + 1], x[X_V + 2]
+    bx = r00 * wx + r10 * wy + r20 * wz
+    by = r01 * wx + r11 * wy + r21 * wz
+    bz = r02 * wx + r12 * wy + r22 * wz
+    speed = math.sqrt(bx * bx + by * by + bz * bz)
+    minv = prm[PRM_MASS_INV]
+    # the pull in body axes over the mass
+    px = (r00 * tfx + r10 * tfy + r20 * tfz) * minv
+    py = (r01 * tfx + r11 * tfy + r21 * tfz) * minv
+    for i in range(2):
+        h[i, :] = 0.0
+    pred = np.zeros(2)
+    b = (bx, by, bz)
+    # columns of R (rows of R'), and R' [u]x's rows: (R' [u]x)_i = (u x R[:, i])' ...
+    rc = ((r00, r10, r20), (r01, r11, r21), (r02, r12, r22))
+    for i in range(2):
+        kq = prm[PRM_DRAG_QX + i]
+        km = prm[PRM_DRAG_MX + i]
+        pred[i] = -(kq * speed + km) * b[i] + (px if i == 0 else py)
+        # d a_i / d b_j
+        g = np.zeros(3)
+        for j in range(3):
+            g[j] = -kq * (b[i] * b[j] / speed if speed > 0.0 else 0.0)
+        g[i] -= kq * speed + km
+        # R g: the inertial direction of the row (on dv; -its horizontal part on dU)
+        ex = r00 * g[0] + r01 * g[1] + r02 * g[2]
+        ey = r10 * g[0] + r11 * g[1] + r12 * g[2]
+        ez = r20 * g[0] + r21 * g[1] + r22 * g[2]
+        h[i, IDX_V] = ex
+        h[i, IDX_V + 1] = ey
+        h[i, IDX_V + 2] = ez
+        h[i, IDX_W] = -ex
+        h[i, IDX_W + 1] = -ey
+        # dtheta: b = R' w, d b = R' [w]x dtheta, so (g' R' [w]x) = (R g)' [w]x = -(w x (R g))'
+        # ... = ((R g) x w)'; the pull likewise: e_i' R' [F]x / m = ((R e_i) x F)' / m
+        cx, cy, cz = rc[i]
+        fx_, fy_, fz_ = tfx * minv, tfy * minv, tfz * minv
+        h[i, IDX_TH] = (ey * wz - ez * wy) + (cy * fz_ - cz * fy_)
+        h[i, IDX_TH + 1] = (ez * wx - ex * wz) + (cz * fx_ - cx * fz_)
+        h[i, IDX_TH + 2] = (ex * wy - ey * wx) + (cx * fy_ - cy * fx_)
+        # the bias-corrected reading is the true specific force plus the bias's error
+        h[i, IDX_BA + i] = 1.0
+    return pred[0], pred[1]
+
+
+@njit
+def fuse_drag_kernel(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
+                     tfx: float, tfy: float, tfz: float) -> int:
+    """The specific force's body x and y averaged since the last call (the prediction's
+    sums, reset here) against the drag model with the tether pulling ``tf*`` [N]
+    (inertial), at the current state. Gated as one (the larger axis's test ratio);
+    fused as two scalars, the correction taken up by the output. Returns FUSED,
+    REJECTED or NUMERIC (no sample summed, or numerically)."""
+    x = w[W_X:W_X + NX]
+    prm = w[W_PRM:]
+    sums = w[W_DRAG_SUM:W_DRAG_SUM + 3]
+    n = sums[2]
+    if not n > 0.0:
+        return NUMERIC
+    fx, fy = sums[0] / n, sums[1] / n
+    sums[0] = sums[1] = sums[2] = 0.0
+    h = np.zeros((2, N_ERR))
+    px, py = drag_prediction(x, prm, tfx, tfy, tfz, h)
+    r, gate = prm[PRM_DRAG_R], prm[PRM_DRAG_GATE]
+    y0, y1 = fx - px, fy - py
+    s0 = dot(h[0], mat_vec(P, h[0])) + r
+    s1 = dot(h[1], mat_vec(P, h[1])) + r
+    ratio = max(y0 * y0 / (gate * gate * s0), y1 * y1 / (gate * gate * s1))
+    set_aid_row(w, _DRAG, y0, y1, 0.0, s0, s1, 0.0, ratio)
+    if ratio > 1.0:
+        return REJECTED
+    before = w[W_X:W_X + 6].copy()
+    dx = w[W_DX:W_DX + N_ERR]
+    var_min = prm[PRM_VAR_MIN]
+    res = FUSED
+    # the second axis's innovation against the state before the batch: row_update
+    # subtracts h dx (the first axis's correction)
+    for i, y in ((0, y0), (1, y1)):
+        if not row_update(P, dx, var_min, y, r, h[i], 0, 0):
+            res = NUMERIC
+    inject(x, dx, buf, meta)
+    take_up(w, before)
+    return res
+
+
+class DragControl:
+    """Fuses the drag's specific force every ``drag.interval_s`` while the vehicle flies;
+    the wind states inhibited on the ground and before the first fusion."""
+
+    __slots__ = ("_p", "_mem", "_st", "_k", "active")
+
+    def __init__(self, params: EstimatorParams, mem: FilterMemory, status: AidSourceStatus,
+                 model: DragModel) -> None:
+        self._p = params
+        self._mem = mem
+        self._st = status
+        prm = mem.prm
+        rho = model.air_density_kg_m3
+        prm[PRM_DRAG_QX] = 0.5 * rho / model.bcoef_x_kg_m2
+        prm[PRM_DRAG_QY] = 0.5 * rho / model.bcoef_y_kg_m2
+        prm[PRM_DRAG_MX] = model.mcoef_x_1_s
+        prm[PRM_DRAG_MY] = model.mcoef_y_1_s
+        prm[PRM_MASS_INV] = 1.0 / model.mass_kg
+        prm[PRM_DRAG_R] = params.drag.noise_m_s2 ** 2
+        prm[PRM_DRAG_GATE] = status.policy.gate_sigma
+        prm[PRM_WIND_HGT_SCALE] = params.drag.wind_walk_height_rate_scale
+        #: whether the wind states are estimated (not inhibited)
+        self.active = False
+        self._k = entry_point(fuse_drag_kernel, mem.w, mem.P, mem.buf, mem.meta, 0.0, 0.0,
+                              0.0)
+
+    def fuse(self, t_s: float, in_air: bool, tether_pull_n: Sequence[float]) -> bool:
+        """At ``t_s`` [s]: the vehicle in the air (``in_air``; else the wind states are
+        inhibited), the tether's modelled pull on it [N] (inertial). Returns whether the
+        drag was fused."""
+        m, st = self._mem, self._st
+        if not in_air:
+            self._inhibit()
+            return False
+        if st.too_soon(t_s):
+            return False
+        if not self.active:
+            self._start()
+            st.time_last_attempt = t_s
+            m.w[W_DRAG_SUM:W_DRAG_SUM + 3] = 0.0     # from now on
+            return False
+        st.time_last_attempt = t_s
+        tx, ty, tz = tether_pull_n
+        res = self._k(m.w, m.P, m.buf, m.meta, float(tx), float(ty), float(tz))
+        st.record(t_s, res)
+        return res == FUSED
+
+    def _start(self) -> None:
+        """The wind states estimated from now on: at 0, with their prior and walk."""
+        m, p = self._mem, self._p
+        m.x[X_W:X_W + 2] = 0.0
+        m.P[IDX_W:IDX_W + 2, :] = 0.0
+        m.P[:, IDX_W:IDX_W + 2] = 0.0
+        m.P[IDX_W, IDX_W] = m.P[IDX_W + 1, IDX_W + 1] = p.drag.wind_sigma_m_s ** 2
+        m.prm[PRM_WIND_WALK] = p.drag.wind_walk_m_s_sqrt_s
+        self.active = True
+
+    def _inhibit(self) -> None:
+        """The wind states inhibited: kept, their covariance zeroed, no walk."""
+        if not self.active:
+            return
+        m = self._mem
+        m.P[IDX_W:IDX_W + 2, :] = 0.0
+        m.P[:, IDX_W:IDX_W + 2] = 0.0
+        m.prm[PRM_WIND_WALK] = 0.0
+        self.active = False
+
+    @property
+    def wind_m_s(self) -> tuple[float, float]:
+        """The wind states [m/s] (east, north)."""
+        x = self._mem.x
+        return (float(x[X_W]), float(x[X_W + 1]))
+
+
+def wind_vec3(wind: tuple[float, float]) -> Vec3:
+    """The horizontal wind as a 3-vector (vertical 0) [m/s]."""
+    return (wind[0], wind[1], 0.0)
