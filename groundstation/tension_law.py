@@ -38,17 +38,7 @@ import math
 
 import numpy as np
 
-from groundstation.lbar import (
-    TP_LEAD_TAN_MIN,
-    TP_TRIM_FILTER,
-    TS_JOIN_GAP,
-    TS_ROOM_ROOT,
-    TS_TENSION,
-    expected_drum_tension_n,
-    lbar_kernel,
-    lead_room_from,
-    weight_estimate,
-)
+from groundstation.lbar import expected_drum_tension_n
 from tuavdefs.jit import njit
 
 # indices of the packed parameters (WinderController.tension_params)
@@ -241,53 +231,3 @@ def tension_setpoint_n(p: np.ndarray, a_m: float, h_m: float, v_m: float,
         return p[Q_FLOOR]
     t_sp = min(p[Q_MARGIN] * t_hat, slack_tension_n(w_n_m, h_m, v_m, min_slack_m))
     return min(max(t_sp, p[Q_FLOOR]), p[Q_SP_MAX])
-
-
-@njit
-def tension_step(px: float, py: float, pz: float, vx: float, vy: float, vz: float,
-                 a_target: float, tan_min: float, min_slack: float, root_guess: float,
-                 law_p: np.ndarray, law_s: np.ndarray, dt_s: float, length_m: float,
-                 omega_rad_s: float, drum_tension_n: float, w_n_m: float,
-                 trim_p: np.ndarray, trim_s: np.ndarray, elevation_rad: float
-                 ) -> tuple[float, float, float, tuple[float, float, float, float, float, bool]]:
-    """The tension law's winder step (:func:`groundstation.winder_host.winder_step`'s
-    place): L-bar and its rate at the UAV's reported position and velocity (the rate is
-    the feed-forward), the line's weight estimate, the set-point
-    (:func:`tension_setpoint_n`), the length bounds (below: the straight distance plus
-    ``min_slack``; above: L-bar or the longest line still off the ground, plus
-    ``length_bound_m``), then :func:`tension_law`. Returns (the length the drum is asked
-    to be at: the measured length plus its lag behind the speed set-point, the speed
-    set-point [m/s], the exit-angle root for next time, the WinderCommand's fields)."""
-    lbar_m, rate, a, root = lbar_kernel(px, py, pz, vx, vy, vz, a_target, tan_min,
-                                        min_slack, root_guess)
-    # the drum tension as the tension trim low-passes it (the weight estimate's and the
-    # winch's tether fix's input)
-    if trim_s[TS_TENSION] == trim_s[TS_TENSION] and trim_p[TP_TRIM_FILTER] > 0.0:
-        trim_s[TS_TENSION] += (1.0 - math.exp(-dt_s / trim_p[TP_TRIM_FILTER])) * (
-            drum_tension_n - trim_s[TS_TENSION])
-    else:
-        trim_s[TS_TENSION] = drum_tension_n
-    w = weight_estimate(trim_p, trim_s, dt_s, w_n_m, drum_tension_n, elevation_rad,
-                        length_m, pz)
-    h = math.hypot(px, py)
-    v = max(pz, 0.0)
-    setpoint = tension_setpoint_n(law_p, a, h, v, w, min_slack)
-    dist = math.sqrt(px * px + py * py + pz * pz)
-    radial = (px * vx + py * vy + pz * vz) / dist if dist > 1e-6 else 0.0
-    # no stopping distance in the lower bound: the drum renders to the pull, so the
-    # vehicle's governor does not count on the length paid out ahead of it (docs/control.md
-    # §8.3); near the vertical, slack held ahead left the line's lower end unloaded, and
-    # the dynamic line whipped taut there (the lumped mission: 52.7 N at 18 cm of slack)
-    room, trim_s[TS_ROOM_ROOT] = lead_room_from(px, py, pz, trim_p[TP_LEAD_TAN_MIN],
-                                                min_slack, trim_s[TS_ROOM_ROOT])
-    # the least slack in proportion to the chord's horizontal share (at least 0.4 of it):
-    # near the vertical a line with min_slack hangs its lower end unloaded (the load
-    # cell reads nothing) and the dynamic line whips taut; the set-point loop, its gain
-    # scaled to the stiff line there, holds the lower end at the floor's pull instead
-    low = dist + min_slack * max(h / dist, 0.4) if dist > 1e-6 else min_slack
-    law_s[Z_STIFFNESS] = taut_line_stiffness_n_m(law_s[Z_SETPOINT], w, h, v)
-    high = max(lbar_m, room) + law_p[Q_BOUND_M]
-    trim_s[TS_JOIN_GAP] = 0.0            # no join: the law has no length reference to jump
-    cmd = tension_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, setpoint,
-                      rate, low, radial, high, lbar_m)
-    return length_m + law_s[Z_LAG], law_s[Z_SPEED], root, cmd

@@ -8,6 +8,9 @@ never taut), around it:
   times its tension), the drum holds the line at ``ground_tension_n``: a loop on the load
   cell's tension, winding in slowly, paying out fast (holding instead while no position is
   known), never below the taut floor; without a load-cell reading it holds its length;
+  taken over from the tension law, its target starts at the tension the law held and
+  falls to ``ground_tension_n`` on the law's set-point filter, and it reads the load cell
+  through the law's low-pass (a bumpless transfer);
 - the **rejoin** of L-bar from a line longer by more than ``REJOIN_MARGIN_M`` (wound in on
   a trapezoid) and the **join** from one shorter by more than ``JOIN_MARGIN_M`` (L-bar's
   law less a gap that closes on a trapezoid);
@@ -22,6 +25,7 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from groundstation.tension_law import Z_TENSION
 from groundstation.winch_modes import (
     JOIN_MARGIN_M,
     REJOIN_ACC_M_S2,
@@ -30,7 +34,7 @@ from groundstation.winch_modes import (
     WinchMode,
 )
 from groundstation.winch_report import Notice, WinchOutput, notice
-from groundstation.winder_control import WinderCommand
+from groundstation.winder_control import WinderCommand, WinderLaw
 
 if TYPE_CHECKING:
     from groundstation.winch import UavState, Winch
@@ -49,6 +53,8 @@ class Relaxed(ModeLogic):
         self._join_rate = 0.0               # how fast that closes [m/s]
         self._ground = False                # holding the ground pre-tension
         self._ground_low = False            # ... since the UAV reported itself on the ground
+        self._ground_target_n = math.nan    # the pre-tension's loop's target now [N]
+        self._ground_tension_n = math.nan   # and the tension it reads (NaN: the cell's) [N]
         #: Line paid out (net) since the line was last pulled [m].
         self.slack_paid_m = 0.0
         self._slack_length_m = math.nan     # the length at the last slack count [m]
@@ -235,6 +241,18 @@ class Relaxed(ModeLogic):
         if ground and not self._ground:
             w.ref_m, w.ref_rate_m_s = w.length_m, 0.0
             self._join_gap_m = self._join_rate = 0.0
+            # taken over from the tension law (a landing), the loop's target starts at
+            # the tension the law held and falls to the pre-tension on the law's
+            # set-point filter, and the loop reads the tension through the law's
+            # low-pass: a bumpless transfer (from 2.3 N, the step to 0.3 N paid out at
+            # 2 m/s at once, and the line, slack, snapped at 26 N as the drum wound it
+            # back; on the load cell's noise alone, 1.5 m/s)
+            ctl = w.host.controller
+            tension_law = ctl.law is WinderLaw.TENSION
+            held = ctl.tension_state[Z_TENSION] if tension_law else math.nan
+            self._ground_target_n = (max(held, p.ground_tension_n) if tension_law
+                                     else p.ground_tension_n)
+            self._ground_tension_n = held
         elif self._ground and not ground:
             lbar_m = w.host.lbar.length(uav[0])[0] if uav is not None else math.nan
             self._start_rejoin(w.length_m, lbar_m)
@@ -242,6 +260,7 @@ class Relaxed(ModeLogic):
         self._ground = ground
         if not ground:
             self._ground_low = False
+            self._ground_target_n = self._ground_tension_n = math.nan
         return ground
 
     def _ground_reference(self, w: Winch) -> None:
@@ -251,7 +270,21 @@ class Relaxed(ModeLogic):
         instead while no UAV position is known), never below the taut floor while one is,
         nor past the drum's ends."""
         p, dt = w.p, w.dt_s
-        rate = p.ground_tension_gain_m_s_n * (w.sensors.tension_n - p.ground_tension_n)
+        target = self._ground_target_n
+        if not math.isfinite(target):
+            target = p.ground_tension_n
+        elif target > p.ground_tension_n:
+            target += (1.0 - math.exp(-dt / max(
+                w.host.controller.g.tension_setpoint_filter_s, dt))) * (
+                p.ground_tension_n - target)
+        self._ground_target_n = target
+        tension = w.sensors.tension_n
+        if math.isfinite(self._ground_tension_n):
+            g = w.host.controller.g
+            self._ground_tension_n += (1.0 - math.exp(-dt / max(g.tension_filter_s, dt))) * (
+                tension - self._ground_tension_n)
+            tension = self._ground_tension_n
+        rate = p.ground_tension_gain_m_s_n * (tension - target)
         # a pull above the pre-tension with no position known yet is held, as the drum
         # held its length before (a vehicle in the air the filter has not found)
         high = w.max_rate_m_s if w.uav is not None else 0.0

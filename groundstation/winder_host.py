@@ -26,6 +26,7 @@ from groundstation.lbar import (
     TP_FLOOR_TENSION_RATIO,
     TP_LEAD_ACC,
     TP_LEAD_TAN_MIN,
+    TP_TRIM_FILTER,
     TS_FLOOR,
     TS_FLOOR_RATE,
     TS_JOIN_GAP,
@@ -34,10 +35,10 @@ from groundstation.lbar import (
     TS_OFFSET,
     TS_OFFSET_RATE,
     TS_ROOM_ROOT,
+    TS_TENSION,
     LBarEstimator,
     LBarParams,
     floor_length_m,
-    initial_trim_state,
     lbar_kernel,
     lead_room_from,
     slack_floor,
@@ -45,7 +46,17 @@ from groundstation.lbar import (
     tension_trim,
     weight_estimate,
 )
-from groundstation.tension_law import Z_STARTED, tension_step
+from groundstation.tension_law import (
+    Q_BOUND_M,
+    Z_LAG,
+    Z_SETPOINT,
+    Z_SPEED,
+    Z_STARTED,
+    Z_STIFFNESS,
+    taut_line_stiffness_n_m,
+    tension_law,
+    tension_setpoint_n,
+)
 from groundstation.winder_control import (
     WinderCommand,
     WinderController,
@@ -99,6 +110,21 @@ class StepRecords(NamedTuple):
     dt_s: float                 #: the control period [s]
 
 
+class TensionRecords(NamedTuple):
+    """:func:`tension_step`'s arguments, in its order (the arrays filled in place)."""
+
+    uav: np.ndarray             #: U_* (N_UAV)
+    measured: np.ndarray        #: M_* (N_MEASURED)
+    lbar_p: np.ndarray          #: L-bar's parameters, groundstation.lbar.LB_*
+    lbar_s: np.ndarray          #: L-bar's state, groundstation.lbar.LS_* (advanced)
+    law_p: np.ndarray           #: the tension law's packed parameters (tension_law.Q_*)
+    law_s: np.ndarray           #: its state (tension_law.Z_*, advanced)
+    trim_p: np.ndarray          #: L-bar's trim, lead and floor parameters (TP_*)
+    trim_s: np.ndarray          #: their state (TS_*, advanced: the low-passed tension,
+                                #: the weight estimate, the room's root)
+    dt_s: float                 #: the control period [s]
+
+
 class WinderHost:
     """L-bar estimator + winder torque law, at ``gains.rate_hz``."""
 
@@ -107,7 +133,7 @@ class WinderHost:
         self.dt_s = 1.0 / gains.rate_hz
         self.lbar = LBarEstimator(lbar, tether.weight_per_length_n_m(gravity_m_s2))
         self.controller = WinderController(gains, winder, tether)
-        lb, ctl = self.lbar, self.controller
+        ctl = self.controller
         self._uav = np.zeros(N_UAV)
         self._measured = np.zeros(N_MEASURED)
         self._fix = np.zeros(N_FIX)
@@ -116,19 +142,20 @@ class WinderHost:
         self._step = entry_point(winder_step, *self._records())
         self._tension = None
         if ctl.law is WinderLaw.TENSION:
-            lp = lb.packed
-            self._tension = entry_point(tension_step, 1.0, 0.0, 10.0, 0.0, 0.0, 0.0,
-                                        lp[LB_A_TARGET], lp[LB_TAN_MIN], lp[LB_MIN_SLACK],
-                                        math.nan, ctl.tension_params(),
-                                        ctl.tension_state.copy(), self.dt_s, 10.0, 0.0,
-                                        1.0, lp[LB_W], lb.trim_params, initial_trim_state(),
-                                        math.nan)
+            self._tension = entry_point(tension_step, *self._tension_records())
 
     def _records(self) -> StepRecords:
         """The step's arguments now (the controller's packed gains as they stand)."""
         lb, ctl = self.lbar, self.controller
         return StepRecords(self._uav, self._measured, self._fix, lb.packed, lb.state,
                            ctl.params(), ctl.state, lb.trim_params, lb.trim_state, self.dt_s)
+
+    def _tension_records(self) -> TensionRecords:
+        """The tension law's step's arguments now."""
+        lb, ctl = self.lbar, self.controller
+        return TensionRecords(self._uav, self._measured, lb.packed, lb.state,
+                              ctl.tension_params(), ctl.tension_state, lb.trim_params,
+                              lb.trim_state, self.dt_s)
 
     def update(self, length_m: float, omega_rad_s: float, drum_tension_n: float,
                uav_pos_m: tuple[float, float, float],
@@ -142,27 +169,22 @@ class WinderHost:
         and the UAV's position [m] as the winder's own tether fix places it (None: none
         now; the slack floor is taken back); ``join_m`` [m] and its rate [m/s] are
         added to the reference (a join's gap). With ``law = "tension"`` the tension law
-        (:func:`groundstation.tension_law.tension_step`) runs instead: no trim, lead,
+        (:func:`tension_step`) runs instead: no trim, lead,
         floor or join; the step's length is the measured one plus the drum's lag behind
         its speed set-point, its rate that set-point."""
-        lb, ctl = self.lbar, self.controller
+        ctl = self.controller
         u, m = self._uav, self._measured
         u[U_PX], u[U_PY], u[U_PZ] = uav_pos_m
         u[U_VX], u[U_VY], u[U_VZ] = uav_vel_m_s
+        m[M_LENGTH], m[M_OMEGA], m[M_TENSION] = length_m, omega_rad_s, drum_tension_n
+        m[M_ELEVATION] = exit_elevation_rad
         if self._tension is not None:
             # the tension law: the join's gap, the trim, the lead and the fix's floor are
             # the length law's; the paper's law's filter starts afresh when it next runs
             ctl.state[:] = 0.0
-            lp, ls = lb.packed, lb.state
-            ref_m, rate, ls[LS_ROOT], cmd = self._tension(
-                u[U_PX], u[U_PY], u[U_PZ], u[U_VX], u[U_VY], u[U_VZ], lp[LB_A_TARGET],
-                lp[LB_TAN_MIN], lp[LB_MIN_SLACK], ls[LS_ROOT], ctl.tension_params(),
-                ctl.tension_state, self.dt_s, length_m, omega_rad_s, drum_tension_n,
-                lp[LB_W], lb.trim_params, lb.trim_state, exit_elevation_rad)
+            ref_m, rate, cmd = self._tension(*self._tension_records())
             return WinderStep(cmd[0], ref_m, rate, _command(cmd))
         ctl.tension_state[Z_STARTED] = 0.0
-        m[M_LENGTH], m[M_OMEGA], m[M_TENSION] = length_m, omega_rad_s, drum_tension_n
-        m[M_ELEVATION] = exit_elevation_rad
         f = self._fix
         if fix_m is None:
             f[F_X] = f[F_Y] = f[F_Z] = math.nan
@@ -235,3 +257,58 @@ def winder_step(uav: np.ndarray, measured: np.ndarray, fix: np.ndarray, lbar_p: 
     cmd = winder_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, lbar_m,
                      rate)
     return lbar_m, rate, cmd
+
+
+@njit
+def tension_step(uav: np.ndarray, measured: np.ndarray, lbar_p: np.ndarray,
+                 lbar_s: np.ndarray, law_p: np.ndarray, law_s: np.ndarray,
+                 trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float
+                 ) -> tuple[float, float, tuple[float, float, float, float, float, bool]]:
+    """The tension law's winder step on its records (:class:`TensionRecords`), in
+    :func:`winder_step`'s place: L-bar and its rate at the UAV's reported position and
+    velocity (the rate is the feed-forward; its exit-angle root in ``lbar_s``), the line's
+    weight estimate, the set-point (:func:`groundstation.tension_law.tension_setpoint_n`),
+    the length bounds (below: the straight distance plus the least slack; above: L-bar or
+    the longest line still off the ground, plus ``length_bound_m``), then
+    :func:`groundstation.tension_law.tension_law`. Returns (the length the drum is asked
+    to be at: the measured length plus its lag behind the speed set-point, the speed
+    set-point [m/s], the WinderCommand's fields)."""
+    px, py, pz = uav[U_PX], uav[U_PY], uav[U_PZ]
+    vx, vy, vz = uav[U_VX], uav[U_VY], uav[U_VZ]
+    length_m, omega_rad_s = measured[M_LENGTH], measured[M_OMEGA]
+    drum_tension_n, elevation_rad = measured[M_TENSION], measured[M_ELEVATION]
+    min_slack = lbar_p[LB_MIN_SLACK]
+    lbar_m, rate, a, lbar_s[LS_ROOT] = lbar_kernel(px, py, pz, vx, vy, vz,
+                                                   lbar_p[LB_A_TARGET], lbar_p[LB_TAN_MIN],
+                                                   min_slack, lbar_s[LS_ROOT])
+    # the drum tension as the tension trim low-passes it (the weight estimate's and the
+    # winch's tether fix's input)
+    if trim_s[TS_TENSION] == trim_s[TS_TENSION] and trim_p[TP_TRIM_FILTER] > 0.0:
+        trim_s[TS_TENSION] += (1.0 - math.exp(-dt_s / trim_p[TP_TRIM_FILTER])) * (
+            drum_tension_n - trim_s[TS_TENSION])
+    else:
+        trim_s[TS_TENSION] = drum_tension_n
+    w = weight_estimate(trim_p, trim_s, dt_s, lbar_p[LB_W], drum_tension_n, elevation_rad,
+                        length_m, pz)
+    h = math.hypot(px, py)
+    v = max(pz, 0.0)
+    setpoint = tension_setpoint_n(law_p, a, h, v, w, min_slack)
+    dist = math.sqrt(px * px + py * py + pz * pz)
+    radial = (px * vx + py * vy + pz * vz) / dist if dist > 1e-6 else 0.0
+    # no stopping distance in the lower bound: the drum renders to the pull, so the
+    # vehicle's governor does not count on the length paid out ahead of it (docs/control.md
+    # §8.3); near the vertical, slack held ahead left the line's lower end unloaded, and
+    # the dynamic line whipped taut there (the lumped mission: 52.7 N at 18 cm of slack)
+    room, trim_s[TS_ROOM_ROOT] = lead_room_from(px, py, pz, trim_p[TP_LEAD_TAN_MIN],
+                                                min_slack, trim_s[TS_ROOM_ROOT])
+    # the least slack in proportion to the chord's horizontal share (at least 0.4 of it):
+    # near the vertical a line with min_slack hangs its lower end unloaded (the load
+    # cell reads nothing) and the dynamic line whips taut; the set-point loop, its gain
+    # scaled to the stiff line there, holds the lower end at the floor's pull instead
+    low = dist + min_slack * max(h / dist, 0.4) if dist > 1e-6 else min_slack
+    law_s[Z_STIFFNESS] = taut_line_stiffness_n_m(law_s[Z_SETPOINT], w, h, v)
+    high = max(lbar_m, room) + law_p[Q_BOUND_M]
+    trim_s[TS_JOIN_GAP] = 0.0            # no join: the law has no length reference to jump
+    cmd = tension_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, setpoint,
+                      rate, low, radial, high, lbar_m)
+    return length_m + law_s[Z_LAG], law_s[Z_SPEED], cmd

@@ -1357,3 +1357,40 @@ def test_a_braked_drum_leaves_the_tension_to_the_load_cell():
     assert b.command(request(mavlink2.WINCH_RELAXED)).result == ACK
     b.run(2.0)
     assert b.winch.sensors.current.tension_n == pytest.approx(8.0, abs=0.3)
+
+
+def test_a_landing_hands_the_tension_law_over_to_the_pre_tension_without_a_bump():
+    """The UAV reports itself on the ground while the tension law holds the line at 2.5 N:
+    the pre-tension's loop starts from the tension the law held (its rate continuous: no
+    pay-out at k (T - T_g), 2.2 m/s, at once, which left the lumped line slack and snapped
+    it at 26 N when the drum wound it back) and reaches its own target on the law's
+    set-point filter; with the paper's law, it starts at its own target as before."""
+    for law, bumpless in (("tension", True), ("paper", False)):
+        host = WinderHost(WinderControlParams(law=law), LBarParams(tension_trim_rate_m_s=0.0),
+                          PARAMS.winder, PARAMS.tether, G)
+        w = Winch(host, PARAMS.winder, PARAMS.tether, G)
+        p = w.p
+        air = ((6.0, 0.0, 2.0), (0.0, 0.0, -0.5))
+        w.set_uav(air)
+        wall = 0.0
+        for k in range(300):            # 3 s at 2.5 N in the air: the law's
+            wall = k * DT               # low-pass has it
+            tension(w, wall, 2.5)
+            encoder(w, wall, 6.4)
+        assert not w.relaxed._ground
+        w.set_uav(((6.0, 0.0, 0.4), (0.0, 0.0, -0.5)))
+        rates = []
+        for k in range(1, 301):
+            tension(w, wall + k * DT, 2.5)
+            encoder(w, wall + k * DT, w.reference()[0])
+            rates.append(w.reference()[1])
+        assert w.relaxed._ground
+        full = min(p.ground_tension_gain_m_s_n * (2.5 - p.ground_tension_n), w.max_rate_m_s)
+        if bumpless:
+            assert rates[0] < 0.05 * full
+            # the target falls on the set-point filter (0.5 s): after 3 s nearly all of it
+            tau = WinderControlParams().tension_setpoint_filter_s
+            assert rates[-1] == pytest.approx(full * (1.0 - math.exp(-300 * DT / tau)),
+                                              rel=0.01)
+        else:
+            assert rates[0] == pytest.approx(full)

@@ -67,14 +67,13 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
     'groundstation.lbar._length': [
         ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',),
     ],
-    'groundstation.tension_law.tension_step': [
-        ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
-        'float64', 'float64', 'float64[::1]', 'float64[::1]', 'float64', 'float64', 'float64',
-        'float64', 'float64', 'float64[::1]', 'float64[::1]', 'float64',),
-    ],
     'groundstation.winder_control.winder_law': [
         ('float64[::1]', 'float64[::1]', 'float64', 'float64', 'float64', 'float64', 'float64',
         'float64',),
+    ],
+    'groundstation.winder_host.tension_step': [
+        ('float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]',
+        'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64',),
     ],
     'groundstation.winder_host.winder_step': [
         ('float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]',
