@@ -294,7 +294,9 @@ def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float, length_rate: flo
                  decay: float, top: np.ndarray) -> int:
     """Adds or removes the node at the exit so that the exit segment stays between
     ``MERGE`` and ``SPLIT`` nominal lengths, conserving mass and momentum (a new node on the
-    exit segment's chord where the two parts keep its strain, moving across the chord as
+    exit segment's chord where the two parts keep its strain; on a slack segment, below the
+    chord in its vertical plane where both parts are at rest length, as the line hangs
+    there, and not below the ground; moving across the chord as
     the line there, interpolated towards the exit at rest, and along it so that both parts
     keep the segment's strain rate, the line at the exit leaving at the drum's speed: with
     the drum still the free nodes' momentum is the same after; a removed node and its
@@ -345,6 +347,21 @@ def manage_nodes(ls: np.ndarray, lp: np.ndarray, length: float, length_rate: flo
             o = 1 + 6 * n
             ls[o], ls[o + 1], ls[o + 2] = f * px, f * py, f * pz
             d = math.sqrt(px * px + py * py + pz * pz)
+            if 0.0 < d < l0:
+                # a slack segment hangs: its new node goes where both parts are at their
+                # rest lengths, below the chord in its vertical plane (on the chord it
+                # would fall free until the line caught it: a snap no real line has)
+                la = l0 - ls_m
+                x = (la * la - ls_m * ls_m + d * d) / (2.0 * d)
+                y = math.sqrt(max(la * la - x * x, 0.0))
+                ux, uy, uz = px / d, py / d, pz / d
+                nx, ny, nz = uz * ux, uz * uy, uz * uz - 1.0
+                nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+                if nn < 1e-9:   # a vertical chord: any horizontal side
+                    nx, ny, nz, nn = 1.0, 0.0, 0.0, 1.0
+                ls[o] = x * ux + y * nx / nn
+                ls[o + 1] = x * uy + y * ny / nn
+                ls[o + 2] = max(x * uz + y * nz / nn, 0.0)   # not below the ground
             if d > 0.0:
                 # across the chord: interpolated towards the exit at rest; along it: what
                 # keeps both parts at the segment's strain rate (line paid out leaves the

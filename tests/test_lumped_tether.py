@@ -632,19 +632,46 @@ def test_plant_lumped_energy_with_no_losses():
     assert max(abs(e - e0) for e in es) < 1e-3 * abs(e0)
 
 
-def test_the_first_node_is_laid_on_the_chord_to_the_top():
-    # a line without free nodes (a take-off: the UAV 3 m up) paid out past SPLIT nominal
-    # lengths gains its first node on the straight line to the top, moving with it there
+def test_the_first_node_of_a_slack_line_hangs_below_the_chord_at_rest_lengths():
+    # a line without free nodes (a take-off: the UAV 3.7 m from the exit) paid out past
+    # SPLIT nominal lengths gains its first node where the slack line hangs: both parts at
+    # their unstretched lengths, in the chord's vertical plane, below the chord (on the
+    # chord it fell free until the line caught it: a 31-59 N snap at the take-off climb)
     line = Line(3.0, total_length_m=50.0, segments=25)
     assert line.n == 0
     top = np.array([1.0, 0.5, 3.5, 0.2, 0.0, 1.0])
     assert manage_nodes(line.ls, line.lp, 4.01, 0.0, 1.0, top) == 1
-    f = (4.01 - line.tp.segment_length_m) / 4.01
-    np.testing.assert_allclose(line.node(0), f * top)
-    # its segments share the chord as their unstretched lengths: neither is stretched
+    ls_m = line.tp.segment_length_m
+    q = line.node(0)[:3]
+    assert np.linalg.norm(q) == pytest.approx(4.01 - ls_m, rel=1e-12)
+    assert np.linalg.norm(top[:3] - q) == pytest.approx(ls_m, rel=1e-12)
+    # in the vertical plane of the chord, below it
+    assert np.dot(np.cross(top[:3], [0.0, 0.0, 1.0]), q) == pytest.approx(0.0, abs=1e-12)
+    on_chord_z = q @ top[:3] / (top[:3] @ top[:3]) * top[2]
+    assert q[2] < on_chord_z
+    # neither part is stretched: the top feels at most the half segment's weight
     fx, fy, fz, *_ = line_rhs(line.ls, line.scratch[0], line.lp, *top, 4.01, 0.5,
                               line.node_wind, line.top_wind)
     assert math.hypot(fx, fy, fz) < 1.0
+
+
+def test_a_taut_line_s_first_node_is_laid_on_the_chord_to_the_top():
+    # a stretched chord (4.01 m of line, the top 4.04 m away) keeps the new node on the
+    # chord, where both parts keep the segment's strain
+    line = Line(3.0, total_length_m=50.0, segments=25)
+    top = np.array([1.0, 0.5, 3.89, 0.0, 0.0, 0.0])
+    assert np.linalg.norm(top[:3]) > 4.01
+    assert manage_nodes(line.ls, line.lp, 4.01, 0.0, 1.0, top) == 1
+    f = (4.01 - line.tp.segment_length_m) / 4.01
+    np.testing.assert_allclose(line.node(0)[:3], f * top[:3], rtol=1e-12)
+
+
+def test_a_slack_line_lying_low_gains_no_node_below_the_ground():
+    # the chord almost along the ground: the hanging place would be underground
+    line = Line(3.0, total_length_m=50.0, segments=25)
+    top = np.array([3.0, 0.0, 0.2, 0.0, 0.0, 0.0])
+    assert manage_nodes(line.ls, line.lp, 4.01, 0.0, 1.0, top) == 1
+    assert line.node(0)[2] >= 0.0
 
 
 def test_a_split_while_paying_out_keeps_the_segment_s_strain_rate():
