@@ -23,19 +23,26 @@ from typing import Any
 from tuav_sitl.offline import OfflineRunner
 from tuav_sitl.scenario import load_scenario
 
-#: (label, path of the object from the runner, method name, parent label or None)
+#: (label, path of the object from the runner, method name, parent label or None); a
+#: label may time several methods (the onboard step: ``Companion.begin`` and ``finish``)
 STEPS: tuple[tuple[str, str, str, str | None], ...] = (
     ("winder period", "", "_winder_period", None),
     ("  the winch fed its frames", "ground", "period", "winder period"),
     ("control period", "", "_control_period", None),
     ("  sensor batch", "sensors", "read", "control period"),
-    ("  onboard step", "companion", "step", "control period"),
+    ("  onboard step", "companion", "begin", "control period"),
+    ("  onboard step", "companion", "finish", "control period"),
     ("    the filter", "companion", "estimate", "  onboard step"),
     ("    the navigator", "companion.nav", "step", "  onboard step"),
     ("    flight control", "companion.flight", "update", "  onboard step"),
     ("log row", "", "_record", None),
     ("physics", "", "_advance", None),
 )
+
+
+def _labels() -> list[str]:
+    """The step labels, once each, in order."""
+    return list(dict.fromkeys(label for label, *_ in STEPS))
 
 
 def _timed(obj: Any, name: str, acc: dict[str, float], label: str) -> None:
@@ -57,7 +64,7 @@ def split(scenario: str, seconds: float) -> tuple[dict[str, float], int]:
     """One run: CPU time [s] per step label (and "total"), and the control periods."""
     sc = load_scenario(scenario).replace(duration_s=seconds, metrics_after_s=0.0)
     runner = OfflineRunner(sc)
-    acc = dict.fromkeys([label for label, *_ in STEPS], 0.0)
+    acc = dict.fromkeys(_labels(), 0.0)
     for label, path, name, _ in STEPS:
         obj: Any = runner
         for part in filter(None, path.split(".")):
@@ -84,11 +91,11 @@ def main(argv: list[str] | None = None) -> int:
     periods = runs[0][1]
     med = {k: statistics.median(r[0][k] for r in runs) for k in runs[0][0]}
     total = med["total"]
-    top = sum(med[label] for label, _, _, parent in STEPS if parent is None)
+    top = sum(med[label] for label in _labels() if label == label.lstrip())
     print(f"{args.scenario}, {args.seconds:g} s, {periods} control periods, median of "
           f"{args.rounds}: {1e6 * total / periods:.1f} us of CPU a period, "
           f"{args.seconds / total:.1f}x real time per CPU second")
-    for label, *_ in STEPS:
+    for label in _labels():
         print(f"{label:32s} {1e6 * med[label] / periods:8.1f} us {100 * med[label] / total:6.1f} %")
     rest = total - top
     print(f"{'the loop (and the timers)':32s} {1e6 * rest / periods:8.1f} us "
