@@ -91,17 +91,14 @@ def _category(file: str, func: str) -> str:
                 or "poll" in func or "epoll" in func or "sleep" in func):
             return "sockets"
         return "other"
-    if "/pymavlink/" in f or f.endswith(("tuavdefs/simlink.py", "tuavdefs/component_link.py",
-                                         "companion/simlink_client.py",
-                                         "companion/component_server.py",
-                                         "companion/mavlink_server.py",
-                                         "companion/mavlink_io.py", "companion/autopilot.py",
-                                         "companion/telemetry.py", "companion/commands.py",
-                                         "companion/mission_items.py",
-                                         "companion/mission_protocol.py",
-                                         "companion/param_protocol.py",
-                                         "groundstation/winch_link.py",
-                                         "sitl/simlink_server.py", "tuavdefs/frames.py")):
+    if ("/pymavlink/" in f or "/tuavdefs/simlink/" in f
+            or f.endswith(("tuavdefs/component_link.py", "companion/simlink_client.py",
+                           "companion/component_server.py", "companion/mavlink_server.py",
+                           "companion/mavlink_io.py", "companion/autopilot.py",
+                           "companion/telemetry.py", "companion/commands.py",
+                           "companion/mission_items.py", "companion/mission_protocol.py",
+                           "companion/param_protocol.py", "groundstation/winch_link.py",
+                           "sitl/simlink_server.py", "tuavdefs/frames.py"))):
         return "MAVLink"
     if "/can/" in f or "/cantools/" in f or "tuavdefs/can_protocol/" in f or f.endswith((
             "tuavdefs/canbus.py", "sitl/odrive_axis.py",

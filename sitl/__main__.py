@@ -20,7 +20,7 @@ from sitl.faults import FaultSchedule, FaultsFile
 from sitl.plant import Plant, initial_state
 from sitl.plant_loop import PlantLoop
 from sitl.sensors import GnssPreset, SensorNoise
-from sitl.simlink_server import SimLinkServer, WinderInputs
+from sitl.simlink_server import SimLinkConfig, SimLinkServer, WinderInputs
 from sitl.trim import hover_trim
 from sitl.truth_log import TruthLog
 from sitl.winder_node import WinderCanNode
@@ -153,11 +153,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                             on_end=_log_ended), args.log_every)
            if args.truth_log else None)
     try:
-        server = SimLinkServer(plant, control_rate_hz=args.control_rate,
-                               home=tuple(args.home), port=args.port,
-                               real_time=real_time, speedup=args.speedup,
-                               sensor_noise=noise,
-                               unix_path=args.socket, lockstep_spin_s=spin_s)
+        server = SimLinkServer(plant, SimLinkConfig(
+            control_rate_hz=args.control_rate, home=tuple(args.home), port=args.port,
+            unix_path=args.socket, real_time=real_time, speedup=args.speedup,
+            lockstep_spin_s=spin_s, sensor_noise=noise))
     except OSError as exc:
         where = sl.format_sim_address(args.socket if args.socket is not None
                                       else (sl.SIM_HOST_DEFAULT, args.port))

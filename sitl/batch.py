@@ -1,19 +1,17 @@
 """The plant's sensor batch (HIL_GPS when due, HIL_STATE_QUATERNION, HIL_SENSOR) as MAVLink
-bytes in one compiled call.
+bytes in one call: the batch's one law.
 
-:meth:`sitl.simlink_server.SimLinkServer` builds a control period's batch from the plant's
-state through :mod:`sitl.sensors` (the noisy channels) and :mod:`tuavdefs.simlink` (the
-field conversions and :class:`tuavdefs.simlink.Encoder`): a few hundred interpreted
-operations. :func:`batch_kernel` does the same arithmetic, in the same order, on the same
-random draws (the channels' :class:`sitl.sensors.NoiseState`), and writes the frames, so
-that the bytes, the channels' state afterwards and the encoder's sequence are the same to
-the bit (``tests/test_fast_paths.py`` checks it over thousands of periods).
+:func:`batch_kernel` reads the sensor channels (:func:`sitl.sensors.channel_read`, the
+channels' :class:`sitl.sensors.NoiseState`, the law :meth:`sitl.sensors.NoisyChannel.read`
+runs too), converts the readings and the truth to the link's fields (units, frames and
+integer resolution of :mod:`tuavdefs.simlink`) and writes the frames. Compiled by numba; the
+same code interpreted without it (``TUAV_NO_JIT=1``). ``tests/test_fast_paths.py`` checks
+the compiled kernel against its own Python source, bit for bit, and its batches against
+the link's field builders through pymavlink's parser.
 
-The kernel handles the usual case only: a finite state, air the ISA can describe, integer
-fields that need no error and floats that fit a float32. Anything else leaves everything
-untouched and :meth:`BatchPacker.pack` returns None, for the interpreted path to do
-whatever it does (raise, most likely). Without numba (``TUAV_NO_JIT=1``) there is no
-packer: the interpreted path is the only one.
+A state the link cannot carry (not finite, beyond the ISA's air, a field beyond its type)
+is refused with nothing changed (:data:`REFUSALS`): :meth:`BatchPacker.pack` raises. A
+signing encoder gets the kernel's frames packed again by pymavlink, which signs them.
 """
 
 from __future__ import annotations
@@ -25,7 +23,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from sitl import sensors as _sensors
-from sitl._jit import JIT, njit
+from sitl._jit import njit
 from sitl.plant import Plant, quat_rotate_kernel, specific_force_kernel
 from sitl.pymath import hypot2
 from sitl.sensors import (
@@ -78,6 +76,17 @@ _ACCEL, _GYRO, _MAG, _BARO, _GPS_H, _GPS_V, _GPS_VEL = range(7)
 _ROUND_MAX = 2.0 ** 62
 #: A batch's bytes at most (three frames of at most 10 + 255 + 2).
 _OUT_BYTES = 3 * 267
+#: What :func:`batch_kernel` returns instead of a length when the state is beyond what
+#: the link carries (nothing changed then), and what each means.
+NOT_FINITE, NO_AIR, NO_ATTITUDE, NEGATIVE_PRESSURE, OUT_OF_RANGE = -1, -2, -3, -4, -5
+REFUSALS = {
+    NOT_FINITE: "the state is not finite",
+    NO_AIR: "the air at that altitude is beyond the ISA's (no positive temperature)",
+    NO_ATTITUDE: "the attitude quaternion has no direction",
+    NEGATIVE_PRESSURE: "the barometer would read a negative pressure",
+    OUT_OF_RANGE: "a field's value is beyond what its type carries (a float32, the "
+                  "integers' range)",
+}
 
 
 def _layout(cls: type) -> list[int]:
@@ -189,8 +198,7 @@ BATCH_SIGNATURE = Signature(array(1, "uint8"), REQUEST_RECORD,
 def batch_kernel(out: np.ndarray, request: tuple, plant: tuple[np.ndarray, ...],
                  wind: tuple[float, float, float], consts: np.ndarray, noise: tuple,
                  truth_buffer: tuple, scratch: tuple) -> tuple[int, int]:
-    """The batch of ``request`` (:data:`REQUEST_RECORD`) into ``out``, as
-    :meth:`sitl.simlink_server.SimLinkServer` builds it interpreted: at ``t_us`` [us],
+    """The batch of ``request`` (:data:`REQUEST_RECORD`) into ``out``: at ``t_us`` [us],
     HIL_GPS if ``gps_due`` (its channels read ``gps_dt`` [s] after the last fix), then
     HIL_STATE_QUATERNION and HIL_SENSOR (its channels read ``dt`` [s] after the last),
     the frames numbered from ``seq``, from ``sysid``, ``compid``;
@@ -200,8 +208,9 @@ def batch_kernel(out: np.ndarray, request: tuple, plant: tuple[np.ndarray, ...],
     recorded in the truth buffer (:class:`sitl.sensors.TruthBuffer`), from which HIL_GPS
     reads the truth of ``consts[_K_LATENCY_US]`` earlier. Returns (bytes written, a bit
     for each channel whose block it used up, to be refilled now:
-    :meth:`sitl.sensors.NoisyChannel.refill`), or (0, 0) when this is not the usual case,
-    nothing changed. ``scratch``: :data:`SCRATCH_RECORD`, :class:`BatchPacker`'s."""
+    :meth:`sitl.sensors.NoisyChannel.refill`), or (a negative code of :data:`REFUSALS`, 0)
+    for a state the link cannot carry, nothing changed. ``scratch``: :data:`SCRATCH_RECORD`,
+    :class:`BatchPacker`'s."""
     t_us, gps_due, gps_dt, dt, seq, sysid, compid = request
     x, p, warm = plant
     wind_e, wind_n, wind_u = wind
@@ -211,7 +220,7 @@ def batch_kernel(out: np.ndarray, request: tuple, plant: tuple[np.ndarray, ...],
     reads = 0b0001111 | (0b1110000 if gps_due else 0)
     for j in range(19):
         if not math.isfinite(x[j]):
-            return 0, 0
+            return NOT_FINITE, 0
     px, py, pz, vx, vy, vz = x[0], x[1], x[2], x[3], x[4], x[5]
     qw, qx, qy, qz, wx, wy, wz = x[6], x[7], x[8], x[9], x[10], x[11], x[12]
     ok = True
@@ -256,7 +265,7 @@ def batch_kernel(out: np.ndarray, request: tuple, plant: tuple[np.ndarray, ...],
     fx, fy, fz = specific_force_kernel(x, p, wind_e, wind_n, wind_u, warm, consts[_K_G])
     temperature_k = ISA_T0_K - ISA_LAPSE_K_M * (consts[_K_ALT0] + pz)
     if not temperature_k > 0.0:
-        return 0, 0
+        return NO_AIR, 0
     pressure_hpa = ISA_P0_HPA * (temperature_k / ISA_T0_K) ** _ISA_EXP
     density = pressure_hpa * 100.0 / (ISA_R_J_KG_K * temperature_k)
     # CPython's x ** 2 is the C library's pow (not always x * x): a run-time exponent
@@ -270,7 +279,7 @@ def batch_kernel(out: np.ndarray, request: tuple, plant: tuple[np.ndarray, ...],
                                     Q_FLU_FROM_FRD)
     n = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
     if n == 0.0 or not math.isfinite(n):
-        return 0, 0
+        return NO_ATTITUDE, 0
     sc = 1.0 / n if a0 >= 0.0 else -1.0 / n
     s_f[1], s_f[2], s_f[3], s_f[4] = a0 * sc, a1 * sc, a2 * sc, a3 * sc
     s_f[5], s_f[6], s_f[7] = wx, -wy, -wz
@@ -302,14 +311,14 @@ def batch_kernel(out: np.ndarray, request: tuple, plant: tuple[np.ndarray, ...],
     channel_read(_BARO, 1, pressure_hpa, 0.0, 0.0, dt, draws, bias, gm, cursor, params, new_bias,
           new_gm, r)
     baro = r[0]
-    if baro < 0.0:   # (the interpreter's power of a negative number is complex)
-        return 0, 0
+    if baro < 0.0:   # (a negative number's real power is not a number)
+        return NEGATIVE_PRESSURE, 0
     h_f[10], h_f[11] = baro, 0.0
     h_f[12] = ISA_T0_K / ISA_LAPSE_K_M * (1.0 - (baro / ISA_P0_HPA) ** (1.0 / _ISA_EXP))
     h_f[13] = temperature_k - 273.15
     h_i[14], h_i[15] = _FIELDS_FILLED, 0
     if not (ok and _fits(layouts[_SENSOR], h_f, h_i, f32)) or t_us < 0:
-        return 0, 0
+        return OUT_OF_RANGE, 0
     # the usual case: commit the channels' reads, write the frames
     used_up = 0
     truth_ring[0], truth_ring[1] = newest, count
@@ -361,6 +370,7 @@ class BatchPacker:
         self._iv = np.zeros((3, _MAX_FIELDS), dtype=np.int64)
         #: HIL_SENSOR's rows of those (views, for :meth:`sensor_values`)
         self._sensor_fv, self._sensor_iv = self._fv[_SENSOR, 1:14], self._iv[_SENSOR]
+        self._gps_iv = self._iv[_GPS, :self._layouts[_GPS, 0]]
         self._new_bias = np.zeros((7, 3))
         self._new_gm = np.zeros((7, 3))
         self._f32 = np.zeros(1, dtype=np.float32)
@@ -371,20 +381,22 @@ class BatchPacker:
         self._truth_buffer = tuple(sensors.truth_buffer)
         self._scratch = (self._layouts, self._msgs, self._fv, self._iv, self._new_bias,
                          self._new_gm, np.zeros(6), self._f32, self._u32)
-        # HIL_SENSOR's payload: time_usec, 13 floats, fields_updated, id (sensor_values)
+        # HIL_SENSOR's payload: time_usec, 13 floats, fields_updated, id (sensor_values);
+        # HIL_GPS's: integers only (gps_values)
         if _layout(_MESSAGES[_SENSOR]) != [16, _UNSIGNED * 16 + 8,
                                            *[_FLOAT * 16 + 4] * 13, _UNSIGNED * 16 + 4,
                                            _UNSIGNED * 16 + 1]:
             raise RuntimeError("HIL_SENSOR's layout is not the one sensor_values reads")
+        if any(code >> 4 == _FLOAT for code in _layout(_MESSAGES[_GPS])[1:]):
+            raise RuntimeError("HIL_GPS's layout is not the one gps_values reads")
         self._kernel = entry_point(batch_kernel, BATCH_SIGNATURE)
 
-    def pack(self, t_us: int, gps_dt_s: float | None) -> memoryview | None:
+    def pack(self, t_us: int, gps_dt_s: float | None) -> memoryview | bytes:
         """The batch for the plant's current state at ``t_us`` [us] (with HIL_GPS, its
-        channels read ``gps_dt_s`` [s] after the last fix, unless None), or None when
-        :func:`batch_kernel` leaves it to the interpreter (nothing changed then)."""
+        channels read ``gps_dt_s`` [s] after the last fix, unless None). Raises
+        ValueError for a state the link cannot carry (:data:`REFUSALS`; nothing
+        changed)."""
         mav = self.encoder.mav
-        if mav.signing.sign_outgoing:
-            return None
         p = self.plant
         m = p.model
         gps = gps_dt_s is not None
@@ -392,27 +404,29 @@ class BatchPacker:
             self._out, (t_us, gps, gps_dt_s if gps else 0.0, self.dt_s, mav.seq,
                         mav.srcSystem, mav.srcComponent), (p.x, m.p, m.warm),
             p.wind_m_s, self._consts, self._noise, self._truth_buffer, self._scratch)
-        if n == 0:
-            return None
+        if n <= 0:
+            raise ValueError(f"no simulator-link batch at t = {t_us} us: {REFUSALS[n]}")
         if used_up:
             for c, channel in enumerate(self.sensors.channels):
                 if (used_up >> c) & 1:
                     channel.refill()
+        if mav.signing.sign_outgoing:
+            # pymavlink signs: the frames' values packed again through it
+            items = sl.whole_frames(bytes(self._view[:n]), sl.LINK_CODECS, check_crc=False)
+            assert items is not None, "the kernel writes whole, unsigned frames"
+            return b"".join(self.encoder.pack_values(mid, values) for mid, values in items)
         sl.count_sent(mav, 3 if gps else 2, n)
         return self._view[:n]
 
-
     def sensor_values(self) -> tuple:
-        """HIL_SENSOR's field values in wire order as the last :meth:`pack` that returned a
-        batch wrote them (its floats as the float32 the frame carries): what unpacking
-        that frame's payload gives, without the frame."""
+        """HIL_SENSOR's field values in wire order as the last :meth:`pack` wrote them
+        (its floats as the float32 the frame carries): what unpacking that frame's payload
+        gives, without the frame."""
         fv = self._sensor_fv.astype(np.float32).tolist()
         iv = self._sensor_iv.tolist()
         return (iv[0], *fv, iv[14], iv[15])
 
-
-def batch_packer(plant: Plant, sensors: SensorSuite, home: tuple[float, float, float],
-                 encoder: sl.Encoder, period_us: int) -> BatchPacker | None:
-    """A :class:`BatchPacker`, or None without numba (the interpreted path is then the
-    faster one)."""
-    return BatchPacker(plant, sensors, home, encoder, period_us) if JIT else None
+    def gps_values(self) -> tuple:
+        """HIL_GPS's field values in wire order as the last :meth:`pack` that held one
+        wrote them (all integers): what unpacking that frame's payload gives."""
+        return tuple(self._gps_iv.tolist())

@@ -2,19 +2,17 @@
 
 :class:`SensorBatches` builds each period's batch (HIL_GPS when due, HIL_STATE_QUATERNION,
 HIL_SENSOR, stamped with the period's time) from the plant's state and its sensor models
-(:class:`sitl.sensors.SensorSuite`): in one compiled call (:class:`sitl.batch.BatchPacker`)
-where it can, interpreted otherwise (the packer's reference, and the path for what it
-leaves alone). The simulator-link server sends them; the offline runner decodes them as the
-companion would (``tuav_sitl/sensor_feed.py``).
+(:class:`sitl.sensors.SensorSuite`) in one call of :class:`sitl.batch.BatchPacker`: the
+batch's one law, compiled, or the same code interpreted without numba
+(``TUAV_NO_JIT=1``). The simulator-link server sends them; the offline runner hands them
+to the companion as its client would decode them (``tuav_sitl/sensor_feed.py``).
 """
 
 from __future__ import annotations
 
-import math
-
-from sitl.batch import batch_packer
-from sitl.plant import POS, QUAT, RATES, VEL, Plant
-from sitl.sensors import ISA_RHO0_KG_M3, SensorSuite, airspeed_from, isa_air
+from sitl.batch import BatchPacker
+from sitl.plant import Plant
+from sitl.sensors import SensorSuite
 from tuavdefs import simlink as sl
 
 
@@ -31,15 +29,13 @@ class SensorBatches:
         self.period_us = period_us
         self.gps_period_us = gps_period_us
         self.encoder = encoder
-        self.home_map = sl.home_map(home)
-        #: The batches in one compiled call (None without numba: :meth:`interpreted`).
-        self.packer = batch_packer(plant, sensors, home, encoder, period_us)
+        #: The batches' law (its field values after each batch:
+        #: :meth:`BatchPacker.sensor_values`, :meth:`BatchPacker.gps_values`).
+        self.packer = BatchPacker(plant, sensors, home, encoder, period_us)
         self._last_gps_us: int | None = None
         #: Whether the receiver delivers fixes (False: a GNSS-loss fault, sitl.faults).
         self.gps_enabled = True
-        #: Whether the last batch was the packer's (its field values then in
-        #: :meth:`BatchPacker.sensor_values`) and whether it held a HIL_GPS.
-        self.last_packed = False
+        #: Whether the last batch held a HIL_GPS.
         self.last_gps = False
 
     def reset(self) -> None:
@@ -50,7 +46,9 @@ class SensorBatches:
 
     def batch(self, t_us: int) -> bytes | memoryview:
         """The batch for the plant's current state, stamped ``t_us`` [us] (HIL_GPS in it
-        when one is due)."""
+        when one is due). Raises ValueError for a state the link cannot carry (not
+        finite, beyond the ISA's air or a field's range: :data:`sitl.batch.REFUSALS`),
+        the sensors and the encoder then as they were."""
         gps_dt: float | None = None
         last = self._last_gps_us
         if self.gps_enabled and (last is None or t_us - last >= self.gps_period_us):
@@ -58,35 +56,6 @@ class SensorBatches:
             self._last_gps_us = t_us
         # the IMU's sample covers the period before t_us: a touchdown in it is felt
         self.plant.take_contact_impulse(self.period_us * 1e-6)
-        data = None if self.packer is None else self.packer.pack(t_us, gps_dt)
+        data = self.packer.pack(t_us, gps_dt)
         self.last_gps = gps_dt is not None
-        self.last_packed = data is not None
-        return data if data is not None else self.interpreted(t_us, gps_dt)
-
-    def interpreted(self, t_us: int, gps_dt: float | None) -> bytes:
-        """The batch for the current state at ``t_us`` [us] (with HIL_GPS, its channels read
-        ``gps_dt`` [s] after the last fix, unless None), interpreted: the reference of
-        :class:`sitl.batch.BatchPacker`, and the path for what it leaves alone."""
-        p = self.plant
-        dt = self.period_us * 1e-6
-        x = p.x.tolist()
-        pos, vel, quat, rates = (tuple(x[POS]), tuple(x[VEL]), tuple(x[QUAT]),
-                                 tuple(x[RATES]))
-        s, enc, home = self.sensors, self.encoder, self.home_map
-        s.record_truth_us(t_us, pos, vel)    # (first: whatever fails below, it is kept)
-        f_flu = p.specific_force_flu()
-        pressure_hpa, temperature_k, density = isa_air(self.home[2] + pos[2])
-        tas = airspeed_from(vel, p.wind_m_s)
-        ias = tas * math.sqrt(density / ISA_RHO0_KG_M3)
-        chunks = []
-        if gps_dt is not None:
-            fix = s.gps_fix_us(t_us, gps_dt)
-            chunks.append(enc.pack_values(sl.MSG_HIL_GPS, sl.hil_gps_values(
-                t_us, fix.position_enu_m, fix.velocity_enu_m_s, home, fix.eph_m, fix.epv_m)))
-        chunks.append(enc.pack_values(sl.MSG_HIL_STATE_QUATERNION,
-                                      sl.hil_state_quaternion_values(
-                                          t_us, pos, vel, quat, rates, f_flu, home, tas, ias)))
-        chunks.append(enc.pack_values(sl.MSG_HIL_SENSOR, sl.hil_sensor_values(
-            t_us, *s.imu(f_flu, rates, quat, dt),
-            *s.baro_of_air(pressure_hpa, temperature_k, dt))))
-        return b"".join(chunks)
+        return data

@@ -39,8 +39,9 @@ import stat
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import NamedTuple, Protocol
+from dataclasses import dataclass, replace
+from dataclasses import fields as dataclass_fields
+from typing import Any, NamedTuple, Protocol
 
 from sitl.plant import Plant, PlantInputs
 from sitl.sensor_batch import SensorBatches
@@ -180,41 +181,67 @@ def _listen_unix(path: str) -> socket.socket:
     return sock
 
 
+@dataclass(frozen=True)
+class SimLinkConfig:
+    """How the plant's simulator link is set up (:class:`SimLinkServer`).
+
+    ``control_rate_hz`` [Hz] is the lockstep rate (its period must be a whole number of the
+    plant's steps); ``home`` (lat deg, lon deg, alt m AMSL) places the inertial origin. The
+    link is TCP on ``host``:``port`` (``port=0`` picks a free port), or with ``unix_path`` a
+    Unix-domain socket at that path (``@NAME``: a name in Linux's abstract namespace), which
+    costs the two ends less per period than TCP on the loopback interface.
+    ``sensor_noise`` configures the sensor errors (None: :class:`sitl.sensors.SensorNoise`
+    defaults, the RTK receiver; ``SensorNoise.preset(...)`` for another;
+    ``SensorNoise.off()`` for exact readings); ``earth_field_ned_gauss`` the Earth's field
+    the magnetometer reads (None: the suite's). ``gps_rate_hz`` [Hz] is the rate of HIL_GPS
+    (None: the noise's ``gps_rate_hz``, the preset's); its latency is the noise's
+    ``gps_latency_s``. The link's pacing: lockstep, or with ``real_time`` real time, or
+    lockstep paced at ``speedup`` x real time (None or inf: as fast as possible).
+    ``lockstep_spin_s`` [s]: in lockstep, how long each wait for an answer spins before it
+    sleeps (:mod:`sitl.spin`; 0: it sleeps at once).
+    """
+
+    control_rate_hz: float = sl.CONTROL_RATE_HZ_DEFAULT
+    home: tuple[float, float, float] = sl.HOME_DEFAULT
+    host: str = sl.SIM_HOST_DEFAULT
+    port: int = sl.SIM_PORT_DEFAULT
+    unix_path: str | None = None
+    real_time: bool = False
+    speedup: float | None = None
+    lockstep_spin_s: float = 0.0
+    sensor_noise: SensorNoise | None = None
+    gps_rate_hz: float | None = None
+    earth_field_ned_gauss: tuple[float, float, float] | None = None
+
+
+def _fields_of(config: SimLinkConfig) -> tuple:
+    """``config``'s fields in their order, as they are (``dataclasses.astuple`` would copy
+    the noise record deeply)."""
+    return tuple(getattr(config, f.name) for f in dataclass_fields(config))
+
+
 class SimLinkServer:
     """The plant's simulator-link server (PX4 simulator MAVLink API, one companion).
 
-    ``plant`` is stepped in place; ``control_rate_hz`` [Hz] is the lockstep rate (its period
-    must be a whole number of the plant's steps); ``home`` (lat deg, lon deg, alt m AMSL)
-    places the inertial origin. The link is TCP on ``host``:``port`` (``port=0`` picks a
-    free port, see :attr:`port`), or with ``unix_path`` a Unix-domain socket at that path
-    (``@NAME``: a name in Linux's abstract namespace), which costs the two ends less per
-    period than TCP on the loopback interface. :attr:`address` says which; the socket is
-    bound and listening when the constructor returns. ``sensor_noise`` configures the
-    sensor errors (None: :class:`sitl.sensors.SensorNoise` defaults, the RTK receiver;
-    ``SensorNoise.preset(...)`` for another; ``SensorNoise.off()`` for exact readings).
-    ``gps_rate_hz`` [Hz] is the rate of HIL_GPS (None: the noise's ``gps_rate_hz``, the
-    preset's); its latency is the noise's ``gps_latency_s``. The link's pacing:
-    lockstep, or with ``real_time`` real time, or lockstep paced at ``speedup`` x real time
-    (None or inf: as fast as possible); the loop that runs it is
+    ``plant`` is stepped in place; ``config`` says the link's address, rate, pacing and
+    sensors (:class:`SimLinkConfig`; its fields may also be given by name here, over
+    ``config``'s). :attr:`address` says where it listens; the socket is bound and
+    listening when the constructor returns. The loop that runs it is
     :class:`sitl.plant_loop.PlantLoop`. ``winder_inputs`` are the winder's inputs until the
     loop sets others; ``on_step`` and ``before_physics`` are the hooks :meth:`serve` runs
-    its loop with. ``lockstep_spin_s`` [s]: in lockstep, how long each wait for an answer
-    spins before it sleeps (:mod:`sitl.spin`; 0: it sleeps at once).
+    its loop with; ``log`` takes its messages (None: printed).
     """
 
-    def __init__(self, plant: Plant, control_rate_hz: float = sl.CONTROL_RATE_HZ_DEFAULT,
-                 home: tuple[float, float, float] = sl.HOME_DEFAULT,
-                 host: str = sl.SIM_HOST_DEFAULT, port: int = sl.SIM_PORT_DEFAULT,
-                 real_time: bool = False, sensor_noise: SensorNoise | None = None,
-                 gps_rate_hz: float | None = None,
+    def __init__(self, plant: Plant, config: SimLinkConfig | None = None, *,
                  winder_inputs: WinderInputs = _WINDER_BRAKED,
-                 earth_field_ned_gauss: tuple[float, float, float] | None = None,
                  on_step: Callable[[SimLinkServer], None] | None = None,
-                 speedup: float | None = None,
                  before_physics: Callable[[SimLinkServer], None] | None = None,
-                 unix_path: str | None = None,
-                 log: Callable[[str], None] | None = None,
-                 lockstep_spin_s: float = 0.0) -> None:
+                 log: Callable[[str], None] | None = None, **fields: Any) -> None:
+        config = replace(config or SimLinkConfig(), **fields)
+        #: The link's set-up.
+        self.config = config
+        (control_rate_hz, home, host, port, unix_path, real_time, speedup, lockstep_spin_s,
+         sensor_noise, gps_rate_hz, earth_field_ned_gauss) = _fields_of(config)
         if unix_path is None:
             _check_loopback(host)
         self.plant = plant

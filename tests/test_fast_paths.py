@@ -7,6 +7,7 @@ its home mapping, the compiled specific force, the sensor channels' per-axis for
 import io
 import math
 import random
+import re
 import struct
 from types import SimpleNamespace
 
@@ -14,15 +15,18 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
-from sitl.batch import BatchPacker
+from sitl.batch import batch_kernel
 from sitl.catenary import catenary_end_forces
 from sitl.plant import Plant, PlantInputs
 from sitl.pymath import hypot2, hypot3
 from sitl.sensors import (
+    ISA_RHO0_KG_M3,
     NoiseSpec,
     NoisyChannel,
     SensorNoise,
+    airspeed_from,
     gauss_markov_coefficients,
+    isa_air,
     plant_acceleration_enu,
     specific_force_flu,
 )
@@ -370,29 +374,6 @@ def test_the_gauss_markov_channels_are_the_per_axis_formula():
 
 
 # ----------------------------------------------------------------- the plant's batch
-class _Sink:
-    """A connected socket's stand-in: keeps what is sent."""
-
-    def __init__(self) -> None:
-        self.sent: list[bytes] = []
-
-    def sendall(self, data: bytes) -> None:
-        self.sent.append(bytes(data))
-
-
-def _batch_outcome(server: SimLinkServer, t_us: int) -> tuple:
-    """What sending one batch does: its bytes (or the exception), the encoder's counters."""
-    sink = _Sink()
-    server._sock = sink  # type: ignore[assignment]
-    try:
-        server.send_batch(t_us)
-        out: object = sink.sent
-    except Exception as e:  # noqa: BLE001 - the same error either way is the point
-        out = (type(e), str(e))
-    mav = server._encoder.mav
-    return out, mav.seq, mav.total_packets_sent, mav.total_bytes_sent
-
-
 def _random_state(rng: np.random.Generator, k: int, x0: np.ndarray) -> np.ndarray:
     """A state near ``x0``, now and then with values the fields clamp (fast, high, spun,
     stopped) or that no field can carry (far, hot, not finite)."""
@@ -421,6 +402,55 @@ def _random_state(rng: np.random.Generator, k: int, x0: np.ndarray) -> np.ndarra
     return x
 
 
+def _reference_batch(server: SimLinkServer, t_us: int, gps_dt: float | None) -> bytes:
+    """The batch of ``server``'s plant at ``t_us`` [us] from its sensor suite's own reads
+    (:meth:`sitl.sensors.SensorSuite.gps_fix_us`, ``imu``, ``baro_of_air``), the ISA and
+    the link's value builders (:func:`tuavdefs.simlink.hil_gps_values` and the others),
+    packed by its encoder: what the batch's law must send."""
+    p, s, enc, hm = server.plant, server.sensors, server._encoder, sl.home_map(server.home)
+    dt = server.period_us * 1e-6
+    x = p.x.tolist()
+    pos, vel, quat, rates = (tuple(x[0:3]), tuple(x[3:6]), tuple(x[6:10]), tuple(x[10:13]))
+    s.record_truth_us(t_us, pos, vel)
+    f_flu = p.specific_force_flu()
+    pressure_hpa, temperature_k, density = isa_air(server.home[2] + pos[2])
+    tas = airspeed_from(vel, p.wind_m_s)
+    ias = tas * math.sqrt(density / ISA_RHO0_KG_M3)
+    chunks = []
+    if gps_dt is not None:
+        fix = s.gps_fix_us(t_us, gps_dt)
+        chunks.append(enc.pack_values(sl.MSG_HIL_GPS, sl.hil_gps_values(
+            t_us, fix.position_enu_m, fix.velocity_enu_m_s, hm, fix.eph_m, fix.epv_m)))
+    chunks.append(enc.pack_values(sl.MSG_HIL_STATE_QUATERNION, sl.hil_state_quaternion_values(
+        t_us, pos, vel, quat, rates, f_flu, hm, tas, ias)))
+    chunks.append(enc.pack_values(sl.MSG_HIL_SENSOR, sl.hil_sensor_values(
+        t_us, *s.imu(f_flu, rates, quat, dt), *s.baro_of_air(pressure_hpa, temperature_k, dt))))
+    return b"".join(chunks)
+
+
+def _sensor_state(server: SimLinkServer) -> list:
+    """What a batch advances: the channels' state, the truth buffer, the encoder's
+    counters."""
+    mav = server._encoder.mav
+    return [*(a.copy() for a in server.sensors.noise_state),
+            *(a.copy() for a in server.sensors.truth_buffer),
+            (mav.seq, mav.total_packets_sent, mav.total_bytes_sent)]
+
+
+def _committed(server: SimLinkServer) -> list:
+    """What a refused batch must leave as it was: the channels' state, the truth buffer's
+    ring (its next slot, past the ring, may hold the refused state's truth), the
+    encoder's counters."""
+    state = _sensor_state(server)
+    n = len(server.sensors.noise_state)
+    return [*state[:n], state[n + 2], state[-1]]
+
+
+def _same_state(a: list, b: list) -> bool:
+    return all(np.array_equal(u, v, equal_nan=True) if isinstance(u, np.ndarray) else u == v
+               for u, v in zip(a, b, strict=True))
+
+
 @pytest.mark.parametrize("noise, home", [
     (SensorNoise(seed=7), sl.HOME_DEFAULT),          # the datasheet parts, RTK: 50 ms late
     (SensorNoise.preset("gnss", seed=9), sl.HOME_DEFAULT),   # wandering 0.8 m, 100 ms late
@@ -430,26 +460,25 @@ def _random_state(rng: np.random.Generator, k: int, x0: np.ndarray) -> np.ndarra
                  gyro=NoiseSpec(0.01, 0.0, 0.0),
                  gps_velocity=NoiseSpec(0.1, 0.0, 0.0, 0.2, 0.5)), (89.0, -179.99998, 4000.0)),
 ])
-def test_the_compiled_batch_is_the_interpreted_one(noise: SensorNoise,
-                                                   home: tuple[float, float, float]):
-    """:class:`sitl.batch.BatchPacker` sends the bytes the interpreted path sends and
-    leaves the sensors and the encoder as it leaves them, over thousands of periods (the
-    channels' blocks of draws refilled, Gauss-Markov errors, GPS periods and the truth
-    buffer of their latency, clamped and unknown fields); what it leaves alone (values no
-    field carries) still goes the interpreted way."""
+def test_the_batch_is_the_link_builders_of_the_sensors_reads(noise: SensorNoise,
+                                                           home: tuple[float, float, float]):
+    """The batch's one law (:class:`sitl.batch.BatchPacker`) sends the bytes the sensor
+    suite's reads and the link's value builders give, and leaves the sensors and the
+    encoder as they leave them, over thousands of periods (the channels' blocks of draws
+    refilled, Gauss-Markov errors, GPS periods and the truth buffer of their latency,
+    clamped and unknown fields); the compiled kernel is its own Python source to the bit
+    (refusals included); a state no field carries (far, hot, not finite) is refused with
+    ValueError, nothing changed."""
     params = _windy()
     x0, u = hover_trim(params, (12.0, 5.0, 20.0), 24.5)
     servers = [SimLinkServer(Plant(params, state=x0), port=0, sensor_noise=noise, home=home)
-               for _ in range(2)]
-    fast, ref = servers
-    ref.batches.packer = None
-    assert (fast.batches.packer is not None) == JIT
-    if not JIT:   # the kernel interpreted
-        fast.batches.packer = BatchPacker(fast.plant, fast.sensors, fast.home,
-                                          fast._encoder, fast.period_us)
+               for _ in range(3)]
+    fast, ref, source = servers
+    source.batches.packer._kernel = getattr(batch_kernel, "py_func", batch_kernel)
     periods = 3000 if JIT else 300
     rng = np.random.default_rng(5)
     t_us = 0
+    refused = 0
     try:
         for k in range(periods):
             if k % 50 == 0:   # a real step now and then (wind, warm start)
@@ -461,16 +490,63 @@ def test_the_compiled_batch_is_the_interpreted_one(noise: SensorNoise,
                 for s in servers:
                     s.plant.x = x.copy()
             t_us += 4000 * int(rng.integers(1, 4))
-            got, want = _batch_outcome(fast, t_us), _batch_outcome(ref, t_us)
-            assert got == want, k
-            for a, b in zip(fast.sensors.noise_state, ref.sensors.noise_state, strict=True):
-                assert np.array_equal(a, b, equal_nan=True), k
-            for a, b in zip(fast.sensors.truth_buffer, ref.sensors.truth_buffer, strict=True):
-                assert np.array_equal(a, b, equal_nan=True), k
+            gps_dt = 0.004 * int(rng.integers(1, 30)) if k % 7 == 0 else None
+            interpreted = k < 300
+            before = _committed(fast)
+            try:
+                got = bytes(fast.batches.packer.pack(t_us, gps_dt))
+            except ValueError as e:
+                assert "no simulator-link batch" in str(e), k
+                assert k % 50 and k % 23 in (4, 5, 6, 7), (k, str(e))   # only there
+                assert _same_state(_committed(fast), before), k
+                if interpreted:
+                    with pytest.raises(ValueError, match=re.escape(str(e))):
+                        source.batches.packer.pack(t_us, gps_dt)
+                    assert _same_state(_committed(source), before), k
+                refused += 1
+                continue
+            assert got == _reference_batch(ref, t_us, gps_dt), k
+            assert _same_state(_sensor_state(fast), _sensor_state(ref)), k
             assert np.array_equal(fast.plant.model.warm, ref.plant.model.warm)
+            if interpreted:
+                assert bytes(source.batches.packer.pack(t_us, gps_dt)) == got, k
+                assert _same_state(_sensor_state(source), _sensor_state(fast)), k
+        assert 0 < refused < periods * 4 // 23   # (edges 4 to 7: some of them carried)
     finally:
         for s in servers:
             s._sock = None
+            s.close()
+
+
+def test_a_signed_batch_is_the_unsigned_ones_messages():
+    """With signing on, the batch's frames are signed by pymavlink and parse, with the
+    key, to the messages of the same batch unsigned."""
+    params = _windy()
+    x0, _ = hover_trim(params, (12.0, 5.0, 20.0), 24.5)
+    servers = [SimLinkServer(Plant(params, state=x0), port=0, sensor_noise=SensorNoise(seed=3))
+               for _ in range(2)]
+    signed, plain = servers
+    key = bytes(range(32))
+    signed._encoder.mav.signing.secret_key = key
+    signed._encoder.mav.signing.sign_outgoing = True
+    signed._encoder.mav.signing.link_id = 1
+    signed._encoder.mav.signing.timestamp = 1
+    reader = mavlink2.MAVLink(None)
+    reader.signing.secret_key = key
+    reader.signing.link_id = 1
+    other = mavlink2.MAVLink(None)
+    try:
+        for k in range(20):
+            t_us = 4000 * k
+            gps = 0.1 if k % 5 == 0 else None
+            a = bytes(signed.batches.packer.pack(t_us, gps))
+            b = bytes(plain.batches.packer.pack(t_us, gps))
+            assert a != b and len(a) == len(b) + 13 * (3 if gps else 2)
+            got, want = reader.parse_buffer(a), other.parse_buffer(b)
+            assert all(m._signed for m in got)
+            assert [m.to_dict() for m in got] == [m.to_dict() for m in want]
+    finally:
+        for s in servers:
             s.close()
 
 

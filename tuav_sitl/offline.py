@@ -52,6 +52,7 @@ from sitl.plant import (
     VEL,
     Plant,
     PlantInputs,
+    TetherForces,
     initial_state,
 )
 from sitl.trim import hover_trim
@@ -307,6 +308,9 @@ class OfflineRunner:
         #: what the log takes from the last winder period
         self._winder = WinderReadout(0.0, 0.0, 0.0, 0.0)
         self._g = g     # the companion's gravity: WINCH_STATUS is in kg
+        #: the tether's forces the winder period solved at the current state (None once
+        #: the state moved on): the log's row takes them
+        self._tether: TetherForces | None = None
         self._was_armed = False
 
     def _on_start(self) -> None:
@@ -404,7 +408,7 @@ class OfflineRunner:
         status = None
         # (the tether solved every winder period, the exchange lost or not: its solver
         # starts from its last solution)
-        tf = plant.tether_forces()
+        tf = self._tether = plant.tether_forces()
         if bus.exchange():
             x = plant.x.tolist()
             exit_angle = (self.exit_sensor.read(tf.on_exit_n) if n % self._exit_every == 0
@@ -474,8 +478,10 @@ class OfflineRunner:
     def _record(self, t: float, out: OnboardOutputs, fresh: bool) -> None:
         """The period's row of the series (and the lumped line's nodes when due)."""
         plant = self.plant
-        self.log.record(t, self._x, out, fresh, self._winder, plant.tether_forces(),
-                        plant.wind_m_s)
+        # (in a winder period the tether was solved at this very state: taken as it is)
+        tf = self._tether
+        self.log.record(t, self._x, out, fresh, self._winder,
+                        tf if tf is not None else plant.tether_forces(), plant.wind_m_s)
         if self.line_log is not None:
             self.line_log.record(t, plant)
 
@@ -485,6 +491,7 @@ class OfflineRunner:
         n_ctrl, n_wind = self.n_ctrl, self.n_wind
         nxt = min(k - k % n_ctrl + n_ctrl, k - k % n_wind + n_wind, n_steps)
         bus = self.bus
+        self._tether = None
         self.plant.advance_held(*self._rotors, bus.torque_n_m, bus.enabled, nxt - k)
         return nxt
 

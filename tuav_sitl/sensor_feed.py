@@ -10,15 +10,14 @@ link.
 With ``wire`` (``OfflineRunner(wire=True)``, :mod:`tuav_sitl.offline_links`) every batch's
 bytes are parsed as the companion's client parses its socket's (checksums checked,
 :meth:`companion.simlink_client.BatchDecoder.feed`). Without it (the default) the bytes
-never cross a wire, so :meth:`SensorFeed.read` skips what guards a wire
-(the frames' checksums) and what the onboard step does not read (HIL_STATE_QUATERNION: the
-runner hands the companion the plant's state itself, which flies on it only with
-``EstimatorParams.kind`` "truth", and then no sensor feed is built): each frame's payload
-is unpacked by the link's codec and taken by the companion's decoder, as over the link. A
-period without a GNSS fix whose batch the compiled packer built skips the frames: the
-decoder takes HIL_SENSOR's field values as the packer wrote them into its frame
-(:meth:`sitl.batch.BatchPacker.sensor_values`; ``tests/test_fast_paths.py`` checks both
-against the decoder reading the batch's bytes).
+never cross a wire, so :meth:`SensorFeed.read` hands the companion's decoder the field
+values the batch's frames carry, as the batch's law wrote them
+(:meth:`sitl.batch.BatchPacker.sensor_values`, :meth:`~sitl.batch.BatchPacker.gps_values`:
+HIL_SENSOR's floats as float32, HIL_GPS's integers), without packing and unpacking them;
+HIL_STATE_QUATERNION, which the onboard step does not read, is not decoded (the runner
+hands the companion the plant's state itself, which flies on it only with
+``EstimatorParams.kind`` "truth", and then no sensor feed is built).
+``tests/test_fast_paths.py`` checks both against the decoder reading the batch's bytes.
 """
 
 from __future__ import annotations
@@ -29,7 +28,7 @@ from sitl.sensor_batch import SensorBatches
 from sitl.sensors import SensorNoise, SensorSuite
 from tuavdefs import simlink as sl
 
-_TRUTH = sl.MSG_HIL_STATE_QUATERNION
+_GPS = sl.MSG_HIL_GPS
 _SENSOR = sl.MSG_HIL_SENSOR
 
 
@@ -56,19 +55,9 @@ class SensorFeed:
         if self.wire:
             (state,) = decoder.feed(bytes(data))
             return state
-        if batches.last_packed and not batches.last_gps:
-            # the usual period, compiled: HIL_SENSOR's values as its frame carries them
-            state = decoder.absorb((_SENSOR, batches.packer.sensor_values()))
-            assert state is not None
-            return state
-        data = bytes(data)
-        items = sl.whole_frames(data, sl.LINK_CODECS, check_crc=False)
-        if items is None:     # not the batch's usual frames: the general parser's
-            (state,) = decoder.feed(data)
-            return state
-        state = None
-        for item in items:
-            if item[0] != _TRUTH:
-                state = decoder.absorb(item) or state
+        packer = batches.packer
+        if batches.last_gps:
+            decoder.absorb((_GPS, packer.gps_values()))
+        state = decoder.absorb((_SENSOR, packer.sensor_values()))
         assert state is not None, "a batch ends with its HIL_SENSOR"
         return state
