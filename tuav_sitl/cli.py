@@ -150,7 +150,8 @@ def _cmd_results(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from tuav_sitl.sweep import load_sweep, run_sweep, summary_text
+    from tuav_sitl.sweep import load_sweep, run_sweep
+    from tuav_sitl.sweep_summary import summary_text
 
     sweep, scenario = load_sweep(args.sweep)
     if args.runs is not None:

@@ -153,7 +153,8 @@ def sweep_section(runs_dir: Path, metrics: dict[str, dict[str, Any]],
     ``fig_dir``, each sweep's failures figure copied there and shown."""
     import json
 
-    from tuav_sitl.sweep import load_sweep, summary_text
+    from tuav_sitl.sweep import load_sweep
+    from tuav_sitl.sweep_summary import summary_text
 
     lines = ["", "## Sweeps", "",
              "Monte Carlo sweeps (`tuav-sitl sweep`, docs/usage.md): each run draws the "

@@ -33,6 +33,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from sitl.faults import NEVER_S, FaultParams
+from tuav_sitl.offline_metrics import GROUND_REGIMES
 from tuav_sitl.scenario import ScenarioParams, load_scenario
 from tuavdefs.params import GustParams, TetherModel
 from tuavdefs.paramspec import ParameterError, Params, load_toml, quantity, toml_line
@@ -91,6 +92,7 @@ class FailureKind(enum.Enum):
     SATURATION = "saturation"            #: the rotors saturated more often than allowed
     DIVERGED = "diverged"                #: the position error grew beyond bounds
     CRASHED = "crashed"                  #: the vehicle came down to the ground in flight
+    TILTED = "tilted"                    #: the vehicle tilted beyond its bound (attitude lost)
     TRACKING = "tracking"                #: the position RMSE is above its target
     REFUSED = "refused"                  #: its drawn system was refused (a bad parameter)
     ERROR = "error"                      #: the run raised (e.g. no hover trim exists)
@@ -233,6 +235,30 @@ class TargetParams(Params):
         0.01, "1", "saturation: fraction of the flight the rotors may saturate", ge=0, le=1)
     diverged_error_m: float = quantity(
         2.0, "m", "diverged: the position error may never exceed", gt=0)
+    max_tilt_deg: float = quantity(
+        45.0, "deg", "tilted: the vehicle's tilt in flight may never exceed (beyond the "
+        "position loop's own 35 deg limit: the attitude is lost)", gt=0, le=180)
+
+
+@dataclass(frozen=True)
+class EnvelopeParams(Params):
+    """The envelope over one drawn quantity (the summary's table by its bins and the
+    values where each limit is first passed)."""
+
+    over: str = quantity("", "", "the drawn quantity (uniform or normal) the envelope is "
+                         "read over (empty: no envelope)",
+                         choices=("", *(q.value for q in Quantity if not q.is_label)))
+    bin_width: float = quantity(1.0, "", "width of the table's bins (the quantity's unit)",
+                                gt=0)
+    pull_limit_n: float = quantity(35.0, "N", "the pull at the UAV's limit (its peak in "
+                                   "flight)", gt=0)
+    saturation_limit_fraction: float = quantity(
+        0.01, "1", "the rotors' saturation limit (fraction of the flight)", ge=0, le=1)
+
+    @property
+    def quantity(self) -> Quantity | None:
+        """:attr:`over` as its enum (None: no envelope)."""
+        return Quantity(self.over) if self.over else None
 
 
 @dataclass(frozen=True)
@@ -250,6 +276,8 @@ class SweepParams(Params):
     seeds: bool = quantity(True, "", "each run its own seed of the sensors and the wind's "
                            "turbulence (false: the scenario's)")
     targets: TargetParams = quantity(TargetParams(), "", "the targets a run must meet")
+    envelope: EnvelopeParams = quantity(EnvelopeParams(), "", "the envelope the summary "
+                                        "reads over a drawn quantity")
     vary: tuple[VaryParams, ...] = quantity((), "", "the drawn quantities")
     faults: tuple[FaultDrawParams, ...] = quantity((), "", "the drawn faults (added to the "
                                                    "scenario's own)")
@@ -260,6 +288,10 @@ class SweepParams(Params):
             if v.parameter in seen:
                 raise ValueError(f"vary[{i}].parameter: {v.parameter} is drawn twice")
             seen.add(v.parameter)
+        over = self.envelope.over
+        if over and not any(v.parameter == over and v.dist is not Distribution.CHOICE
+                            for v in self.vary):
+            raise ValueError(f"envelope.over: {over} is not drawn uniform or normal")
 
 
 def shipped_sweeps() -> dict[str, Path]:
@@ -389,15 +421,21 @@ def run_scenario_of(sweep: SweepParams, sc: ScenarioParams, index: int) -> Scena
 
 # --- one run and its row --------------------------------------------------------------
 
-#: The metrics of a row (metrics.json's scalar fields) and the sweep's own
-#: (``min_height_flying_m``: the vehicle's lowest height while its reference is in the air).
+#: The sweep's own metrics of a row (:func:`flight_metrics`).
+OWN_COLUMNS = ("min_height_flying_m", "tension_peak_flying_n", "tension_p99_flying_n",
+               "taut_time_s", "ground_flying_s", "max_tilt_deg")
+#: The metrics of a row: metrics.json's scalar fields, then the sweep's own.
 METRIC_COLUMNS = (
     "position_rmse_m", "position_max_error_m", "attitude_rmse_rad", "tether_length_rmse_m",
     "tether_length_max_error_m", "min_tether_slack_m", "max_tension_n",
     "max_drum_tension_n", "tether_ground_contact_fraction", "motor_saturation_fraction",
     "position_loop_saturation_fraction", "estimate_position_rmse_m",
     "estimate_velocity_rmse_m_s", "estimate_attitude_rmse_rad", "settling_time_s",
-    "overshoot_percent", "sim_time_s", "wall_time_s", "min_height_flying_m")
+    "overshoot_percent", "sim_time_s", "wall_time_s", *OWN_COLUMNS)
+
+#: Height above the gear from which the vehicle counts as flying for the sweep's own
+#: metrics (a mission's take-off and touch-down below it do not count) [m].
+FLYING_ABOVE_GEAR_M = 0.5
 
 
 def failures(sc: ScenarioParams, targets: TargetParams, m: dict[str, Any]
@@ -416,6 +454,9 @@ def failures(sc: ScenarioParams, targets: TargetParams, m: dict[str, Any]
         out.append(FailureKind.SATURATION)
     if bad(m["position_max_error_m"], targets.diverged_error_m):
         out.append(FailureKind.DIVERGED)
+    tilt = m.get("max_tilt_deg")
+    if tilt is not None and not tilt <= targets.max_tilt_deg:
+        out.append(FailureKind.TILTED)
     h = m["min_height_flying_m"]
     if h is not None and math.isfinite(h) and h <= sc.plant.vehicle.gear_height_m + 0.05:
         out.append(FailureKind.CRASHED)
@@ -455,14 +496,43 @@ def row_of(sweep: SweepParams, sc: ScenarioParams, index: int, seed: int,
            drawn: dict[str, float | str | None], metrics: dict[str, Any],
            series: dict[str, np.ndarray]) -> dict[str, Any]:
     """A run's row from its metrics and series."""
-    m = {k: metrics.get(k) for k in METRIC_COLUMNS}
-    ref_z = series["ref_pos"][:, 2]
-    airborne = np.isfinite(ref_z) & (ref_z > sc.plant.vehicle.gear_height_m + 1.0)
-    m["min_height_flying_m"] = (float(series["pos"][airborne, 2].min()) if airborne.any()
-                                else None)
+    m = {k: metrics.get(k) for k in METRIC_COLUMNS} | flight_metrics(sc, sweep.targets,
+                                                                     series)
     fails = failures(sc, sweep.targets, m)
     return {"index": index, "seed": seed, **{c: drawn[c] for c in drawn_columns(sweep)},
             **m, "failed": bool(fails), "failures": ";".join(f.value for f in fails)}
+
+
+def flight_metrics(sc: ScenarioParams, targets: TargetParams, series: dict[str, np.ndarray]
+                   ) -> dict[str, float | None]:
+    """The sweep's own metrics of a run from its series: ``min_height_flying_m`` (the
+    lowest height while the reference is above 1 m over the gear); from the scenario's
+    ``metrics_after_s`` on, while flying (a reference, more than :data:`FLYING_ABOVE_GEAR_M`
+    over the gear), the pull at the UAV's peak and 99th percentile [N] and the largest
+    tilt [deg]; over the whole run, the time the tether is taut (its slack at or below the
+    target's) and the time it touches the ground while flying [s]. None where the run
+    never flies."""
+    t, pos = series["t"], series["pos"]
+    gear = sc.plant.vehicle.gear_height_m
+    ref_z = series["ref_pos"][:, 2]
+    high_ref = np.isfinite(ref_z) & (ref_z > gear + 1.0)
+    dt = np.diff(t, append=t[-1] + (t[-1] - t[-2] if len(t) > 1 else 0.0))
+    flying = np.isfinite(series["ref_pos"]).all(axis=1) & (pos[:, 2] > gear
+                                                           + FLYING_ABOVE_GEAR_M)
+    win = flying & (t >= sc.metrics_after_s)
+    slack = series["length"] - np.linalg.norm(pos, axis=1)
+    on_ground = np.isin(series["regime"], GROUND_REGIMES)
+    roll, pitch = series["euler"][:, 0], series["euler"][:, 1]
+    tilt = np.degrees(np.arccos(np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)))
+    pull = series["top_tension"]
+    return {
+        "min_height_flying_m": float(pos[high_ref, 2].min()) if high_ref.any() else None,
+        "tension_peak_flying_n": float(pull[win].max()) if win.any() else None,
+        "tension_p99_flying_n": float(np.percentile(pull[win], 99)) if win.any() else None,
+        "taut_time_s": float(dt[slack <= targets.min_tether_slack_m].sum()),
+        "ground_flying_s": float(dt[on_ground & flying].sum()),
+        "max_tilt_deg": float(tilt[win].max()) if win.any() else None,
+    }
 
 
 def drawn_columns(sweep: SweepParams) -> list[str]:
@@ -546,94 +616,6 @@ class TableWriter:
         self._f.close()
 
 
-# --- the summary ---------------------------------------------------------------------
-
-def binomial_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
-    """The exact (Clopper-Pearson) confidence interval of a rate seen as ``k`` of ``n``."""
-    from scipy.stats import beta
-
-    a = 1.0 - confidence
-    lo = 0.0 if k == 0 else float(beta.ppf(a / 2, k, n - k + 1))
-    hi = 1.0 if k == n else float(beta.ppf(1 - a / 2, k + 1, n - k))
-    return lo, hi
-
-
-PERCENTILES = (5, 50, 95, 100)
-
-
-def summarise(sweep: SweepParams, rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Failures by kind, the failure rate and its 95 % interval, each metric's percentiles,
-    and for each drawn quantity how the failures depend on it."""
-    n = len(rows)
-    failed = np.array([r["failed"] for r in rows], dtype=bool)
-    k = int(failed.sum())
-    by_kind = {f.value: sum(f.value in r["failures"].split(";") for r in rows)
-               for f in FailureKind}
-    lo, hi = binomial_interval(k, n) if n else (math.nan, math.nan)
-    pct: dict[str, dict[str, float]] = {}
-    for c in METRIC_COLUMNS:
-        vals = np.array([r[c] for r in rows if r[c] is not None], dtype=float)
-        vals = vals[np.isfinite(vals)]
-        if len(vals):
-            pct[c] = {f"p{p}": float(np.percentile(vals, p)) for p in PERCENTILES}
-    corr: dict[str, Any] = {}
-    for v in sweep.vary:
-        col = [r[v.parameter] for r in rows]
-        if v.kind.is_label or v.dist is Distribution.CHOICE:
-            corr[v.parameter] = {"failure_rate_by_value": {
-                str(val): _rate(failed[[c == val for c in col]])
-                for val in sorted(set(col), key=str)}}
-            continue
-        x = np.array(col, dtype=float)
-        r = (float(np.corrcoef(x, failed)[0, 1])
-             if n > 2 and x.std() > 0 and 0 < k < n else None)
-        med = float(np.median(x)) if n else math.nan
-        corr[v.parameter] = {"correlation_with_failure": r,
-                            "failure_rate_below_median": _rate(failed[x <= med]),
-                            "failure_rate_above_median": _rate(failed[x > med])}
-    for i, f in enumerate(sweep.faults):
-        had = np.array([r[f.columns(i)[0]] is not None for r in rows], dtype=bool)
-        corr[f"fault{i}_{f.fault.kind}"] = {"failure_rate_by_value": {
-            "with": _rate(failed[had]), "without": _rate(failed[~had])}}
-    return {"sweep": sweep.name, "scenario": sweep.scenario, "runs": n, "failed": k,
-            "failure_rate": k / n if n else None, "failure_rate_95ci": [lo, hi],
-            "failures_by_kind": by_kind, "percentiles": pct, "failures_against": corr}
-
-
-def _rate(x: np.ndarray) -> float | None:
-    return float(x.mean()) if len(x) else None
-
-
-def summary_text(s: dict[str, Any]) -> str:
-    """The summary as Markdown."""
-    lo, hi = s["failure_rate_95ci"]
-    rate = s["failure_rate"]
-    lines = [f"# sweep {s['sweep']} over {s['scenario']}: {s['runs']} runs", "",
-             f"failed: {s['failed']} of {s['runs']} ({_pct(rate)}; 95 % interval "
-             f"{_pct(lo)} to {_pct(hi)})", "", "| failure | runs |", "|---|---|"]
-    lines += [f"| {kind} | {cnt} |" for kind, cnt in s["failures_by_kind"].items()]
-    lines += ["", "| metric | " + " | ".join(f"p{p}" for p in PERCENTILES) + " |",
-              "|---|" + "---|" * len(PERCENTILES)]
-    for c, q in s["percentiles"].items():
-        lines.append(f"| {c} | " + " | ".join(f"{q[f'p{p}']:.4g}" for p in PERCENTILES)
-                     + " |")
-    lines += ["", "| drawn | failures against it |", "|---|---|"]
-    for name, c in s["failures_against"].items():
-        if "failure_rate_by_value" in c:
-            text = ", ".join(f"{k}: {_pct(v)}" for k, v in c["failure_rate_by_value"].items())
-        else:
-            r = c["correlation_with_failure"]
-            text = (f"correlation {r:+.2f}, " if r is not None else "") + (
-                f"failure rate {_pct(c['failure_rate_below_median'])} below the median, "
-                f"{_pct(c['failure_rate_above_median'])} above")
-        lines.append(f"| {name} | {text} |")
-    return "\n".join(lines) + "\n"
-
-
-def _pct(v: float | None) -> str:
-    return "–" if v is None or not math.isfinite(v) else f"{100 * v:.1f} %"
-
-
 # --- running it ------------------------------------------------------------------------
 
 class SweepProgress:
@@ -694,6 +676,8 @@ def run_sweep(sweep: SweepParams, sc: ScenarioParams, out_dir: Path, *,
         finally:
             writer.close()
             bar.close()
+    from tuav_sitl.sweep_summary import summarise, summary_text
+
     ordered = [rows[i] for i in sorted(rows) if i < sweep.runs]
     summary = summarise(sweep, ordered)
     (out_dir / "runs.json").write_text(json.dumps(ordered, indent=1) + "\n")
