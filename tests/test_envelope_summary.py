@@ -167,3 +167,20 @@ def test_an_envelope_over_a_quantity_not_drawn_is_refused(tmp_path):
         """))
     with pytest.raises(ParameterError, match="envelope.over"):
         sw.load_sweep(p)
+
+
+def test_the_envelope_figure_draws_every_run_and_its_limit(tmp_path):
+    from tuav_sitl.sweep_figures import ENVELOPE_PANELS, fig_envelope, make_sweep_figures
+
+    fig = fig_envelope(SWEEP, ROWS)
+    pull = fig.axes[0]
+    good, bad = (c.get_offsets() for c in pull.collections)
+    # the runs that flew, split by control: 14.9 m/s lost it, 13.0 did not fly (no pull)
+    assert sorted(map(tuple, good.tolist())) == sorted(
+        (r["wind_speed_m_s"], r["tension_peak_flying_n"]) for r in ROWS[:7])
+    assert bad.tolist() == [[14.9, 60.0]]
+    assert [ln.get_ydata()[0] for ln in pull.get_lines()] == [35.0]
+    sat = fig.axes[[p[0] for p in ENVELOPE_PANELS].index("motor_saturation_fraction")]
+    assert [ln.get_ydata()[0] for ln in sat.get_lines()] == [pytest.approx(1.0)]   # in %
+    names = {p.name for p in make_sweep_figures(SWEEP, ROWS, tmp_path)}
+    assert names == {"cdfs.png", "failures.png", "envelope.png"}

@@ -167,12 +167,13 @@ def sweep_section(runs_dir: Path, metrics: dict[str, dict[str, Any]],
             text = summary_text(json.loads(summary.read_text()))
             lines += ["", *("##" + ln if ln.startswith("# ") else ln
                             for ln in text.rstrip("\n").split("\n"))]
-            fig = summary.parent / "figures" / "failures.png"
-            if fig_dir is not None and fig.is_file():
-                fig_dir.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(fig, fig_dir / f"sweep-{name}-failures.png")
-                lines += ["", f"![sweep {name}: failures against the drawn parameters]"
-                          f"(figures/sweep-{name}-failures.png)"]
+            for kind, what in (("failures", "failures against the drawn parameters"),
+                               ("envelope", "the envelope")):
+                fig = summary.parent / "figures" / f"{kind}.png"
+                if fig_dir is not None and fig.is_file():
+                    fig_dir.mkdir(parents=True, exist_ok=True)
+                    shutil.copyfile(fig, fig_dir / f"sweep-{name}-{kind}.png")
+                    lines += ["", f"![sweep {name}: {what}](figures/sweep-{name}-{kind}.png)"]
             continue
         wall = metrics.get(sc.name, {}).get("wall_time_s")
         cores = os.cpu_count() or 1

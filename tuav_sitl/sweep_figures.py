@@ -78,14 +78,65 @@ def fig_failures_against(sweep: SweepParams, rows: list[dict[str, Any]]) -> Figu
     return fig
 
 
+#: The envelope figure's panels: (the row's metric, its label, the scale to draw it in,
+#: the limit's source: a SweepParams attribute path, or None).
+ENVELOPE_PANELS = (
+    ("tension_peak_flying_n", "pull at the UAV, peak in flight [N]", 1.0,
+     "envelope.pull_limit_n"),
+    ("tension_p99_flying_n", "pull at the UAV, p99 in flight [N]", 1.0,
+     "envelope.pull_limit_n"),
+    ("motor_saturation_fraction", "rotors saturated [% of the flight]", 100.0,
+     "envelope.saturation_limit_fraction"),
+    ("min_tether_slack_m", "tether's least slack [m]", 1.0, "targets.min_tether_slack_m"),
+    ("ground_flying_s", "tether on the ground in flight [s]", 1.0, None),
+    ("position_rmse_m", "position RMSE [m]", 1.0, "targets.position_rmse_m"),
+    ("position_max_error_m", "largest position error [m]", 1.0, "targets.diverged_error_m"),
+    ("max_tilt_deg", "largest tilt [deg]", 1.0, "targets.max_tilt_deg"),
+)
+
+
+def fig_envelope(sweep: SweepParams, rows: list[dict[str, Any]]) -> Figure:
+    """Each envelope metric of every run against the envelope's quantity, its limit
+    dashed; the runs whose vehicle was not controlled in red."""
+    from tuav_sitl.sweep_summary import controlled
+
+    over = sweep.envelope.over
+    fig = Figure(figsize=(12, 2.7 * ((len(ENVELOPE_PANELS) + 2) // 3)))
+    ok = [controlled(r) for r in rows]
+    for i, (col, label, scale, limit) in enumerate(ENVELOPE_PANELS):
+        ax = fig.add_subplot((len(ENVELOPE_PANELS) + 2) // 3, 3, i + 1)
+        for good, colour, name in ((True, "0.35", "controlled"), (False, "C3", "not")):
+            sel = [r for r, g in zip(rows, ok, strict=True) if g == good
+                   and r.get(col) is not None]
+            ax.scatter([r[over] for r in sel], [scale * r[col] for r in sel], s=9,
+                       color=colour, label=name)
+        if limit is not None:
+            group, field = limit.split(".")
+            ax.axhline(scale * getattr(getattr(sweep, group), field), color="C3", ls="--",
+                       lw=1)
+        ax.set_xlabel(over, fontsize=9)
+        ax.set_ylabel(label, fontsize=8)
+        ax.grid(alpha=0.3)
+        if i == 0:
+            ax.legend(fontsize=7)
+    fig.suptitle(f"sweep {sweep.name}: the envelope over {over} ({len(rows)} runs of "
+                 f"{sweep.scenario}; dashed: the limit)")
+    fig.tight_layout()
+    return fig
+
+
 def make_sweep_figures(sweep: SweepParams, rows: list[dict[str, Any]], out_dir: Path
                        ) -> list[Path]:
-    """Write ``cdfs.png`` and ``failures.png`` into ``out_dir/figures``."""
+    """Write ``cdfs.png``, ``failures.png`` and, for a sweep with an envelope,
+    ``envelope.png`` into ``out_dir/figures``."""
     folder = out_dir / "figures"
     folder.mkdir(parents=True, exist_ok=True)
     written = []
-    for name, fig in (("cdfs.png", fig_cdfs(sweep, rows)),
-                      ("failures.png", fig_failures_against(sweep, rows))):
+    figs = [("cdfs.png", fig_cdfs(sweep, rows)),
+            ("failures.png", fig_failures_against(sweep, rows))]
+    if sweep.envelope.over:
+        figs.append(("envelope.png", fig_envelope(sweep, rows)))
+    for name, fig in figs:
         path = folder / name
         fig.savefig(path, dpi=DPI)
         written.append(path)
