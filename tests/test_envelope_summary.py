@@ -35,6 +35,7 @@ def _row(index: int, wind: float, *, pull: float | None = 10.0, sat: float | Non
             else 0.8 * pull, "motor_saturation_fraction": sat, "min_tether_slack_m": slack,
             "taut_time_s": taut, "ground_flying_s": ground, "position_rmse_m": rmse,
             "position_max_error_m": None if rmse is None else 3 * rmse, "max_tilt_deg": tilt,
+            "position_loop_saturation_fraction": None if tilt is None else tilt / 100,
             "failed": bool(failures), "failures": failures}
     return row
 
@@ -96,6 +97,7 @@ def test_the_table_holds_the_worst_run_of_each_bin():
     assert wide[2]["pull_peak_n"] == 60.0 and wide[2]["saturation_fraction"] == 0.03
     assert wide[2]["taut_s"] == 0.25 and wide[2]["max_tilt_deg"] == 50.0
     assert wide[2]["position_max_error_m"] == pytest.approx(2.7)
+    assert wide[2]["position_loop_saturation_fraction"] == pytest.approx(0.5)
 
 
 def test_the_summary_writes_the_envelope():
@@ -109,6 +111,8 @@ def test_the_summary_writes_the_envelope():
     assert "- the vehicle not controlled: from 13 (2 runs" in text
     assert "| 7–8 | 1 | 1 | 0 | 36.0 | 28.8 | 0.00 % | 0.500 |" in text
     assert "| 13–14 | 1 | 0 | 0 | – | – |" in text
+    assert ("| 14–15 | 1 | 0 | 0 | 60.0 | 48.0 | 3.00 % | -0.010 | 0.25 | 0.00 | 0.900 | 2.70 "
+            "| 50.0 | 50.0 % |") in text
     # a sweep without an envelope writes none
     plain = ss.summarise(SWEEP.replace(envelope=sw.EnvelopeParams()), ROWS)
     assert "envelope" not in plain and "Envelope" not in ss.summary_text(plain)

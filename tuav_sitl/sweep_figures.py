@@ -92,6 +92,8 @@ ENVELOPE_PANELS = (
     ("position_rmse_m", "position RMSE [m]", 1.0, "targets.position_rmse_m"),
     ("position_max_error_m", "largest position error [m]", 1.0, "targets.diverged_error_m"),
     ("max_tilt_deg", "largest tilt [deg]", 1.0, "targets.max_tilt_deg"),
+    ("position_loop_saturation_fraction", "position loop at its limit [% of the flight]",
+     100.0, None),
 )
 
 

@@ -188,6 +188,7 @@ ENVELOPE_COLUMNS: tuple[tuple[str, str, Callable[[list[float]], float]], ...] = 
     ("position_rmse_m", "position_rmse_m", max),
     ("position_max_error_m", "position_max_error_m", max),
     ("max_tilt_deg", "max_tilt_deg", max),
+    ("position_loop_saturation_fraction", "position_loop_saturation_fraction", max),
 )
 
 
@@ -249,17 +250,19 @@ def envelope_text(e: dict[str, Any]) -> list[str]:
     lines += ["", f"The worst run of each bin of {over} (the pull at the UAV, its peak and "
               "99th percentile in flight after the lead-in; the rotors' saturation; the "
               "tether's least slack, time taut and time on the ground in flight; the "
-              "position error; the largest tilt):", "",
+              "position error; the largest tilt; the position loop at its tilt or thrust "
+              "limit):", "",
               f"| {over} | runs | controlled | passed | pull peak [N] | pull p99 [N] | "
-              "saturated | least slack [m] | taut [s] | on ground [s] | position RMSE [m] "
-              "| max error [m] | max tilt [deg] |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "rotors saturated | least slack [m] | taut [s] | on ground [s] | position "
+              "RMSE [m] | max error [m] | max tilt [deg] | position loop at its limit |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for b in e["table"]:
         cells = [_num(b["pull_peak_n"], ".1f"), _num(b["pull_p99_n"], ".1f"),
                  _pct(b["saturation_fraction"], 2), _num(b["least_slack_m"], ".3f"),
                  _num(b["taut_s"], ".2f"), _num(b["ground_s"], ".2f"),
                  _num(b["position_rmse_m"], ".3f"), _num(b["position_max_error_m"], ".2f"),
-                 _num(b["max_tilt_deg"], ".1f")]
+                 _num(b["max_tilt_deg"], ".1f"),
+                 _pct(b["position_loop_saturation_fraction"], 1)]
         lines.append(f"| {b['low']:g}–{b['high']:g} | {b['runs']} | {b['controlled']} | "
                      f"{b['passed']} | " + " | ".join(cells) + " |")
     return lines
