@@ -39,7 +39,8 @@ def test_a_lost_winder_is_an_error_record_and_its_end_another(tmp_path):
     runner = OfflineRunner(sc)
     comp = runner.companion
     log = FlightLog(tmp_path, tuple(sc.home))
-    step, report = comp.step, comp.winch_report
+    begin, finish, report = comp.begin, comp.finish, comp.winch_report
+    period = {}
     healthy_at: list[float] = []      # the winch's healthy reports [s]
 
     def heard(t_s, length_m, speed_m_s, tension_n, braked=False, healthy=True):
@@ -47,12 +48,16 @@ def test_a_lost_winder_is_an_error_record_and_its_end_another(tmp_path):
             healthy_at.append(t_s)
         report(t_s, length_m, speed_m_s, tension_n, braked, healthy)
 
-    def logged_step(inputs, diagnostics=False):
-        out = step(inputs, diagnostics)
-        log.period(inputs, out, comp)
+    def logged_begin(inputs):           # a period: the runner calls begin, then finish
+        period["inputs"] = inputs
+        return begin(inputs)
+
+    def logged_finish(diagnostics=False):
+        out = finish(diagnostics)
+        log.period(period["inputs"], out, comp)
         return out
 
-    comp.step, comp.winch_report = logged_step, heard
+    comp.begin, comp.finish, comp.winch_report = logged_begin, logged_finish, heard
     runner.run()
     log.close()
     reader = DFReader.DFReader_binary(str(log.path))

@@ -463,7 +463,7 @@ def _read_until(sock: socket.socket, n_bytes: int, flush=None) -> bytes:
 @pytest.mark.parametrize("crc_helper", ["fastcrc", "pure python"])
 def test_component_position_frames_are_pymavlinks(crc_helper, monkeypatch):
     if crc_helper == "pure python":
-        monkeypatch.setattr(simlink, "_MCRF4XX", None)
+        monkeypatch.setattr(simlink.codec, "_MCRF4XX", None)   # mavlink_crc's C helper
     server = ComponentServer(0)
     try:
         mav = server.mav

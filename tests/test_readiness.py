@@ -34,11 +34,17 @@ def _reports(gnss: str, seed: int) -> list[tuple[float, bool, dict[str, bool], i
     c = r.companion
     streams = TelemetryStreams(None, c.nav, (47.0, 8.0, 500.0), None)
     streams.estimator_ready = c.estimator_ready
-    step = c.step
+    begin, finish = c.begin, c.finish
     seen = []
+    period = {}
 
-    def step_and_report(inputs, diagnostics=False):
-        out = step(inputs, diagnostics)
+    def begin_and_keep(inputs):          # a period: the runner calls begin, then finish
+        period["inputs"] = inputs
+        return begin(inputs)
+
+    def step_and_report(diagnostics=False):
+        inputs = period["inputs"]
+        out = finish(diagnostics)
         s = out.state
         if s is not None and not c.nav.armed:
             tm = streams.telem = Telemetry(inputs.t_s, s.pos_m, s.vel_m_s, s.quat,
@@ -52,7 +58,7 @@ def _reports(gnss: str, seed: int) -> list[tuple[float, bool, dict[str, bool], i
             seen.append((inputs.t_s, c.nav.prearm() is None, said, health & CALIBRATION))
         return out
 
-    c.step = step_and_report
+    c.begin, c.finish = begin_and_keep, step_and_report
     r.run()
     return seen
 

@@ -57,8 +57,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          "a 4 MiB receive buffer)")
 
 
-def run_candump(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
-    """Print frames until interrupted (or ``--count``/``--timeout``); returns the exit code."""
+def run_candump(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """Print frames to ``out`` (the standard output at the call, by default) until
+    interrupted (or ``--count``/``--timeout``); returns the exit code."""
+    if out is None:     # read at the call: a default bound at import keeps a stale stream
+        out = sys.stdout
     try:
         link = CanLink(args.can)
     except CanBusError as exc:
