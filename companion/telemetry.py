@@ -310,15 +310,32 @@ class TelemetryStreams:
         if name is None:
             return M.MAV_RESULT_UNSUPPORTED if int(msg_id) != M.MAVLINK_MSG_ID_HEARTBEAT \
                 else M.MAV_RESULT_ACCEPTED
-        sched = self._link(peer).schedule
-        self.due_s = -math.inf
         if interval_us < 0:
-            sched[name] = [0.0, math.inf]
+            interval = 0.0
         else:
             interval = (1.0 / DEFAULT_RATES_HZ[name] if interval_us == 0
                         else max(interval_us * 1e-6, 0.002))
-            sched[name] = [interval, self.telem.t_s if self.telem else 0.0]
+        self._set_rate(self._link(peer).schedule, name, interval)
         return M.MAV_RESULT_ACCEPTED
+
+    def _set_rate(self, sched: dict[str, list[float]], name: str, interval: float) -> None:
+        """Message ``name`` every ``interval`` [s] (0: stopped) on the link of ``sched``.
+        A message that was stopped starts at once; one already streaming keeps its phase
+        (due at the earlier of its due time and one new interval from now), and a request
+        for the rate it has changes nothing: a ground station repeating its requests (a
+        flood of them) costs their decoding, not a burst of every stream in every
+        period."""
+        entry = sched[name]
+        old_interval, due = entry
+        if interval <= 0.0:
+            entry[0], entry[1] = 0.0, math.inf
+            return
+        if interval == old_interval:
+            return
+        t = self.telem.t_s if self.telem else 0.0
+        due = t if old_interval <= 0.0 else min(due, t + interval)
+        entry[0], entry[1] = interval, due
+        self.due_s = min(self.due_s, due)
 
     def on_request_data_stream(self, peer: Peer, msg: Any) -> None:
         """REQUEST_DATA_STREAM: a group's messages at ``req_message_rate`` [Hz] on
@@ -327,11 +344,9 @@ class TelemetryStreams:
                   else [msg.req_stream_id])
         rate = msg.req_message_rate if msg.start_stop else 0
         sched = self._link(peer).schedule
-        self.due_s = -math.inf
-        t = self.telem.t_s if self.telem else 0.0
         for g in groups:
             for name in STREAM_GROUPS.get(g, ()):
-                sched[name] = [1.0 / rate, t] if rate > 0 else [0.0, math.inf]
+                self._set_rate(sched, name, 1.0 / rate if rate > 0 else 0.0)
 
     def request_message(self, peer: Peer, msg_id: float) -> int:
         """MAV_CMD_REQUEST_MESSAGE of message ``msg_id`` (not HEARTBEAT, which the caller

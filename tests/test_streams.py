@@ -122,6 +122,30 @@ def test_set_message_interval_moves_every_stream_and_get_reads_it_back(stack):
         assert get_interval(m, name) == round(1e6 / DEFAULT_RATES_HZ[name])
 
 
+def test_repeated_stream_requests_keep_the_rate_and_its_phase(stack):
+    """A ground station repeating REQUEST_DATA_STREAM (ten times a simulated second here, a
+    flood in benchmarks/flood.py) gets the rate it asks, not a message at each request: a
+    stream already at that rate keeps its phase."""
+    m = stack["m"]
+    m.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_RC_CHANNELS, 1, 1)
+    assert get_interval(m, "RC_CHANNELS") == 1_000_000
+    first = wait_msg(m, "ATTITUDE", timeout=10)
+    n, end = 0, time.monotonic() + 120
+    while time.monotonic() < end:
+        msg = m.recv_match(blocking=True, timeout=1)
+        if msg is None:
+            continue
+        if msg.get_type() == "RC_CHANNELS":
+            n += 1
+        elif msg.get_type() == "ATTITUDE":      # 10 Hz: a request after each
+            m.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_RC_CHANNELS, 1, 1)
+            if msg.time_boot_ms - first.time_boot_ms >= 6000:
+                break
+    assert 4 <= n <= 8, n
+    m.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_RC_CHANNELS, 2, 1)
+    assert get_interval(m, "RC_CHANNELS") == 500_000
+
+
 def test_request_data_stream_all_off_stops_everything_including_the_winch(stack):
     m = stack["m"]
     m.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_ALL, 0, 0)
