@@ -99,12 +99,13 @@ class NavigationParams(Params):
                                      "tension is above the limit before the vehicle moves "
                                      "(a snap of the line is not an over-tension)",
                                      ge=0, le=10)
-    tether_governor: int = quantity(1, "", "the tether governor (docs/control.md §3), what "
-                                    "it counts on from the winder (GovernorMode): 1 a "
-                                    "length law (the default, with the winder's stop lead; "
-                                    "near the vertical it slows moves to 0.3-1.4 m/s), 2 "
-                                    "the tension law (a free drum pays out: the room is "
-                                    "the whole tether or a braked drum's length), 0 off",
+    tether_governor: int = quantity(2, "", "the tether governor (docs/control.md §3), what "
+                                    "it counts on from the winder (GovernorMode): 2 the "
+                                    "tension law (the default: a free drum pays out, the "
+                                    "room is the whole tether or a braked drum's length), "
+                                    "1 a length law (the paper's, with the winder's stop "
+                                    "lead; near the vertical it slows moves to 0.3-1.4 "
+                                    "m/s), 0 off",
                                     ge=0, le=2)
     tether_brake_acc_m_s2: float = quantity(
         3.0, "m/s^2", "tether governor: the deceleration it brakes at (reached at "

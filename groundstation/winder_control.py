@@ -46,8 +46,8 @@ class WinderControlParams(Params):
     """Gains and limits of the winder torque laws."""
 
     law: str = quantity(
-        "paper", "1", "the law that follows the UAV: the paper's length law or the "
-        "tension-regulating law (docs/control.md §8)",
+        "tension", "1", "the law that follows the UAV: the tension-regulating law (the "
+        "default, docs/control.md §8) or the paper's length law (its experiments)",
         choices=tuple(m.value for m in WinderLaw))
     rate_hz: float = quantity(100.0, "Hz", "control rate (the encoder frames' rate)", gt=0)
     k_length_1_s: float = quantity(6.0, "1/s", "length error gain k_L", gt=0)

@@ -150,8 +150,9 @@ def test_compiled_and_interpreted_closed_loops_agree():
 
 def test_the_winder_step_is_its_components_step():
     p = SystemParams()
-    hosts = [WinderHost(WinderControlParams(), LBarParams(), p.winder, p.tether, 9.81)
-             for _ in "ab"]
+    # the paper's law's step: L-bar, its trims, its lead and floor, the length law
+    hosts = [WinderHost(WinderControlParams(law="paper"), LBarParams(), p.winder, p.tether,
+                        9.81) for _ in "ab"]
     for _ in range(300):
         pos = tuple(RNG.uniform(-15.0, 15.0, 2)) + (float(RNG.uniform(1.0, 30.0)),)
         vel = tuple(RNG.uniform(-2.0, 2.0, 3))

@@ -18,13 +18,18 @@ from tuav_sitl.offline import OfflineRunner
 from tuav_sitl.scenario import ScenarioParams
 from tuavdefs.paramspec import load_toml
 
-#: The companion's tether governor and the winder's stop lead, on (the defaults, said
-#: here so that the failsafes are tested with them whatever the defaults become;
-#: docs/control.md §3).
+#: The companion's tether governor for a length law and the winder's stop lead, on, with
+#: the paper's length law on the catenary truth these failsafes were measured with (said
+#: here so that they are tested with them whatever the defaults are: the tension law on
+#: the lumped line by default; docs/control.md §3, §8).
 _SAFETY = """[navigation]
 tether_governor = 1
 [lbar]
-stop_lead_acc_m_s2 = 2.5"""
+stop_lead_acc_m_s2 = 2.5
+[winder_control]
+law = "paper"
+[tether]
+model = 'catenary'"""
 
 
 def _run(tmp_path, fault: str, goal=(8.0, 4.0, 10.0), duration_s: float = 60.0,
@@ -200,6 +205,10 @@ tension_limit_n = 20.0
 [navigation]
 tension_limit_n = 20.0
 tether_governor = 0
+[winder_control]
+law = "paper"
+[tether]
+model = "catenary"
 [[faults]]
 kind = "tether_snag"
 start_s = 5.0

@@ -34,7 +34,10 @@ ZERO = (0.0, 0.0, 0.0)
 
 
 def governor(**params: float) -> TetherGovernor:
-    return TetherGovernor(NavigationParams(**params), FULL_M, GEAR_M)
+    """The governor for a length law (``tether_governor`` 1, the paper's winder; the
+    default, 2, counts on the tension law: tests/test_tension_law.py)."""
+    return TetherGovernor(NavigationParams(**{"tether_governor": 1, **params}), FULL_M,
+                          GEAR_M)
 
 
 def radial(d_m: float, speed_m_s: float) -> RefSample:

@@ -37,6 +37,31 @@ def test_the_paper_experiments_are_shipped():
             "multi-position", "circle-windy", "multi-position-windy"} <= set(NAMES)
 
 
+def test_the_defaults_are_a_stations_and_the_paper_experiments_keep_the_papers():
+    """Issue 31: a scenario naming none flies the tension law, the governor's tension mode
+    and the lumped truth line (the controllers' model stays the catenary); the paper's
+    experiments set the paper's law on the catenary; the tether-fix scenarios that cannot
+    yet fly the lumped line (issue 33) are pinned to the catenary."""
+    bare = ScenarioParams.from_dict({})
+    assert bare.plant.tether.model == "lumped" and bare.tether.model == "catenary"
+    assert bare.winder_control.law == "tension" and bare.navigation.tether_governor == 2
+    named = ScenarioParams.from_dict({"tether": {"model": "catenary"}})
+    assert named.plant.tether.model == "catenary"
+    truth = ScenarioParams.from_dict({"plant": {"tether": {"model": "catenary"}}})
+    assert truth.plant.tether.model == "catenary" and truth.tether.model == "catenary"
+    paper = {"setpoint", "linear", "circle", "circle-windy", "tether-length",
+             "single-position", "multi-position", "multi-position-windy", "regulation"}
+    pinned = {"mission-gnss-denied", "hover-gnss-loss"}
+    for name in shipped_scenarios():
+        sc = load_scenario(name)
+        if name in paper:
+            assert (sc.winder_control.law, sc.navigation.tether_governor) == ("paper", 0)
+        else:
+            assert (sc.winder_control.law, sc.navigation.tether_governor) == ("tension", 2)
+        expect = "catenary" if name in paper | pinned else "lumped"
+        assert sc.plant.tether.model == expect, name
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_tether_never_taut_never_on_the_ground_rotors_rarely_saturate(results, name):
     m = results[name].metrics
@@ -277,9 +302,11 @@ def test_a_mission_s_do_winch_reaches_the_winch_offline():
     assert runner.ground.notices == []
 
 
+# circle-windy-gnss's estimate on the lumped truth, its default: the tether fix it fuses is
+# biased by the line's drag in the wind (docs/estimation.md; issue 33's), 1.005 m measured
 @pytest.mark.parametrize(("name", "tracking_m", "estimate_m", "inside_3_sigma"),
                          [("circle-rtk", 0.05, 0.03, 0.9), ("circle-gnss", 1.0, 1.0, 0.7),
-                          ("circle-windy-gnss", 1.5, 1.0, 0.7)])
+                          ("circle-windy-gnss", 1.5, 1.1, 0.7)])
 def test_the_circle_flown_on_the_onboard_estimate(results, name, tracking_m, estimate_m,
                                                   inside_3_sigma):
     """The circle on the companion's EKF (RTK-grade and consumer-grade GNSS, calm and in
@@ -353,16 +380,14 @@ def test_a_run_that_never_flies_has_metrics():
     assert m["motor_saturation_fraction"] == 0.0
 
 
-def test_the_slack_floor_keeps_a_dynamic_line_off_the_ground(tmp_path):
+def test_the_slack_floor_keeps_a_dynamic_line_off_the_ground():
     """The winch's slack floor (docs/control.md §3) reads the winder's own fix from the
     tension low-passed as its trim does: on the lumped (dynamic) line in the windy circle
     the load cell sees axial waves and snaps, and a floor fed the raw tension (paying out
     fast, taking back slowly) ratcheted the line out onto the ground (98 % of the run).
     Truth: the plant's lumped line, its nodes against the ground."""
-    text = shipped_scenarios()["circle-windy"].read_text()
-    assert "[tether]" not in text
-    (tmp_path / "s.toml").write_text(text + '\n[tether]\nmodel = "lumped"\n')
-    sc = load_scenario(str(tmp_path / "s.toml")).replace(duration_s=40.0)
+    sc = load_scenario("circle-windy").with_tether_model("lumped").replace(duration_s=40.0)
+    assert sc.winder_control.law == "paper"            # the floor is the length law's
     m = run_scenario(sc, None, progress=None).metrics
     assert m["tether_ground_contact_fraction"] == 0.0
     assert m["min_tether_slack_m"] > 0.0
@@ -374,9 +399,13 @@ def test_an_in_air_start_joins_lbar_without_snapping_a_dynamic_line():
     report. Stepping the reference there set the drum paying out at its torque limit,
     faster than the lumped line takes it: the exit went slack, the line near it fell and
     snapped taut when the drum stopped (top 82 N, drum 72 N at 0.6 s). Joined on a
-    trapezoid (docs/control.md §3): measured 28 N. Truth: the plant's lumped line."""
+    trapezoid (docs/control.md §3): measured 28 N. The join is the paper's length law's
+    (the tension law, the default, follows the pull, not L-bar). Truth: the plant's lumped
+    line."""
     sc = load_scenario("circle-gnss").with_tether_model("lumped").replace(
         duration_s=3.0, metrics_after_s=0.0)
+    sc = sc.replace(winder_control=sc.winder_control.replace(law="paper"),
+                    navigation=sc.navigation.replace(tether_governor=1))
     runner = OfflineRunner(sc)
     gaps: list[float] = []
     r = runner.run(on_sample=lambda _t: gaps.append(runner.ground.winch.join_gap_m))

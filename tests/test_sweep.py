@@ -162,13 +162,16 @@ def test_the_truths_line_model_is_drawn_and_the_controllers_keep_theirs():
     """tether_model sets the truth's line model only (the plant's [tether]); the
     controllers' model, and robustness-gnss's scenario file, stay as they are; the shipped
     robustness-gnss flies the lumped line whatever the default truth."""
-    sc = load_scenario("circle-gnss")
+    sc = load_scenario("circle")                  # the paper's: pinned to the catenary
     assert sc.plant.tether.model == "catenary"
     lumped = sw.apply(sc, None, {"tether_model": "lumped"})
     assert lumped.plant.tether.model == "lumped"
     assert lumped.tether == sc.tether
+    sc = load_scenario("circle-gnss")             # the default truth: the lumped line
+    catenary = sw.apply(sc, None, {"tether_model": "catenary"})
+    assert catenary.plant.tether.model == "catenary" and catenary.tether == sc.tether
     sweep, base = sw.load_sweep("robustness-gnss")
-    assert base.plant.tether.model == "catenary"
+    assert base.plant.tether.model == "lumped"
     assert {sw.run_scenario_of(sweep, base, i).plant.tether.model for i in range(3)} == {
         "lumped"}
     with pytest.raises(ValueError):

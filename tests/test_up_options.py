@@ -22,7 +22,7 @@ from tuav_sitl.up import (
     ports_for,
     sim_address,
 )
-from tuavdefs.params import SystemParams
+from tuavdefs.params import SystemParams, TetherModel
 from tuavdefs.paramspec import ParameterError
 from tuavdefs.simlink import format_sim_address, parse_sim_address
 
@@ -128,7 +128,11 @@ def test_plant_params_set_the_truth_apart_field_by_field(tmp_path):
     # the truth: the model's fields, with the file's replacing theirs
     assert truth.vehicle.mass_kg == 3.2 and truth.vehicle.rotor_thrust_coeff == 1.8e-5
     assert truth.tether.linear_density_kg_m == 0.068 and truth.winder == model.winder
-    assert plant_params(parse(), model) is model
+    # without a file the truth is the model on the default truth line, the lumped one
+    assert plant_params(parse(), model) == model.replace(
+        tether=model.tether.replace(model=TetherModel.LUMPED.value))
+    catenary = parse("--tether-model", "catenary")
+    assert plant_params(catenary, model) is model
     truth_file.write_text("[vehicle]\nmass_kg = 0.0\n")
     with pytest.raises(ParameterError) as exc:
         plant_params(args, model)

@@ -43,13 +43,17 @@ UAV = ((3.0, 4.0, 12.0), (0.0, 0.0, 0.0))     # 13 m from the winder's exit
 GCS = (255, 190)
 ACK = mavlink2.MAV_RESULT_ACCEPTED
 ENC_ID = cp.frame_id(0, cp.Cmd.GET_ENCODER_ESTIMATES)
+#: The paper's length law: what these tests check the winch's modes, L-bar's following,
+#: its trims and its faults against (the default, the tension law, has
+#: tests/test_tension_law.py).
+PAPER = WinderControlParams(law="paper")
 
 
 def make_winch(lbar: LBarParams | None = None) -> Winch:
     """The winch; without the tension trim unless ``lbar`` says otherwise: these tests
     feed it made-up tensions (a constant, or none), not a catenary's."""
     lbar = lbar if lbar is not None else LBarParams(tension_trim_rate_m_s=0.0)
-    host = WinderHost(WinderControlParams(), lbar, PARAMS.winder, PARAMS.tether, G)
+    host = WinderHost(PAPER, lbar, PARAMS.winder, PARAMS.tether, G)
     return Winch(host, PARAMS.winder, PARAMS.tether, G)
 
 
@@ -285,7 +289,7 @@ def test_relaxed_follows_lbar_and_holds_its_length_without_a_uav_position():
     assert w.reference() == (pytest.approx(20.0, abs=1e-5), 0.0)   # its first length
     w.set_uav(UAV)
     encoder(w, 1.0, 20.0)
-    host = WinderHost(WinderControlParams(), LBarParams(), PARAMS.winder, PARAMS.tether, G)
+    host = WinderHost(PAPER, LBarParams(), PARAMS.winder, PARAMS.tether, G)
     assert w.reference()[0] == pytest.approx(host.lbar.length(UAV[0])[0], abs=1e-5)
 
 
@@ -872,7 +876,7 @@ def test_tension_trim_rides_out_a_snapping_load_cell():
     paid = {}
     for tau in (LBarParams().tension_trim_filter_s, 0.0):
         lp = LBarParams(tension_trim_filter_s=tau)
-        host = WinderHost(WinderControlParams(), lp, PARAMS.winder, PARAMS.tether, G)
+        host = WinderHost(PAPER, lp, PARAMS.winder, PARAMS.tether, G)
         lbar, a = host.lbar.length(pos)
         expected = expected_drum_tension_n(a, math.hypot(pos[0], pos[1]), pos[2], host.lbar.w)
         for _ in range(100):
@@ -892,7 +896,7 @@ def test_tension_trim_pays_out_when_the_tether_is_tighter_than_its_model_says():
     from groundstation.lbar import expected_drum_tension_n
 
     lp = LBarParams(tension_trim_filter_s=0.0)    # the law on the tension as it comes
-    host = WinderHost(WinderControlParams(), lp, PARAMS.winder, PARAMS.tether, G)
+    host = WinderHost(PAPER, lp, PARAMS.winder, PARAMS.tether, G)
     lb = host.lbar
     pos, vel = UAV
     lbar, a = lb.length(pos)
@@ -956,7 +960,7 @@ def test_relaxed_holds_a_ground_pre_tension_while_the_uav_is_unknown_or_on_the_g
     assert last[0] == pytest.approx(floor, abs=1e-9) and last[1] == 0.0
     # taking off: climbing, still so low that L-bar would ask for more than twice its
     # tension (a nearly straight line): the pre-tension goes on; higher up, L-bar's law
-    host = WinderHost(WinderControlParams(), LBarParams(), PARAMS.winder, PARAMS.tether, G)
+    host = WinderHost(PAPER, LBarParams(), PARAMS.winder, PARAMS.tether, G)
     low = (2.0, 0.0, 0.3)
     assert host.lbar.length(low)[1] > p.ground_lbar_tension_ratio * host.lbar.a_target
     w.set_uav((low, (0.0, 0.0, 0.5)))
@@ -1252,7 +1256,7 @@ def test_a_heavier_line_than_the_model_does_not_trip_the_tension_trim():
     from groundstation.lbar import LBarParams, catenary_length_m, exit_slope
 
     lp = LBarParams(tension_trim_filter_s=0.0)
-    host = WinderHost(WinderControlParams(), lp, PARAMS.winder, PARAMS.tether, G)
+    host = WinderHost(PAPER, lp, PARAMS.winder, PARAMS.tether, G)
     lb = host.lbar
     pos = (12.0, 0.0, 20.0)
     _, a = lb.length(pos)
@@ -1266,7 +1270,7 @@ def test_a_heavier_line_than_the_model_does_not_trip_the_tension_trim():
     assert lb.trim_state[TS_WEIGHT] == pytest.approx(heavy, rel=1e-3)
     assert lb.trim_state[TS_OFFSET] == 0.0
     # without the exit angle the model's weight is all it has: the heavy line reads tight
-    blind = WinderHost(WinderControlParams(), lp, PARAMS.winder, PARAMS.tether, G)
+    blind = WinderHost(PAPER, lp, PARAMS.winder, PARAMS.tether, G)
     for _ in range(200):
         blind.update(length, 0.0, tension, pos, (0.0, 0.0, 0.0))
     assert blind.lbar.trim_state[TS_OFFSET] > 0.3   # 2 s at the trim's 0.2 m/s

@@ -7,6 +7,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from tuavdefs.params import TetherModel
 from tuavdefs.paramspec import ParameterError
 
 
@@ -32,6 +33,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from tuav_sitl.scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
+    if args.tether_model is not None:
+        scenario = scenario.with_tether_model(args.tether_model)
     if args.duration is not None:
         scenario = scenario.replace(duration_s=args.duration)
     from tuav_sitl.offline import run_scenario
@@ -228,6 +231,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", default=None, help="output folder (default runs/NAME)")
     run.add_argument("--duration", type=float, default=None,
                      help="override the scenario's simulated time [s]")
+    run.add_argument("--tether-model", default=None,
+                     choices=tuple(m.value for m in TetherModel),
+                     help="the plant's truth line, lumped or catenary (default: the "
+                          "scenario's, [tether] model; lumped where it names none)")
     run.add_argument("--no-figures", action="store_true", help="skip figures and animation")
     run.add_argument("--no-animation", action="store_true", help="skip the animation")
     run.add_argument("--no-recording", action="store_true",

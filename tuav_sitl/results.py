@@ -20,7 +20,7 @@ from typing import Any, TextIO
 from tuav_sitl.offline import run_scenario
 from tuav_sitl.scenario import load_scenario, shipped_scenarios
 from tuav_sitl.sweep import shipped_sweeps
-from tuavdefs.params import TetherModel, TetherParams
+from tuavdefs.params import DEFAULT_TRUTH_TETHER, TetherModel
 
 #: (scenario, metric, comparison, limit, description) — the targets of the issue.
 TARGETS: list[tuple[str, str, str, float, str]] = [
@@ -221,7 +221,7 @@ def _other_truth_section(metrics: dict[str, dict[str, Any]], names: list[str]) -
              "Each scenario again with the plant's other truth tether, the controllers "
              "unchanged: the catenary for a scenario shipped on the lumped-mass line, the "
              "lumped line for one shipped on the catenary (docs/model.md). The default "
-             f"truth is the {TetherModel(TetherParams().model).value} line.", "",
+             f"truth is the {DEFAULT_TRUTH_TETHER.value} line.", "",
              "| scenario | truth: shipped → other | position RMSE [m] | min slack [m] | "
              "on ground | max tension [N] | rotor saturation | fails on the other truth |",
              "|---|---|---|---|---|---|---|---|"]

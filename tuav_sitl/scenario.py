@@ -15,7 +15,9 @@ and an error names it (``circle.trajectory.radius_m: must be > 0 m, got -1.0``).
 designers believe it: the controllers' model (the companion's and the ground station's).
 ``[plant.vehicle]``, ``[plant.tether]``, ``[plant.winder]``, ``[plant.environment]`` set the
 truth apart from it, field by field (a field not given there is the model's); ``[wind]`` is
-the plant's alone.
+the plant's alone. The truth's line is the lumped-mass model unless ``[tether] model`` or
+``[plant.tether] model`` says otherwise (:data:`DEFAULT_TRUTH_TETHER`; the controllers model
+the line as a catenary whatever the truth).
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from sitl.faults import FaultParams
 from sitl.sensors import GnssPreset, SensorNoise
 from tuavdefs.frames import local_enu_to_global
 from tuavdefs.params import (
+    DEFAULT_TRUTH_TETHER,
     EnvironmentParams,
     SystemParams,
     TetherParams,
@@ -63,7 +66,9 @@ class PlantParams(Params):
 
     environment: EnvironmentParams = quantity(EnvironmentParams(), "", "gravity and air")
     vehicle: VehicleParams = quantity(VehicleParams(), "", "the quadrotor")
-    tether: TetherParams = quantity(TetherParams(), "", "the tether")
+    tether: TetherParams = quantity(TetherParams(model=DEFAULT_TRUTH_TETHER.value), "",
+                                    "the tether (the lumped-mass line unless a model is "
+                                    "given)")
     winder: WinderParams = quantity(WinderParams(), "", "the winder")
 
 
@@ -237,7 +242,8 @@ class ScenarioParams(Params):
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], prefix: str | None = None) -> Self:
-        """Build from a scenario's tables; each ``[plant.X]`` table starts from ``[X]``."""
+        """Build from a scenario's tables; each ``[plant.X]`` table starts from ``[X]``, the
+        truth's line model from :data:`DEFAULT_TRUTH_TETHER` where neither names one."""
         data = dict(data)
         plant = data.get("plant", {})
         if isinstance(plant, dict):
@@ -246,6 +252,8 @@ class ScenarioParams(Params):
                 model, truth = data.get(name, {}), plant.get(name, {})
                 if isinstance(model, dict) and isinstance(truth, dict):
                     merged[name] = {**model, **truth}
+            if isinstance(merged.get("tether"), dict):
+                merged["tether"] = {"model": DEFAULT_TRUTH_TETHER.value, **merged["tether"]}
             data["plant"] = merged
         return super().from_dict(data, prefix)
 

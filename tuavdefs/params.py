@@ -25,6 +25,10 @@ class TetherModel(enum.Enum):
     LUMPED = "lumped"       #: dynamic lumped-mass line with drag (sitl/lumped.py)
 
 
+#: The truth's line of the stack's runs (a scenario, ``tuav-sitl up``) where none is named;
+#: a bare :class:`TetherParams` keeps the catenary (the controllers' model of the line).
+DEFAULT_TRUTH_TETHER = TetherModel.LUMPED
+
 class WindProfile(enum.Enum):
     """How the mean wind varies with height above the ground."""
 
