@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, NamedTuple, TextIO
 
 from tuav_sitl.locations import Home, parse_home
 from tuavdefs import component_link as cl
+from tuavdefs import params as tp
 from tuavdefs import signing as sg
 from tuavdefs import simlink as sl
 from tuavdefs.canbus import DEFAULT_GROUP, resolve_spec
@@ -36,14 +37,7 @@ from tuavdefs.gcs import (
     UDP_API_PORT_DEFAULT,
     UDP_GCS_PORT_DEFAULT,
 )
-from tuavdefs.params import (
-    DEFAULT_TRUTH_TETHER,
-    SystemParams,
-    TetherModel,
-    TetherParams,
-    VehicleParams,
-    WinderParams,
-)
+from tuavdefs.params import SystemParams, TetherParams, VehicleParams, WinderParams
 from tuavdefs.paramspec import ParameterError, load_toml, to_dict
 
 if TYPE_CHECKING:
@@ -312,11 +306,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--ground-params", default=None, metavar="FILE",
                     help="the ground station's parameters TOML: [winder_control] (law = "
                          "paper | tension), [lbar], [winch], as a scenario's tables")
-    ap.add_argument("--tether-model", default=DEFAULT_TRUTH_TETHER.value,
-                    choices=tuple(m.value for m in TetherModel),
-                    help="the plant's truth line: lumped (the dynamic lumped-mass line, the "
-                         "default) or catenary (quasi-static); the controllers model a "
-                         "catenary either way ([tether] model of --plant-params wins)")
+    ap.add_argument("--tether-model", default=tp.DEFAULT_TRUTH_TETHER.value,
+                    choices=tuple(m.value for m in tp.TetherModel), help="the plant's truth "
+                    "line: lumped (default) or catenary; the controllers model a catenary")
     ap.add_argument("--plant-params", default=None, metavar="FILE",
                     help="the plant's truth where it differs from the controllers' model "
                          "(the parameters above): a system TOML whose fields replace the "
@@ -432,11 +424,9 @@ def ground_params(args: argparse.Namespace) -> GroundStationParams:
 
 def plant_params(args: argparse.Namespace, model: SystemParams) -> SystemParams:
     """The plant's truth: ``model`` (the controllers' parameters) on the line
-    ``--tether-model``, with the fields of ``--plant-params`` replacing its own, table by
-    table."""
+    ``--tether-model``, with ``--plant-params``' fields replacing its own, table by table."""
     if model.tether.model != args.tether_model:
-        model = dataclasses.replace(model, tether=model.tether.replace(
-            model=args.tether_model))
+        model = dataclasses.replace(model, tether=model.tether.replace(model=args.tether_model))
     if args.plant_params is None:
         return model
     path = Path(args.plant_params)
