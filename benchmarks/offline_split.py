@@ -1,7 +1,9 @@
 """Where a control period of the offline loop goes: thread CPU time around each named step.
 
-``python -m benchmarks.offline_split [--scenario circle-rtk] [--seconds 20] [--rounds 3]``
-flies the scenario (after a short warm-up run) with a timer around each step of
+``python -m benchmarks.offline_split [--scenario circle-rtk] [--seconds 20] [--rounds 3]
+[--tether-model lumped|catenary] [--law tension|paper] [--governor N]`` flies the scenario
+(after a short warm-up run; the options override its truth tether, winder law and tether
+governor) with a timer around each step of
 :meth:`tuav_sitl.offline.OfflineRunner.run` and, inside them, around the parts that cost
 most (the filter, the navigator, flight control; the winch fed its frames; the sensor
 batch), and prints each one's CPU time per control period [us] and its share of the
@@ -21,7 +23,7 @@ from collections.abc import Callable
 from typing import Any
 
 from tuav_sitl.offline import OfflineRunner
-from tuav_sitl.scenario import load_scenario
+from tuav_sitl.scenario import ScenarioParams, load_scenario
 
 #: (label, path of the object from the runner, method name, parent label or None); a
 #: label may time several methods (the onboard step: ``Companion.begin`` and ``finish``)
@@ -60,9 +62,24 @@ def _timed(obj: Any, name: str, acc: dict[str, float], label: str) -> None:
     setattr(obj, name, wrapper)
 
 
-def split(scenario: str, seconds: float) -> tuple[dict[str, float], int]:
-    """One run: CPU time [s] per step label (and "total"), and the control periods."""
-    sc = load_scenario(scenario).replace(duration_s=seconds, metrics_after_s=0.0)
+def scenario_variant(name: str, seconds: float, tether_model: str | None = None,
+                     law: str | None = None, governor: int | None = None) -> ScenarioParams:
+    """Scenario ``name`` for ``seconds`` of simulated time (metrics from the start), with
+    the truth's and the model's tether ``tether_model``, the winder's ``law`` and the
+    ``governor`` (TUAV_TETH_GOV) where given."""
+    sc = load_scenario(name).replace(duration_s=seconds, metrics_after_s=0.0)
+    if tether_model is not None:
+        sc = sc.with_tether_model(tether_model)
+    if law is not None:
+        sc = sc.replace(winder_control=sc.winder_control.replace(law=law))
+    if governor is not None:
+        sc = sc.replace(navigation=sc.navigation.replace(tether_governor=governor))
+    return sc
+
+
+def split(sc: ScenarioParams) -> tuple[dict[str, float], int]:
+    """One run of ``sc``: CPU time [s] per step label (and "total"), and the control
+    periods."""
     runner = OfflineRunner(sc)
     acc = dict.fromkeys(_labels(), 0.0)
     for label, path, name, _ in STEPS:
@@ -84,15 +101,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenario", default="circle-rtk")
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--tether-model", choices=("lumped", "catenary"),
+                    help="the truth's and the model's tether (default: the scenario's)")
+    ap.add_argument("--law", choices=("tension", "paper"),
+                    help="the winder's law (default: the scenario's)")
+    ap.add_argument("--governor", type=int, choices=(0, 1, 2),
+                    help="the tether governor, TUAV_TETH_GOV (default: the scenario's)")
     args = ap.parse_args(argv)
-    OfflineRunner(load_scenario(args.scenario).replace(duration_s=1.0,
-                                                       metrics_after_s=0.0)).run()   # warm
-    runs = [split(args.scenario, args.seconds) for _ in range(args.rounds)]
+    variant = (args.tether_model, args.law, args.governor)
+    OfflineRunner(scenario_variant(args.scenario, 1.0, *variant)).run()   # warm
+    runs = [split(scenario_variant(args.scenario, args.seconds, *variant))
+            for _ in range(args.rounds)]
     periods = runs[0][1]
     med = {k: statistics.median(r[0][k] for r in runs) for k in runs[0][0]}
     total = med["total"]
     top = sum(med[label] for label in _labels() if label == label.lstrip())
-    print(f"{args.scenario}, {args.seconds:g} s, {periods} control periods, median of "
+    sc = scenario_variant(args.scenario, args.seconds, *variant)
+    described = (f"{args.scenario} ({sc.plant.tether.model} truth, law "
+                 f"{sc.winder_control.law}, governor {sc.navigation.tether_governor})")
+    print(f"{described}, {args.seconds:g} s, {periods} control periods, median of "
           f"{args.rounds}: {1e6 * total / periods:.1f} us of CPU a period, "
           f"{args.seconds / total:.1f}x real time per CPU second")
     for label in _labels():
