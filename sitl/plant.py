@@ -101,6 +101,8 @@ MAX_LUMPED_SUBSTEPS = 64
 #: Time constant of the critically damped fade of the lumped line's exit allowance
 #: (:func:`sitl.lumped.manage_nodes`) [s].
 ALLOWANCE_TAU_S = 0.1
+#: The rotors' gains when every rotor gives all of its command (:attr:`Plant.rotor_gains`).
+_FULL_GAINS = (1.0, 1.0, 1.0, 1.0)
 POS, VEL, QUAT, RATES, ROTORS, DRUM_ANGLE, DRUM_RATE = (
     slice(0, 3), slice(3, 6), slice(6, 10), slice(10, 13), slice(13, 17), 17, 18)
 
@@ -420,6 +422,9 @@ class Plant:
         self.wind = WindModel(self.params.wind, dt_s)
         self.t_s = t_s
         self.x = initial_state(self.model) if state is None else np.array(state, float)
+        #: the state array :meth:`advance_held` owns and advances in place (a state set
+        #: from outside is copied into a new one first)
+        self._owned: np.ndarray | None = None
         if self.x.shape != (N_STATES,) or not np.all(np.isfinite(self.x)):
             raise ValueError(f"state must be {N_STATES} finite floats")
         self.wind_m_s: tuple[float, float, float] = tuple(self.params.wind.steady_m_s)
@@ -478,12 +483,17 @@ class Plant:
             return
         c0, c1, c2, c3 = rotor_commands
         gains = self.rotor_gains
-        if gains != (1.0, 1.0, 1.0, 1.0):
+        if gains != _FULL_GAINS:
             c0, c1, c2, c3 = c0 * gains[0], c1 * gains[1], c2 * gains[2], c3 * gains[3]
         enabled = winder_enabled
-        m, dt, wind = self.model, self.dt_s, self.wind
+        wind = self.wind
         varies = not wind.constant
-        x = np.array(self.x, dtype=float)   # a new array each call, as the kernel wants it
+        x = self.x
+        if x is not self._owned:
+            # a state set from outside: the kernel takes a float64 array of its own (the
+            # entry point checks neither dtype nor layout); the plant's own it advances in
+            # place
+            x = self._owned = np.array(x, dtype=float)
         t = self.t_s
         # (the entry point converts the numbers to the kernel's float and bool)
         inputs = (c0, c1, c2, c3, bool(armed), winder_torque_n_m, bool(enabled))
@@ -499,9 +509,9 @@ class Plant:
             else:
                 # the step ended at or below the gear: ground contact, then the drum
                 self._ground(x)
-                x[DRUM_ANGLE], x[DRUM_RATE] = m.winder.project(
+                x[DRUM_ANGLE], x[DRUM_RATE] = self.model.winder.project(
                     float(x[DRUM_ANGLE]), float(x[DRUM_RATE]), omega_before, not enabled)
-                t += dt
+                t += self.dt_s
                 n -= 1
                 if not n:
                     break
@@ -687,10 +697,23 @@ class Plant:
         m = self.model
         if not m.lumped:
             return np.zeros((0, 3))
-        n = int(m.line[0])
-        nodes = m.line[1:1 + 6 * n].reshape(n, 6)[::-1, :3]
-        bx, by, bz, _, _, _ = attachment_point(self.x, m.p)
-        return np.vstack((np.zeros((1, 3)), nodes, [[bx, by, bz]]))
+        out = np.empty((int(m.line[0]) + 2, 3))
+        self.line_nodes_into(out)
+        return out
+
+    def line_nodes_into(self, out: np.ndarray) -> int:
+        """:meth:`line_nodes_m` written into the first rows of ``out`` (at least n + 2
+        rows of 3, any float dtype: a recorder's preallocated frame), the rest left as they
+        are; returns the number of points written (0 for the catenary)."""
+        m = self.model
+        if not m.lumped:
+            return 0
+        line = m.line
+        n = int(line[0])
+        out[0] = 0.0
+        out[1:n + 1] = line[1:1 + 6 * n].reshape(n, 6)[::-1, :3]
+        out[n + 1] = attachment_point(self.x, m.p)[:3]
+        return n + 2
 
     def line_energy_j(self) -> float:
         """The lumped line's kinetic, gravitational and elastic energy [J] (0 for the

@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from sitl.plant import DRUM_ANGLE, DRUM_RATE, POS, QUAT, RATES, VEL
-from tuavdefs.frames import quat_to_euler
+from tuavdefs.frames import quat_to_euler_kernel
+from tuavdefs.jit import njit
 
 if TYPE_CHECKING:
     from companion.ekf import NavFilter
@@ -39,14 +39,41 @@ SERIES: tuple[tuple[str, int], ...] = (
     ("lowest", 0), ("wind", 3), ("tether_force", 3), ("tether_force_est", 3),
     ("est_pos", 3), ("est_vel", 3), ("est_euler", 3), ("est_pos_sigma", 3))
 
+#: A row as :meth:`SeriesLog.record` packs it: :data:`SERIES`' columns in the order their
+#: sources give them (the plant's whole state first, as its list comes), with the two
+#: attitudes as quaternions and the drum's angle for the paid-out length (:meth:`SeriesLog.
+#: arrays` turns them into ``euler``, ``est_euler`` and ``length`` once, at the end).
+_ROW: tuple[tuple[str, int], ...] = (
+    ("t", 0), ("pos", 3), ("vel", 3), ("quat", 4), ("rates", 3), ("rotor_speeds", 4),
+    ("drum_angle", 0), ("drum_rate", 0), ("ref_pos", 3), ("ref_vel", 3),
+    ("att_cmd", 3), ("att_des", 3), ("thrust", 0), ("torque", 3), ("rotor_cmd", 4),
+    ("mixer_sat", 0), ("pos_sat", 0), ("d_hat", 3), ("v_pos", 0), ("v_att", 0),
+    ("v_pos_raw", 0), ("v_att_raw", 0), ("tether_force_est", 3), ("v_win", 0),
+    ("lbar", 0), ("lbar_rate", 0), ("lbar_fresh", 0), ("winder_torque", 0),
+    ("drum_tension", 0), ("top_tension", 0), ("regime", 0), ("lowest", 0), ("wind", 3),
+    ("tether_force", 3), ("est_pos", 3), ("est_vel", 3), ("est_quat", 4),
+    ("est_pos_sigma", 3))
 #: The flight controller's diagnostics logged for a control period without flight (on the
-#: ground): att_cmd and att_des; thrust and torque; mixer_sat, pos_sat, d_hat, v_pos, v_att.
+#: ground): att_cmd and att_des; thrust and torque; then mixer_sat, pos_sat, d_hat, v_pos,
+#: v_att, v_pos_raw, v_att_raw and tether_force_est.
 _GROUND_ATTITUDE = (math.nan,) * 6
 _GROUND_WRENCH = (math.nan,) * 4
-_GROUND_REST = (0.0, 0.0, math.nan, math.nan, math.nan, math.nan, math.nan)
+_GROUND_REST = (0.0, 0.0) + (math.nan,) * 10
+#: The estimate's columns (est_pos, est_vel, est_quat, est_pos_sigma) without one.
+_NO_ESTIMATE = (math.nan,) * 13
 _NAN3 = (math.nan,) * 3
-#: The estimate's columns (est_pos, est_vel, est_euler, est_pos_sigma) without one.
-_NO_ESTIMATE = (math.nan,) * 12
+
+
+@njit
+def quat_rows_to_euler(quats: np.ndarray) -> np.ndarray:
+    """Z-Y-X Euler angles (roll, pitch, yaw) [rad], (n, 3), of the (n, 4) unit quaternions
+    (w, x, y, z): :func:`tuavdefs.frames.quat_to_euler` of each row (NaN rows give NaN)."""
+    n = quats.shape[0]
+    out = np.empty((n, 3))
+    for i in range(n):
+        out[i, 0], out[i, 1], out[i, 2] = quat_to_euler_kernel(
+            (quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3]))
+    return out
 
 
 class WinderReadout(NamedTuple):
@@ -70,7 +97,7 @@ class SeriesLog:
     def __init__(self, n: int, drum_radius_m: float, nav_filter: NavFilter | None) -> None:
         self.n = n
         self.i = 0
-        self.width = sum(max(w, 1) for _, w in SERIES)
+        self.width = sum(max(w, 1) for _, w in _ROW)
         self._data = np.empty((n, self.width))
         self._buffer = memoryview(self._data).cast("B")
         packer = struct.Struct(f"{self.width}d")
@@ -89,35 +116,29 @@ class SeriesLog:
         if i >= self.n:
             return
         self.i = i + 1
-        pos, vel, quat, rates = x[POS], x[VEL], x[QUAT], x[RATES]
         state, fs, ref = out.state, out.flight, out.reference
         if fs is not None:
             po, ao = fs.position, fs.attitude
-            control = (*ao.attitude_cmd_rad, *po.attitude_rad, *rates, po.thrust_n,
-                       *ao.torque_n_m, *fs.rotor_commands, fs.mixer_saturated, po.saturated,
-                       *po.disturbance_m_s2, po.lyapunov, ao.lyapunov)
-            lyap_raw = (po.lyapunov_raw, ao.lyapunov_raw)
-            est = fs.tether_force_est_n
+            control = (*ao.attitude_cmd_rad, *po.attitude_rad, po.thrust_n, *ao.torque_n_m,
+                       *fs.rotor_commands, fs.mixer_saturated, po.saturated,
+                       *po.disturbance_m_s2, po.lyapunov, ao.lyapunov, po.lyapunov_raw,
+                       ao.lyapunov_raw, *fs.tether_force_est_n)
         else:
-            control = (*_GROUND_ATTITUDE, *rates, *_GROUND_WRENCH, *out.rotor_commands,
+            control = (*_GROUND_ATTITUDE, *_GROUND_WRENCH, *out.rotor_commands,
                        *_GROUND_REST)
-            lyap_raw, est = (math.nan, math.nan), _NAN3
         ref_pos, ref_vel = ((ref.pos_m, ref.vel_m_s) if ref is not None
                             else (_NAN3, _NAN3))
         filt = self._filter
         if filt is None or state is None:
             estimate = _NO_ESTIMATE
         else:
-            estimate = (*state.pos_m, *state.vel_m_s, *quat_to_euler(state.quat),
-                        *filt.position_sigma_m())
+            estimate = (*state.pos_m, *state.vel_m_s, *state.quat, *filt.position_sigma_m())
         info = forces.info
         self._pack_into(
-            self._buffer, i * self._row_bytes, t_s, *pos, *vel, *ref_pos, *ref_vel,
-            *quat_to_euler(tuple(quat)), *control, winder.lyapunov, *lyap_raw,
-            self._r_w * x[DRUM_ANGLE], winder.lbar_m, winder.lbar_rate_m_s, fresh,
-            x[DRUM_RATE], winder.torque_n_m, forces.drum_tension_n, forces.top_tension_n,
-            int(info.regime), info.lowest_point_height_m, *wind_m_s, *forces.on_uav_n, *est,
-            *estimate)
+            self._buffer, i * self._row_bytes, t_s, *x, *ref_pos, *ref_vel, *control,
+            winder.lyapunov, winder.lbar_m, winder.lbar_rate_m_s, fresh, winder.torque_n_m,
+            forces.drum_tension_n, forces.top_tension_n, int(info.regime),
+            info.lowest_point_height_m, *wind_m_s, *forces.on_uav_n, *estimate)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The columns: 1-D arrays for scalars, (rows, width) arrays for vectors."""
@@ -126,12 +147,15 @@ class SeriesLog:
         # one pass over the rows; the columns are views of the result (a vector's
         # (rows, width) view is column-major)
         cols = np.ascontiguousarray(self._data[:self.i].T)
-        out: dict[str, np.ndarray] = {}
+        row: dict[str, np.ndarray] = {}
         j = 0
-        for name, w in SERIES:
-            out[name] = cols[j] if w == 0 else cols[j:j + w].T
+        for name, w in _ROW:
+            row[name] = cols[j] if w == 0 else cols[j:j + w].T
             j += max(w, 1)
-        return out
+        row["euler"] = quat_rows_to_euler(np.ascontiguousarray(row["quat"]))
+        row["est_euler"] = quat_rows_to_euler(np.ascontiguousarray(row["est_quat"]))
+        row["length"] = self._r_w * row["drum_angle"]
+        return {name: row[name] for name, _ in SERIES}
 
 
 class LineNodesLog:
@@ -151,9 +175,8 @@ class LineNodesLog:
         if t_s < self._next_s - 1e-9 or self.i >= len(self._t):
             return
         self._next_s += 1.0 / LINE_NODES_RATE_HZ
-        nodes = plant.line_nodes_m()
         self._t[self.i] = t_s
-        self._nodes[self.i, :nodes.shape[0]] = nodes
+        plant.line_nodes_into(self._nodes[self.i])
         self.i += 1
 
     def arrays(self) -> dict[str, np.ndarray]:
