@@ -202,6 +202,19 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     return tau_limited, e, e_w, alpha, lyap, saturated or tau_limited != tau
 
 
+def hold_speed(s: np.ndarray, speed_m_s: float) -> None:
+    """Anti-windup for a drum that cannot follow (a snag: the winch's stuck check): the
+    law's state ``s`` with its speed set-point, that set-point's feedback part and its lag
+    restarted from the drum's measured line speed ``speed_m_s`` [m/s]; the tension's and
+    the set-point's filters run on (else the set-point runs on to the law's speed limit,
+    and a drum released with it pays out a metre of slack at once)."""
+    if s[Z_STARTED]:
+        s[Z_SPEED] = speed_m_s
+        s[Z_FEEDBACK] = speed_m_s - s[Z_FF]
+        s[Z_ACC] = 0.0
+        s[Z_LAG] = 0.0
+
+
 @njit
 def slack_tension_n(w_n_m: float, h_m: float, v_m: float, slack_m: float) -> float:
     """The exit tension [N] at which a taut, shallow-sag line spanning ``h_m`` across and

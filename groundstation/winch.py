@@ -83,6 +83,7 @@ from collections.abc import Callable
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from groundstation.tension_law import Z_STARTED, hold_speed
 from groundstation.tether_fix import TetherFix, TetherFixer, TetherFixParams
 from groundstation.winch_axis import (
     FOREIGN_NOTICE_S,
@@ -596,24 +597,28 @@ class Winch:
         else:
             command = self.active.control(self, out)
         self.last_command = command
-        self._check_stuck(out, length)
+        self._check_stuck(out, length, command)
         torque = command.torque_n_m
         return torque if math.isfinite(torque) else 0.0
 
-    def _check_stuck(self, out: WinchOutput, length: float) -> None:
-        """A drum that does not pay out as its reference asks (a snagged line, a jammed
-        drum): the reference ``stuck_error_m`` ahead of the measured length, the line
-        slower than ``stuck_speed_m_s`` (a drum catching up moves), for ``stuck_s`` of
-        simulated time. While it is so the winch reports the drum braked
-        (CLUTCH_ENGAGED: the vehicle bounds its reach by the length) and not HEALTHY (the
-        vehicle's winder failsafe); said as it begins and ends. It ends when the reference
-        is back within half of ``stuck_error_m`` and the drum has moved as far from where
-        it stuck (it is free): a vehicle that stopped short of the snag (its tether
-        governor) brings the reference back without freeing the drum."""
-        behind = self.ref_m - length
+    def _check_stuck(self, out: WinchOutput, length: float, command: WinderCommand) -> None:
+        """A drum that does not pay out as its law asks (a snag, a jam) for ``stuck_s``:
+        the reference ``stuck_error_m`` ahead of the length, the line slower than
+        ``stuck_speed_m_s``; or, under the tension law, the drum standing (within that
+        either way) while its law asks no wind-in and the pull is ``stuck_tension_n`` above
+        the set-point (a free drum renders to it at once: docs/control.md §8.5). Reported
+        braked (CLUTCH_ENGAGED) and not HEALTHY, said as it begins and ends, the tension
+        law's speed set-point held at the drum's meanwhile (anti-windup). It ends with the reference
+        within half of ``stuck_error_m`` and the drum moved as far from where it stuck."""
+        behind, speed = self.ref_m - length, self.omega_rad_s * self.r_w
+        ctl = self.host.controller
+        tension_law = ctl.tension_state[Z_STARTED] > 0.0   # (the length law's step unsets it)
         if not self.drum_stuck:
-            lagging = (behind > self.p.stuck_error_m
-                       and self.omega_rad_s * self.r_w < self.p.stuck_speed_m_s)
+            lagging = behind > self.p.stuck_error_m and speed < self.p.stuck_speed_m_s
+            if tension_law and not lagging:
+                lagging = (abs(speed) < self.p.stuck_speed_m_s
+                           and command.rate_cmd_rad_s >= 0.0
+                           and command.e_length_m > self.p.stuck_tension_n)
             self._stuck_frames = self._stuck_frames + 1 if lagging else 0
             if self._stuck_frames * self.dt_s > self.p.stuck_s - 1e-9:
                 self.drum_stuck = True
@@ -626,6 +631,8 @@ class Winch:
             self._stuck_frames = 0
             out.notices.append(notice(mavlink2.MAV_SEVERITY_NOTICE,
                                       "winch: drum no longer behind its reference"))
+        if self.drum_stuck and tension_law:
+            hold_speed(ctl.tension_state, speed)
 
     # ------------------------------------------------------------------------ the clock
 

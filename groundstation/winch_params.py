@@ -67,6 +67,11 @@ class WinchParams(Params):
     stuck_s: float = quantity(
         0.1, "s", "how long (simulated time) the drum lags stuck_error_m before it counts "
         "as stuck", ge=0)
+    stuck_tension_n: float = quantity(
+        1.0, "N", "tension law: the pull this far above the set-point, the drum standing "
+        "and its law asking no wind-in, for stuck_s: the drum is stuck (a free drum renders "
+        "to any pull above its set-point at once; the lag of stuck_error_m tells 0.1-0.4 s "
+        "later)", gt=0)
     max_extrapolation_s: float = quantity(
         0.1, "s", "the UAV's reported position is carried forward by its velocity to the "
         "winch's sample time over gaps up to this", ge=0)
