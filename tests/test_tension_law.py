@@ -11,6 +11,10 @@ import math
 import numpy as np
 import pytest
 from scipy.optimize import brentq
+from test_winch import PARAMS as BENCH_PARAMS
+from test_winch import R_W, Bench
+from test_winch import UAV as BENCH_UAV
+from test_winch import G as BENCH_G
 
 from companion.governor import (
     GOVERNOR_SLOW_MARGIN_M,
@@ -21,7 +25,10 @@ from companion.governor import (
 from companion.navigation import NavigationParams
 from companion.reference import RefSample
 from groundstation import tension_law as tl
+from groundstation.lbar import LBarParams
+from groundstation.winch import Winch
 from groundstation.winder_control import WinderController, WinderControlParams, WinderLaw
+from groundstation.winder_host import WinderHost
 from sitl.load_cell import LoadCell, LoadCellParams
 from sitl.winder import WinderModel
 from tuav_sitl.offline import OfflineRunner, run_scenario
@@ -129,18 +136,23 @@ max_acc_m_s2 = {acc}
 {extra}"""
 
 
-SNAP_CASES = {
-    # a step of the UAV's radial speed (0 -> +-2 m/s at 8 m/s^2, 10 m along the radius)
-    "radial-out": (_radial((9.0, 0.0, 12.0), (15.0, 0.0, 20.0), 2.0, 8.0, 14.0), 3.0),
-    "radial-in": (_radial((15.0, 0.0, 20.0), (9.0, 0.0, 12.0), 2.0, 8.0, 14.0), 3.0),
-    # the drum stalled (snagged) during an outward move at 1 m/s, released 2 s later:
-    # the peak counted from the release
-    "stall-released": (_radial((9.0, 0.0, 12.0), (15.0, 0.0, 20.0), 1.0, 2.0, 16.0, """
+_SNAG = """
 [[faults]]
 kind = "tether_snag"
 start_s = 4.0
 end_s = 6.0
-"""), 6.0),
+"""
+
+SNAP_CASES = {
+    # a step of the UAV's radial speed (0 -> +-2 m/s at 8 m/s^2, 10 m along the radius)
+    "radial-out": (_radial((9.0, 0.0, 12.0), (15.0, 0.0, 20.0), 2.0, 8.0, 14.0), 3.0),
+    "radial-in": (_radial((15.0, 0.0, 20.0), (9.0, 0.0, 12.0), 2.0, 8.0, 14.0), 3.0),
+    # the drum stalled (snagged) during an outward or an inward move at 1 m/s, released
+    # 2 s later: the peak counted from the release
+    "stall-released": (_radial((9.0, 0.0, 12.0), (15.0, 0.0, 20.0), 1.0, 2.0, 16.0, _SNAG),
+                       6.0),
+    "stall-released-in": (_radial((15.0, 0.0, 20.0), (9.0, 0.0, 12.0), 1.0, 2.0, 16.0,
+                                  _SNAG), 6.0),
 }
 
 
@@ -151,26 +163,91 @@ def _peak_ratio(series, from_s):
     return top[t >= from_s].max() / max(before, after)
 
 
-#: (case, the vehicle's governor): 1 counts on a length law, 2 on the tension law (the
-#: default). With 2 the streamed step's 8 m/s^2 reaches the line unslowed: out, the pull
-#: peaks 2.8x (28 N at 4.6 s), after the stall's release 7.2x; in, 1.43x (issue 31).
-_NOT_YET = pytest.mark.xfail(strict=True, reason="issue 31: with the governor's tension "
-                             "mode the outward step and the released stall snap the line")
-SNAP_RUNS = [*((case, 1) for case in sorted(SNAP_CASES)), ("radial-in", 2),
-             pytest.param("radial-out", 2, marks=_NOT_YET),
-             pytest.param("stall-released", 2, marks=_NOT_YET)]
+#: The shipped line's 2 m segments (nodes added and removed at the drum) snap where the
+#: law and the vehicle do not: a slack exit segment split as the drum pays out, or 2 m
+#: of slack gathered at the exit wound in (docs/control.md §8.5). Measured on the
+#: 2 m line: the step out with governor 2 peaks 2.8x (28 N at 4.62 s, the exit segment
+#: split at 16 m while the exit hung slack; 1.36x with 1 m segments, 1.19x at 4 m/s^2),
+#: the inward stall 1.93x with either governor (19.1 N, 1 s after the release; 1.18x
+#: with 1 m segments). Those cases are asserted on 1 m segments; on 2 m they are known
+#: to fail (strict: a mended line makes them pass, and then this mark goes).
+_LINE_RESOLUTION = pytest.mark.xfail(strict=True, reason="the line's 2 m segments: "
+                                     "docs/control.md §8.5")
+#: (case, the vehicle's governor, the line's segments over its 50 m: 25 is the shipped
+#: 2 m). With governor 1 (a length law's room) the step out never flies: the reported
+#: length less its margin brakes the streamed step at 4.1 s and ends it, 15.1 m out.
+SNAP_RUNS = [("radial-out", 1, 25), ("radial-in", 1, 25), ("stall-released", 1, 25),
+             ("radial-in", 2, 25), ("stall-released", 2, 25), ("radial-out", 2, 50),
+             ("stall-released-in", 2, 50),
+             pytest.param("radial-out", 2, 25, marks=_LINE_RESOLUTION),
+             pytest.param("stall-released-in", 1, 25, marks=_LINE_RESOLUTION),
+             pytest.param("stall-released-in", 2, 25, marks=_LINE_RESOLUTION)]
 
 
-@pytest.mark.parametrize(("case", "governor"), SNAP_RUNS)
-def test_no_snap_on_the_lumped_line(case, governor, tmp_path):
-    """The pull at the UAV peaks at most 1.5 times its steady value (before or after)."""
+@pytest.mark.parametrize(("case", "governor", "segments"), SNAP_RUNS)
+def test_no_snap_on_the_lumped_line(case, governor, segments, tmp_path):
+    """The pull at the UAV peaks at most 1.5 times its steady value (before or after), and
+    the line is never taut."""
     text, from_s = SNAP_CASES[case]
     path = tmp_path / "snap.toml"
     path.write_text(text + _TAIL.format(law="tension")
-                    + f"[navigation]\ntether_governor = {governor}\n")
+                    + f"[navigation]\ntether_governor = {governor}\n"
+                    + f"[plant.tether]\nsegments = {segments}\n")
     res = run_scenario(load_scenario(str(path)), None, progress=None)
     assert _peak_ratio(res.series, from_s) <= 1.5
     assert res.metrics["min_tether_slack_m"] > 0.0
+
+
+def _tension_bench():
+    """The winch on the tension law against the plant's axis and drum (test_winch's
+    bench: a constant line tension at the drum), settled at its set-point; and that
+    set-point [N]."""
+    b = Bench(14.0)
+    host = WinderHost(WinderControlParams(law="tension"), LBarParams(), BENCH_PARAMS.winder,
+                      BENCH_PARAMS.tether, BENCH_G)
+    b.winch = Winch(host, BENCH_PARAMS.winder, BENCH_PARAMS.tether, BENCH_G)
+    b.winch.set_uav(BENCH_UAV)
+    b.run(3.0)
+    setpoint = float(host.controller.tension_state[tl.Z_SETPOINT])
+    b.tension = setpoint
+    b.run(2.0)
+    return b, setpoint
+
+
+def test_a_stuck_drum_is_told_by_the_pull_it_does_not_render_to():
+    """The tension law's drum jammed (its stops closed, as a snag closes them): at the
+    set-point's pull nothing is said (a jam nothing pulls against is no danger); the pull
+    3 N above it, which a free drum renders to at once, is said stuck within 0.25 s, while
+    the law's lag behind its speed set-point is still far below stuck_error_m. Meanwhile
+    the law's speed set-point stays at the drum's (anti-windup): freed, the drum starts
+    from rest under the excess pull, not from the speed the law would have run on to, and
+    is said free once it has moved."""
+    b, setpoint = _tension_bench()
+    winch = b.winch
+    theta = b.theta
+    b.model.set_stops(theta, theta)
+    b.run(2.0)
+    assert not [n for n in b.notices if "stuck" in n] and not winch.drum_stuck
+    t0, n0 = b.t, len(b.notices)
+    b.tension = setpoint + 3.0
+    lag_at = None
+    while not winch.drum_stuck and b.t - t0 < 1.0:
+        lag_at = float(winch.host.controller.tension_state[tl.Z_LAG])
+        b.run(0.01)
+    assert winch.drum_stuck and b.t - t0 <= 0.25
+    assert lag_at is not None and lag_at < 0.2 * winch.p.stuck_error_m
+    assert b.notices[n0:] == [f"winch: drum stuck at {b.length:.1f} m, no pay-out"]
+    b.run(1.0)
+    assert abs(winch.last_command.rate_cmd_rad_s * R_W) < winch.p.stuck_speed_m_s
+    b.model.set_stops(b.model.theta_min, b.model.theta_max)
+    fastest = 0.0
+    for _ in range(10):
+        b.run(0.01)
+        fastest = max(fastest, b.omega * R_W)
+    assert 0.0 < fastest < 0.2
+    b.run(1.0)
+    assert "winch: drum no longer behind its reference" in b.notices[n0:]
+    assert not winch.drum_stuck
 
 
 def test_the_paper_law_snaps_where_the_tension_law_does_not(tmp_path):
