@@ -603,9 +603,9 @@ class Winch:
 
     def _check_stuck(self, out: WinchOutput, length: float, command: WinderCommand) -> None:
         """A drum that does not pay out as its law asks (a snag, a jam) for ``stuck_s``:
-        the reference ``stuck_error_m`` ahead of the length, the line slower than
-        ``stuck_speed_m_s``; or, under the tension law, the drum standing (within that
-        either way) while its law asks no wind-in and the pull is ``stuck_tension_n`` above
+        the reference ``stuck_error_m`` ahead of the length with the drum standing (its
+        line within ``stuck_speed_m_s`` either way); or, under the tension law, the drum
+        standing while its law asks no wind-in and the pull is ``stuck_tension_n`` above
         the set-point (a free drum renders to it at once: docs/control.md §8.5). Reported
         braked (CLUTCH_ENGAGED) and not HEALTHY, said as it begins and ends, the tension
         law's speed set-point held at the drum's meanwhile (anti-windup). It ends with the reference
@@ -614,10 +614,10 @@ class Winch:
         ctl = self.host.controller
         tension_law = ctl.tension_state[Z_STARTED] > 0.0   # (the length law's step unsets it)
         if not self.drum_stuck:
-            lagging = behind > self.p.stuck_error_m and speed < self.p.stuck_speed_m_s
+            standing = abs(speed) < self.p.stuck_speed_m_s
+            lagging = behind > self.p.stuck_error_m and standing
             if tension_law and not lagging:
-                lagging = (abs(speed) < self.p.stuck_speed_m_s
-                           and command.rate_cmd_rad_s >= 0.0
+                lagging = (standing and command.rate_cmd_rad_s >= 0.0
                            and command.e_length_m > self.p.stuck_tension_n)
             self._stuck_frames = self._stuck_frames + 1 if lagging else 0
             if self._stuck_frames * self.dt_s > self.p.stuck_s - 1e-9:

@@ -63,7 +63,8 @@ class WinchParams(Params):
     bus_good_windows: int = quantity(
         10, "1", "good windows in a row that end a degraded bus", ge=1)
     stuck_speed_m_s: float = quantity(
-        0.05, "m/s", "a drum paying out slower than this while it lags may be stuck", gt=0)
+        0.05, "m/s", "a drum whose line moves slower than this (either way) while it lags "
+        "may be stuck", gt=0)
     stuck_s: float = quantity(
         0.1, "s", "how long (simulated time) the drum lags stuck_error_m before it counts "
         "as stuck", ge=0)
