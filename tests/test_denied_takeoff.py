@@ -53,6 +53,7 @@ def test_the_pad_is_a_position_source_at_rest_and_through_the_take_off(monkeypat
     constraint) it holds for PAD_HOLD_S (5 s here) and then, no fix having come, raises NO_GNSS;
     tether fixes fused after leaving do not end the hold early."""
     monkeypatch.setattr(health, "PAD_HOLD_S", 5.0)
+    monkeypatch.setattr(health, "TETHER_HOLD_S", 3.0)
     params = EstimatorParams()
     f, run_to = _parked_filter(params)
     t = run_to(12.0, rest=True)
@@ -70,7 +71,8 @@ def test_the_pad_is_a_position_source_at_rest_and_through_the_take_off(monkeypat
     assert AidSource.PAD not in st.sources
     assert st.reasons & HealthReason.NO_GNSS and st.health == FilterHealth.UNHEALTHY
     # a second filter: fixes that come and go after leaving the pad (a line lifting off
-    # the ground) do not end the hold; past PAD_HOLD_S they alone are the source
+    # the ground) do not end the hold; past PAD_HOLD_S they alone are the source (the
+    # last one held TETHER_HOLD_S, 3 s here: to 16 s)
     g, run_g = _parked_filter(params)
     run_g(12.0, rest=True)
     run_g(13.0, rest=False, fix=True)
@@ -86,6 +88,34 @@ def test_the_pad_is_a_position_source_at_rest_and_through_the_take_off(monkeypat
     run_h(12.0, rest=True)
     t = run_h(12.5, rest=False)
     assert h.status(t).reasons & HealthReason.NO_GNSS
+
+
+def test_the_last_tether_fix_holds_through_a_gap_and_a_rejected_fix_does_not(monkeypatch):
+    """Off the pad (no stationary constraint), fused tether fixes, then a gap: the filter
+    stays healthy for TETHER_HOLD_S after the last fix fused (the line slack for a moment),
+    then raises NO_GNSS; fixes far off (rejected by the gate) do not renew the hold, and a
+    fix fused again ends NO_GNSS."""
+    monkeypatch.setattr(health, "PAD_HOLD_S", 0.0)
+    params = EstimatorParams()
+    f, run_to = _parked_filter(params)
+    run_to(12.0, rest=True)
+    t = run_to(14.0, rest=False, fix=True)        # in the air on the fixes
+    st = f.status(t)
+    assert st.health == FilterHealth.HEALTHY and AidSource.TETHER in st.sources
+    t = run_to(14.0 + 0.8 * health.TETHER_HOLD_S, rest=False)
+    st = f.status(t)
+    assert AidSource.TETHER not in st.sources
+    assert st.health == FilterHealth.HEALTHY and not st.reasons & HealthReason.NO_GNSS
+    far = (PARKED[0] + 30.0, PARKED[1], PARKED[2])
+    cov = ((0.04, 0.0, 0.0), (0.0, 0.04, 0.0), (0.0, 0.0, 0.04))
+    for k in range(10):                             # rejected: 30 m off at a sigma of 0.2 m
+        tk = t + 0.1 * k
+        assert not f.fuse_tether(tk, tk - 0.02, far, cov)
+    t = run_to(14.0 + 1.2 * health.TETHER_HOLD_S, rest=False)
+    assert f.status(t).reasons & HealthReason.NO_GNSS
+    t = run_to(t + 0.5, rest=False, fix=True)
+    st = f.status(t)
+    assert st.health == FilterHealth.HEALTHY and AidSource.TETHER in st.sources
 
 
 def _lumped_denied(**tables: dict) -> object:

@@ -164,6 +164,22 @@ def _pad_holds(t: float, src: AidSources) -> bool:
     return t - left <= PAD_HOLD_S and src.gnss_pos.time_last_fused < left
 
 
+#: In flight, how long [s] after its last fused fix the tether still counts as a position
+#: source, the IMU dead-reckoning from it (PX4 EKF2's ``EKF2_NOAID_TOUT``, 5 s): the
+#: winch's fixes pause while the line goes slack for a moment (the vehicle moving in
+#: towards the winder faster than the drum winds in, or passing over it, the load cell
+#: reading less than the fix needs) or its fixes are rejected; 1-3 s gaps on the lumped
+#: line in the GNSS-denied mission (docs/estimation.md §10, *Gaps in the fixes*).
+TETHER_HOLD_S = 5.0
+
+
+def _tether_holds(t: float, src: AidSources) -> bool:
+    """Whether the last tether fix fused still holds the position at ``t`` [s]: within
+    :data:`TETHER_HOLD_S` of it, no GNSS position fused since."""
+    last = src.tether.time_last_fused
+    return t - last <= TETHER_HOLD_S and src.gnss_pos.time_last_fused < last
+
+
 def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P: np.ndarray,
                   heading_innovation_rad: float, src: AidSources,
                   const_pos: bool) -> FilterStatus:
@@ -186,7 +202,7 @@ def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P:
         gnss_vel = src.gnss_vel.in_use(t)
         tether = src.tether.in_use(t)
         pad = _pad_holds(t, src)
-        held = gnss_pos or tether or pad
+        held = gnss_pos or tether or pad or _tether_holds(t, src)
         if not (held or gnss_vel):
             reasons |= HealthReason.NO_GNSS
         for kind, reason in _REJECTED:
