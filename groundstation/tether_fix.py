@@ -204,9 +204,17 @@ class TetherFixer:
         load = (wind[0], wind[1], -w)
         c, s = math.cos(az), math.sin(az)
         if height_m is not None:
-            z = max(height_m, 0.0)
+            z = min(max(height_m, 0.0), L)
             a = T / w
-            hang = min(math.sqrt(z * z + 2.0 * a * z), L)
+            if z > 0.0:
+                # a line hanging to z from a touchdown at the exit has a = (L^2 - z^2)/2z:
+                # one pulling harder would leave the exit rising, which the arm says it
+                # does not (a dynamic line's tension, the pull of a line whose part on
+                # the ground friction holds): the exit is then its touchdown, and the end
+                # no farther than such a line reaches (without it, a taut line read flat
+                # put the end beyond the straight line's reach, 17 m off at 10 m up)
+                a = min(a, 0.5 * (L * L - z * z) / z)
+            hang = math.sqrt(z * z + 2.0 * a * z)
             d = L - hang + a * math.acosh(1.0 + z / a) if a > 0.0 else L - hang
             # the wind's drag blows the hanging part sideways by about its share of the
             # load over its length

@@ -187,6 +187,28 @@ def test_line_on_the_ground_with_the_reported_height():
         assert float(e @ np.linalg.solve(np.array(cov0), e)) <= 11.34
 
 
+def test_a_line_read_flat_is_never_fixed_beyond_its_reach():
+    """The guide arm reading the line flat while the vehicle reports itself high on a
+    short, pulling line (on the lumped line: the exit segment read flat for a moment under
+    a tension spike, 7.3 N at 9.8 m on 10.3 m of line): the fix is no farther out than the
+    line's straight reach, no nearer than its slack hanging straight down, and its error
+    from the truth (2.94 m out) within its covariance; so for any pull."""
+    f = _fixer()
+    truth = (1.80, 2.33, 9.82)
+    L, az = 10.29, math.atan2(truth[1], truth[0])
+    reported = (1.35, -0.84, 9.81)
+    for tension in (0.2, 1.0, 7.27, 40.0):
+        p, cov, ground = f.position(L, tension, az, 0.001, reported_m=reported)
+        assert ground
+        d = math.hypot(p[0], p[1])
+        assert L - reported[2] - 1e-9 <= d <= math.sqrt(L * L - reported[2] ** 2) + 1e-9
+        e = np.subtract(p, truth)
+        assert float(e @ np.linalg.solve(np.array(cov), e)) <= 11.34
+    # a height the line cannot reach: the line straight up
+    p, _, _ = f.position(L, 7.27, az, 0.001, reported_m=(0.0, 0.0, L + 0.5))
+    assert math.hypot(p[0], p[1]) == pytest.approx(0.0, abs=1e-9)
+
+
 def test_a_heavier_line_than_believed_is_fixed_on_the_winders_weight_estimate():
     """The plant's line 1.6x the belief's weight: the fix on the belief lands far from
     the UAV; handed the true weight as the winder's estimate, it uses all of it beyond
