@@ -51,7 +51,7 @@ def test_the_defaults_are_a_stations_and_the_paper_experiments_keep_the_papers()
     assert truth.plant.tether.model == "catenary" and truth.tether.model == "catenary"
     paper = {"setpoint", "linear", "circle", "circle-windy", "tether-length",
              "single-position", "multi-position", "multi-position-windy", "regulation"}
-    pinned = {"mission-gnss-denied", "hover-gnss-loss", "circle-windy-gnss"}
+    pinned = {"hover-gnss-loss", "circle-windy-gnss"}
     for name in shipped_scenarios():
         sc = load_scenario(name)
         if name in paper:
@@ -66,14 +66,23 @@ def test_the_defaults_are_a_stations_and_the_paper_experiments_keep_the_papers()
 def test_tether_never_taut_never_on_the_ground_rotors_rarely_saturate(results, name):
     m = results[name].metrics
     sc = results[name].scenario
-    assert m["min_tether_slack_m"] > 0.0
+    s = results[name].series
+    if sc.flies_mission:
+        # never taut in flight; before the take-off the winch's ground pre-tension may
+        # pull a short lumped line straight once: without GNSS the only way to a fix on
+        # the ground, and a line under two nominal segments (4 m) is one segment, which
+        # pulls nothing until it is straight (mission-gnss-denied: 0.3 mm at 16.5 N)
+        slack = s["length"] - np.linalg.norm(s["pos"], axis=1)
+        assert slack[np.isfinite(s["ref_pos"]).all(axis=1)].min() > 0.0
+        assert m["min_tether_slack_m"] > -1e-3
+    else:
+        assert m["min_tether_slack_m"] > 0.0
     # a mission starts and ends on the ground; above 8 m/s of mean wind the line's own
     # drag may lay it on the ground at the exit (issue 31: there it must stay controlled
     # and never taut; hover-windy-lumped, 12 m/s)
     if not sc.flies_mission and math.hypot(*sc.wind.steady_m_s) <= 8.0:
         assert m["tether_ground_contact_fraction"] == 0.0
     assert m["motor_saturation_fraction"] < 0.01
-    s = results[name].series
     # independent check of the slack metric from the raw series
     slack = s["length"] - np.linalg.norm(s["pos"], axis=1)
     assert slack.min() == pytest.approx(m["min_tether_slack_m"])

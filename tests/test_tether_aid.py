@@ -299,15 +299,21 @@ def test_hover_holds_through_a_gnss_loss_on_the_tether_fix():
 
 
 def test_mission_without_any_gnss():
-    """The shipped mission-gnss-denied: every item reached within 1 m (truth), landed and
-    disarmed, the tether never taut."""
+    """The shipped mission-gnss-denied (on the lumped line): every item reached within 1 m
+    (truth), landed and disarmed, the tether never taut in flight. Before the take-off
+    the winch's ground pre-tension pulls the line straight once, the only way to a fix on
+    the ground without GNSS: 2 m of line is one lumped segment, which pulls nothing until
+    it is straight, and then is strained (0.3 mm at 16.5 N for a moment)."""
     sc = load_scenario("mission-gnss-denied")
     runner = OfflineRunner(sc)
     res = runner.run()
     m = res.metrics
     assert m["items_reached"] == [1, 2, 3, 4, 5, 6]
     assert m["landed_disarmed"] is True
-    assert m["min_tether_slack_m"] > 0.0
+    s = res.series
+    slack = s["length"] - np.linalg.norm(s["pos"], axis=1)
+    assert slack[np.isfinite(s["ref_pos"]).all(axis=1)].min() > 0.0
+    assert m["min_tether_slack_m"] > -1e-3
     t, pos = res.series["t"], res.series["pos"]
     targets = {3: (10.0, 0.0, 12.0), 4: (6.0, 8.0, 10.0), 5: (-2.0, 6.0, 8.0)}
     for seq, ts in zip(m["items_reached"], m["items_reached_t_s"], strict=True):
