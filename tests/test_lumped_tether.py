@@ -714,3 +714,96 @@ def test_a_line_too_light_to_integrate_is_refused_with_its_field(tmp_path: Path)
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 2
     assert "plant: bad parameter: TetherParams.model" in run.stderr
+
+
+# --- what a split or a merge at the exit conserves --------------------------------------
+
+def _moving_line(stretch, length, seed):
+    """A 2 m-segment line of 8 free nodes paid out to ``length`` [m] (its exit segment
+    near SPLIT or MERGE nominal lengths), settled with its top where the chord is
+    ``1 + stretch`` times the length, then given random velocities [m/s]; returns the
+    line and the top (position, velocity)."""
+    d = length * (1.0 + stretch)
+    top = (0.6 * d, 0.0, 0.8 * d)
+    line = Line(17.6, total_length_m=50.0, segments=25, ground_friction_coeff=0.0)
+    line.lay(top)
+    assert line.n == 8
+    line.length = length
+    line.settle(top, seconds=3.0, h=2e-4)
+    rng = np.random.default_rng(seed)
+    for k in range(line.n):
+        line.node(k)[3:] = rng.normal(scale=0.5, size=3)
+    return line, np.array([*top, *rng.normal(scale=0.5, size=3)])
+
+
+def _ledger(line, top6, length):
+    """(energy [J], momentum [kg m/s], the pull on the top and the exit segment's on the
+    exit (6 floats) [N], the elastic energy [J], the exit segment's strain) of the line at
+    ``length`` with the exit's share at rest."""
+    rho, ea = line.tp.linear_density_kg_m, line.tp.axial_stiffness_n
+    ls_m, n = line.tp.segment_length_m, line.n
+    exit_len = length - n * ls_m
+    masses = [ls_m] * (n - 1) + [0.5 * (ls_m + exit_len)]
+    mom = sum(rho * m * line.node(k)[3:] for k, m in enumerate(masses))
+    f = line_rhs(line.ls, line.scratch[0], line.lp, *top6, length, 0.0, line.node_wind,
+                 line.top_wind)
+    pts = [top6[:3]] + [line.node(k)[:3] for k in range(n)] + [np.zeros(3)]
+    rest = [ls_m] * n + [exit_len - line.ls[-1]]
+    elastic = sum(0.5 * ea * max(np.linalg.norm(a - b) - l0, 0.0) ** 2 / l0
+                  for a, b, l0 in zip(pts[:-1], pts[1:], rest, strict=True))
+    energy = line_energy_j(line.ls, line.lp, *top6[:3], length)
+    # the exit segment's own pull: its lower half's weight (the ground's) given back
+    # where the pull lifts it
+    lift = 0.5 * rho * G * exit_len if f[7] > 0.0 else 0.0
+    f = np.array([f[0], f[1], f[2], f[5], f[6], f[7] + lift])
+    exit_strain = np.linalg.norm(pts[-2]) / rest[-1] - 1.0
+    return energy, mom, f, elastic, exit_strain
+
+
+#: the chord over the line's length, less one: 22 N of pull, or 30 % of slack
+STRETCH = {"taut": 2e-4, "slack": -0.3}
+
+
+@pytest.mark.parametrize("state", ["taut", "slack"])
+def test_a_split_adds_no_energy_and_keeps_momentum_and_the_end_pulls(state):
+    # paying out past SPLIT nominal lengths on a moving line: the new node takes its mass
+    # from the exit's share (at rest), so the free nodes' momentum is the same; the elastic
+    # energy is the same (a taut segment's two parts keep its strain; a slack one's stay
+    # slack); the kinetic energy can only fall (the interpolated velocity is a mean); and
+    # the pulls at the top and at the exit are the same as before
+    line, top6 = _moving_line(STRETCH[state], 8 * 2.0 + 2.0 * 2.0 - 1e-6, seed=3)
+    line.length += 2e-6                   # (the line paid out joins the exit's share)
+    e0, p0, f0, el0, strain = _ledger(line, top6, line.length)
+    assert (strain > 0.0) == (state == "taut")
+    assert manage_nodes(line.ls, line.lp, line.length, 0.0, 1.0, top6) == 1
+    e1, p1, f1, el1, _ = _ledger(line, top6, line.length)
+    np.testing.assert_allclose(p1, p0, rtol=1e-9, atol=1e-12)
+    assert el1 == pytest.approx(el0, rel=1e-6, abs=1e-12)
+    assert e1 <= e0 + 1e-9
+    assert e0 - e1 < 0.05 * e0              # what the mean velocity takes, not more
+    np.testing.assert_allclose(f1, f0, rtol=1e-6, atol=1e-6 * max(1.0, abs(f0).max()))
+
+
+@pytest.mark.parametrize("state", ["taut", "slack"])
+def test_a_merge_adds_no_energy_and_keeps_momentum_and_the_end_pulls(state):
+    # reeling in past MERGE nominal lengths on a moving line: the two nodes at the exit
+    # become one at their mean velocity (the half segment that joins the exit's share
+    # carrying its momentum there); a taut exit segment keeps its strain (the allowance)
+    # and strain rate, so its elastic energy and both end pulls stay; no energy is added
+    line, top6 = _moving_line(STRETCH[state], 8 * 2.0 + MERGE * 2.0 + 1e-6, seed=5)
+    line.length -= 2e-6
+    e0, p0, f0, el0, strain = _ledger(line, top6, line.length)
+    assert (strain > 0.0) == (state == "taut")
+    assert manage_nodes(line.ls, line.lp, line.length, 0.0, 1.0, top6) == -1
+    e1, p1, f1, el1, _ = _ledger(line, top6, line.length)
+    q, v = line.node(line.n - 1)[:3], line.node(line.n - 1)[3:]
+    gone = line.tp.linear_density_kg_m * 0.5 * line.tp.segment_length_m
+    change = p1 + gone * v - p0
+    if state == "taut":
+        # the survivor's speed along the new chord is set to keep the strain rate: an
+        # impulse exchanged with the exit along that chord, none across it
+        change -= (change @ q) * q / (q @ q)
+    np.testing.assert_allclose(change, 0.0, atol=1e-9 * np.abs(p0).max())
+    assert el1 == pytest.approx(el0, rel=0.02, abs=1e-12)
+    assert e1 + 0.5 * gone * (v @ v) <= e0 + 1e-9
+    np.testing.assert_allclose(f1, f0, rtol=0.02, atol=0.02 * max(1.0, abs(f0).max()))
