@@ -37,8 +37,11 @@ Records, and when they are written (simulated time):
 - at each check of the filter's health (companion.onboard.HEALTH_CHECK_S): ``XKF3`` (the
   innovations of GNSS velocity and position, barometric height and magnetic heading),
   ``XKF4`` (the square roots of the test ratios x 100, the fault, timeout, solution and
-  GNSS-check bits) and the project's ``XKFT`` (the tether fix's innovation, test ratio,
-  whether it is fused). Innovations are ArduPilot's sign: estimate minus measurement;
+  GNSS-check bits) and the project's ``XKFT`` (the tether's innovation, test ratio,
+  whether it is fused: the ground station's fix, or the raw reading fused tightly, whichever
+  was tried last) and, with the tight fusion, ``XKTL`` (the line's states: weight and drag
+  factors, the guide arm's biases [rad], and their standard deviations). Innovations are
+  ArduPilot's sign: estimate minus measurement;
 - ``TETH`` (the project's own): each winch report: paid-out length [m], line speed [m/s],
   tension [N].
 
@@ -179,6 +182,8 @@ FORMATS = [
               "s#-----rmm-----", "F-BBBBB000-----"),
     LogFormat(85, "XKQ", "QBffff", "TimeUS,C,Q1,Q2,Q3,Q4", "s#----", "F-0000"),
     LogFormat(86, "XKFT", "QBfffHB", "TimeUS,C,ITN,ITE,ITD,TR,U", "s#mmm--", "F-000B-"),
+    LogFormat(87, "XKTL", "QBffffffff", "TimeUS,C,KW,KC,BPsi,BEps,SKW,SKC,SBPsi,SBEps",
+              "s#--rr--rr", "F-00000000"),
 ]
 
 
@@ -505,6 +510,9 @@ class FlightLog:
         itn, ite, itd = enu_to_ned(st.tether_innovation_m)
         w.write("XKFT", t_us, 0, -itn, -ite, -itd, _u16(st.tether_variance * 100.0),
                 int(AidSource.TETHER in sources))
+        f = onboard.filter
+        if f is not None and f.tether_line_fusion:
+            w.write("XKTL", t_us, 0, *f.line_states, *f.line_sigmas)
         if glitch != self._glitch:
             self._glitch = glitch
             self.error(ErrorSubsystem.GPS,

@@ -111,6 +111,8 @@ class Companion:
         self._line = LineModel.from_tether(params.tether, g, env.air_density_kg_m3)
         #: the winch's latest raw tether reading (None: none yet)
         self._reading: TetherReading | None = None
+        #: raw readings received since the last step (the filter's tight fusion)
+        self._readings: list[TetherReading] = []
         self.filter: NavFilter | None = self._new_filter()
         self.gps: GpsFix | None = None
         """The last GNSS fix received (what GPS_RAW_INT reports)."""
@@ -183,7 +185,8 @@ class Companion:
         if est.kind != "ekf":
             return None
         return NavFilter(est, self.params.environment.gravity_m_s2,
-                         ned_to_enu(tuple(est.earth_field_ned_gauss)), self._drag_model)
+                         ned_to_enu(tuple(est.earth_field_ned_gauss)), self._drag_model,
+                         self._line, tuple(self.params.vehicle.tether_attachment_m))
 
     def wind_estimate(self) -> tuple[float, float, float]:
         """The onboard wind estimate [m/s], z-up (what WIND reports). With the filter's
@@ -230,8 +233,10 @@ class Companion:
     def tether_reading(self, reading: TetherReading) -> None:
         """The raw reading a tether fix of the winch was made of (length, tension, exit
         angles, at its sample time on the vehicle's clock): the tether's pull in the drag
-        fusion."""
+        fusion, and the filter's tight fusion (docs/estimation.md §11)."""
         self._reading = reading
+        if len(self._readings) < 16:      # bounded: a flood waits for the next step
+            self._readings.append(reading)
 
     def _line_pull(self, t_s: float, pos_m: tuple[float, float, float]
                    ) -> tuple[float, float, float] | None:
@@ -246,17 +251,35 @@ class Companion:
             return None
         m = self._line
         u = f.wind_m_s
-        top = line_top(r.length_m, r.tension_n, r.azimuth_rad, r.elevation_rad,
-                       m.weight_n_m, m.drag_n_s2_m3, u[0], u[1], m.ea_n,
+        kw, kc, b_psi, b_eps = f.line_states
+        top = line_top(r.length_m, r.tension_n, r.azimuth_rad - b_psi, r.elevation_rad - b_eps,
+                       kw * m.weight_n_m, kc * m.drag_n_s2_m3, u[0], u[1], m.ea_n,
                        max(pos_m[2], 1.0), est.drag.tether_wind_shear, 1.0, m.steps)
         return (-top[3], -top[4], -top[5])
 
-    def _fuse_external(self, t_s: float) -> None:
+    def _fuse_readings(self, t_s: float) -> set[float]:
+        """The raw tether readings into the filter's tight fusion; the sample times of
+        those it took (their ground station's fixes are then not fused as well)."""
+        f = self.filter
+        readings, self._readings = self._readings, []
+        taken: set[float] = set()
+        if f is None or not f.tether_line_fusion:
+            return taken
+        flying = self.nav.flying
+        for r in readings:
+            if f.fuse_tether_reading(t_s, r.t_s, r.length_m, r.tension_n, r.azimuth_rad,
+                                     r.elevation_rad, flying) is not None:
+                taken.add(round(r.t_s, 3))
+        return taken
+
+    def _fuse_external(self, t_s: float, taken: set[float]) -> None:
         f = self.filter
         fixes, self._external = self._external, []
         if f is None:
             return
         for fix in fixes:
+            if taken and round(fix.t_s, 3) in taken:
+                continue      # its raw reading was fused tightly
             pos = fix.pos_m
             if f.aligned and any(self._attach_m):
                 # the fix is of the attachment point: the vehicle's origin is R r_a below
@@ -382,8 +405,9 @@ class Companion:
         if self.started and self.nav.landed and not self.nav.armed:
             # at rest on its gear: no drift without GNSS, and the gear's height
             f.fuse_stationary(t, self.params.vehicle.gear_height_m)
+        taken = self._fuse_readings(t) if self._readings else set()
         if self._external:
-            self._fuse_external(t)
+            self._fuse_external(t, taken)
         if f.drag_due(t):
             self._fuse_drag(t)
         self._check_health(t)

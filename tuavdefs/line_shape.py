@@ -268,6 +268,64 @@ def end_differences(x: np.ndarray, step: np.ndarray, ea_n: float, reference_heig
     return _end_at(x, ea_n, reference_height_m, shear_exponent, min_height_m, steps)
 
 
+#: The relative step of :func:`end_slopes`' forward differences (about the square root of
+#: the float's resolution, times each input's scale).
+SLOPE_STEP = 2e-8
+
+
+@njit
+def end_slopes(x: np.ndarray, ea_n: float, reference_height_m: float, shear_exponent: float,
+               min_height_m: float, steps: int, out: np.ndarray
+               ) -> tuple[float, float, float, float, float, float]:
+    """(the end [m], the tension there [N]: :func:`line_top`) at the inputs ``x``
+    (:class:`Column` order), and in ``out`` (3 x :data:`N_COLUMNS`) the Jacobian of the
+    end with respect to every input, for a filter to linearise with at the cost of eight
+    integrations: the length's column is the line's tangent at the end, ``dp/ds = (1/|T| +
+    1/EA) T(L)``; the biases' are the angles' negated; the others forward differences of
+    :data:`SLOPE_STEP` times the input's scale (the tension, the wind's speed, the weight,
+    the drag; 1 rad for the angles). Without drag (no wind, or none per metre) the wind's
+    and the drag's columns are 0: the quadratic drag has no slope at calm air."""
+    L, t0 = max(x[0], 0.0), x[1]
+    az, el = x[2] - x[8], x[3] - x[9]
+    w, c = max(x[6], 0.0), max(x[7], 0.0)
+    ux, uy = x[4], x[5]
+    base = line_top(L, t0, az, el, w, c, ux, uy, ea_n, reference_height_m, shear_exponent,
+                    min_height_m, steps)
+    tx, ty, tz = base[3], base[4], base[5]
+    tn = math.sqrt(tx * tx + ty * ty + tz * tz)
+    g = (1.0 / tn if tn > 0.0 else 0.0) + (1.0 / ea_n if ea_n > 0.0 and math.isfinite(ea_n)
+                                           else 0.0)
+    out[0, 0], out[1, 0], out[2, 0] = g * tx, g * ty, g * tz
+    calm = c <= 0.0 or (ux == 0.0 and uy == 0.0)
+    wind = math.hypot(ux, uy)
+    for k in range(1, 8):
+        if calm and (k == 4 or k == 5 or k == 7):
+            out[0, k] = out[1, k] = out[2, k] = 0.0
+            continue
+        if k == 1:
+            h = SLOPE_STEP * max(abs(t0), 1.0)
+        elif k == 2 or k == 3:
+            h = SLOPE_STEP
+        elif k == 4 or k == 5:
+            h = SLOPE_STEP * max(wind, 1.0)
+        elif k == 6:
+            h = SLOPE_STEP * max(w, 1e-3)
+        else:
+            h = SLOPE_STEP * max(c, 1e-4)
+        e = line_top(L, t0 + h if k == 1 else t0, az + h if k == 2 else az,
+                     el + h if k == 3 else el, w + h if k == 6 else w,
+                     c + h if k == 7 else c, ux + h if k == 4 else ux,
+                     uy + h if k == 5 else uy, ea_n, reference_height_m, shear_exponent,
+                     min_height_m, steps)
+        out[0, k] = (e[0] - base[0]) / h
+        out[1, k] = (e[1] - base[1]) / h
+        out[2, k] = (e[2] - base[2]) / h
+    for i in range(3):
+        out[i, 8] = -out[i, 2]
+        out[i, 9] = -out[i, 3]
+    return base
+
+
 @njit
 def _add_wind_point(x: np.ndarray, xe: np.ndarray, base: tuple[float, float, float],
                     dx: float, dy: float, weight: float, ea_n: float, zr: float,
@@ -392,6 +450,16 @@ def jacobian(model: LineModel, x: np.ndarray, relative_step: float = 1e-6
     out = np.zeros((3, N_COLUMNS))
     e = differences(model, x, relative_step * scale, out)
     return e, out
+
+
+def slopes(model: LineModel, x: np.ndarray) -> tuple[Vec3, Vec3, np.ndarray]:
+    """(the end [m], the tension there [N], the Jacobian 3 x :data:`N_COLUMNS`) of
+    ``model``'s line at the inputs ``x`` (:func:`inputs`; :func:`end_slopes`)."""
+    out = np.zeros((3, N_COLUMNS))
+    r = end_slopes(np.ascontiguousarray(x, dtype=np.float64), float(model.ea_n),
+                   float(model.reference_height_m), float(model.shear_exponent),
+                   float(model.min_height_m), int(model.steps), out)
+    return (r[0], r[1], r[2]), (r[3], r[4], r[5]), out
 
 
 def differences(model: LineModel, x: np.ndarray, step: np.ndarray, out: np.ndarray) -> Vec3:

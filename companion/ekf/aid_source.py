@@ -100,6 +100,8 @@ def policies(p: EstimatorParams) -> dict[AidSourceKind, AidSourcePolicy]:
         k.DRAG: AidSourcePolicy(p.drag.gate_sigma, 10.0 * p.drag.interval_s,
                                 min_interval_s=p.drag.interval_s,
                                 interval_from=IntervalFrom.ATTEMPT),
+        k.TETHER_LINE: AidSourcePolicy(p.drag.tether_line.gate_sigma, p.tether_timeout_s,
+                                       fail, p.tether_reset_s),
     }
 
 
@@ -193,7 +195,7 @@ class AidSources:
     (``sources.gnss_pos``)."""
 
     __slots__ = ("gnss_pos", "gnss_hgt", "gnss_vel", "baro", "mag", "tether", "zero_vel",
-                 "const_pos", "drag", "_by_kind")
+                 "const_pos", "drag", "tether_line", "_by_kind")
 
     def __init__(self, params: EstimatorParams, rows: np.ndarray) -> None:
         pol = policies(params)

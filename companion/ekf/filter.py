@@ -24,6 +24,12 @@ from companion.ekf.drag import DragControl, DragModel
 from companion.ekf.gnss import GnssControl, usable_fix
 from companion.ekf.health import FilterStatus, filter_status
 from companion.ekf.layout import (
+    IDX_LINE,
+    LINE_BEPS,
+    LINE_BPSI,
+    LINE_KC,
+    LINE_KW,
+    N_LINE,
     PRM_ACC_N,
     PRM_BA_W,
     PRM_BG_W,
@@ -49,10 +55,12 @@ from companion.ekf.memory import FilterMemory
 from companion.ekf.output import OutputPredictor, predict_output_kernel
 from companion.ekf.params import EstimatorParams
 from companion.ekf.tether import TetherControl, cov_matrix
+from companion.ekf.tether_line import TetherLineControl
 from companion.ekf.zero_velocity import ZeroVelocityControl
 from companion.flight_controller import VehicleState
 from tuavdefs.frames import Vec3
 from tuavdefs.jit import entry_point
+from tuavdefs.line_shape import LineModel
 
 #: The least variance an update may leave on the covariance's diagonal.
 _VAR_MIN = 1e-14
@@ -71,7 +79,9 @@ class NavFilter:
     magnetic field it assumes [gauss] in the inertial frame (east, north, up: the
     declination and inclination are in it). Times are the companion's [s], monotonic.
     ``drag`` is the vehicle's drag model (the controllers' vehicle's), which drag fusion
-    (``params.drag.enabled``) needs.
+    (``params.drag.enabled``) needs; ``line`` the tether as the companion believes it and
+    ``attachment_m`` where it is attached [m] (body FLU), which the raw reading's fusion
+    (``params.drag.tether_line.enabled``) needs.
     """
 
     #: The state the vehicle flies on (:meth:`companion.ekf.output.OutputPredictor.state`):
@@ -80,7 +90,8 @@ class NavFilter:
 
     def __init__(self, params: EstimatorParams, gravity_m_s2: float,
                  earth_field_enu_gauss: tuple[float, float, float],
-                 drag: DragModel | None = None) -> None:
+                 drag: DragModel | None = None, line: LineModel | None = None,
+                 attachment_m: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
         self.params = p = params
         self.gravity_m_s2 = float(gravity_m_s2)
         self.earth_field_enu_gauss = field = _vec3(earth_field_enu_gauss)
@@ -115,6 +126,12 @@ class NavFilter:
         if p.drag.enabled and drag is None:
             raise ValueError("drag.enabled: the filter needs the vehicle's drag model")
         self._drag = (DragControl(p, mem, src.drag, drag) if p.drag.enabled else None)
+        lp = p.drag.tether_line
+        if lp.enabled and (line is None or not p.drag.enabled):
+            raise ValueError("drag.tether_line.enabled: the filter needs the drag fusion "
+                             "(its wind states) and the line's model")
+        self._line = (TetherLineControl(p, mem, src, out, cp.leave, line, _vec3(attachment_m))
+                      if lp.enabled and line is not None else None)
         self._align = Alignment(p, mem, src, self.gravity_m_s2, field)
         self._aligned = False
         #: when the filter aligned [s] (None: not yet)
@@ -138,9 +155,9 @@ class NavFilter:
 
     @property
     def covariance(self) -> np.ndarray:
-        """The error-state covariance (24 x 24, a copy): dp [m], dv [m/s], dtheta [rad]
+        """The error-state covariance (28 x 28, a copy): dp [m], dv [m/s], dtheta [rad]
         (inertial axes), db_g [rad/s], db_a [m/s^2], db_h [m], db_m [gauss], db_p [m],
-        dU [m/s] (east, north)."""
+        dU [m/s] (east, north), the line's dk_c, dk_w, db_psi, db_eps [rad]."""
         return self._mem.P.copy()
 
     @property
@@ -185,6 +202,29 @@ class NavFilter:
     def drag_fusion(self) -> bool:
         """Whether the filter fuses the drag's specific force (and has wind states)."""
         return self._drag is not None
+
+    @property
+    def tether_line_fusion(self) -> bool:
+        """Whether the filter fuses the raw tether reading tightly (with the line's
+        states)."""
+        return self._line is not None
+
+    @property
+    def line_states(self) -> tuple[float, float, float, float]:
+        """The line's states: its weight and drag per metre as factors on the belief
+        (k_w, k_c) and the guide arm's azimuth and elevation biases [rad]; (1, 1, 0, 0)
+        without the raw reading's fusion."""
+        return (1.0, 1.0, 0.0, 0.0) if self._line is None else self._line.states
+
+    @property
+    def line_sigmas(self) -> tuple[float, float, float, float]:
+        """The standard deviations of :attr:`line_states` (0 without the raw reading's
+        fusion)."""
+        if self._line is None:
+            return (0.0, 0.0, 0.0, 0.0)
+        d = np.diag(self._mem.P)[IDX_LINE:IDX_LINE + N_LINE]
+        s = [math.sqrt(max(float(v), 0.0)) for v in d]
+        return (s[LINE_KW], s[LINE_KC], s[LINE_BPSI], s[LINE_BEPS])
 
     @property
     def gnss_resets(self) -> int:
@@ -281,6 +321,21 @@ class NavFilter:
         self._try_align(t_s)
         return False
 
+    def fuse_tether_reading(self, t_s: float, t_meas_s: float, length_m: float,
+                            tension_n: float, azimuth_rad: float, elevation_rad: float,
+                            in_air: bool) -> bool | None:
+        """The winch's raw tether reading arriving at ``t_s`` [s], taken at ``t_meas_s``
+        [s]: paid-out length [m], tension [N], exit azimuth and elevation as read [rad];
+        the vehicle in the air or not. Returns None when it is not fused tightly (no such
+        fusion, not aligned, a line on the ground or slack, no GNSS and the line's states
+        not learnt yet: the ground station's fix of the same sample is the tether's
+        position then), else whether it was fused."""
+        lc = self._line
+        if lc is None or not self._aligned:
+            return None
+        return lc.fuse(t_s, t_meas_s, length_m, tension_n, azimuth_rad, elevation_rad,
+                       in_air)
+
     def drag_due(self, t_s: float) -> bool:
         """Whether :meth:`fuse_drag` would fuse (or start) at ``t_s`` [s] in the air: the
         caller computes the tether's pull only then."""
@@ -314,6 +369,8 @@ class NavFilter:
             self.aligned_at_s = t_s
             self._t_last = t_s
             self._baro.ref_m = self._align.baro_ref_m
+            if self._line is not None:
+                self._line.start()
 
     # ----- status
     def status(self, t_s: float | None = None) -> FilterStatus:

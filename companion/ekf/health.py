@@ -9,7 +9,7 @@ from enum import IntEnum, IntFlag
 
 import numpy as np
 
-from companion.ekf.aid_source import AidSources
+from companion.ekf.aid_source import AidSources, AidSourceStatus
 from companion.ekf.layout import IDX_P, IDX_TH, IDX_V, AidSourceKind
 from companion.ekf.params import EstimatorParams
 from tuavdefs.frames import Vec3
@@ -115,9 +115,10 @@ class FilterStatus:
     sources: AidSource = AidSource.NONE
     """What is fused now."""
     tether_variance: float = 0.0
-    """sqrt of the latest tether fix's test ratio (1.0 at its gate)."""
+    """sqrt of the latest tether measurement's test ratio (1.0 at its gate): the ground
+    station's fix, or the raw reading fused tightly, whichever was tried last."""
     tether_innovation_m: Vec3 = (0.0, 0.0, 0.0)
-    """Latest tether fix innovation (fix - delayed state) [m]."""
+    """Latest tether innovation (the fix, or the line's end, - the delayed state) [m]."""
 
     @property
     def healthy(self) -> bool:
@@ -174,10 +175,18 @@ TETHER_HOLD_S = 5.0
 
 
 def _tether_holds(t: float, src: AidSources) -> bool:
-    """Whether the last tether fix fused still holds the position at ``t`` [s]: within
-    :data:`TETHER_HOLD_S` of it, no GNSS position fused since."""
-    last = src.tether.time_last_fused
+    """Whether the last tether fix or raw reading fused still holds the position at ``t``
+    [s]: within :data:`TETHER_HOLD_S` of it, no GNSS position fused since."""
+    last = max(src.tether.time_last_fused, src.tether_line.time_last_fused)
     return t - last <= TETHER_HOLD_S and src.gnss_pos.time_last_fused < last
+
+
+def latest_tether(src: AidSources) -> AidSourceStatus:
+    """The tether's source last tried: the ground station's fix, or the raw reading fused
+    tightly (docs/estimation.md §11): what reports the tether's innovation and test
+    ratio."""
+    line = src.tether_line
+    return line if line.time_last_attempt > src.tether.time_last_attempt else src.tether
 
 
 def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P: np.ndarray,
@@ -200,7 +209,7 @@ def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P:
             reasons |= HealthReason.COVARIANCE
         gnss_pos = src.gnss_pos.in_use(t)
         gnss_vel = src.gnss_vel.in_use(t)
-        tether = src.tether.in_use(t)
+        tether = src.tether.in_use(t) or src.tether_line.in_use(t)
         pad = _pad_holds(t, src)
         held = gnss_pos or tether or pad or _tether_holds(t, src)
         if not (held or gnss_vel):
@@ -208,7 +217,7 @@ def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P:
         for kind, reason in _REJECTED:
             if src[kind].failing(t):
                 reasons |= reason
-        if not gnss_pos and src.tether.failing(t):
+        if not gnss_pos and latest_tether(src).failing(t):
             reasons |= HealthReason.TETHER_REJECTED
         if gnss_pos:
             sources |= AidSource.GNSS
@@ -248,8 +257,9 @@ def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P:
         else:
             health = FilterHealth.ALIGNED
     sd = np.sqrt(np.maximum(var, 0.0))
+    teth = latest_tether(src)
     pos = (src.gnss_pos if AidSource.GNSS in sources or AidSource.TETHER not in sources
-           else src.tether)
+           else teth)
     gp, gh = src.gnss_pos.innovation, src.gnss_hgt.innovation
     return FilterStatus(
         health, reasons, flags,
@@ -266,5 +276,5 @@ def filter_status(p: EstimatorParams, t: float, aligned: bool, x: np.ndarray, P:
         attitude_sigma_rad=_vec3(sd[IDX_TH:IDX_TH + 3]),
         time_since_gnss_s=since_pos if aligned else math.inf,
         sources=sources,
-        tether_variance=_sqrt0(src.tether.test_ratio),
-        tether_innovation_m=src.tether.innovation)
+        tether_variance=_sqrt0(teth.test_ratio),
+        tether_innovation_m=teth.innovation)

@@ -40,6 +40,10 @@ class AidSourceKind(IntEnum):
     DRAG = 8
     """The drag's specific force: the accelerometer's body x and y against the vehicle's
     drag in the wind states' air and the tether's pull (2 axes gated as one)."""
+    TETHER_LINE = 9
+    """The winch's raw tether reading (length, tension, exit angles) against the line's
+    model in the filter's wind and line states (3 axes gated as one on their Mahalanobis
+    distance; tightly coupled, docs/estimation.md §11)."""
 
 
 N_AID_SOURCES = len(AidSourceKind)
@@ -48,16 +52,23 @@ N_AID_SOURCES = len(AidSourceKind)
 #: position p [m] (ENU), velocity v [m/s], attitude q (w, x, y, z; body FLU -> inertial),
 #: gyro bias b_g [rad/s], accelerometer bias b_a [m/s^2], baro offset b_h [m],
 #: magnetometer bias b_m [gauss], GNSS receiver wander b_p [m], horizontal wind U [m/s]
-#: (the velocity the air moves with, east and north).
-X_P, X_V, X_Q, X_BG, X_BA, X_BH, X_BM, X_BP, X_W = 0, 3, 6, 10, 13, 16, 17, 20, 23
-NX = 25
+#: (the velocity the air moves with, east and north), the line's states: its drag and weight
+#: per metre as factors on the belief k_c, k_w, the guide arm's azimuth and elevation
+#: biases b_psi, b_eps [rad].
+X_P, X_V, X_Q, X_BG, X_BA, X_BH, X_BM, X_BP, X_W, X_LINE = (0, 3, 6, 10, 13, 16, 17, 20, 23,
+                                                            25)
+NX = 29
+#: the line's states, in order (offsets from X_LINE and IDX_LINE): k_c first, so that
+#: "k_c alone considered" and "all considered" are both one contiguous range
+LINE_KC, LINE_KW, LINE_BPSI, LINE_BEPS = 0, 1, 2, 3
+N_LINE = 4
 
 # ----- the error state (the covariance's rows)
 #: dp, dv, dtheta (a small rotation in the inertial frame), db_g, db_a, db_h, db_m, db_p,
-#: dU (the wind's two horizontal axes).
-IDX_P, IDX_V, IDX_TH, IDX_BG, IDX_BA, IDX_BH, IDX_BM, IDX_BP, IDX_W = (0, 3, 6, 9, 12, 15, 16,
-                                                                     19, 22)
-N_ERR = 24
+#: dU (the wind's two horizontal axes), the line's states (dk_c, dk_w, db_psi, db_eps).
+IDX_P, IDX_V, IDX_TH, IDX_BG, IDX_BA, IDX_BH, IDX_BM, IDX_BP, IDX_W, IDX_LINE = (
+    0, 3, 6, 9, 12, 15, 16, 19, 22, 24)
+N_ERR = 28
 
 # ----- the ring buffer of past states: one row per IMU step
 BUF_T, BUF_P, BUF_V = 0, 1, 4
@@ -72,8 +83,10 @@ BUF_COLS = 7
  PRM_MAG_COUPLE_X, PRM_MAG_COUPLE_Y, PRM_MAG_WITH_BIAS, PRM_EARTH_X, PRM_EARTH_Y,
  PRM_EARTH_Z, PRM_HEADING_EARTH, PRM_TETHER_GATE, PRM_WIND_WALK, PRM_WIND_HGT_SCALE,
  PRM_DRAG_QX, PRM_DRAG_QY, PRM_DRAG_MX, PRM_DRAG_MY, PRM_MASS_INV, PRM_DRAG_R,
- PRM_DRAG_GATE) = range(41)
-N_PRM = 41
+ PRM_DRAG_GATE, PRM_LINE_GATE, PRM_LINE_W, PRM_LINE_C, PRM_LINE_EA, PRM_LINE_SHEAR,
+ PRM_LINE_STEPS, PRM_ATTACH_X, PRM_ATTACH_Y, PRM_ATTACH_Z, PRM_LINE_SIG_L, PRM_LINE_SIG_T,
+ PRM_LINE_SIG_T_FRAC, PRM_LINE_SIG_ANG, PRM_LINE_SIG_MIN, PRM_LINE_SIG_GUST) = range(56)
+N_PRM = 56
 
 # ----- one aid source's status row (the AID block: a row per AidSourceKind)
 #: innovation (up to 3 axes; measurement - predicted), its variance, the gate's test ratio

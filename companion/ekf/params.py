@@ -27,6 +27,77 @@ class MagFusion(Enum):
 
 
 @dataclass(frozen=True)
+class TetherLineParams(Params):
+    """The winch's raw tether reading fused tightly, with the line's states
+    (``[estimator.drag.tether_line]``: it needs the wind states the drag fusion makes
+    observable; docs/estimation.md §11)."""
+
+    enabled: bool = quantity(
+        False, "", "fuse the winch's raw tether reading (length, tension, exit angles: "
+        "DEBUG_FLOAT_ARRAY TETHER) against the line's model in the filter's wind states, "
+        "with the line's weight and drag per metre and the guide arm's biases as states "
+        "(tightly coupled; docs/estimation.md §11). The ground station's fix stays for the "
+        "alignment, the line on the ground, and a flight that has not learnt the line's "
+        "states with GNSS yet")
+    gate_sigma: float = quantity(
+        5.0, "1", "its gate: the innovation's Mahalanobis distance [standard deviations]",
+        gt=0)
+    weight_sigma_fraction: float = quantity(
+        0.03, "1", "prior standard deviation of the line's weight per metre, as a fraction "
+        "of the belief (the tether's linear density, as the winder's estimate would hold "
+        "it)", gt=0, le=1)
+    drag_sigma_fraction: float = quantity(
+        0.25, "1", "prior standard deviation of the line's drag per metre, as a fraction of "
+        "the belief (a cylinder's normal drag coefficient is 1.0-1.3)", gt=0, le=1)
+    angle_bias_sigma_rad: float = quantity(
+        3e-3, "rad", "prior standard deviation of each guide-arm angle's bias (the "
+        "mounting's zero)", gt=0)
+    length_noise_m: float = quantity(
+        0.02, "m", "the paid-out length's noise (drum layers, the encoder)", ge=0)
+    tension_noise_n: float = quantity(
+        0.05, "N", "the load cell's tension noise (and the line's axial waves)", ge=0)
+    tension_noise_fraction: float = quantity(
+        0.02, "1", "the load cell's scale error", ge=0)
+    angle_noise_rad: float = quantity(
+        1.5e-3, "rad", "each exit angle's white noise (the arm's play, the encoder)", ge=0)
+    model_sigma_m: float = quantity(
+        0.2, "m", "the line model's error (a static shape for a line that sways and "
+        "carries axial waves, the wind's profile), per axis, added to the reading's "
+        "noise", gt=0)
+    gust_sigma_m_s: float = quantity(
+        2.0, "m/s", "how far the wind the line feels (along its length, through its own "
+        "dynamics) may differ from the wind states (the vehicle's, from its drag): taken "
+        "through the wind's columns into the reading's noise, per axis", ge=0)
+    max_age_s: float = quantity(
+        0.3, "s", "readings older than this on arrival are not fused", gt=0, le=1.0)
+    min_tension_n: float = quantity(
+        0.05, "N", "a reading of less tension says nothing of where the line ends (a "
+        "slack line)", ge=0)
+    ground_elevation_rad: float = quantity(
+        0.03, "rad", "a line leaving the exit below this lies on the ground there: the "
+        "ground station's fix covers it", ge=0)
+    learn_time_s: float = quantity(
+        3.0, "s", "without GNSS the reading is fused only after the line's states have "
+        "been learnt with GNSS in the air this long (before that the ground station's "
+        "fix, whose weight is the winder's estimate)", ge=0)
+    wind_sigma_max_m_s: float = quantity(
+        1.5, "m/s", "the line's states are learnt only while the wind states are known to "
+        "this (each axis's standard deviation): the drag's bend has no slope at calm air, "
+        "so a wind not yet learnt would pass into the line's weight", gt=0)
+    learn_drag: bool = quantity(
+        False, "", "learn the line's drag factor too (in at least drag_learn_wind_m_s of "
+        "wind); false: it is considered, its prior's uncertainty in the noise. On the "
+        "lumped truth in 6 m/s of moderate turbulence learning it took it to 0.6 and the "
+        "60 s GNSS-loss hold from 0.55 m to 1.24 m: the wind states follow the gusts at "
+        "the vehicle, the line the wind along it")
+    drag_learn_wind_m_s: float = quantity(
+        3.0, "m/s", "the line's drag factor is learnt only while the wind states say at "
+        "least this much wind (c U^2 too small to tell below)", ge=0)
+    steps: int = quantity(
+        16, "1", "Runge-Kutta steps along the line in wind", ge=1, le=400)
+
+
+@dataclass(frozen=True)
 class DragFusionParams(Params):
     """The drag's specific-force fusion and the wind states it makes observable
     (``[estimator.drag]``; docs/estimation.md §11)."""
@@ -64,6 +135,10 @@ class DragFusionParams(Params):
     wind_sigma_m_s: float = quantity(
         5.0, "m/s", "prior standard deviation of each wind state when drag fusion starts "
         "(the wind starts at 0)", gt=0)
+    tether_line: TetherLineParams = quantity(
+        TetherLineParams(), "", "the winch's raw tether reading fused tightly against the "
+        "line's model in these wind states, with the line's own states "
+        "([estimator.drag.tether_line]; docs/estimation.md §11)")
 
 
 @dataclass(frozen=True)

@@ -161,6 +161,7 @@ class TetherControl:
         m = self._mem
         res = self._k(m.w, m.P, m.buf, m.meta, t_meas, *pos, *cov)
         st = self._src.tether
+        st.time_last_attempt = t_s
         reset_due = st.record(t_s, res)
         if res == FUSED:
             self._leave_const_pos()

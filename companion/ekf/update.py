@@ -21,14 +21,17 @@ from companion.ekf.layout import (
     IDX_BH,
     IDX_BM,
     IDX_BP,
+    IDX_LINE,
     IDX_TH,
     IDX_W,
+    N_LINE,
     W_AID,
     X_BA,
     X_BG,
     X_BH,
     X_BM,
     X_BP,
+    X_LINE,
     X_Q,
     X_W,
 )
@@ -111,9 +114,9 @@ def scalar_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: fl
 @njit
 def mat_vec(P: np.ndarray, h: np.ndarray) -> np.ndarray:
     """``P h``: the block of the states before the wind's by one BLAS product of that
-    square block, the wind's rows and columns added by loops (so that every sum over the
-    other states is that of a filter without wind states, to the bit: BLAS groups its
-    rows by the matrix's size)."""
+    square block, the rows and columns of the wind's and the line's states added by loops
+    (so that every sum over the other states is that of a filter without them, to the bit:
+    BLAS groups its rows by the matrix's size)."""
     n, c = h.shape[0], IDX_W
     out = np.empty(n)
     out[:c] = np.ascontiguousarray(P[:c, :c]) @ np.ascontiguousarray(h[:c])
@@ -189,6 +192,8 @@ def inject(x: np.ndarray, dx: np.ndarray, buf: np.ndarray, meta: np.ndarray) -> 
         x[X_BP + i] += dx[IDX_BP + i]
     x[X_W] += dx[IDX_W]
     x[X_W + 1] += dx[IDX_W + 1]
+    for i in range(N_LINE):
+        x[X_LINE + i] += dx[IDX_LINE + i]
     for m in range(meta[1]):
         for i in range(6):
             buf[m, BUF_P + i] += dx[i]

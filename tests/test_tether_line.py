@@ -1,0 +1,230 @@
+"""The raw tether reading fused tightly with the line's states (companion/ekf/tether_line.py;
+docs/estimation.md §11): the measurement's Jacobian and noise against central differences
+of the line's model, and offline on the lumped truth the line's states learnt in a hover
+with GNSS in the wind."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.ekf import DragFusionParams
+from companion.ekf.layout import (
+    IDX_LINE,
+    IDX_P,
+    IDX_TH,
+    IDX_W,
+    LINE_BEPS,
+    LINE_BPSI,
+    LINE_KC,
+    LINE_KW,
+    N_ERR,
+    N_PRM,
+    NX,
+    PRM_ATTACH_X,
+    PRM_LINE_C,
+    PRM_LINE_EA,
+    PRM_LINE_SHEAR,
+    PRM_LINE_SIG_ANG,
+    PRM_LINE_SIG_GUST,
+    PRM_LINE_SIG_L,
+    PRM_LINE_SIG_MIN,
+    PRM_LINE_SIG_T,
+    PRM_LINE_SIG_T_FRAC,
+    PRM_LINE_STEPS,
+    PRM_LINE_W,
+    X_LINE,
+    X_Q,
+    X_W,
+)
+from companion.ekf.params import TetherLineParams
+from companion.ekf.tether_line import line_rows
+from tuavdefs import line_shape as ls
+from tuavdefs.frames import euler_to_quat, quat_multiply
+from tuavdefs.params import TetherParams
+
+LINE = ls.LineModel.from_tether(TetherParams(), 9.81, 1.225)
+LP = TetherLineParams()
+SHEAR = 1.0 / 7.0
+
+
+def _prm(steps: int = LP.steps) -> np.ndarray:
+    prm = np.zeros(N_PRM)
+    prm[PRM_LINE_W], prm[PRM_LINE_C], prm[PRM_LINE_EA] = (LINE.weight_n_m, LINE.drag_n_s2_m3,
+                                                          LINE.ea_n)
+    prm[PRM_LINE_SHEAR], prm[PRM_LINE_STEPS] = SHEAR, steps
+    prm[PRM_ATTACH_X:PRM_ATTACH_X + 3] = (0.02, -0.01, 0.08)
+    prm[PRM_LINE_SIG_L], prm[PRM_LINE_SIG_T] = LP.length_noise_m, LP.tension_noise_n
+    prm[PRM_LINE_SIG_T_FRAC], prm[PRM_LINE_SIG_ANG] = (LP.tension_noise_fraction,
+                                                       LP.angle_noise_rad)
+    prm[PRM_LINE_SIG_MIN] = LP.model_sigma_m
+    prm[PRM_LINE_SIG_GUST] = LP.gust_sigma_m_s
+    return prm
+
+
+def _exp_q(th: np.ndarray) -> tuple[float, float, float, float]:
+    a = float(np.linalg.norm(th))
+    if a == 0.0:
+        return (1.0, 0.0, 0.0, 0.0)
+    s = math.sin(a / 2) / a
+    return (math.cos(a / 2), th[0] * s, th[1] * s, th[2] * s)
+
+
+def _case(seed: int):
+    rng = np.random.default_rng(seed)
+    x = np.zeros(NX)
+    x[0:3] = rng.uniform(-5, 5, 3)
+    x[X_Q:X_Q + 4] = euler_to_quat(*rng.uniform(-0.3, 0.3, 2), rng.uniform(-3, 3))
+    x[X_W:X_W + 2] = rng.uniform(-8, 8, 2)
+    x[X_LINE + LINE_KC], x[X_LINE + LINE_KW] = rng.uniform(0.8, 1.2, 2)
+    x[X_LINE + LINE_BPSI], x[X_LINE + LINE_BEPS] = rng.uniform(-3e-3, 3e-3, 2)
+    reading = (rng.uniform(12, 35), rng.uniform(1.5, 6.0), rng.uniform(-3, 3),
+               rng.uniform(0.15, 0.9))
+    return x, reading, float(rng.uniform(8, 25))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_jacobian_matches_central_differences(seed):
+    """Every non-zero column of H (position, attitude error as ``Exp(dtheta) R``, wind,
+    the line's four states) against central differences of the innovation ``f - p - R
+    r_a`` (H is minus its slope), the wind's reference height held."""
+    x, (L, T, az, el), z = _case(seed)
+    prm = _prm()
+    h = np.zeros((3, N_ERR))
+    r = np.zeros((3, 3))
+    line_rows(x, prm, z, L, T, az, el, h, r)
+    scratch_h, scratch_r = np.zeros((3, N_ERR)), np.zeros((3, 3))
+
+    def innov(xx):
+        return np.array(line_rows(xx, prm, z, L, T, az, el, scratch_h, scratch_r))
+
+    cols = ([(IDX_P + i, i, 1e-4) for i in range(3)]
+            + [(IDX_W + i, X_W + i, 1e-4) for i in range(2)]
+            + [(IDX_LINE + k, X_LINE + k, 1e-5 if k < 2 else 1e-6) for k in range(4)])
+    for col, xi, eps in cols:
+        xp, xm = x.copy(), x.copy()
+        xp[xi] += eps
+        xm[xi] -= eps
+        num = -(innov(xp) - innov(xm)) / (2 * eps)
+        np.testing.assert_allclose(h[:, col], num, rtol=2e-4, atol=2e-5 * max(
+            1.0, float(np.abs(num).max())), err_msg=f"column {col}")
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = 1e-6
+        q = tuple(x[X_Q:X_Q + 4])
+        xp, xm = x.copy(), x.copy()
+        xp[X_Q:X_Q + 4] = quat_multiply(_exp_q(d), q)
+        xm[X_Q:X_Q + 4] = quat_multiply(_exp_q(-d), q)
+        num = -(innov(xp) - innov(xm)) / 2e-6
+        np.testing.assert_allclose(h[:, IDX_TH + i], num, atol=1e-7)
+    # the biases act as the angles read the other way
+    assert np.any(h[:, IDX_LINE + LINE_BPSI] != 0.0)
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_noise_is_the_readings_spread(seed):
+    """R against the readings' noises propagated by central differences over their
+    standard deviations (the ground fix's columns), the gusts through the wind's slope,
+    the model's floor added."""
+    x, (L, T, az, el), z = _case(seed)
+    prm = _prm()
+    h, r = np.zeros((3, N_ERR)), np.zeros((3, 3))
+    line_rows(x, prm, z, L, T, az, el, h, r)
+    model = ls.LineModel(LINE.weight_n_m * x[X_LINE + LINE_KW],
+                         LINE.drag_n_s2_m3 * x[X_LINE + LINE_KC], LINE.ea_n, z, SHEAR, 1.0,
+                         LP.steps)
+    inp = ls.inputs(L, T, az, el, model, tuple(x[X_W:X_W + 2]),
+                    (x[X_LINE + LINE_BPSI], x[X_LINE + LINE_BEPS]))
+    sig = np.zeros(ls.N_COLUMNS)
+    sig[:4] = (LP.length_noise_m, math.hypot(LP.tension_noise_n, LP.tension_noise_fraction * T),
+               LP.angle_noise_rad, LP.angle_noise_rad)
+    out = np.zeros((3, ls.N_COLUMNS))
+    ls.differences(model, inp, sig, out)
+    cols = out * sig
+    # the gusts through the wind's slope (linearised: the drag's curvature over 2 m/s is
+    # the wind states' own, which S carries through H)
+    _, J = ls.jacobian(model, inp)
+    gust = J[:, 4:6] * LP.gust_sigma_m_s
+    want = cols @ cols.T + gust @ gust.T + np.eye(3) * LP.model_sigma_m ** 2
+    np.testing.assert_allclose(r, want, rtol=0.02, atol=1e-6)
+
+
+@pytest.mark.parametrize("wind", [(0.0, 0.0), (6.0, -2.0)])
+def test_end_slopes_against_central_differences(wind):
+    """:func:`tuavdefs.line_shape.end_slopes` (the tangent for the length, forward
+    differences, the biases as the angles negated) against small central differences of
+    the end; calm air: the wind's and drag's columns zero."""
+    model = ls.LineModel(LINE.weight_n_m, LINE.drag_n_s2_m3, LINE.ea_n, 15.0, SHEAR, 1.0, 32)
+    inp = ls.inputs(22.0, 2.4, 0.4, 0.5, model, wind, (1e-3, -2e-3))
+    end, top, J = ls.slopes(model, inp)
+    e2, J2 = ls.jacobian(model, inp)
+    np.testing.assert_allclose(end, e2, atol=1e-12)
+    np.testing.assert_allclose(J, J2, rtol=1e-4, atol=1e-6 * float(np.abs(J2).max()))
+    if wind == (0.0, 0.0):
+        assert not np.any(J[:, [ls.Column.WIND_X, ls.Column.WIND_Y, ls.Column.DRAG]])
+
+
+def test_fewer_steps_keep_the_end():
+    """The tight fusion's 16 Runge-Kutta steps against 400, on lines of 10-36 m in
+    3-12 m/s sheared: within a centimetre (a fifth of the model's error allowed for,
+    ``model_sigma_m``; 7.5 mm at worst, the 36 m line in 12 m/s)."""
+    for L, el, u in ((10.0, 0.6, 3.0), (18.0, 0.3, 6.0), (36.0, 0.5, 12.0), (25.0, 1.1, 9.0)):
+        ends = []
+        for steps in (LP.steps, 400):
+            model = ls.LineModel(LINE.weight_n_m, LINE.drag_n_s2_m3, LINE.ea_n, 15.0, SHEAR,
+                                 1.0, steps)
+            ends.append(np.array(ls.end(model, ls.inputs(L, 2.5, 0.2, el, model, (u, 1.0)))))
+        assert np.linalg.norm(ends[0] - ends[1]) < 1e-2
+
+
+def _lumped_hover(duration_s: float, wind_m_s: float, loss: tuple[float, float] | None):
+    """``hover-gnss-loss`` on the lumped truth in ``wind_m_s`` from the west (light
+    turbulence), the drag fusion and the tight fusion on; GNSS lost over ``loss`` [s]."""
+    from tuav_sitl.offline import OfflineRunner
+    from tuav_sitl.scenario import load_scenario
+
+    sc = load_scenario("hover-gnss-loss").with_tether_model("lumped")
+    faults = () if loss is None else (sc.faults[0].replace(start_s=loss[0], end_s=loss[1]),)
+    drag = DragFusionParams(enabled=True, tether_line=TetherLineParams(enabled=True))
+    sc = sc.replace(wind=sc.wind.replace(steady_m_s=(wind_m_s, 0.0, 0.0)),
+                    duration_s=duration_s, faults=faults,
+                    estimator=sc.estimator.replace(drag=drag))
+    runner = OfflineRunner(sc)
+    rows = []
+    record = runner._record
+
+    def rec(t, out, fresh):
+        record(t, out, fresh)
+        f = runner.companion.filter
+        if f.aligned:
+            P = f.covariance
+            rows.append((t, *f.line_states, P[IDX_LINE + LINE_KW, IDX_LINE + LINE_KW],
+                         *f.wind_m_s[:2], *runner.plant.wind_m_s[:2]))
+
+    runner._record = rec
+    res = runner.run()
+    return runner, res, np.array(rows)
+
+
+def test_the_line_is_learnt_in_a_lumped_hover_with_gnss():
+    """Offline on the lumped truth (its line as the companion believes it), hovering in
+    6 m/s with GNSS for 30 s: the weight factor within two of its standard deviations of
+    1, its deviation below the prior's, the readings fused (not rejected), the wind within
+    1 m/s RMS of the truth's mean at the vehicle."""
+    runner, res, a = _lumped_hover(30.0, 6.0, None)
+    f = runner.companion.filter
+    st = f.aid_sources.tether_line
+    assert st.time_last_fused > 25.0
+    kw, sig = a[-1, 1], math.sqrt(a[-1, 5])
+    print(f"k_w {kw:.3f} +- {sig:.3f}, k_c {a[-1, 2]:.3f}, biases {a[-1, 3]:.4f} "
+          f"{a[-1, 4]:.4f} rad")
+    assert abs(kw - 1.0) <= 2.0 * sig
+    assert sig < LP.weight_sigma_fraction
+    n = int(round(10.0 / (a[1, 0] - a[0, 0])))
+    mean = np.stack([np.convolve(a[:, 8 + i], np.ones(n) / n)[:len(a)] for i in range(2)],
+                    axis=1)
+    late = a[:, 0] > 15.0
+    err = a[late, 6:8] - mean[late]
+    assert np.sqrt((err ** 2).sum(axis=1).mean()) < 1.0
