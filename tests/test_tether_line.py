@@ -10,7 +10,6 @@ import math
 import numpy as np
 import pytest
 
-from companion.ekf import DragFusionParams
 from companion.ekf.layout import (
     IDX_LINE,
     IDX_P,
@@ -179,18 +178,25 @@ def test_fewer_steps_keep_the_end():
         assert np.linalg.norm(ends[0] - ends[1]) < 1e-2
 
 
+#: chi-square(3) two-sided 95 % bounds (position NEES).
+CHI2_3_LOW, CHI2_3_HIGH = 0.2158, 9.348
+
+
 def _lumped_hover(duration_s: float, wind_m_s: float, loss: tuple[float, float] | None):
-    """``hover-gnss-loss`` on the lumped truth in ``wind_m_s`` from the west (light
-    turbulence), the drag fusion and the tight fusion on; GNSS lost over ``loss`` [s]."""
+    """``hover-gnss-loss-windy`` (the lumped truth, moderate turbulence, the drag fusion and
+    the tight fusion on) in ``wind_m_s`` from the west; GNSS lost over ``loss`` [s].
+    Rows per control period after alignment: t, the line's states (4), k_w's variance, the
+    filter's wind (2), the truth's wind at the vehicle (2), the position NEES of the
+    filter's state under its P_pp, the horizontal estimate error [m]."""
     from tuav_sitl.offline import OfflineRunner
     from tuav_sitl.scenario import load_scenario
 
-    sc = load_scenario("hover-gnss-loss").with_tether_model("lumped")
+    sc = load_scenario("hover-gnss-loss-windy")
     faults = () if loss is None else (sc.faults[0].replace(start_s=loss[0], end_s=loss[1]),)
-    drag = DragFusionParams(enabled=True, tether_line=TetherLineParams(enabled=True))
-    sc = sc.replace(wind=sc.wind.replace(steady_m_s=(wind_m_s, 0.0, 0.0)),
-                    duration_s=duration_s, faults=faults,
-                    estimator=sc.estimator.replace(drag=drag))
+    assert sc.estimator.drag.tether_line.enabled
+    sc = sc.replace(wind=sc.wind.replace(steady_m_s=(wind_m_s, 0.0, 0.0),
+                                         wind_speed_at_6m_m_s=wind_m_s),
+                    duration_s=duration_s, faults=faults)
     runner = OfflineRunner(sc)
     rows = []
     record = runner._record
@@ -200,28 +206,42 @@ def _lumped_hover(duration_s: float, wind_m_s: float, loss: tuple[float, float] 
         f = runner.companion.filter
         if f.aligned:
             P = f.covariance
+            e = f._mem.x[0:3] - np.asarray(runner.plant.x[0:3])
             rows.append((t, *f.line_states, P[IDX_LINE + LINE_KW, IDX_LINE + LINE_KW],
-                         *f.wind_m_s[:2], *runner.plant.wind_m_s[:2]))
+                         *f.wind_m_s[:2], *runner.plant.wind_m_s[:2],
+                         float(e @ np.linalg.solve(P[0:3, 0:3], e)), math.hypot(e[0], e[1])))
 
     runner._record = rec
     res = runner.run()
     return runner, res, np.array(rows)
 
 
-def test_the_line_is_learnt_in_a_lumped_hover_with_gnss():
+def test_the_line_is_learnt_and_holds_a_gnss_loss_on_the_lumped_line():
     """Offline on the lumped truth (its line as the companion believes it), hovering in
-    6 m/s with GNSS for 30 s: the weight factor within two of its standard deviations of
-    1, its deviation below the prior's, the readings fused (not rejected), the wind within
-    1 m/s RMS of the truth's mean at the vehicle."""
-    runner, res, a = _lumped_hover(30.0, 6.0, None)
+    6 m/s of moderate turbulence with GNSS for 25 s, then 15 s without: the weight factor
+    within two of its standard deviations of 1 and its deviation below the prior's, the
+    readings fused
+    throughout (with GNSS and without), the wind within 1 m/s RMS of the truth's mean at
+    the vehicle, the estimate within 0.5 m of the truth horizontally during the loss, and
+    the filter consistent: its position NEES inside chi-square(3)'s 95 % bounds at least
+    90 % of the time."""
+    runner, res, a = _lumped_hover(40.0, 6.0, (25.0, 40.0))
     f = runner.companion.filter
     st = f.aid_sources.tether_line
-    assert st.time_last_fused > 25.0
+    assert st.time_last_fused > 39.0 and st.resets == 0
     kw, sig = a[-1, 1], math.sqrt(a[-1, 5])
+    late = a[:, 0] > 5.0
+    inside = float(np.mean((a[late, 10] >= CHI2_3_LOW) & (a[late, 10] <= CHI2_3_HIGH)))
+    loss = a[:, 0] > 25.0
     print(f"k_w {kw:.3f} +- {sig:.3f}, k_c {a[-1, 2]:.3f}, biases {a[-1, 3]:.4f} "
-          f"{a[-1, 4]:.4f} rad")
+          f"{a[-1, 4]:.4f} rad; NEES inside {100 * inside:.1f} % (below "
+          f"{100 * np.mean(a[late, 10] < CHI2_3_LOW):.1f} %, mean "
+          f"{a[late, 10].mean():.2f}; in the loss {a[loss, 10].mean():.2f}); estimate off "
+          f"{a[loss, 11].max():.2f} m in the loss")
     assert abs(kw - 1.0) <= 2.0 * sig
     assert sig < LP.weight_sigma_fraction
+    assert inside >= 0.9
+    assert a[loss, 11].max() <= 0.5
     n = int(round(10.0 / (a[1, 0] - a[0, 0])))
     mean = np.stack([np.convolve(a[:, 8 + i], np.ones(n) / n)[:len(a)] for i in range(2)],
                     axis=1)
