@@ -257,8 +257,9 @@ def test_load_kernels_compiles_then_loads_and_late_compiles_are_told(tmp_path):
 
 
 #: Scenarios whose flights call every kernel the others do and more (the lumped line in a
-#: gust, a mission on the tether fix without GNSS, a hover through a GNSS loss).
-MANIFEST_SCENARIOS = ("gust-lumped", "mission-gnss-denied", "hover-gnss-loss")
+#: gust, a mission on the tether fix without GNSS, a hover through a GNSS loss on the
+#: drag fusion and the raw tether reading fused tightly).
+MANIFEST_SCENARIOS = ("gust-lumped", "mission-gnss-denied", "hover-gnss-loss-windy")
 
 
 def test_the_manifest_has_every_signature_these_scenarios_call():
