@@ -16,6 +16,10 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
         ('float64[::1]', 'float64[:, ::1]', 'float64[:, ::1]', 'int64[::1]', 'float64',
         'float64', 'float64',),
     ],
+    'companion.ekf.drag.fuse_drag_kernel': [
+        ('float64[::1]', 'float64[:, ::1]', 'float64[:, ::1]', 'int64[::1]', 'float64',
+        'float64', 'float64',),
+    ],
     'companion.ekf.gnss.fuse_gnss_kernel': [
         ('float64[::1]', 'float64[:, ::1]', 'float64[:, ::1]', 'int64[::1]', 'float64',
         'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
@@ -37,6 +41,10 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
         ('float64[::1]', 'float64[:, ::1]', 'float64[:, ::1]', 'int64[::1]', 'float64',
         'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
         'float64',),
+    ],
+    'companion.ekf.tether_line.fuse_tether_line_kernel': [
+        ('float64[::1]', 'float64[:, ::1]', 'float64[:, ::1]', 'int64[::1]', 'float64',
+        'float64', 'float64', 'float64', 'float64', 'int64', 'int64',),
     ],
     'companion.ekf.zero_velocity.fuse_zero_velocity_kernel': [
         ('float64[::1]', 'float64[:, ::1]', 'float64[:, ::1]', 'int64[::1]', 'float64',
@@ -165,6 +173,10 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
     'tuavdefs.line_shape.end_differences': [
         ('float64[::1]', 'float64[::1]', 'float64', 'float64', 'float64', 'float64', 'int64',
         'float64[:, ::1]',),
+    ],
+    'tuavdefs.line_shape.line_top': [
+        ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
+        'float64', 'float64', 'float64', 'float64', 'int64',),
     ],
     'tuavdefs.line_shape.uniform_end': [
         ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
