@@ -13,6 +13,7 @@ from pathlib import Path
 
 from pymavlink import mavutil
 
+from tests.netns import paper_law
 from tests.netns.up_session import processes_mentioning, wait_banner
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -52,8 +53,14 @@ def main() -> int:
     base = Path(sys.argv[1])
     out: dict = {}
     logdir = base / "e2e"
+    # the paper's law, its governor and the catenary truth: the test checks L-bar and the
+    # stop lead's bound, and the line's shape on the catenary (the defaults: the tension
+    # law, governor 2, the lumped line)
+    law = paper_law.write(base / "law")
     up = subprocess.Popen([sys.executable, "-m", "tuav_sitl", "up", "--speedup", "max",
-                           "--can", "udp_multicast", "--logdir", str(logdir), "--instance", "2"],
+                           "--can", "udp_multicast", "--logdir", str(logdir), "--instance", "2",
+                           "--ground-params", str(law["control"]), "--parm", str(law["parm"]),
+                           "--tether-model", "catenary"],
                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     banner = wait_banner(up)
     out["banner"] = banner

@@ -13,8 +13,10 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -26,6 +28,7 @@ from pymavlink.dialects.v20 import common as mavlink2  # noqa: E402
 from sitl.odrive_axis import OdriveAxis, WinchSensors  # noqa: E402
 from sitl.winder import WinderModel  # noqa: E402
 from tests.gcs_util import free_port
+from tests.netns import paper_law  # noqa: E402
 from tuavdefs import can_protocol as cp  # noqa: E402
 from tuavdefs import component_link as cl  # noqa: E402
 from tuavdefs.canbus import CanLink  # noqa: E402
@@ -157,8 +160,13 @@ def main() -> int:
     port = free_port()
     comp = Companion(port)
     link = CanLink("udp_multicast")
+    # the paper's law: the drum here pulls a constant 5 N, no line, which the tension law
+    # (the default), regulating the line's pull to its set-point, winds in to the taut
+    # floor (FULLY_RETRACTED); the paper's law follows L-bar, which the modes are checked on
+    law_dir = Path(tempfile.mkdtemp(prefix="gs_session_"))
+    law = paper_law.write(law_dir)
     gs = subprocess.Popen([sys.executable, "-m", "groundstation", "--can", "udp_multicast",
-                           "--mavlink", f"127.0.0.1:{port}"],
+                           "--mavlink", f"127.0.0.1:{port}", "--control", str(law["control"])],
                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     out: dict = {}
     winder = None
@@ -342,6 +350,7 @@ def main() -> int:
         out["gs_rc"] = gs.returncode
         link.close()
         comp.conn.close()
+        shutil.rmtree(law_dir, ignore_errors=True)
     print(json.dumps(out, default=str))
     return 0
 

@@ -24,7 +24,10 @@ def main() -> int:
         [sys.executable, "-m", "tuav_sitl", "up", "--can", "udp_multicast", "--logdir",
          str(base / "runs"), "--speedup", "max", "--duration", "45", "--position", "8", "4",
          "15", "--goto", "8", "4", "15", "--gnss", "gnss", "--wind", "3,270", "--faults",
-         str(faults), "--headless"], cwd=ROOT, stdout=subprocess.PIPE,
+         str(faults), "--headless",
+         # the catenary truth, as the hover-gnss-loss scenario (issue 33: on the lumped line
+         # the tether fix does not yet hold the hover to 0.5 m)
+         "--tether-model", "catenary"], cwd=ROOT, stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True)
     texts, ekf, t_ms = [], [], 0
     deadline = time.monotonic() + 300

@@ -1,7 +1,8 @@
 """The plant, the companion and the ground station as three OS processes: MAVLink between
 plant and companion (simulator link) and between companion and winch (component link), CAN
-between plant and ground station. Run inside a private network namespace; prints one JSON
-line for tests/test_three_processes.py."""
+between plant and ground station; the ground station on the paper's law, the companion's
+governor for it (tests/netns/paper_law.py). Run inside a private network namespace; prints
+one JSON line for tests/test_three_processes.py."""
 
 import csv
 import json
@@ -11,6 +12,7 @@ import time
 from pathlib import Path
 
 from tests.gcs_util import free_port
+from tests.netns import paper_law
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -32,13 +34,16 @@ def main() -> int:
          *([] if pacing else ["--lockstep-spin-us", "200"])],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     ready = plant.stdout.readline()
+    # the paper's law and the governor for it: the test checks L-bar and the stop lead's
+    # bound (on the catenary: python -m sitl's truth line with no --params)
+    law = paper_law.write(out_dir)
     gs = subprocess.Popen([py, "-m", "groundstation", "--can", "udp_multicast", "--mavlink",
-                           f"127.0.0.1:{comp_port}"],
+                           f"127.0.0.1:{comp_port}", "--control", str(law["control"])],
                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     time.sleep(0.5)
     # on the simulator's state: the test holds the goal to 2 cm and L-bar to millimetres
     comp = subprocess.Popen([py, "-m", "companion", "--sim", f"127.0.0.1:{sim_port}",
-                             "--state", "truth",
+                             "--state", "truth", "--nav", str(law["nav"]),
                              "--component-port", str(comp_port), "--gcs-tcp", "0",
                              "--gcs-udp", "none", "--goto", *map(str, goal)],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
