@@ -49,8 +49,14 @@ def test_a_calibrated_vehicle_knows_its_attitude_to_half_a_degree():
     for, the tilt (the heading is the magnetometer's): over four sensor seeds, from 5 s on
     (after the in-air alignment), its error without the calibration is several times what
     it is with it (measured 0.09-0.14 against 0.21-1.16 degrees; the whole attitude's RMSE,
-    the heading's error in it, differs by 0.8-1.4 times only)."""
-    sc = load_scenario("circle-gnss")
+    the heading's error in it, differs by 0.8-1.4 times only).
+
+    On the catenary truth, the line the fused tether fix's model assumes: on the lumped line
+    (circle-gnss's default) that fix is biased (issue 33) and the filter takes it out of the
+    heading, 1-2 degrees from 3 s on, decaying over a minute: the attitude's RMSE 1.29
+    degrees over 40 s, roll 0.04 and pitch 0.14 of it (0.24 here, and 0.24 on the lumped
+    line without the tether fix)."""
+    sc = load_scenario("circle-gnss").with_tether_model("catenary")
     cal = run_scenario(sc.replace(duration_s=40.0), None, progress=None).metrics
     assert cal["estimate_attitude_rmse_rad"] <= math.radians(0.5)
     tilt: dict[bool, list[float]] = {True: [], False: []}
