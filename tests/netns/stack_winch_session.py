@@ -70,7 +70,10 @@ def main() -> int:
     # UAV's 0.2 m hold was measured with them (on the catenary, python -m sitl's own line)
     law = paper_law.write(out_dir)
     gs = subprocess.Popen([py, "-m", "groundstation", "--can", "udp_multicast", "--mavlink",
-                           f"127.0.0.1:{proxy_port}", "--control", str(law["control"])],
+                           f"127.0.0.1:{proxy_port}", "--control", str(law["control"]),
+                           # on the lockstep plant's time, as up runs it: a stall of the
+                           # plant on a busy host is then no lost encoder (a braked drum)
+                           "--clock", "frames"],
                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     listener.settimeout(60.0)
     gs_sock, _ = listener.accept()

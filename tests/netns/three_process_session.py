@@ -38,7 +38,10 @@ def main() -> int:
     # bound (on the catenary: python -m sitl's truth line with no --params)
     law = paper_law.write(out_dir)
     gs = subprocess.Popen([py, "-m", "groundstation", "--can", "udp_multicast", "--mavlink",
-                           f"127.0.0.1:{comp_port}", "--control", str(law["control"])],
+                           f"127.0.0.1:{comp_port}", "--control", str(law["control"]),
+                           # in lockstep on the plant's time, as up runs it: a stall of the
+                           # plant on a busy host is then no lost encoder (a braked drum)
+                           *([] if pacing else ["--clock", "frames"])],
                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     time.sleep(0.5)
     # on the simulator's state: the test holds the goal to 2 cm and L-bar to millimetres
