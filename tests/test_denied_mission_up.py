@@ -46,7 +46,13 @@ def test_the_stack_flies_a_mission_without_gnss_on_the_tether_fix(session):
             r = truth[min(bisect.bisect_left(times, t), len(truth) - 1)]
             assert math.dist(r[1:4], WAYPOINTS[seq]) <= 1.0, (seq, t, r)
     assert "disarmed_s" in s
-    # landed: on its gear at the end, and the tether never taut
+    # landed: on its gear at the end, and the tether never taut in flight (armed); before
+    # the arm the winch's ground pre-tension may pull the short lumped line straight once,
+    # the only way to a fix on the ground without GNSS (a line under two nominal segments
+    # is one segment, which pulls nothing until straight: docs/estimation.md §10), so
+    # there it may stretch by under a millimetre, as tests/test_scenarios.py allows
     end = [r for r in truth if r[0] >= s["disarmed_s"]]
     assert end and all(r[3] <= 0.3 for r in end)
-    assert all(r[4] > math.dist(r[1:4], (0.0, 0.0, 0.0)) for r in truth)
+    slack = [(r[0], r[4] - math.dist(r[1:4], (0.0, 0.0, 0.0))) for r in truth]
+    assert all(sl > 0.0 for t, sl in slack if t_arm <= t <= s["disarmed_s"])
+    assert all(sl > -1e-3 for _, sl in slack)

@@ -16,8 +16,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from tuavdefs.frames import quat_to_euler_kernel
-from tuavdefs.jit import njit
+from tuavdefs.frames import quat_rows_to_euler
 
 if TYPE_CHECKING:
     from companion.ekf import NavFilter
@@ -62,18 +61,6 @@ _GROUND_REST = (0.0, 0.0) + (math.nan,) * 10
 #: The estimate's columns (est_pos, est_vel, est_quat, est_pos_sigma) without one.
 _NO_ESTIMATE = (math.nan,) * 13
 _NAN3 = (math.nan,) * 3
-
-
-@njit
-def quat_rows_to_euler(quats: np.ndarray) -> np.ndarray:
-    """Z-Y-X Euler angles (roll, pitch, yaw) [rad], (n, 3), of the (n, 4) unit quaternions
-    (w, x, y, z): :func:`tuavdefs.frames.quat_to_euler` of each row (NaN rows give NaN)."""
-    n = quats.shape[0]
-    out = np.empty((n, 3))
-    for i in range(n):
-        out[i, 0], out[i, 1], out[i, 2] = quat_to_euler_kernel(
-            (quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3]))
-    return out
 
 
 class WinderReadout(NamedTuple):

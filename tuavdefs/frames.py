@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from tuavdefs.jit import njit
 
 Vec3 = tuple[float, float, float]
@@ -152,6 +154,18 @@ def wrap_pi(angle_rad: float) -> float:
 #: Compiled versions of the same functions, for the controllers' kernels.
 quat_to_matrix_kernel = njit(quat_to_matrix)
 quat_to_euler_kernel = njit(quat_to_euler)
+
+
+@njit
+def quat_rows_to_euler(quats: np.ndarray) -> np.ndarray:
+    """Z-Y-X Euler angles (roll, pitch, yaw) [rad], (n, 3), of the (n, 4) unit quaternions
+    (w, x, y, z): :func:`quat_to_euler` of each row (NaN rows give NaN)."""
+    n = quats.shape[0]
+    out = np.empty((n, 3))
+    for i in range(n):
+        out[i, 0], out[i, 1], out[i, 2] = quat_to_euler_kernel(
+            (quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3]))
+    return out
 
 
 def quat_enu_flu_to_ned_frd(q: Quat) -> Quat:

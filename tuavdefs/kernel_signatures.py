@@ -152,7 +152,7 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
     'sitl.wind.profile_factor': [
         ('float64[::1]', 'float64',),
     ],
-    'tuav_sitl.offline_log.quat_rows_to_euler': [
+    'tuavdefs.frames.quat_rows_to_euler': [
         ('float64[:, ::1]',),
     ],
     'tuavdefs.airframe._speed_to_command': [
