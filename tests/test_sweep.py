@@ -453,3 +453,42 @@ def test_a_sweep_meeting_a_run_that_cannot_fly_records_it_and_goes_on(tmp_path, 
     assert sorted(r["index"] for r in again) == [0, 1]
     kept = json.loads((out / "runs.json").read_text())
     assert any("cannot hold" in (r.get("error") or "") for r in kept)
+
+
+def test_a_sweep_keeps_its_worst_failed_runs_as_run_folders(tmp_path, capsys):
+    """``tuav-sitl sweep --keep 1``: of two failed runs (a tracking target no hover
+    meets), the one with the larger position error is flown again into
+    OUT/runs/run-INDEX/, the run its row counted (a run depends only on the sweep and its
+    index), with its recording.rrd; the other is not kept."""
+    path = _write(tmp_path, """\
+        name = "keep"
+        scenario = "hover"
+        runs = 2
+        seed = 3
+        duration_s = 12.0
+
+        [[vary]]
+        parameter = "wind_speed_m_s"
+        distribution = "uniform"
+        low = 0.0
+        high = 6.0
+
+        [targets]
+        position_rmse_m = 1e-6
+        """, "keep.toml")
+    out = tmp_path / "o"
+    assert main(["sweep", str(path), "--out", str(out), "--workers", "1", "--quiet",
+                 "--no-figures", "--keep", "1"]) == 0
+    sweep, sc = sw.load_sweep(path)
+    rows = sw.read_table(out / "runs.csv", sweep)
+    failed = sorted((r for r in rows if r["failed"]), key=lambda r: -r["position_max_error_m"])
+    assert len(failed) == 2, rows
+    kept = sorted((out / "runs").iterdir())
+    assert kept == [out / "runs" / f"run-{failed[0]['index']:04d}"]
+    metrics = json.loads((kept[0] / "metrics.json").read_text())
+    assert metrics["position_rmse_m"] == pytest.approx(failed[0]["position_rmse_m"], rel=1e-9)
+    from tuav_sitl.view import available
+    if available():
+        assert (kept[0] / "recording.rrd").stat().st_size > 0
+    assert f"kept a failed run: {kept[0]}" in capsys.readouterr().out
+    assert main(["sweep", str(path), "--out", str(out), "--keep", "-1"]) == 2

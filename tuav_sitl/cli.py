@@ -7,6 +7,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from tuav_sitl.sweep_keep import DEFAULT_KEEP
 from tuavdefs.params import TetherModel
 from tuavdefs.paramspec import ParameterError
 
@@ -163,6 +164,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         sweep = sweep.replace(runs=args.runs)
     if args.workers is not None and args.workers < 1:
         raise ParameterError("--workers", f"must be >= 1, got {args.workers}")
+    if args.keep < 0:
+        raise ParameterError("--keep", f"must be >= 0, got {args.keep}")
     out = Path(args.out) if args.out else Path("sweeps") / sweep.name
     where = args.scheduler or f"a LocalCluster of {args.workers or 'one worker per core'}"
     print(f"tuav-sitl sweep {sweep.name}: {sweep.runs} runs of {scenario.name} on {where}")
@@ -176,6 +179,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
         figs = make_sweep_figures(sweep, rows, out)
         print("wrote " + ", ".join(str(f) for f in figs))
+    if args.keep:
+        from tuav_sitl.sweep_keep import keep_runs
+
+        for folder in keep_runs(sweep, scenario, rows, out, args.keep):
+            print(f"kept a failed run: {folder} (tuav-sitl view {folder})")
     return 0
 
 
@@ -313,6 +321,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help="the LocalCluster's worker processes (default: one per core)")
     sweep.add_argument("--runs", type=int, default=None, help="override the run count")
     sweep.add_argument("--out", default=None, help="output folder (default sweeps/NAME)")
+    sweep.add_argument("--keep", type=int, default=DEFAULT_KEEP, metavar="N",
+                       help="fly the N failed runs with the largest position error again "
+                            "into OUT/runs/run-INDEX/ as run folders with their "
+                            f"recording.rrd (default {DEFAULT_KEEP}; 0: none)")
     sweep.add_argument("--quiet", action="store_true", help="no progress bar")
     sweep.add_argument("--no-figures", action="store_true",
                        help="skip the figures (CDFs, failures against the drawn parameters)")
