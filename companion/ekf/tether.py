@@ -12,8 +12,6 @@ import numpy as np
 
 from companion.ekf.aid_source import AidSources
 from companion.ekf.layout import (
-    AID_COLS,
-    AID_TEST_RATIO,
     BUF_P,
     FUSED,
     IDX_P,
@@ -23,7 +21,6 @@ from companion.ekf.layout import (
     PRM_TETHER_GATE,
     PRM_VAR_MIN,
     REJECTED,
-    W_AID,
     W_DELAYED,
     W_DX,
     W_PRM,
@@ -34,7 +31,7 @@ from companion.ekf.layout import (
 from companion.ekf.memory import FilterMemory
 from companion.ekf.output import OutputPredictor, take_up
 from companion.ekf.params import EstimatorParams
-from companion.ekf.update import cholesky3, delayed_state, inject, scalar_update, set_aid_row
+from companion.ekf.update import delayed_state, gate3, inject, scalar_update, whitening3
 from tuavdefs.frames import Vec3
 from tuavdefs.jit import entry_point, njit
 
@@ -57,29 +54,13 @@ def _fuse_tether(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray
     # S = P_pp + C, its Cholesky factor, and d^2 = y' S^-1 y
     s00, s01, s02 = P[0, 0] + c00, P[0, 1] + c01, P[0, 2] + c02
     s11, s12, s22 = P[1, 1] + c11, P[1, 2] + c12, P[2, 2] + c22
-    ok, a00, a10, a20, a11, a21, a22 = cholesky3(s00, s01, s02, s11, s12, s22)
-    if not ok:       # the innovation kept, the test ratio the last one's
-        set_aid_row(w, _TETHER, y0, y1, y2, s00, s11, s22,
-                    w[W_AID + _TETHER * AID_COLS + AID_TEST_RATIO])
-        return NUMERIC
-    w0 = y0 / a00
-    w1 = (y1 - a10 * w0) / a11
-    w2 = (y2 - a20 * w0 - a21 * w1) / a22
-    ratio = (w0 * w0 + w1 * w1 + w2 * w2) / (gate * gate)
-    set_aid_row(w, _TETHER, y0, y1, y2, s00, s11, s22, ratio)
-    if ratio > 1.0:
-        return REJECTED
-    # the measurement's own factor C = L L'
-    ok, l00, l10, l20, l11, l21, l22 = cholesky3(c00, c01, c02, c11, c12, c22)
+    res = gate3(w, _TETHER, y0, y1, y2, s00, s01, s02, s11, s12, s22, gate)
+    if res != FUSED:
+        return res
+    # rows of L^-1 for the measurement's own C = L L': L^-1 z has the noise I
+    ok, m00, m10, m11, m20, m21, m22 = whitening3(c00, c01, c02, c11, c12, c22)
     if not ok:
         return NUMERIC
-    # rows of L^-1 (lower triangular): z' = L^-1 z has the noise I
-    m00 = 1.0 / l00
-    m10 = -l10 / (l00 * l11)
-    m11 = 1.0 / l11
-    m20 = (l10 * l21 - l11 * l20) / (l00 * l11 * l22)
-    m21 = -l21 / (l11 * l22)
-    m22 = 1.0 / l22
     dx = w[W_DX:W_DX + N_ERR]
     var_min = w[W_PRM + PRM_VAR_MIN]
     res = FUSED

@@ -32,8 +32,6 @@ import numpy as np
 
 from companion.ekf.aid_source import AidSources
 from companion.ekf.layout import (
-    AID_COLS,
-    AID_TEST_RATIO,
     BUF_P,
     FUSED,
     IDX_LINE,
@@ -63,7 +61,6 @@ from companion.ekf.layout import (
     PRM_LINE_W,
     PRM_VAR_MIN,
     REJECTED,
-    W_AID,
     W_DELAYED,
     W_DX,
     W_PRM,
@@ -77,13 +74,13 @@ from companion.ekf.memory import FilterMemory
 from companion.ekf.output import OutputPredictor, take_up
 from companion.ekf.params import EstimatorParams
 from companion.ekf.update import (
-    cholesky3,
     delayed_state,
     dot,
+    gate3,
     inject,
     mat_vec,
     row_update,
-    set_aid_row,
+    whitening3,
 )
 from tuavdefs.frames import quat_to_matrix_kernel
 from tuavdefs.jit import entry_point, njit
@@ -167,30 +164,14 @@ def _fuse_line(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
     p0, p1, p2 = mat_vec(P, h[0]), mat_vec(P, h[1]), mat_vec(P, h[2])
     s00, s01, s02 = dot(h[0], p0) + r[0, 0], dot(h[0], p1) + r[0, 1], dot(h[0], p2) + r[0, 2]
     s11, s12, s22 = dot(h[1], p1) + r[1, 1], dot(h[1], p2) + r[1, 2], dot(h[2], p2) + r[2, 2]
-    ok, a00, a10, a20, a11, a21, a22 = cholesky3(s00, s01, s02, s11, s12, s22)
-    gate = prm[PRM_LINE_GATE]
-    if not ok:
-        set_aid_row(w, _LINE, y0, y1, y2, s00, s11, s22,
-                    w[W_AID + _LINE * AID_COLS + AID_TEST_RATIO])
-        return NUMERIC
-    v0 = y0 / a00
-    v1 = (y1 - a10 * v0) / a11
-    v2 = (y2 - a20 * v0 - a21 * v1) / a22
-    ratio = (v0 * v0 + v1 * v1 + v2 * v2) / (gate * gate)
-    set_aid_row(w, _LINE, y0, y1, y2, s00, s11, s22, ratio)
-    if ratio > 1.0:
-        return REJECTED
+    res = gate3(w, _LINE, y0, y1, y2, s00, s01, s02, s11, s12, s22, prm[PRM_LINE_GATE])
+    if res != FUSED:
+        return res
     # whitened by the reading's own noise R = L L': L^-1 y has the noise I
-    ok, l00, l10, l20, l11, l21, l22 = cholesky3(r[0, 0], r[0, 1], r[0, 2], r[1, 1],
-                                                 r[1, 2], r[2, 2])
+    ok, m00, m10, m11, m20, m21, m22 = whitening3(r[0, 0], r[0, 1], r[0, 2], r[1, 1],
+                                                  r[1, 2], r[2, 2])
     if not ok:
         return NUMERIC
-    m00 = 1.0 / l00
-    m10 = -l10 / (l00 * l11)
-    m11 = 1.0 / l11
-    m20 = (l10 * l21 - l11 * l20) / (l00 * l11 * l22)
-    m21 = -l21 / (l11 * l22)
-    m22 = 1.0 / l22
     dx = w[W_DX:W_DX + N_ERR]
     var_min = prm[PRM_VAR_MIN]
     res = FUSED

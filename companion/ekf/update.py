@@ -16,6 +16,7 @@ from companion.ekf.layout import (
     AID_TEST_RATIO,
     BUF_P,
     BUF_T,
+    FUSED,
     IDX_BA,
     IDX_BG,
     IDX_BH,
@@ -25,6 +26,8 @@ from companion.ekf.layout import (
     IDX_TH,
     IDX_W,
     N_LINE,
+    NUMERIC,
+    REJECTED,
     W_AID,
     X_BA,
     X_BG,
@@ -221,4 +224,39 @@ def cholesky3(s00: float, s01: float, s02: float, s11: float, s12: float, s22: f
     if not d22 > 0.0:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     return True, l00, l10, l20, l11, l21, math.sqrt(d22)
+
+
+
+@njit
+def gate3(w: np.ndarray, kind: int, y0: float, y1: float, y2: float, s00: float,
+          s01: float, s02: float, s11: float, s12: float, s22: float, gate: float) -> int:
+    """One gate for a three-axis innovation ``y`` with covariance ``S`` (upper triangle
+    ``s``): its test ratio ``y' S^-1 y / gate^2`` through ``S``'s Cholesky factor, written
+    with the innovation into aid source ``kind``'s row of ``w``. FUSED when it passes (the
+    caller fuses), REJECTED beyond the gate, NUMERIC when ``S`` is not positive definite
+    (the innovation kept, the test ratio the last one's)."""
+    ok, a00, a10, a20, a11, a21, a22 = cholesky3(s00, s01, s02, s11, s12, s22)
+    if not ok:
+        set_aid_row(w, kind, y0, y1, y2, s00, s11, s22,
+                    w[W_AID + kind * AID_COLS + AID_TEST_RATIO])
+        return NUMERIC
+    v0 = y0 / a00
+    v1 = (y1 - a10 * v0) / a11
+    v2 = (y2 - a20 * v0 - a21 * v1) / a22
+    ratio = (v0 * v0 + v1 * v1 + v2 * v2) / (gate * gate)
+    set_aid_row(w, kind, y0, y1, y2, s00, s11, s22, ratio)
+    return REJECTED if ratio > 1.0 else FUSED
+
+
+@njit
+def whitening3(c00: float, c01: float, c02: float, c11: float, c12: float, c22: float
+               ) -> tuple[bool, float, float, float, float, float, float]:
+    """The rows of ``L^-1`` for the measurement noise ``C = L L'`` (upper triangle ``c``):
+    (positive definite, m00, m10, m11, m20, m21, m22), so that ``L^-1 z`` has the noise I
+    and its three rows fuse one at a time."""
+    ok, l00, l10, l20, l11, l21, l22 = cholesky3(c00, c01, c02, c11, c12, c22)
+    if not ok:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    return (True, 1.0 / l00, -l10 / (l00 * l11), 1.0 / l11,
+            (l10 * l21 - l11 * l20) / (l00 * l11 * l22), -l21 / (l11 * l22), 1.0 / l22)
 
