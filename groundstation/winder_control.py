@@ -95,11 +95,24 @@ class WinderControlParams(Params):
     slack_recovery_m_s: float = quantity(
         1.0, "m/s", "tension law: below the slack floor the line is wound in towards L-bar "
         "at up to this speed beyond the feed-forward (0: only the force loop's)", ge=0)
+    slack_approach_gain_1_s: float = quantity(
+        0.15, "1/s", "tension law: below the slack floor and within L-bar, the line's slack "
+        "above the lower length bound is taken in at most this fast (relative to the UAV's "
+        "radial speed): a line that pulls nothing at the exit may be held up by the wind, "
+        "and its slack is all that keeps it from a snap", gt=0)
     length_bound_gain_1_s: float = quantity(
         4.0, "1/s", "tension law: the length bounds' loop gain", gt=0)
     length_bound_m: float = quantity(
         3.0, "m", "tension law: the most line beyond L-bar (or the longest line off the "
         "ground) it pays out", gt=0)
+    exit_lift_gain_n_s_rad: float = quantity(
+        20.0, "N/(s*rad)", "tension law: the exit-elevation loop: how fast the set-point "
+        "rises per radian the guide arm's elevation is below L-bar's least exit angle (and "
+        "falls, above it, as fast at most as it rises at a flat exit; 0: off; docs/"
+        "control.md §8.4)", ge=0)
+    exit_lift_max_n: float = quantity(
+        6.0, "N", "tension law: the most the exit-elevation loop raises the set-point (the "
+        "snap ceiling caps the sum)", ge=0)
     line_stiffness_n_m: float = quantity(
         10.0, "N/m", "tension law: the line's stiffness kappa its Lyapunov function is "
         "reported with, and the stiffest line the set-point loop's gain is designed for "
@@ -191,6 +204,8 @@ class WinderController:
             q[tl.Q_MARGIN], q[tl.Q_BOUND_M] = g.tension_margin, g.length_bound_m
             q[tl.Q_LAG_S] = LAG_TIME_S
             q[tl.Q_RECOVER] = g.slack_recovery_m_s
+            q[tl.Q_LIFT_GAIN], q[tl.Q_LIFT_MAX] = g.exit_lift_gain_n_s_rad, g.exit_lift_max_n
+            q[tl.Q_APPROACH] = g.slack_approach_gain_1_s
             self._q = q
             self._tension_from = self._packed_from
         return self._q
@@ -217,16 +232,20 @@ class WinderController:
     def update_tension(self, dt_s: float, length_m: float, omega_rad_s: float,
                        tension_n: float, setpoint_n: float, ff_rate_m_s: float,
                        low_m: float, low_rate_m_s: float, high_m: float,
-                       recover_m: float = math.nan) -> WinderCommand:
+                       recover_m: float = math.nan, elevation_rad: float = math.nan,
+                       exit_min_rad: float = 0.0) -> WinderCommand:
         """Torque request [N m] of the tension law (:func:`groundstation.tension_law.
         tension_law`) for the measured length [m], drum rate [rad/s] and tension [N], the
         set-point [N], the line speed's feed-forward [m/s] and the length bounds [m]
         (the lower moving at ``low_rate_m_s``), the length a slack line is wound in towards
-        [m] (NaN: none); the length law's filter is forgotten."""
+        [m] (NaN: none), the guide arm's exit elevation [rad] (NaN: none) and the least
+        the exit-elevation loop holds it at [rad] (0: the loop off); the length law's
+        filter is forgotten."""
         self.state[:] = 0.0
         return WinderCommand(*tl.tension_law(
             self.tension_params(), self.tension_state, dt_s, length_m, omega_rad_s,
-            tension_n, setpoint_n, ff_rate_m_s, low_m, low_rate_m_s, high_m, recover_m))
+            tension_n, setpoint_n, ff_rate_m_s, low_m, low_rate_m_s, high_m, recover_m,
+            elevation_rad, exit_min_rad))
 
     def update(self, dt_s: float, length_m: float, omega_rad_s: float, drum_tension_n: float,
                ref_length_m: float, ref_rate_m_s: float) -> WinderCommand:

@@ -269,7 +269,9 @@ def tension_step(uav: np.ndarray, measured: np.ndarray, lbar_p: np.ndarray,
     velocity (the rate is the feed-forward; its exit-angle root in ``lbar_s``), the line's
     weight estimate, the set-point (:func:`groundstation.tension_law.tension_setpoint_n`),
     the length bounds (below: the straight distance plus the least slack; above: L-bar or
-    the longest line still off the ground, plus ``length_bound_m``), then
+    the longest line still off the ground, plus ``length_bound_m``), the exit-elevation
+    loop's reference (L-bar's least exit angle, at most half the chord's elevation) with
+    the measured exit elevation, then
     :func:`groundstation.tension_law.tension_law`. Returns (the length the drum is asked
     to be at: the measured length plus its lag behind the speed set-point, the speed
     set-point [m/s], the WinderCommand's fields)."""
@@ -309,6 +311,10 @@ def tension_step(uav: np.ndarray, measured: np.ndarray, lbar_p: np.ndarray,
     law_s[Z_STIFFNESS] = taut_line_stiffness_n_m(law_s[Z_SETPOINT], w, h, v)
     high = max(lbar_m, room) + law_p[Q_BOUND_M]
     trim_s[TS_JOIN_GAP] = 0.0            # no join: the law has no length reference to jump
+    # the exit-elevation loop holds L-bar's least exit angle, or half the chord's
+    # elevation where that is flatter (a catenary leaves below its chord: the UAV low and
+    # far, as L-bar's own rule there)
+    exit_min = min(math.atan(lbar_p[LB_TAN_MIN]), 0.5 * math.atan2(v, h))
     cmd = tension_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, setpoint,
-                      rate, low, radial, high, lbar_m)
+                      rate, low, radial, high, lbar_m, elevation_rad, exit_min)
     return length_m + law_s[Z_LAG], law_s[Z_SPEED], cmd
