@@ -29,11 +29,10 @@ the set-point's: the drum renders to the line's true pull by itself). Lyapunov f
 (the last term is the command filter's lag and the bounds: zero while neither acts).
 While a length bound holds the line, the torque's ``T*`` follows the measured tension
 (anti-windup); below the slack floor the line is wound in towards L-bar (the slack
-floor's recovery; within L-bar its slack is taken no faster than the slack approach, and
-the torque holds the tension the line has). The exit-elevation loop (:func:`exit_lift`)
-raises the force loop's set-point ``T* + dT`` while the guide arm reads the line leaving
-below L-bar's least exit angle: the windless catenary's ``T*`` does not keep a line that
-the wind bows off the ground (docs/control.md §8.4).
+floor's recovery). The exit-elevation loop (:func:`exit_lift`) raises the force loop's
+set-point ``T* + dT`` while the guide arm reads the line leaving below L-bar's least exit
+angle and the line pulls what the raised set-point asks: the windless catenary's ``T*``
+does not keep a line that the wind bows off the ground (docs/control.md §8.4).
 """
 
 from __future__ import annotations
@@ -49,7 +48,7 @@ from tuavdefs.jit import njit
 (Q_R_W, Q_BETA, Q_TAU_MAX, Q_V_MAX, Q_M_BAR, Q_RHO, Q_L_T, Q_R2, Q_I_ROTOR, Q_FILTER,
  Q_SP_FILTER, Q_GAIN, Q_CEIL, Q_CEIL_GAIN, Q_ACC_MAX, Q_CMD_FILTER, Q_K_W, Q_K_BOUND,
  Q_STIFFNESS, Q_FLOOR, Q_SP_MAX, Q_MARGIN, Q_BOUND_M, Q_LAG_S, Q_RECOVER, Q_LIFT_GAIN,
- Q_LIFT_MAX, Q_APPROACH) = range(28)
+ Q_LIFT_MAX, Q_LIFT_BAND) = range(28)
 N_TENSION_PARAMS = 28
 # indices of its state (Z_LIFT: the exit-elevation loop's raise of the set-point [N])
 (Z_STARTED, Z_TENSION, Z_SETPOINT, Z_SPEED, Z_ACC, Z_LAG, Z_SPEED_RAW, Z_FEEDBACK,
@@ -113,15 +112,23 @@ def tension_speed(p: np.ndarray, tension_n: float, setpoint_n: float,
 
 @njit
 def exit_lift(p: np.ndarray, s: np.ndarray, dt_s: float, elevation_rad: float,
-              exit_min_rad: float) -> None:
+              exit_min_rad: float, deficit_n: float = 0.0) -> None:
     """One step of the exit-elevation loop (docs/control.md §8.4): the raise of the
     set-point ``s[Z_LIFT]`` [N] integrates the guide arm's elevation ``elevation_rad``
     [rad] below ``exit_min_rad`` [rad] at ``lift_gain`` N/(s rad), the error bounded to
     +-``exit_min_rad`` (a steep line gives the raise back no faster than a flat one
     takes it), the raise within [0, ``lift_max``]; held without a reading (NaN: the
-    line pulls nothing at the exit) or without a reference (``exit_min_rad`` 0)."""
+    line pulls nothing at the exit) or without a reference (``exit_min_rad`` 0). It
+    rises only while the line's tension is at most ``lift_band`` below the raised
+    set-point (``deficit_n`` [N], the tension loop's lag: 0 converged): a line that lies
+    low because the drum has more out than the set-point holds (a stalled drum, a
+    vehicle coming in faster than the drum winds) is already wound in by the tension
+    loop, and a raise integrated meanwhile (the cascade's windup) winds it in hard once
+    the drum follows (a stall released on the way in: 1.9x its steady pull)."""
     if elevation_rad == elevation_rad and exit_min_rad > 0.0:
         err = min(max(exit_min_rad - elevation_rad, -exit_min_rad), exit_min_rad)
+        if err > 0.0 and deficit_n > p[Q_LIFT_BAND]:
+            return
         s[Z_LIFT] = min(max(s[Z_LIFT] + dt_s * p[Q_LIFT_GAIN] * err, 0.0), p[Q_LIFT_MAX])
 
 
@@ -139,7 +146,7 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     [rad] or above) and low-passed; the force loops' speed bounded by the length
     bounds ``low_m`` (moving at ``low_rate_m_s``) and ``high_m`` [m] and by the ceiling;
     a slack line (below the floor) wound in towards ``recover_m`` [m] (NaN: none) at up to
-    the recovery speed, and within it no faster than the slack approach allows,
+    the recovery speed,
     the speed set-point filtered with its acceleration limit, then the backstepping
     torque. Returns the fields of a :class:`~groundstation.winder_control.WinderCommand`
     (torque [N m], tension error [N] in the length error's place, e_w [rad/s], the drum
@@ -166,7 +173,7 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     # slack: 0 rad at 0.05 N)
     if min(t_f, tension_n) < p[Q_FLOOR]:
         elevation_rad = math.nan
-    exit_lift(p, s, dt_s, elevation_rad, exit_min_rad)
+    exit_lift(p, s, dt_s, elevation_rad, exit_min_rad, t_sp + s[Z_LIFT] - t_f)
     # the raise enters the force loop's set-point, not the torque's: the drum renders from
     # the line's own set-point, and tracks the speed the raise asks
     v0 = tension_speed(p, t_f, min(t_sp + s[Z_LIFT], max(p[Q_CEIL], t_sp)), ff_rate_m_s,
@@ -175,20 +182,11 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     # the slack floor's recovery: a line pulling less than the floor says nothing of how
     # much of it hangs slack; the length the UAV's position asks does, and is wound in
     # towards at up to the recovery speed, blended in as the tension falls below the floor
-    # (below it, the force loop's wind-in on at most the slack approach's rate towards the
-    # lower bound: a line that pulls nothing at the exit yet is no longer than L-bar may be
-    # held up by the wind, blown back over the winder with its lowest segment loose; the
-    # force loop's wind-in took its slack at 0.5 m/s while the far end still went away,
-    # and snapped it straight: 115 N)
     slack = (p[Q_FLOOR] - t_f) / p[Q_FLOOR]
-    recovering = 0.0
     if slack > 0.0 and p[Q_RECOVER] > 0.0 and recover_m == recover_m:
-        if length_m > recover_m:
-            v_rec = ff_rate_m_s - min(k_b * (length_m - recover_m), p[Q_RECOVER])
-        else:
-            v_rec = max(v0, low_rate_m_s - p[Q_APPROACH] * (length_m - low_m))
-        recovering = min(slack, 1.0)
-        v0 += recovering * (v_rec - v0)
+        v_rec = ff_rate_m_s - min(k_b * max(length_m - recover_m, 0.0), p[Q_RECOVER])
+        if v_rec < v0:
+            v0 += min(slack, 1.0) * (v_rec - v0)
     # command filter: the force loops' part first order (the load cell's noise, the
     # dynamic line's waves), the feed-forward (the UAV's reported motion: smooth) on a
     # light low-pass
@@ -214,10 +212,6 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
         s[Z_SETPOINT] += (1.0 - math.exp(-dt_s / p[Q_SP_FILTER])) * (
             setpoint_n - s[Z_SETPOINT])
     t_sp = s[Z_SETPOINT]
-    # while the recovery (a length loop) speaks, the torque holds the tension the line has,
-    # as under a bound: the set-point's torque against a line that pulls nothing wound the
-    # drum in r_w^2 (T* - T) / k_w faster than its speed set-point (0.27 m/s at 4 N)
-    t_tau = t_sp + recovering * (t_f - t_sp)
     saturated = False
     if abs(v) > v_max:
         v = math.copysign(v_max, v)
@@ -237,7 +231,7 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     e_w = omega_rad_s - alpha
     inertia = _inertia(p, length_m)
     inertia_dot = -0.5 * p[Q_RHO] * p[Q_R2] * r * omega_rad_s
-    tau = (-r * t_tau + p[Q_BETA] * omega_rad_s + inertia * alpha_dot
+    tau = (-r * t_sp + p[Q_BETA] * omega_rad_s + inertia * alpha_dot
            - 0.5 * inertia_dot * e_w - p[Q_K_W] * e_w)
     tau_max = p[Q_TAU_MAX]
     tau_limited = min(max(tau, -tau_max), tau_max)

@@ -95,11 +95,6 @@ class WinderControlParams(Params):
     slack_recovery_m_s: float = quantity(
         1.0, "m/s", "tension law: below the slack floor the line is wound in towards L-bar "
         "at up to this speed beyond the feed-forward (0: only the force loop's)", ge=0)
-    slack_approach_gain_1_s: float = quantity(
-        0.15, "1/s", "tension law: below the slack floor and within L-bar, the line's slack "
-        "above the lower length bound is taken in at most this fast (relative to the UAV's "
-        "radial speed): a line that pulls nothing at the exit may be held up by the wind, "
-        "and its slack is all that keeps it from a snap", gt=0)
     length_bound_gain_1_s: float = quantity(
         4.0, "1/s", "tension law: the length bounds' loop gain", gt=0)
     length_bound_m: float = quantity(
@@ -113,6 +108,10 @@ class WinderControlParams(Params):
     exit_lift_max_n: float = quantity(
         6.0, "N", "tension law: the most the exit-elevation loop raises the set-point (the "
         "snap ceiling caps the sum)", ge=0)
+    exit_lift_band_n: float = quantity(
+        1.0, "N", "tension law: the exit-elevation loop raises the set-point only while the "
+        "line pulls at most this much below the raised set-point (the cascade's anti-windup: "
+        "a stalled drum, a line paid out ahead of the vehicle; docs/control.md §8.4)", gt=0)
     line_stiffness_n_m: float = quantity(
         10.0, "N/m", "tension law: the line's stiffness kappa its Lyapunov function is "
         "reported with, and the stiffest line the set-point loop's gain is designed for "
@@ -205,7 +204,7 @@ class WinderController:
             q[tl.Q_LAG_S] = LAG_TIME_S
             q[tl.Q_RECOVER] = g.slack_recovery_m_s
             q[tl.Q_LIFT_GAIN], q[tl.Q_LIFT_MAX] = g.exit_lift_gain_n_s_rad, g.exit_lift_max_n
-            q[tl.Q_APPROACH] = g.slack_approach_gain_1_s
+            q[tl.Q_LIFT_BAND] = g.exit_lift_band_n
             self._q = q
             self._tension_from = self._packed_from
         return self._q
