@@ -52,8 +52,8 @@ from tuavdefs.jit import njit
 N_TENSION_PARAMS = 28
 # indices of its state (Z_LIFT: the exit-elevation loop's raise of the set-point [N])
 (Z_STARTED, Z_TENSION, Z_SETPOINT, Z_SPEED, Z_ACC, Z_LAG, Z_SPEED_RAW, Z_FEEDBACK,
- Z_FF, Z_STIFFNESS, Z_LIFT) = range(11)
-N_TENSION_STATE = 11
+ Z_FF, Z_STIFFNESS, Z_LIFT, Z_LIFTED) = range(12)
+N_TENSION_STATE = 12
 
 
 #: Time constant [s] of the low-pass on the line speed's feed-forward (dL-bar/dt from the
@@ -124,8 +124,13 @@ def exit_lift(p: np.ndarray, s: np.ndarray, dt_s: float, elevation_rad: float,
     low because the drum has more out than the set-point holds (a stalled drum, a
     vehicle coming in faster than the drum winds) is already wound in by the tension
     loop, and a raise integrated meanwhile (the cascade's windup) winds it in hard once
-    the drum follows (a stall released on the way in: 1.9x its steady pull)."""
-    if elevation_rad == elevation_rad and exit_min_rad > 0.0:
+    the drum follows (a stall released on the way in: 1.9x its steady pull). It is armed
+    once the arm has read the line leaving at twice ``exit_min_rad`` (``s[Z_LIFTED]``):
+    a line that has not yet lifted off the ground (the take-off) is not one the wind
+    bows down."""
+    if elevation_rad == elevation_rad and elevation_rad >= 2.0 * exit_min_rad:
+        s[Z_LIFTED] = 1.0
+    if elevation_rad == elevation_rad and exit_min_rad > 0.0 and s[Z_LIFTED] > 0.0:
         err = min(max(exit_min_rad - elevation_rad, -exit_min_rad), exit_min_rad)
         if err > 0.0 and deficit_n > p[Q_LIFT_BAND]:
             return
@@ -163,6 +168,7 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
         s[Z_FF] = ff_rate_m_s
         s[Z_FEEDBACK] = s[Z_SPEED] - ff_rate_m_s
         s[Z_LIFT] = 0.0
+        s[Z_LIFTED] = 0.0
     if p[Q_FILTER] > 0.0:
         s[Z_TENSION] += (1.0 - math.exp(-dt_s / p[Q_FILTER])) * (tension_n - s[Z_TENSION])
     else:

@@ -453,6 +453,7 @@ def test_the_exit_elevation_loop_s_lyapunov_function_on_moorpy_s_catenary():
         # the ground, below 3.9 N)
         assert np.all(np.diff(table) >= 0) and table[-1] > table[0]
         s = np.zeros(tl.N_TENSION_STATE)
+        s[tl.Z_LIFTED] = 1.0        # the line has flown (the loop is armed)
         lift, values = [], []
         if raised:
             assert table[0] < ref < table[-1]
