@@ -31,7 +31,7 @@ While a length bound holds the line, the torque's ``T*`` follows the measured te
 (anti-windup); below the slack floor the line is wound in towards L-bar (the slack
 floor's recovery). The exit-elevation loop (:func:`exit_lift`) raises the force loop's
 set-point ``T* + dT`` while the guide arm reads the line leaving below L-bar's least exit
-angle and the line pulls what the raised set-point asks: the windless catenary's ``T*``
+angle and the drum follows its speed set-point: the windless catenary's ``T*``
 does not keep a line that the wind bows off the ground (docs/control.md §8.4).
 """
 
@@ -48,7 +48,7 @@ from tuavdefs.jit import njit
 (Q_R_W, Q_BETA, Q_TAU_MAX, Q_V_MAX, Q_M_BAR, Q_RHO, Q_L_T, Q_R2, Q_I_ROTOR, Q_FILTER,
  Q_SP_FILTER, Q_GAIN, Q_CEIL, Q_CEIL_GAIN, Q_ACC_MAX, Q_CMD_FILTER, Q_K_W, Q_K_BOUND,
  Q_STIFFNESS, Q_FLOOR, Q_SP_MAX, Q_MARGIN, Q_BOUND_M, Q_LAG_S, Q_RECOVER, Q_LIFT_GAIN,
- Q_LIFT_MAX, Q_LIFT_BAND) = range(28)
+ Q_LIFT_MAX, Q_LIFT_LAG) = range(28)
 N_TENSION_PARAMS = 28
 # indices of its state (Z_LIFT: the exit-elevation loop's raise of the set-point [N])
 (Z_STARTED, Z_TENSION, Z_SETPOINT, Z_SPEED, Z_ACC, Z_LAG, Z_SPEED_RAW, Z_FEEDBACK,
@@ -112,19 +112,19 @@ def tension_speed(p: np.ndarray, tension_n: float, setpoint_n: float,
 
 @njit
 def exit_lift(p: np.ndarray, s: np.ndarray, dt_s: float, elevation_rad: float,
-              exit_min_rad: float, deficit_n: float = 0.0) -> None:
+              exit_min_rad: float, lag_m: float = 0.0) -> None:
     """One step of the exit-elevation loop (docs/control.md §8.4): the raise of the
     set-point ``s[Z_LIFT]`` [N] integrates the guide arm's elevation ``elevation_rad``
     [rad] below ``exit_min_rad`` [rad] at ``lift_gain`` N/(s rad), the error bounded to
     +-``exit_min_rad`` (a steep line gives the raise back no faster than a flat one
     takes it), the raise within [0, ``lift_max``]; held without a reading (NaN: the
     line pulls nothing at the exit) or without a reference (``exit_min_rad`` 0). It
-    rises only while the line's tension is at most ``lift_band`` below the raised
-    set-point (``deficit_n`` [N], the tension loop's lag: 0 converged): a line that lies
-    low because the drum has more out than the set-point holds (a stalled drum, a
-    vehicle coming in faster than the drum winds) is already wound in by the tension
-    loop, and a raise integrated meanwhile (the cascade's windup) winds it in hard once
-    the drum follows (a stall released on the way in: 1.9x its steady pull). It is armed
+    rises only while the drum follows its speed set-point, within ``lift_lag`` of it
+    (``lag_m`` [m], the drum's low-passed lag, ``s[Z_LAG]``: 0 following): a raise
+    integrated while the drum cannot act (a snag) is the cascade's windup, and winds the
+    line in hard once the drum follows (a stall released on the way in: 1.9x its steady
+    pull; the tension's own lag behind the raised set-point is no such sign: a line on
+    the ground pulls little more as it is wound in, until it lifts). It is armed
     once the arm has read the line leaving at twice ``exit_min_rad`` (``s[Z_LIFTED]``):
     a line that has not yet lifted off the ground (the take-off) is not one the wind
     bows down."""
@@ -132,7 +132,7 @@ def exit_lift(p: np.ndarray, s: np.ndarray, dt_s: float, elevation_rad: float,
         s[Z_LIFTED] = 1.0
     if elevation_rad == elevation_rad and exit_min_rad > 0.0 and s[Z_LIFTED] > 0.0:
         err = min(max(exit_min_rad - elevation_rad, -exit_min_rad), exit_min_rad)
-        if err > 0.0 and deficit_n > p[Q_LIFT_BAND]:
+        if err > 0.0 and abs(lag_m) > p[Q_LIFT_LAG]:
             return
         s[Z_LIFT] = min(max(s[Z_LIFT] + dt_s * p[Q_LIFT_GAIN] * err, 0.0), p[Q_LIFT_MAX])
 
@@ -179,7 +179,7 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     # slack: 0 rad at 0.05 N)
     if min(t_f, tension_n) < p[Q_FLOOR]:
         elevation_rad = math.nan
-    exit_lift(p, s, dt_s, elevation_rad, exit_min_rad, t_sp + s[Z_LIFT] - t_f)
+    exit_lift(p, s, dt_s, elevation_rad, exit_min_rad, s[Z_LAG])
     # the raise enters the force loop's set-point, not the torque's: the drum renders from
     # the line's own set-point, and tracks the speed the raise asks
     v0 = tension_speed(p, t_f, min(t_sp + s[Z_LIFT], max(p[Q_CEIL], t_sp)), ff_rate_m_s,

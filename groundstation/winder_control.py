@@ -108,10 +108,10 @@ class WinderControlParams(Params):
     exit_lift_max_n: float = quantity(
         6.0, "N", "tension law: the most the exit-elevation loop raises the set-point (the "
         "snap ceiling caps the sum)", ge=0)
-    exit_lift_band_n: float = quantity(
-        1.0, "N", "tension law: the exit-elevation loop raises the set-point only while the "
-        "line pulls at most this much below the raised set-point (the cascade's anti-windup: "
-        "a stalled drum, a line paid out ahead of the vehicle; docs/control.md §8.4)", gt=0)
+    exit_lift_lag_m: float = quantity(
+        0.1, "m", "tension law: the exit-elevation loop raises the set-point only while the "
+        "drum is at most this far behind its speed set-point (low-passed over 0.5 s: the "
+        "cascade's anti-windup, a snagged drum; docs/control.md §8.4)", gt=0)
     line_stiffness_n_m: float = quantity(
         10.0, "N/m", "tension law: the line's stiffness kappa its Lyapunov function is "
         "reported with, and the stiffest line the set-point loop's gain is designed for "
@@ -204,7 +204,7 @@ class WinderController:
             q[tl.Q_LAG_S] = LAG_TIME_S
             q[tl.Q_RECOVER] = g.slack_recovery_m_s
             q[tl.Q_LIFT_GAIN], q[tl.Q_LIFT_MAX] = g.exit_lift_gain_n_s_rad, g.exit_lift_max_n
-            q[tl.Q_LIFT_BAND] = g.exit_lift_band_n
+            q[tl.Q_LIFT_LAG] = g.exit_lift_lag_m
             self._q = q
             self._tension_from = self._packed_from
         return self._q
