@@ -29,7 +29,9 @@ the set-point's: the drum renders to the line's true pull by itself). Lyapunov f
 (the last term is the command filter's lag and the bounds: zero while neither acts).
 While a length bound holds the line, the torque's ``T*`` follows the measured tension
 (anti-windup); below the slack floor the line is wound in towards L-bar (the slack
-floor's recovery). The exit-elevation loop (:func:`exit_lift`) raises the force loop's
+floor's recovery; once the line has flown, within L-bar its slack is taken no faster
+than the slack approach, and the torque holds the tension the line has). The
+exit-elevation loop (:func:`exit_lift`) raises the force loop's
 set-point ``T* + dT`` while the guide arm reads the line leaving below L-bar's least exit
 angle and the drum follows its speed set-point: the windless catenary's ``T*``
 does not keep a line that the wind bows off the ground (docs/control.md §8.4).
@@ -48,8 +50,8 @@ from tuavdefs.jit import njit
 (Q_R_W, Q_BETA, Q_TAU_MAX, Q_V_MAX, Q_M_BAR, Q_RHO, Q_L_T, Q_R2, Q_I_ROTOR, Q_FILTER,
  Q_SP_FILTER, Q_GAIN, Q_CEIL, Q_CEIL_GAIN, Q_ACC_MAX, Q_CMD_FILTER, Q_K_W, Q_K_BOUND,
  Q_STIFFNESS, Q_FLOOR, Q_SP_MAX, Q_MARGIN, Q_BOUND_M, Q_LAG_S, Q_RECOVER, Q_LIFT_GAIN,
- Q_LIFT_MAX, Q_LIFT_LAG) = range(28)
-N_TENSION_PARAMS = 28
+ Q_LIFT_MAX, Q_LIFT_LAG, Q_APPROACH) = range(29)
+N_TENSION_PARAMS = 29
 # indices of its state (Z_LIFT: the exit-elevation loop's raise of the set-point [N])
 (Z_STARTED, Z_TENSION, Z_SETPOINT, Z_SPEED, Z_ACC, Z_LAG, Z_SPEED_RAW, Z_FEEDBACK,
  Z_FF, Z_STIFFNESS, Z_LIFT, Z_LIFTED) = range(12)
@@ -151,7 +153,8 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     [rad] or above) and low-passed; the force loops' speed bounded by the length
     bounds ``low_m`` (moving at ``low_rate_m_s``) and ``high_m`` [m] and by the ceiling;
     a slack line (below the floor) wound in towards ``recover_m`` [m] (NaN: none) at up to
-    the recovery speed,
+    the recovery speed (once the line has flown, ``s[Z_LIFTED]``: within it no faster than
+    the slack approach, the torque on the measured tension),
     the speed set-point filtered with its acceleration limit, then the backstepping
     torque. Returns the fields of a :class:`~groundstation.winder_control.WinderCommand`
     (torque [N m], tension error [N] in the length error's place, e_w [rad/s], the drum
@@ -188,11 +191,25 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     # the slack floor's recovery: a line pulling less than the floor says nothing of how
     # much of it hangs slack; the length the UAV's position asks does, and is wound in
     # towards at up to the recovery speed, blended in as the tension falls below the floor
+    # (once the line has flown, within L-bar the force loop's wind-in on at most the slack
+    # approach's rate towards the lower bound: a line that pulls nothing at the exit yet is
+    # no longer than L-bar may be held up by the wind, its lowest segment loose over the
+    # winder, and the force loop's wind-in snapped it straight: 115 N; and the torque holds
+    # the tension the line has. Not before it has flown: on the take-off the set-point's
+    # torque pulls the line on the ground straight, which the winder's tether fix counts on)
     slack = (p[Q_FLOOR] - t_f) / p[Q_FLOOR]
+    recovering = 0.0
     if slack > 0.0 and p[Q_RECOVER] > 0.0 and recover_m == recover_m:
-        v_rec = ff_rate_m_s - min(k_b * max(length_m - recover_m, 0.0), p[Q_RECOVER])
-        if v_rec < v0:
-            v0 += min(slack, 1.0) * (v_rec - v0)
+        if s[Z_LIFTED] > 0.0 and length_m <= recover_m:
+            v_rec = max(v0, low_rate_m_s - p[Q_APPROACH] * (length_m - low_m))
+            recovering = min(slack, 1.0)
+            v0 += recovering * (v_rec - v0)
+        else:
+            v_rec = ff_rate_m_s - min(k_b * max(length_m - recover_m, 0.0), p[Q_RECOVER])
+            if v_rec < v0:
+                v0 += min(slack, 1.0) * (v_rec - v0)
+            if s[Z_LIFTED] > 0.0:
+                recovering = min(slack, 1.0)
     # command filter: the force loops' part first order (the load cell's noise, the
     # dynamic line's waves), the feed-forward (the UAV's reported motion: smooth) on a
     # light low-pass
@@ -218,6 +235,9 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
         s[Z_SETPOINT] += (1.0 - math.exp(-dt_s / p[Q_SP_FILTER])) * (
             setpoint_n - s[Z_SETPOINT])
     t_sp = s[Z_SETPOINT]
+    # (the set-point's torque against a line that pulls nothing winds the drum in
+    # r_w^2 (T* - T) / k_w faster than its speed set-point)
+    t_tau = t_sp + recovering * (t_f - t_sp)
     saturated = False
     if abs(v) > v_max:
         v = math.copysign(v_max, v)
@@ -237,7 +257,7 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     e_w = omega_rad_s - alpha
     inertia = _inertia(p, length_m)
     inertia_dot = -0.5 * p[Q_RHO] * p[Q_R2] * r * omega_rad_s
-    tau = (-r * t_sp + p[Q_BETA] * omega_rad_s + inertia * alpha_dot
+    tau = (-r * t_tau + p[Q_BETA] * omega_rad_s + inertia * alpha_dot
            - 0.5 * inertia_dot * e_w - p[Q_K_W] * e_w)
     tau_max = p[Q_TAU_MAX]
     tau_limited = min(max(tau, -tau_max), tau_max)

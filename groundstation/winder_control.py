@@ -95,6 +95,11 @@ class WinderControlParams(Params):
     slack_recovery_m_s: float = quantity(
         1.0, "m/s", "tension law: below the slack floor the line is wound in towards L-bar "
         "at up to this speed beyond the feed-forward (0: only the force loop's)", ge=0)
+    slack_approach_gain_1_s: float = quantity(
+        0.15, "1/s", "tension law: below the slack floor and within L-bar, once the line has "
+        "flown, its slack above the lower length bound is taken in at most this fast "
+        "(relative to the UAV's radial speed): a line that pulls nothing at the exit may be "
+        "held up by the wind, and its slack is all that keeps it from a snap", gt=0)
     length_bound_gain_1_s: float = quantity(
         4.0, "1/s", "tension law: the length bounds' loop gain", gt=0)
     length_bound_m: float = quantity(
@@ -205,6 +210,7 @@ class WinderController:
             q[tl.Q_RECOVER] = g.slack_recovery_m_s
             q[tl.Q_LIFT_GAIN], q[tl.Q_LIFT_MAX] = g.exit_lift_gain_n_s_rad, g.exit_lift_max_n
             q[tl.Q_LIFT_LAG] = g.exit_lift_lag_m
+            q[tl.Q_APPROACH] = g.slack_approach_gain_1_s
             self._q = q
             self._tension_from = self._packed_from
         return self._q
