@@ -468,3 +468,24 @@ def test_the_exit_elevation_loop_s_lyapunov_function_on_moorpy_s_catenary():
             values.append((s[tl.Z_LIFT] - target) ** 2)
         assert np.all(np.diff(values) <= 1e-12)
         assert lift[-1] == pytest.approx(target, abs=0.05)
+
+
+def test_the_exit_elevation_loop_waits_for_a_flown_line_and_a_following_drum():
+    """The loop's raise (docs/control.md §8.4) at a flat exit: none before the guide arm
+    has read the line leaving at twice the reference (the take-off's line on the ground),
+    none while the drum lags its speed set-point by more than ``exit_lift_lag_m`` (a
+    snag: the cascade's windup); then ``k_eps eps_r`` per second."""
+    gains = WinderControlParams(law="tension")
+    p = WinderController(gains, WinderParams(), TetherParams()).tension_params()
+    ref = math.radians(8.0)
+    s = np.zeros(tl.N_TENSION_STATE)
+    for _ in range(100):
+        tl.exit_lift(p, s, 0.01, 0.0, ref)
+    assert s[tl.Z_LIFT] == 0.0
+    tl.exit_lift(p, s, 0.01, 2.0 * ref, ref)        # the line leaves steeply: armed
+    for _ in range(100):
+        tl.exit_lift(p, s, 0.01, 0.0, ref, 1.5 * gains.exit_lift_lag_m)
+    assert s[tl.Z_LIFT] == 0.0
+    for _ in range(100):
+        tl.exit_lift(p, s, 0.01, 0.0, ref, 0.5 * gains.exit_lift_lag_m)
+    assert s[tl.Z_LIFT] == pytest.approx(gains.exit_lift_gain_n_s_rad * ref, rel=1e-9)
