@@ -144,14 +144,15 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
                 omega_rad_s: float, tension_n: float, setpoint_n: float,
                 ff_rate_m_s: float, low_m: float, low_rate_m_s: float, high_m: float,
                 recover_m: float, elevation_rad: float = math.nan,
-                exit_min_rad: float = 0.0
+                exit_min_rad: float = 0.0, share: float = 1.0
                 ) -> tuple[float, float, float, float, float, bool]:
     """One step of the tension law (module docstring) on the packed parameters ``p``,
     its state ``s`` advanced in place: the load cell's ``tension_n`` [N] low-passed; the
     set-point ``setpoint_n`` [N] raised by the exit-elevation loop (:func:`exit_lift`:
     the guide arm's ``elevation_rad`` [rad], NaN: no reading, held at ``exit_min_rad``
-    [rad] or above) and low-passed; the force loops' speed bounded by the length
-    bounds ``low_m`` (moving at ``low_rate_m_s``) and ``high_m`` [m] and by the ceiling;
+    [rad] or above, the raise times ``share``, :func:`lay_down_share`) and low-passed;
+    the force loops' speed bounded by the length bounds ``low_m`` (moving at
+    ``low_rate_m_s``) and ``high_m`` [m] and by the ceiling;
     a slack line (below the floor) wound in towards ``recover_m`` [m] (NaN: none) at up to
     the recovery speed (once the line has flown, ``s[Z_LIFTED]``: within it no faster than
     the slack approach, the torque on the measured tension),
@@ -185,7 +186,8 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     exit_lift(p, s, dt_s, elevation_rad, exit_min_rad, s[Z_LAG])
     # the raise enters the force loop's set-point, not the torque's: the drum renders from
     # the line's own set-point, and tracks the speed the raise asks
-    v0 = tension_speed(p, t_f, min(t_sp + s[Z_LIFT], max(p[Q_CEIL], t_sp)), ff_rate_m_s,
+    v0 = tension_speed(p, t_f, min(t_sp + share * s[Z_LIFT], max(p[Q_CEIL], t_sp)),
+                       ff_rate_m_s,
                        gain_scale(p, s[Z_STIFFNESS]))
     k_b = p[Q_K_BOUND]
     # the slack floor's recovery: a line pulling less than the floor says nothing of how
@@ -302,16 +304,47 @@ def slack_tension_n(w_n_m: float, h_m: float, v_m: float, slack_m: float) -> flo
 
 
 @njit
+def string_slack_m(w_n_m: float, h_m: float, v_m: float, tension_n: float) -> float:
+    """The slack [m] of the taut, shallow-sag line of :func:`slack_tension_n` pulling
+    ``tension_n`` [N] at its exit (that function's inverse: its top pulls ``w v`` more, and
+    ``q^2 d^3 / (24 T_m^2)`` with ``T_m^2`` the product of the two); 0 where nothing hangs
+    across."""
+    d = math.hypot(h_m, v_m)
+    q = w_n_m * h_m / d if d > 0.0 else 0.0
+    tm2 = tension_n * (tension_n + w_n_m * v_m)
+    if q <= 0.0 or tm2 <= 0.0:
+        return 0.0
+    return q * q * d * d * d / (24.0 * tm2)
+
+
+@njit
+def lay_down_share(exit_min_rad: float, h_m: float, v_m: float) -> float:
+    """How much of the suspending set-point the station asks [0, 1] with the UAV ``h_m``
+    [m] across and ``v_m`` [m] up: 1 where the chord rises at twice L-bar's least exit
+    angle ``exit_min_rad`` [rad] or more, 0 at that angle or below, linear in the chord's
+    elevation between. Low and far, the catenary that leaves the winder at the least exit
+    angle is nearly straight and its pull nearly level at the UAV (8 N, a 0.3 rad lean,
+    landing 8.5 m out at 1.5 m up): the station lays the line down to the ground there
+    instead, as it lies before a take-off."""
+    if exit_min_rad <= 0.0:
+        return 1.0
+    el = math.atan2(max(v_m, 0.0), h_m)
+    return min(max(el / exit_min_rad - 1.0, 0.0), 1.0)
+
+
+@njit
 def tension_setpoint_n(p: np.ndarray, a_m: float, h_m: float, v_m: float,
-                       w_n_m: float, min_slack_m: float) -> float:
+                       w_n_m: float, min_slack_m: float, share: float = 1.0) -> float:
     """The tension set-point [N]: the exit tension of L-bar's catenary (parameter ``a_m``
     [m], spanning ``h_m`` across and ``v_m`` up, weighing ``w_n_m`` [N/m]) times the
     margin, at most the tension at which the line keeps ``min_slack_m`` [m] of slack
     (:func:`slack_tension_n`: near the vertical L-bar's catenary asks tens of newtons of
     a nearly straight line), between the slack floor and the set-point's cap (the floor
-    where that catenary is degenerate: the UAV above the winder, or low and far)."""
+    where that catenary is degenerate: the UAV above the winder, or low and far), the
+    part above the floor times ``share`` (:func:`lay_down_share`)."""
     t_hat = expected_drum_tension_n(a_m, h_m, v_m, w_n_m)
     if not math.isfinite(t_hat):
         return p[Q_FLOOR]
     t_sp = min(p[Q_MARGIN] * t_hat, slack_tension_n(w_n_m, h_m, v_m, min_slack_m))
-    return min(max(t_sp, p[Q_FLOOR]), p[Q_SP_MAX])
+    t_sp = min(max(t_sp, p[Q_FLOOR]), p[Q_SP_MAX])
+    return p[Q_FLOOR] + share * (t_sp - p[Q_FLOOR])

@@ -48,11 +48,14 @@ from groundstation.lbar import (
 )
 from groundstation.tension_law import (
     Q_BOUND_M,
+    Q_FLOOR,
     Z_LAG,
     Z_SETPOINT,
     Z_SPEED,
     Z_STARTED,
     Z_STIFFNESS,
+    lay_down_share,
+    string_slack_m,
     taut_line_stiffness_n_m,
     tension_law,
     tension_setpoint_n,
@@ -294,7 +297,8 @@ def tension_step(uav: np.ndarray, measured: np.ndarray, lbar_p: np.ndarray,
                         length_m, pz)
     h = math.hypot(px, py)
     v = max(pz, 0.0)
-    setpoint = tension_setpoint_n(law_p, a, h, v, w, min_slack)
+    share = lay_down_share(math.atan(lbar_p[LB_TAN_MIN]), h, v)
+    setpoint = tension_setpoint_n(law_p, a, h, v, w, min_slack, share)
     dist = math.sqrt(px * px + py * py + pz * pz)
     radial = (px * vx + py * vy + pz * vz) / dist if dist > 1e-6 else 0.0
     # no stopping distance in the lower bound: the drum renders to the pull, so the
@@ -307,14 +311,22 @@ def tension_step(uav: np.ndarray, measured: np.ndarray, lbar_p: np.ndarray,
     # near the vertical a line with min_slack hangs its lower end unloaded (the load
     # cell reads nothing) and the dynamic line whips taut; the set-point loop, its gain
     # scaled to the stiff line there, holds the lower end at the floor's pull instead
-    low = dist + min_slack * max(h / dist, 0.4) if dist > 1e-6 else min_slack
+    # (low and far, as the line is laid down, more: at the lay-down share 0 the slack at
+    # which the line pulls twice the floor, else the least slack pulls the set-point's cap
+    # nearly level at the UAV)
+    low_slack = min_slack * max(h / dist, 0.4) if dist > 1e-6 else min_slack
+    if share < 1.0:
+        low_slack = max(low_slack, (1.0 - share) * string_slack_m(
+            w, h, v, 2.0 * law_p[Q_FLOOR]))
+    low = dist + low_slack
     law_s[Z_STIFFNESS] = taut_line_stiffness_n_m(law_s[Z_SETPOINT], w, h, v)
     high = max(lbar_m, room) + law_p[Q_BOUND_M]
     trim_s[TS_JOIN_GAP] = 0.0            # no join: the law has no length reference to jump
     # the exit-elevation loop holds L-bar's least exit angle, or half the chord's
     # elevation where that is flatter (a catenary leaves below its chord: the UAV low and
     # far, as L-bar's own rule there)
-    exit_min = min(math.atan(lbar_p[LB_TAN_MIN]), 0.5 * math.atan2(v, h))
+    # (both times the lay-down share: low and far the line is let down, not held up)
+    exit_min = share * min(math.atan(lbar_p[LB_TAN_MIN]), 0.5 * math.atan2(v, h))
     cmd = tension_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, setpoint,
-                      rate, low, radial, high, lbar_m, elevation_rad, exit_min)
+                      rate, low, radial, high, lbar_m, elevation_rad, exit_min, share)
     return length_m + law_s[Z_LAG], law_s[Z_SPEED], cmd
