@@ -489,3 +489,38 @@ def test_the_exit_elevation_loop_waits_for_a_flown_line_and_a_following_drum():
     for _ in range(100):
         tl.exit_lift(p, s, 0.01, 0.0, ref, 0.5 * gains.exit_lift_lag_m)
     assert s[tl.Z_LIFT] == pytest.approx(gains.exit_lift_gain_n_s_rad * ref, rel=1e-9)
+
+
+# ---------------------------------------------------------------- low and far
+def test_the_string_slack_inverts_the_slack_tension():
+    """:func:`string_slack_m` is :func:`slack_tension_n`'s inverse, and the lay-down share
+    falls linearly in the chord's elevation from 1 at twice the least exit angle to 0."""
+    for h, v, s in [(8.5, 1.5, 0.05), (12.0, 6.0, 0.3), (3.0, 20.0, 0.01)]:
+        t = tl.slack_tension_n(0.33, h, v, s)
+        assert tl.string_slack_m(0.33, h, v, t) == pytest.approx(s, rel=1e-9)
+    eps = math.radians(8.0)
+    assert tl.lay_down_share(eps, 10.0, 10.0 * math.tan(2.5 * eps)) == 1.0
+    assert tl.lay_down_share(eps, 10.0, 10.0 * math.tan(0.5 * eps)) == 0.0
+    assert tl.lay_down_share(eps, 10.0, 10.0 * math.tan(1.5 * eps)) == pytest.approx(0.5)
+
+
+def test_a_landing_low_and_far_lays_the_line_down(tmp_path):
+    """Coming down 8.5 m out (docs/control.md §8.4): below the chord's 16 deg the station
+    lays the line down instead of holding it up on its least slack. Before, below 1.5 m
+    (10 deg) the line pulled 8 N nearly level at the UAV and leaned it 0.2 rad; now the pull
+    there stays under 3 N over 0.1 s, the lean under 0.1 rad, and the line is never
+    taut."""
+    text = _radial((8.0, 3.0, 3.0), (8.0, 3.0, 0.6), 0.4, 1.0, 12.0)
+    path = tmp_path / "land.toml"
+    path.write_text(text + _TAIL.format(law="tension"))
+    res = run_scenario(load_scenario(str(path)), None, progress=None)
+    s = res.series
+    t, z = s["t"], s["pos"][:, 2]
+    band = (t > 4.0) & (z < 8.5 * math.tan(math.radians(10.0))) & (z > 0.8)
+    assert band.sum() > 100
+    # the pull over 0.1 s (single 4 ms samples of the 2 m line touching down reach 9 N:
+    # docs/control.md §8.5)
+    mean = np.convolve(s["top_tension"], np.ones(25) / 25.0, mode="same")
+    assert mean[band].max() < 3.0
+    assert np.abs(s["euler"][band, :2]).max() < 0.1
+    assert res.metrics["min_tether_slack_m"] > 0.0
