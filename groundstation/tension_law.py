@@ -50,8 +50,8 @@ from tuavdefs.jit import njit
 (Q_R_W, Q_BETA, Q_TAU_MAX, Q_V_MAX, Q_M_BAR, Q_RHO, Q_L_T, Q_R2, Q_I_ROTOR, Q_FILTER,
  Q_SP_FILTER, Q_GAIN, Q_CEIL, Q_CEIL_GAIN, Q_ACC_MAX, Q_CMD_FILTER, Q_K_W, Q_K_BOUND,
  Q_STIFFNESS, Q_FLOOR, Q_SP_MAX, Q_MARGIN, Q_BOUND_M, Q_LAG_S, Q_RECOVER, Q_LIFT_GAIN,
- Q_LIFT_MAX, Q_LIFT_LAG, Q_APPROACH) = range(29)
-N_TENSION_PARAMS = 29
+ Q_LIFT_MAX, Q_LIFT_LAG, Q_APPROACH, Q_LAY_HEIGHT) = range(30)
+N_TENSION_PARAMS = 30
 # indices of its state (Z_LIFT: the exit-elevation loop's raise of the set-point [N])
 (Z_STARTED, Z_TENSION, Z_SETPOINT, Z_SPEED, Z_ACC, Z_LAG, Z_SPEED_RAW, Z_FEEDBACK,
  Z_FF, Z_STIFFNESS, Z_LIFT, Z_LIFTED) = range(12)
@@ -318,18 +318,23 @@ def string_slack_m(w_n_m: float, h_m: float, v_m: float, tension_n: float) -> fl
 
 
 @njit
-def lay_down_share(exit_min_rad: float, h_m: float, v_m: float) -> float:
+def lay_down_share(p: np.ndarray, exit_min_rad: float, h_m: float, v_m: float) -> float:
     """How much of the suspending set-point the station asks [0, 1] with the UAV ``h_m``
-    [m] across and ``v_m`` [m] up: 1 where the chord rises at twice L-bar's least exit
-    angle ``exit_min_rad`` [rad] or more, 0 at that angle or below, linear in the chord's
-    elevation between. Low and far, the catenary that leaves the winder at the least exit
-    angle is nearly straight and its pull nearly level at the UAV (8 N, a 0.3 rad lean,
-    landing 8.5 m out at 1.5 m up): the station lays the line down to the ground there
-    instead, as it lies before a take-off."""
+    [m] across and ``v_m`` [m] up: 1 less the product of two lay-down shares, each
+    linear from 1 to 0 between twice its bound and the bound: the chord's elevation
+    below twice L-bar's least exit angle ``exit_min_rad`` [rad] (low and far, the
+    catenary that leaves the winder at that angle is nearly straight and its pull nearly
+    level at the UAV: 8 N, a 0.23 rad lean, landing 8.5 m out at 1.5 m up) and the height
+    below twice ``lay_down_height_m`` (``p[Q_LAY_HEIGHT]``: the landing's last metres; in
+    flight above it the line is held off the ground whatever it costs, up to the cap).
+    There the station lays the line down, as it lies before a take-off."""
     if exit_min_rad <= 0.0:
         return 1.0
-    el = math.atan2(max(v_m, 0.0), h_m)
-    return min(max(el / exit_min_rad - 1.0, 0.0), 1.0)
+    v = max(v_m, 0.0)
+    low_angle = 1.0 - min(max(math.atan2(v, h_m) / exit_min_rad - 1.0, 0.0), 1.0)
+    z_lay = p[Q_LAY_HEIGHT]
+    low_height = 1.0 - min(max(v / z_lay - 1.0, 0.0), 1.0) if z_lay > 0.0 else 0.0
+    return 1.0 - low_angle * low_height
 
 
 @njit

@@ -100,6 +100,11 @@ class WinderControlParams(Params):
         "flown, its slack above the lower length bound is taken in at most this fast "
         "(relative to the UAV's radial speed): a line that pulls nothing at the exit may be "
         "held up by the wind, and its slack is all that keeps it from a snap", gt=0)
+    lay_down_height_m: float = quantity(
+        1.5, "m", "tension law: low and far (the chord under twice L-bar's least exit "
+        "angle) and below twice this height the line is laid down towards the ground, "
+        "fully at this height and that angle (the landing's last metres; 0: never)",
+        ge=0)
     length_bound_gain_1_s: float = quantity(
         4.0, "1/s", "tension law: the length bounds' loop gain", gt=0)
     length_bound_m: float = quantity(
@@ -211,6 +216,7 @@ class WinderController:
             q[tl.Q_LIFT_GAIN], q[tl.Q_LIFT_MAX] = g.exit_lift_gain_n_s_rad, g.exit_lift_max_n
             q[tl.Q_LIFT_LAG] = g.exit_lift_lag_m
             q[tl.Q_APPROACH] = g.slack_approach_gain_1_s
+            q[tl.Q_LAY_HEIGHT] = g.lay_down_height_m
             self._q = q
             self._tension_from = self._packed_from
         return self._q

@@ -297,7 +297,7 @@ def tension_step(uav: np.ndarray, measured: np.ndarray, lbar_p: np.ndarray,
                         length_m, pz)
     h = math.hypot(px, py)
     v = max(pz, 0.0)
-    share = lay_down_share(math.atan(lbar_p[LB_TAN_MIN]), h, v)
+    share = lay_down_share(law_p, math.atan(lbar_p[LB_TAN_MIN]), h, v)
     setpoint = tension_setpoint_n(law_p, a, h, v, w, min_slack, share)
     dist = math.sqrt(px * px + py * py + pz * pz)
     radial = (px * vx + py * vy + pz * vz) / dist if dist > 1e-6 else 0.0

@@ -499,9 +499,15 @@ def test_the_string_slack_inverts_the_slack_tension():
         t = tl.slack_tension_n(0.33, h, v, s)
         assert tl.string_slack_m(0.33, h, v, t) == pytest.approx(s, rel=1e-9)
     eps = math.radians(8.0)
-    assert tl.lay_down_share(eps, 10.0, 10.0 * math.tan(2.5 * eps)) == 1.0
-    assert tl.lay_down_share(eps, 10.0, 10.0 * math.tan(0.5 * eps)) == 0.0
-    assert tl.lay_down_share(eps, 10.0, 10.0 * math.tan(1.5 * eps)) == pytest.approx(0.5)
+    p = WinderController(WinderControlParams(law="tension", lay_down_height_m=1.5),
+                         WinderParams(), TetherParams()).tension_params()
+    # low: only the chord's elevation says
+    assert tl.lay_down_share(p, eps, 5.0, 5.0 * math.tan(2.5 * eps)) == 1.0
+    assert tl.lay_down_share(p, eps, 5.0, 5.0 * math.tan(0.5 * eps)) == 0.0
+    assert tl.lay_down_share(p, eps, 5.0, 5.0 * math.tan(1.5 * eps)) == pytest.approx(0.5)
+    # low and far, but up at 2.25 m or 3 m: half held, held
+    assert tl.lay_down_share(p, eps, 30.0, 2.25) == pytest.approx(0.5)
+    assert tl.lay_down_share(p, eps, 30.0, 3.0) == 1.0
 
 
 def test_a_landing_low_and_far_lays_the_line_down(tmp_path):
