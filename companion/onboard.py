@@ -252,8 +252,10 @@ class Companion:
         m = self._line
         u = f.wind_m_s
         kw, kc, b_psi, b_eps = f.line_states
+        w_b = f.line_weight_belief_n_m
+        w = kw * (m.weight_n_m if w_b is None else w_b)
         top = line_top(r.length_m, r.tension_n, r.azimuth_rad - b_psi, r.elevation_rad - b_eps,
-                       kw * m.weight_n_m, kc * m.drag_n_s2_m3, u[0], u[1], m.ea_n,
+                       w, kc * m.drag_n_s2_m3, u[0], u[1], m.ea_n,
                        max(pos_m[2], 1.0), est.drag.tether_wind_shear, 1.0, m.steps)
         return (-top[3], -top[4], -top[5])
 
@@ -268,7 +270,7 @@ class Companion:
         flying = self.nav.flying
         for r in readings:
             if f.fuse_tether_reading(t_s, r.t_s, r.length_m, r.tension_n, r.azimuth_rad,
-                                     r.elevation_rad, flying) is not None:
+                                     r.elevation_rad, flying, r.weight_n_m) is not None:
                 taken.add(round(r.t_s, 3))
         return taken
 

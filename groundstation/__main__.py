@@ -117,7 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         fix = out.fix
         if fix is not None and mav is not None:
             mav.tether_fix(fix.sample_time_ms * 1e-3, fix.pos_m, fix.cov_m2)
-            reading = winch.sensors.tether_reading(fix, winch.length_m)
+            reading = winch.sensors.tether_reading(fix, winch.length_m, winch.host.lbar)
             if reading is not None:
                 mav.tether_reading(reading)
         st = out.status

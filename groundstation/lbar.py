@@ -640,6 +640,12 @@ class LBarEstimator:
         w = float(self.trim_state[TS_WEIGHT])
         return w if math.isfinite(w) else self.w
 
+    @property
+    def estimated_weight_n_m(self) -> float:
+        """The line's weight per metre [N/m] as :func:`weight_estimate` holds it, NaN before
+        it has one (what the winch sends the vehicle with each raw reading)."""
+        return float(self.trim_state[TS_WEIGHT])
+
     def drum_tension_n(self, measured_n: float) -> float:
         """The drum tension [N] as the tension trim low-passes it (:func:`tension_trim`),
         ``measured_n`` before its first sample."""

@@ -182,15 +182,17 @@ class WinchSensors:
             return False
         return abs(wrap_ms(self.sample_time_ms - ea[2])) * 1e-3 <= fixer.p.max_age_s
 
-    def tether_reading(self, fix: TetherFix, length_m: float) -> cl.TetherReading | None:
+    def tether_reading(self, fix: TetherFix, length_m: float,
+                       lbar: LBarEstimator) -> cl.TetherReading | None:
         """The raw reading the tether fix ``fix`` was made of (``length_m`` [m], the load
         cell's tension, the guide arm's angles, at the fix's sample time on the vehicle's
-        clock), None without a valid exit angle."""
+        clock) with the line's weight per metre as ``lbar`` estimates it (NaN: none yet),
+        None without a valid exit angle."""
         ea = self.exit_angle
         if ea is None or not ea[3]:
             return None
         return cl.TetherReading(fix.sample_time_ms * 1e-3, length_m, self.load_cell_n, ea[0],
-                                ea[1])
+                                ea[1], lbar.estimated_weight_n_m)
 
     def measured_position_m(self, length_m: float, lbar: LBarEstimator) -> Vec3 | None:
         """The UAV's position [m] as the winder itself measures it (its tether fix's mean

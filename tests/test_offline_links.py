@@ -73,16 +73,44 @@ def test_tether_reading_as_the_autopilot_takes_it():
     through them, at float32 and whole microseconds; not finite, refused."""
     rng = random.Random(7)
     direct, wire = Links(), WireLinks()
-    for _ in range(200):
+    for i in range(200):
         r = cl.TetherReading(rng.uniform(0.0, 600.0), rng.uniform(0.0, 60.0),
                              rng.uniform(0.0, 30.0), rng.uniform(-math.pi, math.pi),
-                             rng.uniform(-0.1, 1.5))
+                             rng.uniform(-0.1, 1.5),
+                             rng.uniform(0.05, 3.0) if i % 4 else math.nan)
         a, b = direct.tether_reading(r), wire.tether_reading(r)
         assert repr(a) == repr(b)
         assert a is not None and a.t_s == round(r.t_s * 1e6) * 1e-6
         assert abs(a.length_m - r.length_m) < 1e-5 and a.length_m != r.length_m
+        if i % 4:
+            assert abs(a.weight_n_m - r.weight_n_m) < 1e-6 * r.weight_n_m
+        else:
+            assert math.isnan(a.weight_n_m)
     bad = cl.TetherReading(1.0, 10.0, math.nan, 0.1, 0.2)
     assert direct.tether_reading(bad) is None and wire.tether_reading(bad) is None
+
+
+@pytest.mark.parametrize("weight", [math.nan, math.inf, -math.inf, -0.3, 0.0, 5e-4, 25.0,
+                                    1e30])
+def test_tether_reading_refuses_a_weight_out_of_range(weight):
+    """The winder's weight estimate (``data[4]``) not finite or out of
+    ``LINE_WEIGHT_RANGE_N_M`` (0: the array's zero of a winch that sends none) is read as
+    none, the reading kept: sent as NaN, and a message carrying it anyway (another
+    sender's) taken without it, through pymavlink's packing and parsing."""
+    r = cl.TetherReading(3.0, 20.0, 2.5, 0.4, 0.6, weight)
+    msg = cl.tether_reading_message(r)
+    assert math.isnan(msg.data[4])
+    msg.data[4] = weight          # as a sender that does not check would put it
+    companion = cl.new_mavlink(cl.AUTOPILOT_COMPONENT_ID)
+    got, = companion.parse_buffer(msg.pack(cl.new_mavlink(cl.WINCH_COMPONENT_ID)))
+    a = cl.tether_reading(got)
+    assert a is not None and math.isnan(a.weight_n_m)
+    assert (a.length_m, a.elevation_rad) == pytest.approx((20.0, 0.6))
+    lo, hi = cl.LINE_WEIGHT_RANGE_N_M
+    for w in (lo, 0.33, hi):
+        msg.data[4] = w
+        got, = companion.parse_buffer(msg.pack(cl.new_mavlink(cl.WINCH_COMPONENT_ID)))
+        assert cl.tether_reading(got).weight_n_m == pytest.approx(w, rel=1e-6)
 
 
 def _short(name: str, seconds: float, **changes) -> object:

@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from companion.ekf.aid_source import AidSources
 from companion.ekf.layout import (
     IDX_LINE,
     IDX_P,
@@ -38,8 +39,10 @@ from companion.ekf.layout import (
     X_Q,
     X_W,
 )
-from companion.ekf.params import TetherLineParams
-from companion.ekf.tether_line import line_rows
+from companion.ekf.memory import FilterMemory
+from companion.ekf.output import OutputPredictor
+from companion.ekf.params import DragFusionParams, EstimatorParams, TetherLineParams
+from companion.ekf.tether_line import TetherLineControl, line_rows
 from tuavdefs import line_shape as ls
 from tuavdefs.frames import euler_to_quat, quat_multiply
 from tuavdefs.params import TetherParams
@@ -178,13 +181,63 @@ def test_fewer_steps_keep_the_end():
         assert np.linalg.norm(ends[0] - ends[1]) < 1e-2
 
 
+def _line_control() -> tuple[TetherLineControl, FilterMemory, AidSources]:
+    """The raw reading's control on a filter's memory, aligned (the line's priors set, the
+    line's states correlated with the position as a fusion would leave them)."""
+    p = EstimatorParams(drag=DragFusionParams(enabled=True,
+                                        tether_line=TetherLineParams(enabled=True)))
+    mem = FilterMemory(p)
+    src = AidSources(p, mem.aid)
+    lc = TetherLineControl(p, mem, src, OutputPredictor(mem.w), lambda: None, LINE,
+                           (0.0, 0.0, 0.0))
+    lc.start()
+    i = IDX_LINE + LINE_KW
+    mem.P[IDX_P, IDX_P] = 1.0
+    mem.P[IDX_P, i] = mem.P[i, IDX_P] = 0.01
+    mem.x[X_LINE + LINE_KW] = 1.1
+    return lc, mem, src
+
+
+def test_weight_belief_from_the_winders_estimate():
+    """The line model's weight belief ``w_b`` (what ``k_w`` multiplies): the parameter
+    file's until a reading carries the winder's estimate within the factors' bounds; the
+    first one taken at once, ``k_w`` started again at 1 with its prior and uncorrelated
+    (it now says how far the winder's estimate is off); later ones only while a GNSS
+    position is fused, each move growing ``k_w``'s deviation by its fraction of the
+    belief, up to the prior's; without GNSS the belief held."""
+    lc, mem, src = _line_control()
+    w0, i = LINE.weight_n_m, IDX_LINE + LINE_KW
+    sig0 = LP.weight_sigma_fraction
+    for bad in (math.nan, 0.1 * w0, 6.0 * w0, math.inf):
+        lc.take_weight(1.0, bad, True)
+        assert lc.weight_belief_n_m == w0 and not lc.weight_from_winder
+    assert mem.x[X_LINE + LINE_KW] == 1.1
+    lc.take_weight(1.0, 2.0 * w0, True)                 # no GNSS: the first is taken
+    assert lc.weight_belief_n_m == 2.0 * w0 and lc.weight_from_winder
+    assert mem.x[X_LINE + LINE_KW] == 1.0
+    assert mem.P[i, i] == pytest.approx(sig0 ** 2) and mem.P[IDX_P, i] == 0.0
+    lc.take_weight(2.0, 2.2 * w0, True)                 # no GNSS: held
+    assert lc.weight_belief_n_m == 2.0 * w0 and mem.P[i, i] == pytest.approx(sig0 ** 2)
+    src.gnss_pos.time_last_fused = 3.0
+    mem.P[i, i] = 0.01 ** 2                             # k_w learnt to 1 %
+    lc.take_weight(3.0, 2.02 * w0, True)                # a 1 % move: 1 % more
+    assert lc.weight_belief_n_m == 2.02 * w0
+    assert math.sqrt(mem.P[i, i]) == pytest.approx(0.01 + 0.02 / 2.02)
+    lc.take_weight(3.1, 1.5 * w0, True)                 # a large move: the prior's
+    assert math.sqrt(mem.P[i, i]) == pytest.approx(sig0)
+    assert mem.x[X_LINE + LINE_KW] == 1.0               # a factor on the belief
+
+
 #: chi-square(3) two-sided 95 % bounds (position NEES).
 CHI2_3_LOW, CHI2_3_HIGH = 0.2158, 9.348
 
 
-def _lumped_hover(duration_s: float, wind_m_s: float, loss: tuple[float, float] | None):
+def _lumped_hover(duration_s: float, wind_m_s: float, loss: tuple[float, float] | None,
+                  density_factor: float = 1.0):
     """``hover-gnss-loss-windy`` (the lumped truth, moderate turbulence, the drag fusion and
-    the tight fusion on) in ``wind_m_s`` from the west; GNSS lost over ``loss`` [s].
+    the tight fusion on) in ``wind_m_s`` from the west, the truth's line
+    ``density_factor`` times as heavy as the companion believes; GNSS lost over ``loss``
+    [s].
     Rows per control period after alignment: t, the line's states (4), k_w's variance, the
     filter's wind (2), the truth's wind at the vehicle (2), the position NEES of the
     filter's state under its P_pp, the horizontal estimate error [m]."""
@@ -194,9 +247,12 @@ def _lumped_hover(duration_s: float, wind_m_s: float, loss: tuple[float, float] 
     sc = load_scenario("hover-gnss-loss-windy")
     faults = () if loss is None else (sc.faults[0].replace(start_s=loss[0], end_s=loss[1]),)
     assert sc.estimator.drag.tether_line.enabled
+    teth = sc.plant.tether
     sc = sc.replace(wind=sc.wind.replace(steady_m_s=(wind_m_s, 0.0, 0.0),
                                          wind_speed_at_6m_m_s=wind_m_s),
-                    duration_s=duration_s, faults=faults)
+                    duration_s=duration_s, faults=faults,
+                    plant=sc.plant.replace(tether=teth.replace(
+                        linear_density_kg_m=teth.linear_density_kg_m * density_factor)))
     runner = OfflineRunner(sc)
     rows = []
     record = runner._record
@@ -248,3 +304,23 @@ def test_the_line_is_learnt_and_holds_a_gnss_loss_on_the_lumped_line():
     late = a[:, 0] > 15.0
     err = a[late, 6:8] - mean[late]
     assert np.sqrt((err ** 2).sum(axis=1).mean()) < 1.0
+
+
+def test_a_line_twice_as_heavy_is_modelled_on_the_winders_estimate():
+    """Offline on a lumped truth line twice as heavy as the companion's parameter file
+    says, hovering in 6 m/s of moderate turbulence with GNSS for 12 s, then 4 s without:
+    the line model's weight belief is the winder's estimate that each reading carries
+    (within 25 % of the truth's weight; the parameter file's is 50 % off, beyond what
+    ``k_w``'s 3 % prior covers), and the estimate stays within 1 m of the truth
+    horizontally from 8 s on, the GNSS loss included (on the parameter file's weight:
+    1.5-2.1 m, the tight fusion pulling the position to the light line's end)."""
+    runner, res, a = _lumped_hover(16.0, 6.0, (12.0, 16.0), density_factor=2.0)
+    f = runner.companion.filter
+    truth_w = 2.0 * LINE.weight_n_m
+    w_b = f.line_weight_belief_n_m
+    assert abs(w_b / truth_w - 1.0) < 0.25
+    assert f.aid_sources.tether_line.time_last_fused > 15.0
+    late = a[:, 0] >= 8.0
+    print(f"belief {w_b:.3f} N/m (truth {truth_w:.3f}), k_w {a[-1, 1]:.3f}; horizontal "
+          f"error from 8 s: max {a[late, 11].max():.2f} m")
+    assert a[late, 11].max() < 1.0

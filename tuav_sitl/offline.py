@@ -436,7 +436,7 @@ class OfflineRunner:
         ext = self.links.odometry(cl.ExternalPosition(fix.sample_time_ms * 1e-3, fix.pos_m,
                                                       fix.cov_m2))
         winch = self.ground.winch
-        reading = winch.sensors.tether_reading(fix, winch.length_m)
+        reading = winch.sensors.tether_reading(fix, winch.length_m, winch.host.lbar)
         if reading is not None:
             reading = self.links.tether_reading(reading)
         if reading is not None:

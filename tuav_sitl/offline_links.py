@@ -74,7 +74,8 @@ class Links:
         its time in whole microseconds, its values as float32."""
         return cl.tether_reading(cl.tether_reading_message(r._replace(
             length_m=_f32(r.length_m), tension_n=_f32(r.tension_n),
-            azimuth_rad=_f32(r.azimuth_rad), elevation_rad=_f32(r.elevation_rad))))
+            azimuth_rad=_f32(r.azimuth_rad), elevation_rad=_f32(r.elevation_rad),
+            weight_n_m=_f32(r.weight_n_m))))
 
 
 def _f32(v: float) -> float:

@@ -132,34 +132,52 @@ def external_position(msg: mavlink2.MAVLink_odometry_message) -> ExternalPositio
 TETHER_READING_NAME = "TETHER"
 
 
+#: The line weights per metre [N/m] a reading may carry as the winder's estimate: a UAV's
+#: tether, from a tenth of a gram to two kilograms a metre; outside, none.
+LINE_WEIGHT_RANGE_N_M = (1e-3, 20.0)
+
+
 class TetherReading(NamedTuple):
     """What the winch measured of the line at one sample (the readings its tether fix is
     made of): the sample's time on the vehicle's clock [s], the paid-out length [m], the
     load cell's tension [N], the guide arm's exit azimuth and elevation [rad] (as read:
     its biases in them; azimuth anticlockwise from east, elevation up from the
-    horizontal, the project's z-up frame)."""
+    horizontal, the project's z-up frame), and the line's weight per metre [N/m] as the
+    winder estimates it (``groundstation.lbar.weight_estimate``; NaN: it has none yet)."""
 
     t_s: float
     length_m: float
     tension_n: float
     azimuth_rad: float
     elevation_rad: float
+    weight_n_m: float = math.nan
+
+
+def line_weight_n_m(value: float) -> float:
+    """A line weight per metre [N/m] as a reading may carry it: ``value`` when finite and
+    within :data:`LINE_WEIGHT_RANGE_N_M`, else NaN (none)."""
+    lo, hi = LINE_WEIGHT_RANGE_N_M
+    return float(value) if lo <= value <= hi else math.nan     # (False for NaN)
 
 
 def tether_reading_message(r: TetherReading) -> mavlink2.MAVLink_debug_float_array_message:
     """``DEBUG_FLOAT_ARRAY`` (350) named :data:`TETHER_READING_NAME`: ``time_usec`` the
-    sample's time, ``data[0:4]`` length [m], tension [N], exit azimuth and elevation [rad]
-    (the rest 0). MAVLink has no message for a tether's raw reading; this one carries a
-    named array of floats for a component's own data, which it is."""
+    sample's time, ``data[0:4]`` length [m], tension [N], exit azimuth and elevation [rad],
+    ``data[4]`` the winder's estimate of the line's weight per metre [N/m] (NaN: none, or
+    one out of :data:`LINE_WEIGHT_RANGE_N_M`), the rest 0. MAVLink has no message for a
+    tether's raw reading; this one carries a named array of floats for a component's own
+    data, which it is."""
     data = [0.0] * 58
-    data[0:4] = (r.length_m, r.tension_n, r.azimuth_rad, r.elevation_rad)
+    data[0:5] = (r.length_m, r.tension_n, r.azimuth_rad, r.elevation_rad,
+                 line_weight_n_m(r.weight_n_m))
     return mavlink2.MAVLink_debug_float_array_message(
         max(int(round(r.t_s * 1e6)), 0), TETHER_READING_NAME.encode(), 0, data)
 
 
 def tether_reading(msg: mavlink2.MAVLink_debug_float_array_message) -> TetherReading | None:
     """The reading in a ``DEBUG_FLOAT_ARRAY`` (:func:`tether_reading_message`), or None when
-    the array is another or a value is not finite."""
+    the array is another or a measured value is not finite; a weight not finite or out of
+    :data:`LINE_WEIGHT_RANGE_N_M` is read as none (NaN)."""
     name = msg.name
     if isinstance(name, bytes):
         name = name.decode(errors="replace")
@@ -168,4 +186,4 @@ def tether_reading(msg: mavlink2.MAVLink_debug_float_array_message) -> TetherRea
     vals = [float(v) for v in msg.data[0:4]]
     if not all(math.isfinite(v) for v in vals):
         return None
-    return TetherReading(msg.time_usec * 1e-6, *vals)
+    return TetherReading(msg.time_usec * 1e-6, *vals, line_weight_n_m(float(msg.data[4])))

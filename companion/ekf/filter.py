@@ -217,6 +217,12 @@ class NavFilter:
         return (1.0, 1.0, 0.0, 0.0) if self._line is None else self._line.states
 
     @property
+    def line_weight_belief_n_m(self) -> float | None:
+        """The line's weight per metre [N/m] that ``k_w`` multiplies (the winder's
+        estimate once a reading carried one); None without the raw reading's fusion."""
+        return None if self._line is None else self._line.weight_belief_n_m
+
+    @property
     def line_sigmas(self) -> tuple[float, float, float, float]:
         """The standard deviations of :attr:`line_states` (0 without the raw reading's
         fusion)."""
@@ -323,15 +329,20 @@ class NavFilter:
 
     def fuse_tether_reading(self, t_s: float, t_meas_s: float, length_m: float,
                             tension_n: float, azimuth_rad: float, elevation_rad: float,
-                            in_air: bool) -> bool | None:
+                            in_air: bool, weight_n_m: float = math.nan) -> bool | None:
         """The winch's raw tether reading arriving at ``t_s`` [s], taken at ``t_meas_s``
-        [s]: paid-out length [m], tension [N], exit azimuth and elevation as read [rad];
-        the vehicle in the air or not. Returns None when it is not fused tightly (no such
-        fusion, not aligned, a line on the ground or slack, no GNSS and the line's states
-        not learnt yet: the ground station's fix of the same sample is the tether's
-        position then), else whether it was fused."""
+        [s]: paid-out length [m], tension [N], exit azimuth and elevation as read [rad],
+        the winder's estimate of the line's weight per metre [N/m] (NaN: none; the line
+        model's belief when it has one, docs/estimation.md §11); the vehicle in the air or
+        not. Returns None when it is not fused tightly (no such fusion, not aligned, a
+        line on the ground or slack, no GNSS and the line's states not learnt yet: the
+        ground station's fix of the same sample is the tether's position then), else
+        whether it was fused."""
         lc = self._line
-        if lc is None or not self._aligned:
+        if lc is None:
+            return None
+        lc.take_weight(t_s, weight_n_m, self._aligned)
+        if not self._aligned:
             return None
         return lc.fuse(t_s, t_meas_s, length_m, tension_n, azimuth_rad, elevation_rad,
                        in_air)

@@ -214,7 +214,7 @@ class TetherLineControl:
     end after ``tether_reset_s`` of rejections without GNSS."""
 
     __slots__ = ("_p", "_lp", "_mem", "_src", "_out", "_leave_const_pos", "_k",
-                 "learnt_s", "_learn_t", "refused")
+                 "learnt_s", "_learn_t", "refused", "_w_param", "weight_from_winder")
 
     def __init__(self, params: EstimatorParams, mem: FilterMemory, sources: AidSources,
                  output: OutputPredictor, leave_const_pos, line: LineModel,
@@ -227,7 +227,9 @@ class TetherLineControl:
         self._leave_const_pos = leave_const_pos
         prm = mem.prm
         prm[PRM_LINE_GATE] = sources.tether_line.policy.gate_sigma
-        prm[PRM_LINE_W] = line.weight_n_m
+        prm[PRM_LINE_W] = self._w_param = line.weight_n_m
+        #: whether the weight belief w_b is the winder's estimate (else the parameter's)
+        self.weight_from_winder = False
         prm[PRM_LINE_C] = line.drag_n_s2_m3
         prm[PRM_LINE_EA] = line.ea_n
         prm[PRM_LINE_SHEAR] = params.drag.tether_wind_shear
@@ -261,6 +263,39 @@ class TetherLineControl:
         m.P[i + LINE_BEPS, i + LINE_BEPS] = lp.angle_bias_sigma_rad ** 2
         self.learnt_s = 0.0
         self._learn_t = -math.inf
+
+    def take_weight(self, t_s: float, weight_n_m: float, aligned: bool) -> None:
+        """The line's weight belief ``w_b`` [N/m] from the ``weight_n_m`` of a reading
+        arriving at ``t_s`` [s] (the winder's estimate; NaN: none): the first within
+        :data:`FACTOR_BOUNDS` of the parameter file's is taken, later ones while a GNSS
+        position is fused (the winder's estimate is made with the vehicle's reported
+        height, which without GNSS is partly this line's model: a loop); otherwise the
+        belief stays (the parameter file's before the first). ``k_w`` stays a factor on the
+        belief (docs/estimation.md §11): at the first estimate (the filter ``aligned``) it
+        starts again at 1 with its prior, uncorrelated; at a later move of the estimate its
+        standard deviation grows by the move's fraction of the belief, up to the prior's."""
+        lo, hi = FACTOR_BOUNDS
+        w0 = self._w_param
+        if not lo * w0 <= weight_n_m <= hi * w0:      # (False for NaN)
+            return
+        first = not self.weight_from_winder
+        if not (first or self._src.gnss_pos.in_use(t_s)):
+            return
+        prm, m, i = self._mem.prm, self._mem, IDX_LINE + LINE_KW
+        before = float(prm[PRM_LINE_W])
+        prm[PRM_LINE_W] = weight_n_m
+        sig_prior = self._lp.weight_sigma_fraction
+        if first:
+            self.weight_from_winder = True
+            if aligned:
+                m.x[X_LINE + LINE_KW] = 1.0
+                m.P[i, :] = 0.0
+                m.P[:, i] = 0.0
+                m.P[i, i] = sig_prior ** 2
+            return
+        sig = math.sqrt(max(float(m.P[i, i]), 0.0))
+        grown = min(sig + abs(weight_n_m - before) / weight_n_m, max(sig, sig_prior))
+        m.P[i, i] = grown * grown
 
     def suspended(self, t_s: float, t_meas_s: float, length_m: float, tension_n: float,
                   azimuth_rad: float, elevation_rad: float) -> bool:
@@ -346,6 +381,12 @@ class TetherLineControl:
         for k in range(3):
             P[IDX_P + k, IDX_P + k] = s[k]
         self._out.reset(velocity=False)
+
+    @property
+    def weight_belief_n_m(self) -> float:
+        """The line's weight per metre ``w_b`` [N/m] that ``k_w`` multiplies: the winder's
+        estimate once a reading carried one, the parameter file's before."""
+        return float(self._mem.prm[PRM_LINE_W])
 
     @property
     def states(self) -> tuple[float, float, float, float]:
