@@ -181,11 +181,13 @@ def test_fewer_steps_keep_the_end():
         assert np.linalg.norm(ends[0] - ends[1]) < 1e-2
 
 
-def _line_control() -> tuple[TetherLineControl, FilterMemory, AidSources]:
+def _line_control(winder_weight: bool = True
+                  ) -> tuple[TetherLineControl, FilterMemory, AidSources]:
     """The raw reading's control on a filter's memory, aligned (the line's priors set, the
     line's states correlated with the position as a fusion would leave them)."""
-    p = EstimatorParams(drag=DragFusionParams(enabled=True,
-                                        tether_line=TetherLineParams(enabled=True)))
+    p = EstimatorParams(drag=DragFusionParams(
+        enabled=True, tether_line=TetherLineParams(enabled=True,
+                                                   winder_weight=winder_weight)))
     mem = FilterMemory(p)
     src = AidSources(p, mem.aid)
     lc = TetherLineControl(p, mem, src, OutputPredictor(mem.w), lambda: None, LINE,
@@ -199,12 +201,16 @@ def _line_control() -> tuple[TetherLineControl, FilterMemory, AidSources]:
 
 
 def test_weight_belief_from_the_winders_estimate():
-    """The line model's weight belief ``w_b`` (what ``k_w`` multiplies): the parameter
-    file's until a reading carries the winder's estimate within the factors' bounds; the
+    """With ``winder_weight``, the line model's weight belief ``w_b`` (what ``k_w``
+    multiplies): the parameter file's until a reading carries the winder's estimate
+    within the factors' bounds (without it, always the parameter file's); the
     first one taken at once, ``k_w`` started again at 1 with its prior and uncorrelated
     (it now says how far the winder's estimate is off); later ones only while a GNSS
     position is fused, each move growing ``k_w``'s deviation by its fraction of the
     belief, up to the prior's; without GNSS the belief held."""
+    off, mem_off, _ = _line_control(winder_weight=False)
+    off.take_weight(1.0, 2.0 * LINE.weight_n_m, True)
+    assert off.weight_belief_n_m == LINE.weight_n_m and mem_off.x[X_LINE + LINE_KW] == 1.1
     lc, mem, src = _line_control()
     w0, i = LINE.weight_n_m, IDX_LINE + LINE_KW
     sig0 = LP.weight_sigma_fraction
@@ -233,11 +239,11 @@ CHI2_3_LOW, CHI2_3_HIGH = 0.2158, 9.348
 
 
 def _lumped_hover(duration_s: float, wind_m_s: float, loss: tuple[float, float] | None,
-                  density_factor: float = 1.0):
+                  density_factor: float = 1.0, winder_weight: bool = False):
     """``hover-gnss-loss-windy`` (the lumped truth, moderate turbulence, the drag fusion and
     the tight fusion on) in ``wind_m_s`` from the west, the truth's line
-    ``density_factor`` times as heavy as the companion believes; GNSS lost over ``loss``
-    [s].
+    ``density_factor`` times as heavy as the companion believes, the line's weight belief
+    the winder's estimate with ``winder_weight``; GNSS lost over ``loss`` [s].
     Rows per control period after alignment: t, the line's states (4), k_w's variance, the
     filter's wind (2), the truth's wind at the vehicle (2), the position NEES of the
     filter's state under its P_pp, the horizontal estimate error [m]."""
@@ -247,8 +253,10 @@ def _lumped_hover(duration_s: float, wind_m_s: float, loss: tuple[float, float] 
     sc = load_scenario("hover-gnss-loss-windy")
     faults = () if loss is None else (sc.faults[0].replace(start_s=loss[0], end_s=loss[1]),)
     assert sc.estimator.drag.tether_line.enabled
-    teth = sc.plant.tether
-    sc = sc.replace(wind=sc.wind.replace(steady_m_s=(wind_m_s, 0.0, 0.0),
+    teth, est = sc.plant.tether, sc.estimator
+    est = est.replace(drag=est.drag.replace(tether_line=est.drag.tether_line.replace(
+        winder_weight=winder_weight)))
+    sc = sc.replace(estimator=est, wind=sc.wind.replace(steady_m_s=(wind_m_s, 0.0, 0.0),
                                          wind_speed_at_6m_m_s=wind_m_s),
                     duration_s=duration_s, faults=faults,
                     plant=sc.plant.replace(tether=teth.replace(
@@ -308,13 +316,15 @@ def test_the_line_is_learnt_and_holds_a_gnss_loss_on_the_lumped_line():
 
 def test_a_line_twice_as_heavy_is_modelled_on_the_winders_estimate():
     """Offline on a lumped truth line twice as heavy as the companion's parameter file
-    says, hovering in 6 m/s of moderate turbulence with GNSS for 12 s, then 4 s without:
-    the line model's weight belief is the winder's estimate that each reading carries
+    says, hovering in 6 m/s of moderate turbulence with GNSS for 12 s, then 4 s without,
+    ``winder_weight`` on: the line model's weight belief is the winder's estimate that
+    each reading carries
     (within 25 % of the truth's weight; the parameter file's is 50 % off, beyond what
     ``k_w``'s 3 % prior covers), and the estimate stays within 1 m of the truth
     horizontally from 8 s on, the GNSS loss included (on the parameter file's weight:
     1.5-2.1 m, the tight fusion pulling the position to the light line's end)."""
-    runner, res, a = _lumped_hover(16.0, 6.0, (12.0, 16.0), density_factor=2.0)
+    runner, res, a = _lumped_hover(16.0, 6.0, (12.0, 16.0), density_factor=2.0,
+                                   winder_weight=True)
     f = runner.companion.filter
     truth_w = 2.0 * LINE.weight_n_m
     w_b = f.line_weight_belief_n_m

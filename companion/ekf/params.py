@@ -95,6 +95,13 @@ class TetherLineParams(Params):
         "least this much wind (c U^2 too small to tell below)", ge=0)
     steps: int = quantity(
         16, "1", "Runge-Kutta steps along the line in wind", ge=1, le=400)
+    winder_weight: bool = quantity(
+        False, "", "the line's weight belief (k_w's centre) is the winder's estimate each "
+        "reading carries (DEBUG_FLOAT_ARRAY TETHER data[4]) once one came, moving with it "
+        "while GNSS is fused; false: the parameter file's. On a line twice as heavy as "
+        "believed it holds a GNSS loss in 6 m/s within 0.5 m instead of 2.1 m, but on a "
+        "line as believed its 10-15 % error (the winder's estimate is made on the "
+        "reported height, calm) doubles the loss's drift (docs/estimation.md §11)")
 
 
 @dataclass(frozen=True)

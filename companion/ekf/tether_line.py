@@ -265,18 +265,19 @@ class TetherLineControl:
         self._learn_t = -math.inf
 
     def take_weight(self, t_s: float, weight_n_m: float, aligned: bool) -> None:
-        """The line's weight belief ``w_b`` [N/m] from the ``weight_n_m`` of a reading
-        arriving at ``t_s`` [s] (the winder's estimate; NaN: none): the first within
-        :data:`FACTOR_BOUNDS` of the parameter file's is taken, later ones while a GNSS
-        position is fused (the winder's estimate is made with the vehicle's reported
-        height, which without GNSS is partly this line's model: a loop); otherwise the
-        belief stays (the parameter file's before the first). ``k_w`` stays a factor on the
-        belief (docs/estimation.md §11): at the first estimate (the filter ``aligned``) it
-        starts again at 1 with its prior, uncorrelated; at a later move of the estimate its
-        standard deviation grows by the move's fraction of the belief, up to the prior's."""
+        """With ``winder_weight``, the line's weight belief ``w_b`` [N/m] from the
+        ``weight_n_m`` of a reading arriving at ``t_s`` [s] (the winder's estimate; NaN:
+        none): the first within :data:`FACTOR_BOUNDS` of the parameter file's is taken,
+        later ones while a GNSS position is fused (the winder's estimate is made with the
+        vehicle's reported height, which without GNSS is partly this line's model: a
+        loop); otherwise the belief stays (the parameter file's before the first). ``k_w``
+        stays a factor on the belief (docs/estimation.md §11): at the first estimate (the
+        filter ``aligned``) it starts again at 1 with its prior, uncorrelated; at a later
+        move of the estimate its standard deviation grows by the move's fraction of the
+        belief, up to the prior's."""
         lo, hi = FACTOR_BOUNDS
         w0 = self._w_param
-        if not lo * w0 <= weight_n_m <= hi * w0:      # (False for NaN)
+        if not (self._lp.winder_weight and lo * w0 <= weight_n_m <= hi * w0):  # NaN: False
             return
         first = not self.weight_from_winder
         if not (first or self._src.gnss_pos.in_use(t_s)):
