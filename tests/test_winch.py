@@ -1268,6 +1268,7 @@ def test_a_heavier_line_than_the_model_does_not_trip_the_tension_trim():
     for _ in range(2000):   # 20 s at 100 Hz
         host.update(length, 0.0, tension, pos, (0.0, 0.0, 0.0), math.atan(slope))
     assert lb.trim_state[TS_WEIGHT] == pytest.approx(heavy, rel=1e-3)
+    assert lb.estimated_weight_n_m == lb.trim_state[TS_WEIGHT]
     assert lb.trim_state[TS_OFFSET] == 0.0
     # without the exit angle the model's weight is all it has: the heavy line reads tight
     blind = WinderHost(PAPER, lp, PARAMS.winder, PARAMS.tether, G)
@@ -1278,6 +1279,38 @@ def test_a_heavier_line_than_the_model_does_not_trip_the_tension_trim():
     for _ in range(100):
         host.update(length, 0.0, 1.6 * tension, pos, (0.0, 0.0, 0.0), math.atan(slope))
     assert lb.trim_state[TS_OFFSET] > 0.1
+
+
+def test_the_raw_reading_carries_the_winders_weight_estimate():
+    """The raw reading the winch sends with a tether fix (DEBUG_FLOAT_ARRAY "TETHER")
+    carries L-bar's weight estimate: none (NaN) before it has one, then the estimate of a
+    line twice the model's weight (its catenary at the geometry the model expects),
+    through the message the vehicle parses."""
+    from groundstation.lbar import catenary_length_m, exit_slope
+    from groundstation.tether_fix import TetherFix
+
+    winch = Winch(WinderHost(PAPER, LBarParams(tension_trim_filter_s=0.0), PARAMS.winder,
+                             PARAMS.tether, G), PARAMS.winder, PARAMS.tether, G)
+    sensors, lb = winch.sensors, winch.host.lbar
+    sensors.load_cell_n = 2.5
+    sensors.exit_angle = (0.1, 0.6, 0, True)
+    fix = TetherFix((10.0, 1.0, 12.0), ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
+                    4200, False)
+    assert math.isnan(sensors.tether_reading(fix, 16.0, lb).weight_n_m)
+    pos = (12.0, 0.0, 20.0)
+    _, a = lb.length(pos)
+    h, v = math.hypot(pos[0], pos[1]), pos[2]
+    slope = exit_slope(a, h, v)
+    tension = 2.0 * lb.w * a * math.sqrt(1.0 + slope * slope)
+    for _ in range(2000):   # 20 s at 100 Hz
+        winch.host.update(catenary_length_m(a, h, v), 0.0, tension, pos, (0.0, 0.0, 0.0),
+                          math.atan(slope))
+    reading = sensors.tether_reading(fix, 16.0, lb)
+    assert reading.weight_n_m == pytest.approx(2.0 * lb.w, rel=1e-3)
+    companion = cl.new_mavlink(cl.AUTOPILOT_COMPONENT_ID)
+    msg, = companion.parse_buffer(cl.tether_reading_message(reading).pack(
+        cl.new_mavlink(cl.WINCH_COMPONENT_ID)))
+    assert cl.tether_reading(msg).weight_n_m == pytest.approx(2.0 * lb.w, rel=1e-6)
 
 
 # ------------------------------------------------- the motor's current, a second source
