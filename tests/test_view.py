@@ -308,11 +308,31 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+#: The tether's colour in the web viewer (RGB), and how near a pixel must be to count.
+TETHER_RGB, TETHER_TOLERANCE = (140, 86, 75), 30
+
+
+def _tether_pixels(png: bytes) -> int:
+    """How many pixels of a screenshot have the tether's colour."""
+    from PIL import Image
+
+    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
+    return int((np.abs(img - np.array(TETHER_RGB)).max(axis=2) < TETHER_TOLERANCE).sum())
+
+
+def _draws_the_scene(png: bytes) -> bool:
+    """Not a blank page, and the tether drawn (an error page has none of its colour)."""
+    from chromium_util import image_spread
+
+    return image_spread(png) > 10.0 and _tether_pixels(png) > 50
+
+
 def test_the_web_viewer_draws_the_scene(gust, tmp_path):
     """``tuav-sitl view RUN --web`` serves the recording; headless Chromium draws it: not
-    a blank page, and the tether's colour where the scene is (an error page has none)."""
+    a blank page, and the tether's colour where the scene is (an error page has none).
+    Each screenshot is taken as soon as it shows what is checked (the view: the scene; the
+    blank page: its first picture), not after the page has stood still for seconds."""
     from chromium_util import chromium, image_spread, screenshot
-    from PIL import Image
 
     if chromium() is None:
         pytest.skip("chromium is not installed (Debian: apt-get install chromium)")
@@ -337,15 +357,15 @@ def test_the_web_viewer_draws_the_scene(gust, tmp_path):
             except OSError:
                 assert time.monotonic() < deadline and proc.poll() is None
                 time.sleep(0.5)
-        shot = screenshot(url, tmp_path / "view.png", size=(1280, 720))
+        shot = screenshot(url, tmp_path / "view.png", size=(1280, 720),
+                          until=_draws_the_scene)
         blank = screenshot("about:blank", tmp_path / "blank.png", size=(1280, 720),
-                           settle_s=30.0, still_s=2.0)
+                           settle_s=30.0, until=lambda png: True)
     finally:
         os.killpg(proc.pid, signal.SIGINT)
         proc.wait(timeout=30)
     png, empty = shot.read_bytes(), blank.read_bytes()
     assert image_spread(empty) < 1.0            # the blank page is blank
     assert image_spread(png) > 10.0             # the view is not
-    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
-    tether = (np.abs(img - np.array([140, 86, 75])).max(axis=2) < 30).sum()
+    tether = _tether_pixels(png)
     assert tether > 50, tether                  # the line is drawn
