@@ -91,6 +91,20 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 @pytest.hookimpl(hookwrapper=True)
+def pytest_collection(session: pytest.Session):
+    """Collection with the test modules' assertion rewriting cached (``__pycache__``, git
+    ignores it) even where ``PYTHONDONTWRITEBYTECODE`` is set: pytest rewrites every test
+    module in every worker, about 11 CPU-s each, before the first test can start; from
+    the cache it only loads them. Bytecode writing is as it was again after collection."""
+    before = sys.dont_write_bytecode
+    sys.dont_write_bytecode = False
+    try:
+        yield
+    finally:
+        sys.dont_write_bytecode = before
+
+
+@pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
     """Around one test's setup, call and teardown: its CPU, one line appended."""
     path = _table_path(item.config)
