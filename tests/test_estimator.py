@@ -4,6 +4,7 @@ analytic trajectories sampled through the plant's own sensor models (tests/ekf_h
 Seeded and deterministic. What a static vehicle cannot tell apart (its horizontal
 accelerometer bias from its tilt) is checked where it becomes observable: once it turns."""
 
+import functools
 import json
 import math
 
@@ -162,10 +163,12 @@ def test_circle_with_wandering_gnss():
     assert att_max <= 0.5
 
 
+@functools.cache
 def _preset_circle(gnss: str, seed: int, **changes):
     """The circle through the plant's datasheet sensors (sitl.sensors presets: a 0.005 G
     hard-iron residual on the magnetometer, the receiver's Gauss-Markov wander), at the
-    receiver's rate and latency."""
+    receiver's rate and latency. Seeded, so the same arguments fly the same circle: each
+    is flown once in a worker (the hard-iron and the wander tests share seed 4's)."""
     from sitl.sensors import GNSS_MODELS, GnssPreset
 
     model = GNSS_MODELS[GnssPreset(gnss)]
