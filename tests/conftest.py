@@ -53,17 +53,17 @@ def _append(path: Path, line: str) -> None:
         os.close(fd)
 
 
-#: The modules that take longest, the longest first (on a quiet host's two workers:
-#: tests/test_benchmarks.py about four minutes of wall time, the next three one to two, the
-#: rest of these 30 s to a minute each). The suite's workers take a whole module at a time,
-#: in the collection's order (pyproject's ``--dist loadscope --no-loadscope-reorder``):
-#: these first, so that no long one is left to start last while the other worker runs out
-#: of work; what follows them (the collection's order) takes under half a minute a module.
-LONGEST_FIRST = ("test_benchmarks.py", "test_cold_start.py", "test_first_contact.py",
-                 "test_up.py", "test_estimator.py", "test_scenarios.py", "test_sim_params.py",
+#: The modules that take longest, the longest first (on a quiet host's two workers: the
+#: first three one to two minutes of wall time, the rest of these 30 s to a minute each).
+#: The suite's workers take a whole module at a time, in the collection's order
+#: (pyproject's ``--dist loadscope --no-loadscope-reorder``): these first, so that no long
+#: one is left to start last while the other worker runs out of work; what follows them
+#: (the collection's order) takes under half a minute a module.
+LONGEST_FIRST = ("test_cold_start.py", "test_first_contact.py", "test_up.py",
+                 "test_estimator.py", "test_scenarios.py", "test_sim_params.py",
                  "test_groundstation_process.py", "test_fault_failsafes.py", "test_e2e.py",
-                 "test_signing.py", "test_view.py", "test_view_live.py", "test_sweep.py",
-                 "test_rogue_can.py")
+                 "test_signing.py", "test_view.py", "test_view_live.py", "test_benchmarks.py",
+                 "test_sweep.py", "test_rogue_can.py")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
