@@ -77,7 +77,8 @@ def wait_log(veh: Vehicle, text: str, count: int = 1, timeout_s: float = 30.0) -
 @pytest.fixture(scope="module")
 def vehicle(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("mavproxy_cmd")
-    veh = Vehicle(tmp, extra=("--log-dir", str(tmp / "logs")))
+    # in real time: nothing here flies (see test_mavproxy.py's vehicle)
+    veh = Vehicle(tmp, speedup="1", extra=("--log-dir", str(tmp / "logs")))
     try:
         yield veh
     finally:
