@@ -3,7 +3,8 @@ a private network namespace), the example pymavlink script flying take-off, a lo
 circle, three waypoints and a landing; then the run's files are checked against independent
 truths: the plant's truth series against the ground station's L-bar and the tether's
 straight-line distance, the winch's WINCH_STATUS against L-bar, the CAN capture decoded by
-cantools, the tlog parsed by pymavlink, and Ctrl-C leaving no process behind."""
+cantools, the tlog parsed by pymavlink, the law ``--ground-params`` named run by the ground
+station, and Ctrl-C leaving no process behind."""
 
 import csv
 import math
@@ -159,6 +160,17 @@ def test_ctrl_c_stops_everything_and_the_tlog_parses(e2e):
               "GLOBAL_POSITION_INT", "MISSION_ITEM_INT"):
         assert kinds.get(k, 0) > 0, k
     assert "tcp:127.0.0.1:5780" in e2e["banner"]          # instance 2 moved every port
+
+
+def test_up_hands_the_ground_station_its_law(e2e):
+    """``up --ground-params`` with ``law = "paper"`` (not the default, the tension law):
+    the ground-station process runs the paper law (its log, and its STATUSTEXT in the
+    vehicle's tlog, name the law its winder host dispatches on), and the run folder keeps
+    the parameters it was given."""
+    run = Path(e2e["run_dir"])
+    assert "law paper" in (run / "groundstation.log").read_text()
+    assert "winch: paper law" in e2e["statustexts"], e2e["statustexts"]
+    assert 'law = "paper"' in (run / "groundstation.toml").read_text()
 
 
 def test_winch_commands_and_heartbeats_pass_through_the_companion(e2e):

@@ -249,15 +249,3 @@ def test_ground_params_are_checked_and_default_to_the_defaults(tmp_path):
     bad.write_text('[winder_control]\nlaw = "rope"\n')
     with pytest.raises(ParameterError, match="law"):
         ground_params(ap.parse_args(["--ground-params", str(bad)]))
-
-
-def test_up_hands_the_ground_station_its_law(tmp_path):
-    """``up --ground-params`` with ``law = "tension"``: the ground-station process runs the
-    tension law (its log, and its STATUSTEXT in the vehicle's tlog, name the law its
-    winder host dispatches on), and the run folder keeps the file it was given."""
-    out = _session("tests.netns.ground_law_session", str(tmp_path), timeout_s=300)
-    assert out["rc"] == 0, out["stderr"]
-    assert "law tension" in out["gs_log"]
-    assert "winch: tension law" in out["statustexts"]
-    assert 'law = "tension"' in out["gs_toml"]
-    assert out["left"] == []

@@ -102,16 +102,20 @@ def main() -> int:
     kinds: dict = {}
     ekf: list = []
     local: list = []
+    texts: list = []
     while True:
         msg = tlog.recv_match()
         if msg is None:
             break
         kinds[msg.get_type()] = kinds.get(msg.get_type(), 0) + 1
-        if msg.get_type() == "EKF_STATUS_REPORT":
+        if msg.get_type() == "STATUSTEXT":
+            texts.append(msg.text)
+        elif msg.get_type() == "EKF_STATUS_REPORT":
             ekf.append([msg.flags, msg.pos_horiz_variance])
         elif msg.get_type() == "LOCAL_POSITION_NED":
             local.append([msg.time_boot_ms * 1e-3, msg.x, msg.y, msg.z])
     out["tlog_kinds"] = kinds
+    out["statustexts"] = texts
     out["ekf_status"] = ekf
     out["local_ned"] = local
     print(json.dumps(out))
