@@ -314,7 +314,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             # one wait for the plant's next batch, the ground stations and the winch
             buffered = client.has_buffered_state()
             ready = [] if buffered else waiter.wait(
-                autopilot.selectables(), 0.0 if autopilot.backlogged else SELECT_TIMEOUT_S)
+                autopilot.selectables(), min(SELECT_TIMEOUT_S, autopilot.receive_wait_s()))
             sim = None
             if buffered or sim_fd in ready:
                 try:

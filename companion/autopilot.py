@@ -74,6 +74,14 @@ _WINCH_ACK_TIMEOUT_S = 0.4
 #: (ArduPilot's GCS receive takes 1 ms a loop): a flood costs the control period at most
 #: this, between two periods.
 RECEIVE_BUDGET_S = 0.001
+#: The share of wall time that reading and handling ground-station messages may take on
+#: average (a credit refilled at this rate, up to :data:`RECEIVE_BUDGET_S`): a flood
+#: that outruns it waits, its sockets unwatched, instead of the loop spinning on it. A
+#: real-time process spinning flat out is throttled by the kernel (sched_rt_runtime_us:
+#: 50 ms of every second), which is a dozen control periods unanswered.
+RECEIVE_SHARE = 0.25
+#: The shortest wait :meth:`Autopilot.receive_wait_s` gives for a spent credit [s].
+RECEIVE_WAIT_MIN_S = 1e-4
 #: Messages read and waiting beyond which the ground stations' sockets are not read.
 INBOX_MAX = 2000
 #: The shortest wall time between two STATUSTEXTs about refused (unsigned, badly signed,
@@ -91,14 +99,16 @@ class Autopilot:
     ``home`` is the winder's (latitude deg, longitude deg, ground altitude m AMSL);
     ``params`` the parameters ground stations may read and set; ``component`` the
     component link to the winch (or None); ``signing`` the links' signing (whose states
-    ``endpoints`` and ``component`` were built on), or None for none ever.
+    ``endpoints`` and ``component`` were built on), or None for none ever; ``clock`` the
+    wall clock [s] the receive budget is counted on.
     """
 
     def __init__(self, endpoints: MavlinkEndpoints, nav: Navigator,
                  home: tuple[float, float, float], params: list[ParamDef],
                  param_file: Any = None, component: Any = None,
                  log: Callable[[str], None] | None = None,
-                 signing: VehicleSigning | None = None) -> None:
+                 signing: VehicleSigning | None = None,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
         self.io = endpoints
         self.signing = signing
         self._refused_said = 0
@@ -157,6 +167,12 @@ class Autopilot:
         self._logged_mode: Any = None
         #: Ground-station messages read and not yet handled (:meth:`receive`'s budget).
         self._inbox: deque[tuple[Peer, Any]] = deque()
+        #: Wall time left for :meth:`receive` [s] (:data:`RECEIVE_SHARE`) and when it was
+        #: counted [s, ``clock``].
+        self._clock = clock
+        self._credit_s = RECEIVE_BUDGET_S
+        self._credit_at = clock()
+        self._watch_winch: list[Any] = []
         #: Logs that ended (a full disk, a lost file, a cap) and are still to be said.
         self._logs_ended: deque[str] = deque()   # appended from the log writer's thread
         if endpoints.tlog is not None:
@@ -189,13 +205,34 @@ class Autopilot:
     def selectables(self) -> list[Any]:
         """The sockets whose input :meth:`receive` takes (the ground stations', the
         component link's), for the caller's ``select``: the same list object until they
-        change (a client connects or goes); do not modify it."""
+        change (a client connects or goes); do not modify it. While the receive credit is
+        spent (:meth:`receive_wait_s`) only the component link's: the ground stations'
+        sockets wait, so that a flood does not wake the loop."""
         gen = self.io.generation
         comp = self.component.selectable if self.component is not None else None
         if gen != self._watch_gen or comp is not self._watch_comp:
             self._watch = [*self.io.sockets(), *([comp] if comp is not None else [])]
+            self._watch_winch = [comp] if comp is not None else []
             self._watch_gen, self._watch_comp = gen, comp
-        return self._watch
+        return self._watch if self._refill() > 0.0 else self._watch_winch
+
+    def _refill(self) -> float:
+        """The receive credit now [s]: what was left, plus :data:`RECEIVE_SHARE` of the
+        wall time since, at most :data:`RECEIVE_BUDGET_S`."""
+        now = self._clock()
+        credit = min(RECEIVE_BUDGET_S,
+                     self._credit_s + RECEIVE_SHARE * max(0.0, now - self._credit_at))
+        self._credit_s, self._credit_at = credit, now
+        return credit
+
+    def receive_wait_s(self) -> float:
+        """How long the loop may wait before :meth:`receive` has work it may do [s]: 0
+        with messages waiting and credit to handle them, the time until the credit is
+        back when it is spent, infinity with nothing waiting."""
+        credit = self._refill()
+        if credit <= 0.0:   # at least RECEIVE_WAIT_MIN_S: the credit is then positive
+            return max(RECEIVE_WAIT_MIN_S, -credit / RECEIVE_SHARE)
+        return 0.0 if self._inbox else math.inf
 
     @property
     def backlogged(self) -> bool:
@@ -209,23 +246,29 @@ class Autopilot:
         handled (commands answered) and the winch's routed at once; what they change in
         flight applies from the next control period. Call :meth:`service` after it.
 
-        Bounded, as ArduPilot bounds its receive: messages are handled for at most
-        :data:`RECEIVE_BUDGET_S` of wall time a call; the rest wait, in order, for the next
-        (:attr:`backlogged`), and while :data:`INBOX_MAX` of them wait the sockets are not
-        read (TCP then pushes back on the sender; a UDP flood overflows the kernel's
-        buffer). The winch's messages are always read."""
-        inbox = self._inbox
-        if len(inbox) < INBOX_MAX:
-            inbox.extend(self.io.receive(ready))
-        end = time.perf_counter() + RECEIVE_BUDGET_S
-        while inbox:
-            peer, msg = inbox.popleft()
-            try:
-                self.handle(peer, msg)
-            except Exception as exc:  # noqa: BLE001 - one bad message must not stop flight
-                self.log(f"error handling {msg.get_type()} from {peer}: {exc!r}")
-            if time.perf_counter() >= end:
-                break
+        Bounded, as ArduPilot bounds its receive: reading and handling take at most the
+        credit left (:data:`RECEIVE_BUDGET_S` at most, refilled at :data:`RECEIVE_SHARE`
+        of wall time); the rest wait, in order, for the next call (:attr:`backlogged`,
+        :meth:`receive_wait_s`), and while :data:`INBOX_MAX` of them wait or the credit is
+        spent the sockets are not read (TCP then pushes back on the sender; a UDP flood
+        overflows the kernel's buffer). The winch's messages are always read."""
+        credit = self._refill()
+        if credit > 0.0:
+            start = self._clock()
+            inbox = self._inbox
+            if len(inbox) < INBOX_MAX:
+                inbox.extend(self.io.receive(ready))
+            end = start + credit
+            while inbox:
+                peer, msg = inbox.popleft()
+                try:
+                    self.handle(peer, msg)
+                except Exception as exc:  # noqa: BLE001 - one bad message must not stop flight
+                    self.log(f"error handling {msg.get_type()} from {peer}: {exc!r}")
+                if self._clock() >= end:
+                    break
+            now = self._clock()
+            self._credit_s, self._credit_at = credit - (now - start), now
         comp = self.component
         if comp is not None and comp.selectable in ready:
             self._from_winch(comp.poll())

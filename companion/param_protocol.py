@@ -392,8 +392,15 @@ class ParamProtocol:
     # --- handlers ----------------------------------------------------------------------
 
     def _on_request_list(self, peer: Hashable, msg: Any, now_s: float) -> None:
-        self._streams[peer] = _Stream(next_index=0, tokens=float(self.stream_burst),
-                                      last_s=now_s)
+        # the list starts again from its first parameter; a peer asking again while its
+        # list is still sent keeps its bucket (the pacing is the peer's, not the
+        # request's: a flood of requests costs no more than one list)
+        stream = self._streams.get(peer)
+        if stream is None:
+            self._streams[peer] = _Stream(next_index=0, tokens=float(self.stream_burst),
+                                          last_s=now_s)
+        else:
+            stream.next_index = 0
         self._pump(peer, now_s)
 
     def _on_request_read(self, peer: Hashable, msg: Any, now_s: float) -> None:

@@ -245,14 +245,21 @@ def test_list_is_paced_and_restarts_on_a_new_request():
     assert len(sent) == 33
     proto.tick(11.0)  # a long gap refills at most one burst
     assert len(sent) == 58
-    proto.handle(PEER, wire(mavlink2.MAVLink_param_request_list_message(1, 1)), 11.0)
+    # asked again while it streams: from index 0, on the bucket the peer has (empty now),
+    # however often it asks
+    for _ in range(100):
+        proto.handle(PEER, wire(mavlink2.MAVLink_param_request_list_message(1, 1)), 11.0)
+    assert len(sent) == 58
     t = 11.0
     while proto.streaming:
         t += 0.01
         proto.tick(t)
     tail = [m.param_index for _, m in sent[58:]]
     assert tail == list(range(1000))  # restarted at index 0, none skipped
-    assert t - 11.0 == pytest.approx((1000 - 25) / 512.0, abs=0.02)
+    assert t - 11.0 == pytest.approx(1000 / 512.0, abs=0.02)
+    # a list asked for after the last one ended starts with a burst again
+    proto.handle(PEER, wire(mavlink2.MAVLink_param_request_list_message(1, 1)), t + 1.0)
+    assert len(sent) == 58 + 1000 + 25
 
 
 def test_two_links_stream_independently():
