@@ -84,6 +84,9 @@ RECEIVE_SHARE = 0.25
 RECEIVE_WAIT_MIN_S = 1e-4
 #: Messages read and waiting beyond which the ground stations' sockets are not read.
 INBOX_MAX = 2000
+#: Messages parsed at one :meth:`Autopilot.receive` at most (some 15 us each; the bytes
+#: beyond wait in their links' parsers).
+PARSE_MAX = 32
 #: The shortest wall time between two STATUSTEXTs about refused (unsigned, badly signed,
 #: replayed) frames [s].
 SIGNING_NOTICE_S = 5.0
@@ -232,13 +235,13 @@ class Autopilot:
         credit = self._refill()
         if credit <= 0.0:   # at least RECEIVE_WAIT_MIN_S: the credit is then positive
             return max(RECEIVE_WAIT_MIN_S, -credit / RECEIVE_SHARE)
-        return 0.0 if self._inbox else math.inf
+        return 0.0 if self.backlogged else math.inf
 
     @property
     def backlogged(self) -> bool:
         """Whether ground-station messages wait to be handled (a flood outran the budget
         of :meth:`receive`): call it again soon, without waiting for a socket."""
-        return bool(self._inbox)
+        return bool(self._inbox) or self.io.unparsed
 
     def receive(self, ready: Iterable[Any]) -> None:
         """Take the input of the sockets in ``ready`` (found readable by a ``select`` on
@@ -257,7 +260,7 @@ class Autopilot:
             start = self._clock()
             inbox = self._inbox
             if len(inbox) < INBOX_MAX:
-                inbox.extend(self.io.receive(ready))
+                inbox.extend(self.io.receive(ready, PARSE_MAX))
             end = start + credit
             while inbox:
                 peer, msg = inbox.popleft()

@@ -36,6 +36,8 @@ from tuavdefs.logfile import LogFile
 from tuavdefs.signing import SigningMavlink
 
 Peer = tuple[Any, ...]
+#: What :meth:`MavlinkEndpoints._next` returns for a frame that is no message.
+_SKIP = object()
 Address = tuple[str, int]
 
 SYSTEM_ID = gcs.SYSTEM_ID
@@ -51,6 +53,13 @@ MAX_UDP_PEERS = 8
 UDP_PEER_TIMEOUT_S = 10.0
 #: Unsent bytes a TCP client may fall behind by before frames to it are dropped.
 _TCP_BACKLOG_BYTES = 1 << 20
+#: Bytes read from a TCP client at one :meth:`MavlinkEndpoints.receive` (about 60
+#: messages: what the rest of the kernel's buffer holds waits, and TCP pushes back).
+READ_TCP_BYTES = 2048
+#: Datagrams read from a UDP socket at one :meth:`MavlinkEndpoints.receive`.
+READ_UDP_DATAGRAMS = 8
+#: Bytes a link's parser may hold unparsed; a datagram beyond them is dropped.
+UNPARSED_MAX_BYTES = 1 << 16
 
 
 class TelemetryLog(LogFile):
@@ -133,6 +142,8 @@ class MavlinkEndpoints:
         self._tcp: dict[int, socket.socket] = {}
         self._pending: dict[int, bytearray] = {}
         self._backlogged: set[int] = set()     # TCP clients with unsent bytes
+        #: Links whose parser may hold whole messages not yet taken (an ordered set).
+        self._unparsed: dict[Peer, None] = {}
         self._closed: list[Peer] = []
         self.udp: list[socket.socket] = []
         self.udp_targets: list[Address] = []
@@ -200,10 +211,15 @@ class MavlinkEndpoints:
         self.flush()
         return self.receive(ready)
 
-    def receive(self, ready: Iterable[Any]) -> list[tuple[Peer, Any]]:
+    def receive(self, ready: Iterable[Any], max_messages: int | None = None
+                ) -> list[tuple[Peer, Any]]:
         """Read the sockets in ``ready`` that are this object's (others are ignored: the
         caller may have watched more in the same ``select``); returns the messages that
-        arrived, as (peer, message)."""
+        arrived, as (peer, message): all of them, or at most ``max_messages``, the rest
+        parsed at the next calls (:attr:`unparsed`; parsing costs some 15 us a message,
+        so a flood's bytes must not be parsed all at once). A read is bounded too
+        (:data:`READ_TCP_BYTES`, :data:`READ_UDP_DATAGRAMS`), and a TCP client whose bytes
+        still wait to be parsed is not read."""
         out: list[tuple[Peer, Any]] = []
         self.expire_udp_peers()
         for sock in ready:
@@ -211,9 +227,54 @@ class MavlinkEndpoints:
                 self._accept()
             elif sock in self._udp_index:
                 self._read_udp(self._udp_index[sock], sock, out)
-            elif isinstance(sock, socket.socket) and self._tcp.get(sock.fileno()) is sock:
+            elif (isinstance(sock, socket.socket) and self._tcp.get(sock.fileno()) is sock
+                  and ("tcp", sock.fileno()) not in self._unparsed):
                 self._read_tcp(sock, out)
+        self._drain(out, max_messages)
         return out
+
+    @property
+    def unparsed(self) -> bool:
+        """Whether bytes read wait to be parsed (:meth:`receive` with ``max_messages``)."""
+        return bool(self._unparsed)
+
+    def _drain(self, out: list[tuple[Peer, Any]], max_messages: int | None) -> None:
+        """Parse the links' waiting bytes into ``out``, one message from each link in
+        turn, until ``out`` holds ``max_messages`` (None: all)."""
+        waiting = self._unparsed
+        while waiting and (max_messages is None or len(out) < max_messages):
+            for peer in list(waiting):
+                link = self._links.get(peer)
+                m = self._next(link.parser) if link is not None else None
+                if m is None:
+                    del waiting[peer]   # nothing whole left (a part waits for its rest)
+                elif m is not _SKIP:
+                    self._emit(peer, m, out)
+                if max_messages is not None and len(out) >= max_messages:
+                    break
+
+    def _next(self, p: Any, data: bytes = b"") -> Any:
+        """The parser's next message after taking ``data`` (None: none whole; ``_SKIP``:
+        a frame that is no message, already counted)."""
+        before = p.total_receive_errors
+        try:
+            m = p.parse_char(data)
+        except (mavlink2.MAVError, struct.error, ValueError, IndexError):
+            self.bad_frames += 1
+            return _SKIP
+        finally:
+            self.bad_frames += p.total_receive_errors - before
+        if m is not None and m.get_type() == "BAD_DATA":   # already in the error count
+            return _SKIP
+        return m
+
+    def _emit(self, peer: Peer, m: Any, out: list[tuple[Peer, Any]]) -> None:
+        if self.tlog is not None:
+            self.tlog.write(m.get_msgbuf())
+        if m.get_type() == "SETUP_SIGNING" and self.on_setup_signing is not None:
+            self.on_setup_signing(peer, m)   # the frames after it: on the new key
+            return
+        out.append((peer, m))
 
     @property
     def backlogged(self) -> bool:
@@ -247,7 +308,7 @@ class MavlinkEndpoints:
     def _read_tcp(self, sock: socket.socket, out: list[tuple[Peer, Any]]) -> None:
         peer: Peer = ("tcp", sock.fileno())
         try:
-            data = sock.recv(65536)
+            data = sock.recv(READ_TCP_BYTES)
         except BlockingIOError:
             return
         except OSError:
@@ -258,7 +319,7 @@ class MavlinkEndpoints:
         self._parse(peer, data, out)
 
     def _read_udp(self, index: int, sock: socket.socket, out: list[tuple[Peer, Any]]) -> None:
-        for _ in range(64):
+        for _ in range(READ_UDP_DATAGRAMS):
             try:
                 data, addr = sock.recvfrom(65536)
             except (BlockingIOError, ConnectionRefusedError):
@@ -300,31 +361,18 @@ class MavlinkEndpoints:
             self._changed()
 
     def _parse(self, peer: Peer, data: bytes, out: list[tuple[Peer, Any]]) -> None:
+        """Give ``data`` to ``peer``'s parser; its messages are taken by :meth:`_drain`."""
         link = self._links.get(peer)
         if link is None:
             link = self._links[peer] = _Link(self.signing)
         link.last_rx = time.monotonic()
-        p = link.parser
-        before = p.total_receive_errors
-        chunk = data
-        while True:     # pymavlink's parse_buffer, one message at a time
-            try:
-                m = p.parse_char(chunk)
-            except (mavlink2.MAVError, struct.error, ValueError, IndexError):
-                self.bad_frames += 1
-                m = None
-            if m is None:
-                break
-            chunk = b""
-            if m.get_type() == "BAD_DATA":   # already in the parser's error count
-                continue
-            if self.tlog is not None:
-                self.tlog.write(m.get_msgbuf())
-            if m.get_type() == "SETUP_SIGNING" and self.on_setup_signing is not None:
-                self.on_setup_signing(peer, m)   # the frames after it: on the new key
-                continue
-            out.append((peer, m))
-        self.bad_frames += p.total_receive_errors - before
+        if link.parser.buf_len() > UNPARSED_MAX_BYTES:
+            self.bad_frames += 1     # a datagram the parser has no room for: dropped
+            return
+        m = self._next(link.parser, data)
+        if m is not None and m is not _SKIP:
+            self._emit(peer, m, out)
+        self._unparsed[peer] = None   # what follows it, if anything
 
     @property
     def closed_pending(self) -> bool:

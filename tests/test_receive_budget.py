@@ -7,6 +7,7 @@ the test moves (each handled message costs a fixed time on it)."""
 from __future__ import annotations
 
 import select
+import socket
 import time
 
 from pymavlink import mavutil
@@ -77,3 +78,33 @@ def test_a_flood_is_handled_at_the_receive_share_and_its_sockets_wait_meanwhile(
         ep.close()
         comp.close()
 
+
+
+def test_a_burst_is_parsed_a_bounded_number_at_a_time_and_nothing_is_lost():
+    """300 PARAM_SETs in one TCP write: each receive parses at most the number asked
+    (the rest waits in the link's parser, the socket unread meanwhile), and every
+    message comes out once, in order."""
+    ep = MavlinkEndpoints(0, [])
+    client = socket.create_connection(("127.0.0.1", ep.tcp_port))
+    try:
+        while not ep.links():
+            ep.receive(select.select(ep.sockets(), [], [], 2.0)[0])
+        mav = M.MAVLink(None, srcSystem=255, srcComponent=190)
+        n = 300
+        client.sendall(b"".join(
+            M.MAVLink_param_set_message(1, 1, b"WPNAV_SPEED", float(k), 9).pack(mav)
+            for k in range(n)))
+        time.sleep(0.3)
+        got: list[float] = []
+        deadline = time.monotonic() + 10.0
+        while len(got) < n:
+            ready = select.select(ep.sockets(), [], [], 0.2)[0]
+            out = ep.receive(ready, 32)
+            assert len(out) <= 32
+            got += [m.param_value for _, m in out]
+            assert time.monotonic() < deadline
+        assert got == [float(k) for k in range(n)]
+        assert not ep.unparsed
+    finally:
+        client.close()
+        ep.close()
