@@ -20,6 +20,7 @@ from sitl.lumped import (
     line_rk4_prescribed,
     line_state_size,
     manage_nodes,
+    node_count,
     relax,
 )
 from sitl.plant import Plant, PlantInputs
@@ -386,6 +387,48 @@ def test_the_allowance_fades_from_rest_as_the_critically_damped_decay():
     line.ls[-1], line.ls[-2] = a0, 0.0
     manage_nodes(line.ls, line.lp, line.length, 0.0, math.exp(-dt / tau), top6)
     assert a0 - line.ls[-1] < a0 * (dt / tau) ** 2
+
+
+@pytest.mark.parametrize("segments", [25, 50, 100])
+def test_a_line_dragged_along_the_ground_is_caught_at_the_exit_with_the_string_s_impedance(
+        segments):
+    # a straight line lying on the ground slides along itself at v (dragged, its top
+    # pulled at v), its exit segment 1 % short: when that goes taut, the exit's tension
+    # steps to the continuous string's wave impedance times v, sqrt(EA rho) v, and holds
+    # it until the wave's reflection from the top comes back (2 L / c). The lumped line
+    # carries it whatever its segments (2, 1, 0.5 m): a snap of 70 N from 1.15 m/s is
+    # what the line's motion makes, not the integration (docs/model.md)
+    v, length, short, h = 1.15, 10.0, 0.01, 1e-4
+    line = Line(length, total_length_m=50.0, segments=segments)
+    tp = line.tp
+    ls_m = tp.segment_length_m
+    n = node_count(length, ls_m)
+    exit_len = length - n * ls_m
+    line.ls[:] = 0.0
+    line.ls[0] = n
+    sink = -tp.linear_density_kg_m * G / tp.ground_stiffness_n_m2   # resting on the ground
+    x0 = exit_len * (1.0 - short)
+    for k in range(n):
+        line.ls[1 + 6 * k:7 + 6 * k] = (x0 + (n - 1 - k) * ls_m, 0.0, sink, v, 0.0, 0.0)
+    top0 = x0 + n * ls_m
+    c = math.sqrt(tp.axial_stiffness_n / tp.linear_density_kg_m)
+    caught = exit_len * short / v
+    t, exit_t = 0.0, []
+    while t < caught + 2.0 * length / c:
+        b0, b1, b2 = (np.array([top0 + v * s, 0.0, 0.0, v, 0.0, 0.0])
+                      for s in (t, t + 0.5 * h, t + h))
+        line_rk4_prescribed(line.ls, line.scratch, line.lp, h, b0, b1, b2, length,
+                            line.node_wind, line.top_wind)
+        t += h
+        exit_t.append((t, line.forces(b2[:3], b2[3:])[3]))
+    impedance = math.sqrt(tp.axial_stiffness_n * tp.linear_density_kg_m) * v
+    before = [f for s, f in exit_t if s < caught - 5 * h]
+    assert max(before) == 0.0                        # slack until its 1 % is taken up
+    # the plateau between the catch's rise and the reflection's return
+    plateau = [f for s, f in exit_t if caught + 0.3 * length / c < s < caught + length / c]
+    assert len(plateau) > 10
+    assert min(plateau) == pytest.approx(impedance, rel=0.05)
+    assert max(plateau) == pytest.approx(impedance, rel=0.05)
 
 
 # --- MoorDyn ---------------------------------------------------------------------------
