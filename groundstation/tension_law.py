@@ -52,10 +52,12 @@ from tuavdefs.jit import njit
  Q_STIFFNESS, Q_FLOOR, Q_SP_MAX, Q_MARGIN, Q_BOUND_M, Q_LAG_S, Q_RECOVER, Q_LIFT_GAIN,
  Q_LIFT_MAX, Q_LIFT_LAG, Q_APPROACH, Q_LAY_HEIGHT) = range(30)
 N_TENSION_PARAMS = 30
-# indices of its state (Z_LIFT: the exit-elevation loop's raise of the set-point [N])
+# indices of its state (Z_LIFT: the exit-elevation loop's raise of the set-point [N];
+# Z_LAID: the lower length bound's slack laid down and not yet given back [m],
+# groundstation.winder_host.tension_step)
 (Z_STARTED, Z_TENSION, Z_SETPOINT, Z_SPEED, Z_ACC, Z_LAG, Z_SPEED_RAW, Z_FEEDBACK,
- Z_FF, Z_STIFFNESS, Z_LIFT, Z_LIFTED) = range(12)
-N_TENSION_STATE = 12
+ Z_FF, Z_STIFFNESS, Z_LIFT, Z_LIFTED, Z_LAID) = range(13)
+N_TENSION_STATE = 13
 
 
 #: Time constant [s] of the low-pass on the line speed's feed-forward (dL-bar/dt from the
@@ -173,6 +175,7 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
         s[Z_FEEDBACK] = s[Z_SPEED] - ff_rate_m_s
         s[Z_LIFT] = 0.0
         s[Z_LIFTED] = 0.0
+        s[Z_LAID] = 0.0
     if p[Q_FILTER] > 0.0:
         s[Z_TENSION] += (1.0 - math.exp(-dt_s / p[Q_FILTER])) * (tension_n - s[Z_TENSION])
     else:

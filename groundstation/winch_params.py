@@ -92,8 +92,9 @@ class WinchParams(Params):
         "55 kN/m at 2 m) and the drum's overshoot when the slack runs out is all stretch",
         gt=0)
     ground_lbar_tension_ratio: float = quantity(
-        2.0, "1", "a take-off goes on holding the pre-tension while L-bar at the reported "
-        "position asks for more than this times its target horizontal tension", gt=1)
+        2.0, "1", "under L-bar's length law a take-off goes on holding the pre-tension while "
+        "L-bar at the reported position asks for more than this times its target "
+        "horizontal tension (the tension law lays the line down there itself)", gt=1)
     ground_climb_m_s: float = quantity(
         0.3, "m/s", "the UAV counts as on the ground only while it also reports climbing "
         "slower than this (a take-off ends the pre-tension at once; a landing's descent "

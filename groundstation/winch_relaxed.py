@@ -4,8 +4,9 @@ never taut), around it:
 
 - the **ground pre-tension**: while the UAV's position is unknown, or it reports a height
   below ``ground_height_m`` and no climb of ``ground_climb_m_s`` (a climb is a take-off,
-  which keeps it only while L-bar would ask for more than ``ground_lbar_tension_ratio``
-  times its tension), the drum holds the line at ``ground_tension_n``: a loop on the load
+  which under L-bar's length law keeps it only while L-bar would ask for more than
+  ``ground_lbar_tension_ratio`` times its tension, and under the tension law not at
+  all), the drum holds the line at ``ground_tension_n``: a loop on the load
   cell's tension, winding in slowly, paying out fast (holding instead while no position is
   known), never below the taut floor; without a load-cell reading it holds its length;
   taken over from the tension law, its target starts at the tension the law held and
@@ -40,6 +41,13 @@ if TYPE_CHECKING:
     from groundstation.winch import UavState, Winch
 
 
+#: How long [s] the line must pull without a break before the slack guard lets go: a
+#: vehicle that takes the line pulls it on; the drum's own stop against a line lying
+#: slack (110 N in one sample, a crash's runaway report followed under the tension law)
+#: and a tumbling vehicle's jerks do not.
+SLACK_PULL_S = 0.1
+
+
 class Relaxed(ModeLogic):
     """RELAXED: follow L-bar (module docstring)."""
 
@@ -58,6 +66,7 @@ class Relaxed(ModeLogic):
         #: Line paid out (net) since the line was last pulled [m].
         self.slack_paid_m = 0.0
         self._slack_length_m = math.nan     # the length at the last slack count [m]
+        self._pulled_s = 0.0                # how long the line has pulled without a break [s]
         #: Whether the drum holds the line against a pay-out nothing pulls (the slack
         #: guard, :meth:`_check_slack`): the pre-tension's loop, paid out only as pulled.
         self.slack_hold = False
@@ -182,11 +191,11 @@ class Relaxed(ModeLogic):
         followed it and paid out the whole tether). From then the drum holds the length
         and runs the ground pre-tension's loop, which pays out only as the line is pulled
         and winds in slowly to the pre-tension, its floor from the reported position
-        stopping a wind-in but paying nothing out; said once. It ends when the line is
-        pulled and the report agrees with what is out (L-bar within ``REJOIN_MARGIN_M`` of
-        the length: a report still asking much more, or much less, which would wind the
-        line in onto a vehicle elsewhere, is not followed), or with an operator's
-        ``DO_WINCH``."""
+        stopping a wind-in but paying nothing out; said once. It ends when the line has
+        pulled for :data:`SLACK_PULL_S` without a break and the report agrees with what is
+        out (L-bar within ``REJOIN_MARGIN_M`` of the length: a report still asking much
+        more, or much less, which would wind the line in onto a vehicle elsewhere, is not
+        followed), or with an operator's ``DO_WINCH``."""
         p = w.p
         length = w.length_m
         fixer = w.sensors.fixer
@@ -194,6 +203,7 @@ class Relaxed(ModeLogic):
         # (a reading of this window, not a stale one)
         leaves = w.sensors.line_leaves(ground_el, p.bus_window_s)
         slack = w.sensors.tension_n < p.slack_tension_n and not leaves
+        self._pulled_s = 0.0 if slack else self._pulled_s + w.dt_s
         last, self._slack_length_m = self._slack_length_m, length
         if not slack:
             self.slack_paid_m = 0.0
@@ -209,7 +219,7 @@ class Relaxed(ModeLogic):
                     mavlink2.MAV_SEVERITY_CRITICAL,
                     f"winch: {self.slack_paid_m:.1f} m paid out slack, pay-out held"))
             return self.slack_hold
-        if (not slack and uav is not None
+        if (self._pulled_s >= SLACK_PULL_S and uav is not None
                 and abs(w.host.lbar.length(uav[0])[0] - length) <= REJOIN_MARGIN_M):
             # the slack guard off: the law takes up from the measured length
             self.slack_hold = False
@@ -230,12 +240,16 @@ class Relaxed(ModeLogic):
         if ground and uav is not None:
             pos = uav[0]
             low = pos[2] < p.ground_height_m and uav[1][2] < p.ground_climb_m_s
-            # a take-off goes on holding it while L-bar would ask for a nearly straight
-            # line (the UAV low and far: L-bar's horizontal tension a w far above its
-            # target), which only an exact position keeps off taut
+            # under L-bar's length law a take-off goes on holding it while L-bar would ask
+            # for a nearly straight line (the UAV low and far: L-bar's horizontal tension
+            # a w far above its target), which only an exact position keeps off taut; the
+            # tension law lays the line down there itself (its lay-down band), and the
+            # hold's loop, its drum standing while the climb dragged the line over the
+            # ground, snapped it at 55-126 N (docs/control.md §8.5)
             if low:
                 self._ground_low = True
-            flat = (self._ground and self._ground_low and w.host.lbar.length(pos)[1]
+            flat = (w.host.controller.law is not WinderLaw.TENSION and self._ground
+                    and self._ground_low and w.host.lbar.length(pos)[1]
                     > p.ground_lbar_tension_ratio * w.host.lbar.a_target)
             ground = low or flat
         if ground and not self._ground:

@@ -47,9 +47,12 @@ from groundstation.lbar import (
     weight_estimate,
 )
 from groundstation.tension_law import (
+    Q_APPROACH,
     Q_BOUND_M,
     Q_FLOOR,
     Z_LAG,
+    Z_LAID,
+    Z_LIFTED,
     Z_SETPOINT,
     Z_SPEED,
     Z_STARTED,
@@ -271,7 +274,9 @@ def tension_step(uav: np.ndarray, measured: np.ndarray, lbar_p: np.ndarray,
     :func:`winder_step`'s place: L-bar and its rate at the UAV's reported position and
     velocity (the rate is the feed-forward; its exit-angle root in ``lbar_s``), the line's
     weight estimate, the set-point (:func:`groundstation.tension_law.tension_setpoint_n`),
-    the length bounds (below: the straight distance plus the least slack; above: L-bar or
+    the length bounds (below: the straight distance plus the least slack, or the slack the
+    lay-down band lays down, kept until the line has flown or the UAV has left the band and
+    then given back at the slack approach's rate (``law_s[Z_LAID]``); above: L-bar or
     the longest line still off the ground, plus ``length_bound_m``), the exit-elevation
     loop's reference (L-bar's least exit angle, at most half the chord's elevation) with
     the measured exit elevation, then
@@ -318,6 +323,16 @@ def tension_step(uav: np.ndarray, measured: np.ndarray, lbar_p: np.ndarray,
     if share < 1.0:
         low_slack = max(low_slack, (1.0 - share) * string_slack_m(
             w, h, v, 2.0 * law_p[Q_FLOOR]))
+    # the slack laid down is kept until the line has flown or the UAV has left the band,
+    # then given back at the slack approach's rate: on the take-off the band's share rises
+    # with the chord's elevation, and its bound falling back as fast as the distance grew
+    # stood the drum while the climb dragged the line lying on the ground into its exit
+    # (22-44 N; docs/control.md §8.5)
+    laid = law_s[Z_LAID]
+    if law_s[Z_LIFTED] > 0.0 or share >= 1.0:
+        laid -= dt_s * law_p[Q_APPROACH] * laid
+    low_slack = max(low_slack, laid)
+    law_s[Z_LAID] = low_slack
     low = dist + low_slack
     law_s[Z_STIFFNESS] = taut_line_stiffness_n_m(law_s[Z_SETPOINT], w, h, v)
     high = max(lbar_m, room) + law_p[Q_BOUND_M]
