@@ -2,16 +2,9 @@
 through :meth:`WinderHost.update <groundstation.winder_host.WinderHost.update>` (slack,
 never taut), around it:
 
-- the **ground pre-tension**: while the UAV's position is unknown, or it reports a height
-  below ``ground_height_m`` and no climb of ``ground_climb_m_s`` (a climb is a take-off,
-  which under L-bar's length law keeps it only while L-bar would ask for more than
-  ``ground_lbar_tension_ratio`` times its tension, and under the tension law not at
-  all), the drum holds the line at ``ground_tension_n``: a loop on the load
-  cell's tension, winding in slowly, paying out fast (holding instead while no position is
-  known), never below the taut floor; without a load-cell reading it holds its length;
-  taken over from the tension law, its target starts at the tension the law held and
-  falls to ``ground_tension_n`` on the law's set-point filter, and it reads the load cell
-  through the law's low-pass (a bumpless transfer);
+- the **ground pre-tension** while the UAV is on the ground by its report, or unknown
+  (:class:`groundstation.winch_ground.GroundPretension`; a take-off ends it unless the law
+  holds it through the climb);
 - the **rejoin** of L-bar from a line longer by more than ``REJOIN_MARGIN_M`` (wound in on
   a trapezoid) and the **join** from one shorter by more than ``JOIN_MARGIN_M`` (L-bar's
   law less a gap that closes on a trapezoid);
@@ -26,7 +19,7 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from groundstation.tension_law import Z_TENSION
+from groundstation.winch_ground import GroundPretension
 from groundstation.winch_modes import (
     JOIN_MARGIN_M,
     REJOIN_ACC_M_S2,
@@ -35,7 +28,7 @@ from groundstation.winch_modes import (
     WinchMode,
 )
 from groundstation.winch_report import Notice, WinchOutput, notice
-from groundstation.winder_control import WinderCommand, WinderLaw
+from groundstation.winder_control import WinderCommand
 
 if TYPE_CHECKING:
     from groundstation.winch import UavState, Winch
@@ -59,10 +52,8 @@ class Relaxed(ModeLogic):
         self._rejoin_rate = 0.0             # its wind-in speed [m/s]
         self._join_gap_m = 0.0              # how far short of L-bar's law a join still is
         self._join_rate = 0.0               # how fast that closes [m/s]
-        self._ground = False                # holding the ground pre-tension
-        self._ground_low = False            # ... since the UAV reported itself on the ground
-        self._ground_target_n = math.nan    # the pre-tension's loop's target now [N]
-        self._ground_tension_n = math.nan   # and the tension it reads (NaN: the cell's) [N]
+        #: The ground pre-tension (its loop also the slack guard's).
+        self.pretension = GroundPretension()
         #: Line paid out (net) since the line was last pulled [m].
         self.slack_paid_m = 0.0
         self._slack_length_m = math.nan     # the length at the last slack count [m]
@@ -92,7 +83,7 @@ class Relaxed(ModeLogic):
         """RELAXED rejoins L-bar from ``length_m`` [m] (wound in on a trapezoid, or joined
         with a gap)."""
         self.hold_m = length_m
-        self._ground = False
+        self.pretension.reset()
         uav = w.uav_now()
         lbar_m = w.host.lbar.length(uav[0])[0] if uav is not None else math.nan
         self._start_rejoin(length_m, lbar_m)
@@ -119,7 +110,7 @@ class Relaxed(ModeLogic):
                 self._rejoin_m -= rate * dt
                 w.ref_m, w.ref_rate_m_s = self._rejoin_m, -rate
         if self._check_slack(w, out, uav) or self._on_ground(w, uav):
-            self._ground_reference(w)
+            self.pretension.reference(w, self.slack_hold)
             return w.track(w.ref_m, w.ref_rate_m_s)
         if uav is not None and math.isfinite(self._rejoin_m):
             return w.track(w.ref_m, w.ref_rate_m_s)
@@ -231,88 +222,15 @@ class Relaxed(ModeLogic):
         return self.slack_hold
 
     def _on_ground(self, w: Winch, uav: UavState | None) -> bool:
-        """Whether the ground pre-tension holds now (module docstring): the UAV on the
-        ground by its report (or none yet), a load cell to hold it with. Leaving it, a
-        line longer than L-bar rejoins it at ``rejoin_rate_m_s``."""
-        p = w.p
-        tension = w.sensors.tension_n
-        ground = p.ground_tension_n > 0.0 and math.isfinite(tension)
-        if ground and uav is not None:
-            pos = uav[0]
-            low = pos[2] < p.ground_height_m and uav[1][2] < p.ground_climb_m_s
-            # under L-bar's length law a take-off goes on holding it while L-bar would ask
-            # for a nearly straight line (the UAV low and far: L-bar's horizontal tension
-            # a w far above its target), which only an exact position keeps off taut; the
-            # tension law lays the line down there itself (its lay-down band), and the
-            # hold's loop, its drum standing while the climb dragged the line over the
-            # ground, snapped it at 55-126 N (docs/control.md §8.5)
-            if low:
-                self._ground_low = True
-            flat = (w.host.controller.law is not WinderLaw.TENSION and self._ground
-                    and self._ground_low and w.host.lbar.length(pos)[1]
-                    > p.ground_lbar_tension_ratio * w.host.lbar.a_target)
-            ground = low or flat
-        if ground and not self._ground:
-            w.ref_m, w.ref_rate_m_s = w.length_m, 0.0
+        """Whether the ground pre-tension holds now (:class:`GroundPretension`). Taking
+        hold ends a join; leaving it, a line longer than L-bar rejoins it at
+        ``rejoin_rate_m_s``."""
+        was = self.pretension.holding
+        ground = self.pretension.update(w, uav)
+        if ground and not was:
             self._join_gap_m = self._join_rate = 0.0
-            # taken over from the tension law (a landing), the loop's target starts at
-            # the tension the law held and falls to the pre-tension on the law's
-            # set-point filter, and the loop reads the tension through the law's
-            # low-pass: a bumpless transfer (from 2.3 N, the step to 0.3 N paid out at
-            # 2 m/s at once, and the line, slack, snapped at 26 N as the drum wound it
-            # back; on the load cell's noise alone, 1.5 m/s)
-            ctl = w.host.controller
-            tension_law = ctl.law is WinderLaw.TENSION
-            held = ctl.tension_state[Z_TENSION] if tension_law else math.nan
-            self._ground_target_n = (max(held, p.ground_tension_n) if tension_law
-                                     else p.ground_tension_n)
-            self._ground_tension_n = held
-        elif self._ground and not ground:
+        elif was and not ground:
             lbar_m = w.host.lbar.length(uav[0])[0] if uav is not None else math.nan
             self._start_rejoin(w.length_m, lbar_m)
             self.hold_m = w.length_m
-        self._ground = ground
-        if not ground:
-            self._ground_low = False
-            self._ground_target_n = self._ground_tension_n = math.nan
         return ground
-
-    def _ground_reference(self, w: Winch) -> None:
-        """One period of the pre-tension's length reference: paid out or wound in at a
-        speed proportional to the tension's error (wound in at most at
-        ``ground_tension_rate_m_s``, paid out at most at the law's speed limit, held
-        instead while no UAV position is known), never below the taut floor while one is,
-        nor past the drum's ends."""
-        p, dt = w.p, w.dt_s
-        target = self._ground_target_n
-        if not math.isfinite(target):
-            target = p.ground_tension_n
-        elif target > p.ground_tension_n:
-            target += (1.0 - math.exp(-dt / max(
-                w.host.controller.g.tension_setpoint_filter_s, dt))) * (
-                p.ground_tension_n - target)
-        self._ground_target_n = target
-        tension = w.sensors.tension_n
-        if math.isfinite(self._ground_tension_n):
-            g = w.host.controller.g
-            self._ground_tension_n += (1.0 - math.exp(-dt / max(g.tension_filter_s, dt))) * (
-                tension - self._ground_tension_n)
-            tension = self._ground_tension_n
-        rate = p.ground_tension_gain_m_s_n * (tension - target)
-        # a pull above the pre-tension with no position known yet is held, as the drum
-        # held its length before (a vehicle in the air the filter has not found)
-        high = w.max_rate_m_s if w.uav is not None else 0.0
-        rate = max(-p.ground_tension_rate_m_s, min(high, rate))
-        ref = w.ref_m + rate * dt
-        floor, _ = w.taut_floor()
-        lower = max(floor, w.length_min_m) if math.isfinite(floor) else w.length_min_m
-        if ref < lower:
-            if not self.slack_hold:
-                ref, rate = lower, 0.0
-            elif rate < 0.0:
-                # holding against a slack pay-out, the reported position is not to be
-                # trusted: its floor stops a wind-in, it pays nothing out
-                ref, rate = max(ref, min(w.ref_m, lower)), 0.0
-        if ref > w.length_max_m:
-            ref, rate = w.length_max_m, 0.0
-        w.ref_m, w.ref_rate_m_s = ref, rate

@@ -40,6 +40,16 @@ class WinderLaw(enum.Enum):
     PAPER = "paper"         #: track L-bar's length (docs/control.md §4)
     TENSION = "tension"     #: hold the line's tension (docs/control.md §8)
 
+    @property
+    def holds_ground_tension_in_climb(self) -> bool:
+        """Whether a take-off low and far goes on under the winch's ground pre-tension
+        (:class:`groundstation.winch_ground.GroundPretension`): L-bar's length law asks
+        there for a nearly straight line, which only an exact position keeps off taut;
+        the tension law lays the line down there itself (its lay-down band), and the
+        pre-tension's loop, its drum standing while the climb dragged the line over the
+        ground, snapped it (docs/control.md §8.5)."""
+        return self is WinderLaw.PAPER
+
 
 @dataclass(frozen=True)
 class WinderControlParams(Params):

@@ -1414,14 +1414,14 @@ def test_a_landing_hands_the_tension_law_over_to_the_pre_tension_without_a_bump(
             wall = k * DT               # low-pass has it
             tension(w, wall, 2.5)
             encoder(w, wall, 6.4)
-        assert not w.relaxed._ground
+        assert not w.relaxed.pretension.holding
         w.set_uav(((6.0, 0.0, 0.4), (0.0, 0.0, -0.5)))
         rates = []
         for k in range(1, 301):
             tension(w, wall + k * DT, 2.5)
             encoder(w, wall + k * DT, w.reference()[0])
             rates.append(w.reference()[1])
-        assert w.relaxed._ground
+        assert w.relaxed.pretension.holding
         full = min(p.ground_tension_gain_m_s_n * (2.5 - p.ground_tension_n), w.max_rate_m_s)
         if bumpless:
             assert rates[0] < 0.05 * full
