@@ -7,10 +7,13 @@ length. Taken over from the tension law, its target starts at the tension the la
 falls to ``ground_tension_n`` on the law's set-point filter, and it reads the load cell
 through the law's low-pass (a bumpless transfer).
 
-A take-off (the UAV climbing, or above ``ground_height_m``) ends it, unless the law that
-follows the UAV holds it through the climb (:attr:`WinderLaw.holds_ground_tension_in_climb
+A take-off (the UAV climbing, or above ``ground_height_m``) ends it, unless it is held
+through the climb while L-bar would ask for more than ``ground_lbar_tension_ratio`` times
+its tension: by the law that follows the UAV (:attr:`WinderLaw.holds_ground_tension_in_climb
 <groundstation.winder_control.WinderLaw.holds_ground_tension_in_climb>`: L-bar's length
-law, while L-bar would ask for more than ``ground_lbar_tension_ratio`` times its tension).
+law), or by any law within ``ground_hold_near_m`` of the winder (a short line, little to
+drag over the ground; without GNSS the tether fix counts on it lying straight as it
+lifts).
 The slack guard runs the same loop (:meth:`GroundPretension.reference`).
 """
 
@@ -54,11 +57,13 @@ class GroundPretension:
             low = pos[2] < p.ground_height_m and uav[1][2] < p.ground_climb_m_s
             if low:
                 self._low = True
-            # a take-off held through the climb (L-bar's length law: while L-bar would ask
-            # for a nearly straight line, the UAV low and far, L-bar's horizontal tension
-            # a w far above its target, which only an exact position keeps off taut)
-            law = w.host.controller.law
-            flat = (law.holds_ground_tension_in_climb and self.holding and self._low
+            # a take-off held through the climb while L-bar would ask for a nearly
+            # straight line (the UAV low and far: L-bar's horizontal tension a w far above
+            # its target, which only an exact position keeps off taut): by L-bar's length
+            # law, and by any law near the winder
+            climb_hold = (w.host.controller.law.holds_ground_tension_in_climb
+                          or math.hypot(pos[0], pos[1]) <= p.ground_hold_near_m)
+            flat = (climb_hold and self.holding and self._low
                     and w.host.lbar.length(pos)[1]
                     > p.ground_lbar_tension_ratio * w.host.lbar.a_target)
             ground = low or flat

@@ -95,6 +95,12 @@ class WinchParams(Params):
         2.0, "1", "under L-bar's length law a take-off goes on holding the pre-tension while "
         "L-bar at the reported position asks for more than this times its target "
         "horizontal tension (the tension law lays the line down there itself)", gt=1)
+    ground_hold_near_m: float = quantity(
+        3.0, "m", "a take-off this close to the winder (horizontally, as reported) goes on "
+        "holding the pre-tension as L-bar's length law does (ground_lbar_tension_ratio) "
+        "under any law: its short line has little to drag over the ground, and without "
+        "GNSS the tether fix counts on it lying straight under the pre-tension as it lifts "
+        "(docs/control.md §8.5)", ge=0)
     ground_climb_m_s: float = quantity(
         0.3, "m/s", "the UAV counts as on the ground only while it also reports climbing "
         "slower than this (a take-off ends the pre-tension at once; a landing's descent "
