@@ -172,10 +172,13 @@ def simulate(truth: Callable[[float], Truth], noise: SensorNoise, duration_s: fl
              params: EstimatorParams | None = None, gnss_hz: float = 10.0,
              gnss_delay_s: float = 0.1, gnss_error: Callable[[float], tuple] | None = None,
              eph_m: float | None = None, epv_m: float | None = None,
-             t_align_s: float = 0.0) -> Run:
+             t_align_s: float = 0.0,
+             tether_fix: Callable[[float, tuple], tuple] | None = None) -> Run:
     """Sample ``truth`` for ``duration_s`` [s] through the plant's sensors (IMU, baro,
     mag at 250 Hz; GNSS at ``gnss_hz``, each fix of the truth ``gnss_delay_s`` old when
-    it arrives, plus ``gnss_error(t)`` [m] if given) and run a filter on them."""
+    it arrives, plus ``gnss_error(t)`` [m] if given) and run a filter on them; with
+    ``tether_fix(t, true_pos)`` -> (position [m], covariance [m^2]) also a tether fix at
+    10 Hz, taken at ``t``, arriving 20 ms later."""
     suite = SensorSuite(noise=noise)
     params = params or params_for(noise, gnss_delay_s=gnss_delay_s)
     field_enu = suite.earth_field_enu_gauss
@@ -205,6 +208,9 @@ def simulate(truth: Callable[[float], Truth], noise: SensorNoise, duration_s: fl
                                  fix.epv_m if epv_m is None else epv_m)
             if filt.aligned:
                 run.gnss_accepted.append((t, acc))
+        if tether_fix is not None and k % 25 == 0 and t >= 0.02:
+            pos, cov = tether_fix(t - 0.02, truth(t - 0.02).pos)
+            filt.fuse_tether(t, t - 0.02, pos, cov)
         if not filt.aligned:
             continue
         p, v, q, _ = filt.state()

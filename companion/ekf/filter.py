@@ -55,6 +55,7 @@ from companion.ekf.memory import FilterMemory
 from companion.ekf.output import OutputPredictor, predict_output_kernel
 from companion.ekf.params import EstimatorParams
 from companion.ekf.tether import TetherControl, cov_matrix
+from companion.ekf.tether_check import TetherFixCheck
 from companion.ekf.tether_line import TetherLineControl
 from companion.ekf.zero_velocity import ZeroVelocityControl
 from companion.flight_controller import VehicleState
@@ -122,6 +123,9 @@ class NavFilter:
         self._mag = MagControl(p, mem, src.mag, field)
         self._tether = (TetherControl(p, mem, src, out, cp.leave) if p.tether_aid
                         else None)
+        #: the tether fix checked against the GNSS (None: not checked)
+        self.tether_check = (TetherFixCheck(p.tether_check)
+                             if p.tether_aid and p.tether_check.enabled else None)
         self._zero_vel = ZeroVelocityControl(p, mem, src.zero_vel)
         if p.drag.enabled and drag is None:
             raise ValueError("drag.enabled: the filter needs the vehicle's drag model")
@@ -280,6 +284,11 @@ class NavFilter:
         [m] and velocity [m/s] in the inertial ENU frame, the receiver's claimed
         horizontal and vertical accuracies [m] (its noise). Returns whether its position
         was fused (velocity may be fused alone; see :meth:`status`)."""
+        if self.tether_check is not None:
+            fix = usable_fix(self.params, pos_enu_m, vel_enu_m_s, eph_m, epv_m)
+            if fix is not None:
+                self.tether_check.add_gnss(t_s - self.params.gnss_delay_s, fix[0], fix[1],
+                                           eph_m, epv_m)
         if self._aligned:
             return self._gnss.fuse(t_s, pos_enu_m, vel_enu_m_s, eph_m, epv_m)
         fix = usable_fix(self.params, pos_enu_m, vel_enu_m_s, eph_m, epv_m)
@@ -321,6 +330,8 @@ class NavFilter:
         fix = tc.check(t_s, t_meas_s, pos_m, cov_m2)
         if fix is None:
             return False
+        if self.tether_check is not None:
+            fix = (fix[0], *self.tether_check.correct(*fix))
         if self._aligned:
             return tc.fuse(t_s, fix)
         self._align.add_tether_fix(fix[0], fix[1], cov_matrix(fix[2]))

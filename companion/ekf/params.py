@@ -149,6 +149,42 @@ class DragFusionParams(Params):
 
 
 @dataclass(frozen=True)
+class TetherCheckParams(Params):
+    """The tether fix checked against the GNSS (``[estimator.tether_check]``): the slow
+    error its covariance misses, measured against the receiver and added to it
+    (:mod:`companion.ekf.tether_check`; docs/estimation.md §10)."""
+
+    enabled: bool = quantity(
+        True, "", "compare each tether fix with the GNSS fix of its time and take the slow "
+        "error the running mean of their difference reveals beyond the claims off the fix, "
+        "what is left of it counted in its covariance (false: the fix as the ground station "
+        "sends it)")
+    bias_tau_s: float = quantity(
+        20.0, "s", "time constant of the running mean of the fix's difference from the "
+        "GNSS (its slow error: the line's weight, the wind's drag, the model's shape)", gt=0)
+    dead_band_sigma: float = quantity(
+        1.0, "1", "a mean difference within this many standard deviations of one "
+        "difference's claimed spread (the fix's covariance and the receiver's accuracy) "
+        "counts as consistent (the fix left as it is); beyond twice this it is taken off "
+        "in full", gt=0)
+    release_s: float = quantity(
+        30.0, "s", "once the fix's slow error is taken off, the weight it is taken off with "
+        "falls from 1 to 0 over this at the fastest (a receiver wandering towards the fix "
+        "must not let the error back in)", gt=0)
+    correlation_s: float = quantity(
+        10.0, "s", "the fix's slow error is taken correlated over this: its excess is added "
+        "as many times as fixes come within it (fused as white, n fixes of one error must "
+        "not count as n independent ones)", gt=0)
+    gnss_max_offset_s: float = quantity(
+        0.3, "s", "a tether fix is compared with the GNSS fix nearest in measurement time, "
+        "if within this", gt=0)
+    gnss_hold_s: float = quantity(
+        2.0, "s", "no GNSS fix compared within this: the slow error last measured is still "
+        "taken off, its spread counted once (the fix is then the only position there is)",
+        gt=0)
+
+
+@dataclass(frozen=True)
 class EstimatorParams(Params):
     """The navigation filter's own model of its sensors, its gates and its health checks
     (docs/estimation.md). Noise densities are of continuous white noise; random walks are
@@ -305,6 +341,10 @@ class EstimatorParams(Params):
     tether_aid: bool = quantity(
         True, "", "fuse the winch's tether fix (ODOMETRY from the ground station) as a "
         "position source beside the GNSS (ArduPilot's ExternalNav, EK3_SRC1_POSXY 6)")
+    tether_check: TetherCheckParams = quantity(
+        TetherCheckParams(), "", "the tether fix checked against the GNSS: the slow error "
+        "its covariance misses added to it ([estimator.tether_check]; docs/estimation.md "
+        "§10)")
     tether_noise_min_m: float = quantity(
         0.05, "m", "floor on each axis's standard deviation of a tether fix (added to its "
         "covariance)", gt=0)
