@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from ekf_harness import gauss_markov, params_for, simulate, static
 
-from companion.ekf.params import TetherCheckParams
+from companion.ekf.params import TetherCheckParams, TetherFixParams
 from companion.ekf.tether_check import TetherFixCheck
 from sitl.sensors import GNSS_MODELS, GnssPreset, SensorNoise
 
@@ -25,7 +25,8 @@ def _hover(bias_m: tuple[float, float, float] | None, check: bool, seed: int = 5
     model = GNSS_MODELS[GnssPreset("gnss")]
     noise = SensorNoise.preset("gnss", seed)
     params = params_for(noise, gnss_delay_s=model.latency_s, gnss_pos_tau_s=8.0,
-                        tether_check=TetherCheckParams(enabled=check))
+                        tether_fix=TetherFixParams(
+                            gnss_check=TetherCheckParams(enabled=check)))
     rng = np.random.default_rng(seed)
     cov = ((0.09, 0.0, 0.0), (0.0, 0.09, 0.0), (0.0, 0.0, 0.09))
 

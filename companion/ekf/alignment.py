@@ -209,7 +209,7 @@ class Alignment:
             x[0:3] = pos
             P[0:3, 0:3] = c
             var_v = float(c[2, 2])
-            var_vel = p.tether_align_vel_sigma_m_s ** 2
+            var_vel = p.tether_fix.align_vel_sigma_m_s ** 2
         x[X_Q:X_Q + 4] = q
         var_bg = p.gyro_bias_sigma_rad_s ** 2
         if p.gyro_calibration_at_rest and not self._in_air:

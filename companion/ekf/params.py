@@ -150,9 +150,9 @@ class DragFusionParams(Params):
 
 @dataclass(frozen=True)
 class TetherCheckParams(Params):
-    """The tether fix checked against the GNSS (``[estimator.tether_check]``): the slow
-    error its covariance misses, measured against the receiver and added to it
-    (:mod:`companion.ekf.tether_check`; docs/estimation.md §10)."""
+    """The tether fix checked against the GNSS (``[estimator.tether_fix.gnss_check]``): the
+    slow error its covariance misses, measured against the receiver and taken off, the rest
+    counted in its covariance (:mod:`companion.ekf.tether_check`; docs/estimation.md §10)."""
 
     enabled: bool = quantity(
         True, "", "compare each tether fix with the GNSS fix of its time and take the slow "
@@ -182,6 +182,19 @@ class TetherCheckParams(Params):
         2.0, "s", "no GNSS fix compared within this: the slow error last measured is still "
         "taken off, its spread counted once (the fix is then the only position there is)",
         gt=0)
+
+
+@dataclass(frozen=True)
+class TetherFixParams(Params):
+    """The ground station's tether fix as the filter takes it (``[estimator.tether_fix]``;
+    docs/estimation.md §10)."""
+
+    align_vel_sigma_m_s: float = quantity(
+        0.5, "m/s", "velocity standard deviation when the filter aligns on a tether fix "
+        "(no GNSS velocity): the vehicle is taken to be near rest", gt=0)
+    gnss_check: TetherCheckParams = quantity(
+        TetherCheckParams(), "", "the fix checked against the GNSS: the slow error its "
+        "covariance misses taken off, the rest counted ([estimator.tether_fix.gnss_check])")
 
 
 @dataclass(frozen=True)
@@ -341,10 +354,10 @@ class EstimatorParams(Params):
     tether_aid: bool = quantity(
         True, "", "fuse the winch's tether fix (ODOMETRY from the ground station) as a "
         "position source beside the GNSS (ArduPilot's ExternalNav, EK3_SRC1_POSXY 6)")
-    tether_check: TetherCheckParams = quantity(
-        TetherCheckParams(), "", "the tether fix checked against the GNSS: the slow error "
-        "its covariance misses added to it ([estimator.tether_check]; docs/estimation.md "
-        "§10)")
+    tether_fix: TetherFixParams = quantity(
+        TetherFixParams(), "", "the ground station's tether fix as the filter takes it: "
+        "the alignment on it, its check against the GNSS ([estimator.tether_fix]; "
+        "docs/estimation.md §10)")
     tether_noise_min_m: float = quantity(
         0.05, "m", "floor on each axis's standard deviation of a tether fix (added to its "
         "covariance)", gt=0)
@@ -378,9 +391,6 @@ class EstimatorParams(Params):
         "it) is fused with the zero velocity, with this noise (0: not fused). A consumer "
         "receiver's height is metres off: without it a vehicle on the ground took itself "
         "to be 1.2 m up", ge=0)
-    tether_align_vel_sigma_m_s: float = quantity(
-        0.5, "m/s", "velocity standard deviation when the filter aligns on a tether fix "
-        "(no GNSS velocity): the vehicle is taken to be near rest", gt=0)
     drag: DragFusionParams = quantity(
         DragFusionParams(), "", "the drag's specific-force fusion and the wind states "
         "(EKF3's drag fusion; docs/estimation.md §11)")
