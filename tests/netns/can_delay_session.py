@@ -22,7 +22,7 @@ def main() -> int:
     logdir = base / "runs"
     p = subprocess.Popen([sys.executable, "-m", "tuav_sitl", "up", "--can", "udp_multicast",
                           "--logdir", str(logdir), "--speedup", "max", "--position", "4",
-                          "0", "8", "--faults", str(faults)], cwd=ROOT,
+                          "0", "8", "--faults", str(faults), "--no-recording"], cwd=ROOT,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     for line in p.stdout:
         if "Ctrl-C stops all three" in line:

@@ -60,7 +60,7 @@ def main() -> int:
     up = subprocess.Popen([sys.executable, "-m", "tuav_sitl", "up", "--speedup", "max",
                            "--can", "udp_multicast", "--logdir", str(logdir), "--instance", "2",
                            "--ground-params", str(law["control"]), "--parm", str(law["parm"]),
-                           "--tether-model", "catenary"],
+                           "--tether-model", "catenary", "--no-recording"],
                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     banner = wait_banner(up)
     out["banner"] = banner

@@ -85,7 +85,7 @@ def main() -> int:
     up = subprocess.Popen(
         [sys.executable, "-m", "tuav_sitl", "up", "--speedup", speedup, "--can",
          "udp_multicast", "--position", *map(str, POSITION), "--duration", str(seconds),
-         "--logdir", str(logdir), "--instance", str(INSTANCE)],
+         "--logdir", str(logdir), "--instance", str(INSTANCE), "--no-recording"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     out: dict = {"banner": wait_banner(up), "kinds": kinds}
     gcs = mavutil.mavlink_connection(f"tcp:127.0.0.1:{5760 + 10 * INSTANCE}",

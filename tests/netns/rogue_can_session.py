@@ -45,7 +45,7 @@ def main() -> int:
     up = subprocess.Popen(
         [sys.executable, "-m", "tuav_sitl", "up", "--speedup", "2", "--can", "udp_multicast",
          "--position", *map(str, POSITION), "--duration", str(DURATION_S),
-         "--logdir", str(logdir), "--instance", str(INSTANCE)],
+         "--logdir", str(logdir), "--instance", str(INSTANCE), "--no-recording"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     out: dict = {"banner": wait_banner(up)}
     port = 5760 + 10 * INSTANCE

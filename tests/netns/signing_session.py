@@ -63,7 +63,7 @@ def main() -> int:
     out: dict = {}
     p = subprocess.Popen([sys.executable, "-m", "tuav_sitl", "up", "--can", "udp_multicast",
                           "--logdir", str(base), "--speedup", "max", "--position", "4", "0",
-                          "8", "--signing-passphrase", PASSPHRASE], cwd=ROOT,
+                          "8", "--signing-passphrase", PASSPHRASE, "--no-recording"], cwd=ROOT,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     banner = []
     for line in p.stdout:

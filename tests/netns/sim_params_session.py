@@ -55,8 +55,8 @@ def main() -> int:
     out: dict = {}
     p = subprocess.Popen([sys.executable, "-m", "tuav_sitl", "up", "--can", "udp_multicast",
                           "--logdir", str(base), "--speedup", "2", "--position", "4", "0",
-                          "8"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True)
+                          "8", "--no-recording"], cwd=ROOT, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
     for line in p.stdout:
         if "Ctrl-C stops all three" in line:
             break

@@ -17,7 +17,7 @@ from tests.netns.up_session import processes_mentioning, up, wait_banner
 def main() -> int:
     logdir = Path(sys.argv[1])
     p = up(logdir, "-I", "1", "--home", "CMAC", "--out", "udp:127.0.0.1:14600",
-           "--speedup", "4")
+           "--speedup", "4", "--no-recording")
     out: dict = {"banner": wait_banner(p)}
     try:
         rx = mavutil.mavlink_connection("udpin:127.0.0.1:14600")
