@@ -306,6 +306,8 @@ class TetherGovernor:
         self.brake: BrakeRef | None = None          # the stop under way
         self._over_t: float | None = None           # since when over the tension limit [s]
         self._tension_move_t = -math.inf            # the last over-tension move [s]
+        self._mode_of: object = None                # the parameters self._mode is of
+        self._mode = GovernorMode.OFF
 
     @property
     def enabled(self) -> bool:
@@ -315,7 +317,10 @@ class TetherGovernor:
     @property
     def mode(self) -> GovernorMode:
         """What the governor counts on from the winder (``tether_governor``)."""
-        return GovernorMode(self.p.tether_governor)
+        p = self.p
+        if p is not self._mode_of:      # made once per parameter set, not per call
+            self._mode_of, self._mode = p, GovernorMode(p.tether_governor)
+        return self._mode
 
     # ----- what the winch reports
 
