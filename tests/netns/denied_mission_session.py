@@ -35,7 +35,7 @@ def main() -> int:
     up = subprocess.Popen(
         [sys.executable, "-m", "tuav_sitl", "up", "--can", "udp_multicast", "--logdir",
          str(logdir), "--speedup", "max", "--duration", "400", "--gnss", "gnss",
-         "--faults", str(faults), "--no-recording"], cwd=ROOT, stdout=subprocess.PIPE,
+         "--faults", str(faults)], cwd=ROOT, stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True)
     banner = wait_banner(up)
     port = int(re.search(r"tcp:127\.0\.0\.1:(\d+)\n", banner.split("MAVLink", 1)[1]).group(1))
