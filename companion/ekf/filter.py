@@ -284,14 +284,14 @@ class NavFilter:
         [m] and velocity [m/s] in the inertial ENU frame, the receiver's claimed
         horizontal and vertical accuracies [m] (its noise). Returns whether its position
         was fused (velocity may be fused alone; see :meth:`status`)."""
-        if self.tether_check is not None:
-            fix = usable_fix(self.params, pos_enu_m, vel_enu_m_s, eph_m, epv_m)
-            if fix is not None:
-                self.tether_check.add_gnss(t_s - self.params.gnss_delay_s, fix[0], fix[1],
-                                           eph_m, epv_m)
+        # the fix checked once, for the tether check and the alignment alike
+        fix = (usable_fix(self.params, pos_enu_m, vel_enu_m_s, eph_m, epv_m)
+               if self.tether_check is not None or not self._aligned else None)
+        if self.tether_check is not None and fix is not None:
+            self.tether_check.add_gnss(t_s - self.params.gnss_delay_s, fix[0], fix[1],
+                                       eph_m, epv_m)
         if self._aligned:
             return self._gnss.fuse(t_s, pos_enu_m, vel_enu_m_s, eph_m, epv_m)
-        fix = usable_fix(self.params, pos_enu_m, vel_enu_m_s, eph_m, epv_m)
         if fix is not None:
             self.aid_sources.gnss_pos.time_last_attempt = t_s
             self._align.add_gnss_fix(t_s, fix[0], fix[1], eph_m, epv_m)
