@@ -38,7 +38,13 @@ def test_the_winch_says_it_and_brakes_the_drum(attack):
     winch = [t for t in attack["texts"] if t[1] == 169]
     first = [t for t in winch if "another CAN host sends SET_INPUT_TORQUE" in t[3]]
     assert first and first[0][2] == mavlink2.MAV_SEVERITY_CRITICAL
-    assert first[0][0] == pytest.approx(attack["attack_sim_s"], abs=0.2)
+    # said with the brake, after the rogue's first frame: both stamped in the stream the
+    # client reads (under load its simulated time lags the stack's, the same for both)
+    assert not any(f & CLUTCH for t, f in attack["flags"]
+                   if attack["attack_sim_s"] - 2.0 <= t < attack["attack_sim_s"])
+    brake = next(t for t, f in attack["flags"] if t >= attack["attack_sim_s"] and f & CLUTCH)
+    assert attack["attack_sim_s"] <= first[0][0] <= attack["attack_end_sim_s"]
+    assert first[0][0] == pytest.approx(brake, abs=0.2)
     assert any(t[3] == "winch: drum braked against another CAN host" for t in winch)
     # while the rogue sends: braked (the vehicle bounds its reach by the length) and not
     # healthy (its winder failsafe)
