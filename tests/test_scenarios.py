@@ -16,20 +16,43 @@ from tuavdefs.paramspec import ParameterError, load_toml
 NAMES = sorted(shipped_scenarios())
 
 
+#: The paper's experiments whose Lyapunov functions are checked: on the catenary truth,
+#: the line the proofs model (docs/control.md §5). On the shipped lumped line its waves,
+#: which the proofs' quasi-static line has not, make the position loop's function rise
+#: (regulation 2231 times, setpoint 1526, single-position 2117, tether-length 838 above
+#: its floor once the reference is constant): docs/results.md shows both.
+LYAPUNOV = ["regulation", "setpoint", "single-position", "tether-length"]
+
+
 def _run(name: str) -> RunResult:
     return run_scenario(load_scenario(name), None, progress=None)
 
 
-@pytest.fixture(scope="module")
-def results() -> dict[str, RunResult]:
+def _run_on_the_catenary(name: str) -> RunResult:
+    return run_scenario(load_scenario(name).with_tether_model("catenary"), None,
+                        progress=None)
+
+
+def _pool_map(fn, names: list[str]) -> dict[str, RunResult]:
     with get_context("fork").Pool(2) as pool:
-        runs = pool.map(_run, NAMES)
+        runs = pool.map(fn, names)
         # the workers leave on their own (the pool's exit would SIGTERM them, which a
         # handler an earlier test installed in this process catches: the forked worker
         # then waits on the queue's lock forever, and so does the exit)
         pool.close()
         pool.join()
-    return dict(zip(NAMES, runs, strict=True))
+    return dict(zip(names, runs, strict=True))
+
+
+@pytest.fixture(scope="module")
+def results() -> dict[str, RunResult]:
+    return _pool_map(_run, NAMES)
+
+
+@pytest.fixture(scope="module")
+def on_the_catenary() -> dict[str, RunResult]:
+    """:data:`LYAPUNOV`'s scenarios on the catenary truth (an option: ``--tether-model``)."""
+    return _pool_map(_run_on_the_catenary, LYAPUNOV)
 
 
 def test_the_paper_experiments_are_shipped():
@@ -39,9 +62,12 @@ def test_the_paper_experiments_are_shipped():
 
 def test_the_defaults_are_a_stations_and_the_paper_experiments_keep_the_papers():
     """Issue 31: a scenario naming none flies the tension law, the governor's tension mode
-    and the lumped truth line (the controllers' model stays the catenary); the paper's
-    experiments set the paper's law on the catenary; the tether-fix scenarios that cannot
-    yet fly the lumped line (issue 33) are pinned to the catenary."""
+    and the lumped truth line (the controllers' model stays the catenary); every shipped
+    scenario flies the lumped truth, the paper's experiments with the paper's law and the
+    governor off; `tuav-sitl results` flies each again on the catenary beside it."""
+    from tuav_sitl.results import other_truth
+    from tuavdefs.params import DEFAULT_TRUTH_TETHER, TetherModel
+
     bare = ScenarioParams.from_dict({})
     assert bare.plant.tether.model == "lumped" and bare.tether.model == "catenary"
     assert bare.winder_control.law == "tension" and bare.navigation.tether_governor == 2
@@ -51,15 +77,15 @@ def test_the_defaults_are_a_stations_and_the_paper_experiments_keep_the_papers()
     assert truth.plant.tether.model == "catenary" and truth.tether.model == "catenary"
     paper = {"setpoint", "linear", "circle", "circle-windy", "tether-length",
              "single-position", "multi-position", "multi-position-windy", "regulation"}
-    pinned = {"hover-gnss-loss", "circle-windy-gnss"}
+    assert DEFAULT_TRUTH_TETHER is TetherModel.LUMPED
     for name in shipped_scenarios():
         sc = load_scenario(name)
         if name in paper:
             assert (sc.winder_control.law, sc.navigation.tether_governor) == ("paper", 0)
         else:
             assert (sc.winder_control.law, sc.navigation.tether_governor) == ("tension", 2)
-        expect = "catenary" if name in paper | pinned else "lumped"
-        assert sc.plant.tether.model == expect, name
+        assert sc.plant.tether.model == "lumped", name
+        assert other_truth(name) is TetherModel.CATENARY
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -159,13 +185,14 @@ def test_bad_scenario_names_the_field(tmp_path):
         load_scenario("no-such-scenario")
 
 
-@pytest.mark.parametrize("name", ["regulation", "setpoint", "single-position",
-                                  "tether-length"])
-def test_position_lyapunov_function_falls_from_far_above_its_floor(results, name):
+@pytest.mark.parametrize("name", LYAPUNOV)
+def test_position_lyapunov_function_falls_from_far_above_its_floor(on_the_catenary, name):
     """Once the position reference is constant, the position loop's Lyapunov function
     (compensated errors) never rises, and the count covers a real decay: it starts well
-    above its floor and stays above it for seconds (docs/results.md)."""
-    r = results[name].metrics["lyapunov"]["v_pos"]
+    above its floor and stays above it for seconds (docs/results.md). On the catenary
+    truth, the line the proof models (:data:`LYAPUNOV`)."""
+    assert on_the_catenary[name].scenario.plant.tether.model == "catenary"
+    r = on_the_catenary[name].metrics["lyapunov"]["v_pos"]
     assert r["from_s"] is not None and r["floor"] > 0.0
     assert r["value_then"] > 1e3 * r["floor"], r
     assert r["above_floor_s"] > 5.0, r
@@ -173,18 +200,20 @@ def test_position_lyapunov_function_falls_from_far_above_its_floor(results, name
     assert r["increases"] == 0, r
 
 
-def test_regulation_lyapunov_count_starts_at_the_initial_error(results):
+def test_regulation_lyapunov_count_starts_at_the_initial_error(on_the_catenary):
     """The regulation run's reference is constant from t = 0, so its count starts at the
-    whole initial error: compensated and raw alike fall from there without a rise."""
-    r = results["regulation"].metrics["lyapunov"]["v_pos"]
+    whole initial error: compensated and raw alike fall from there without a rise (on the
+    catenary truth, :data:`LYAPUNOV`)."""
+    r = on_the_catenary["regulation"].metrics["lyapunov"]["v_pos"]
     assert r["from_s"] == 0.0 and r["value_then"] > 1.0
     assert r["raw_value_then"] > 1.0 and r["raw_increases"] == 0
 
 
 def test_the_rise_counter_sees_a_disturbance():
     """The counter can fail: a gust while the reference is constant makes the position
-    loop's Lyapunov function rise above its floor."""
-    base = load_scenario("regulation")
+    loop's Lyapunov function rise above its floor (on the catenary truth, where without
+    the gust it does not: :data:`LYAPUNOV`)."""
+    base = load_scenario("regulation").with_tether_model("catenary")
     gust = GustParams(start_s=12.0, duration_s=2.0, amplitude_m_s=(4.0, 0.0, 0.0))
     sc = base.replace(wind=base.wind.replace(gusts=(gust,)), duration_s=16.0)
     r = run_scenario(sc, None, progress=None).metrics["lyapunov"]["v_pos"]
@@ -193,7 +222,7 @@ def test_the_rise_counter_sees_a_disturbance():
 
 
 def _regulation(start, goal, duration=12.0) -> RunResult:
-    base = load_scenario("setpoint")
+    base = load_scenario("setpoint").with_tether_model("catenary")   # LYAPUNOV's why
     sc = base.replace(initial=base.initial.replace(position_m=start),
                       trajectory=base.trajectory.replace(kind="step", goal_m=goal),
                       duration_s=duration)
@@ -204,7 +233,8 @@ def _regulation(start, goal, duration=12.0) -> RunResult:
 def test_regulation_from_an_offset_position_lyapunov_decreases_throughout(start):
     """The paper's set-point experiment: the reference is the goal from t = 0, the UAV
     starts metres away (the thrust saturates in tilt at first); the position loop's
-    Lyapunov function must fall at every sample, from its largest value on."""
+    Lyapunov function must fall at every sample, from its largest value on (on the
+    catenary truth, :data:`LYAPUNOV`)."""
     res = _regulation(start, (5.0, 5.0, 20.0))
     s = res.series
     v = s["v_pos"]
@@ -311,9 +341,13 @@ def test_a_mission_s_do_winch_reaches_the_winch_offline():
     assert runner.ground.notices == []
 
 
-@pytest.mark.parametrize(("name", "tracking_m", "estimate_m", "inside_3_sigma"),
-                         [("circle-rtk", 0.05, 0.03, 0.9), ("circle-gnss", 1.0, 1.0, 0.7),
-                          ("circle-windy-gnss", 1.5, 1.0, 0.7)])
+@pytest.mark.parametrize(("name", "tracking_m", "estimate_m", "inside_3_sigma"), [
+    ("circle-rtk", 0.05, 0.03, 0.9), ("circle-gnss", 1.0, 1.0, 0.7),
+    pytest.param("circle-windy-gnss", 1.5, 1.0, 0.7, marks=pytest.mark.xfail(
+        strict=True, reason="on the lumped line in the wind the tether fix the filter "
+        "fuses is biased by the line's drag: the estimate 1.09 m off the truth (target "
+        "1 m; 0.05 m on the catenary), overconfident (issue 33); tracking 1.1 m, within "
+        "its 1.5 m"))])
 def test_the_circle_flown_on_the_onboard_estimate(results, name, tracking_m, estimate_m,
                                                   inside_3_sigma):
     """The circle on the companion's EKF (RTK-grade and consumer-grade GNSS, calm and in
@@ -337,6 +371,18 @@ def test_the_circle_flown_on_the_onboard_estimate(results, name, tracking_m, est
     assert err.max() > 1e-3
     inside = (err <= 3.0 * s["est_pos_sigma"][est] + 0.05).mean()
     assert inside > inside_3_sigma
+
+
+@pytest.mark.xfail(strict=True, reason="on the lumped line the ground's tether fix holds the "
+                   "hover to 0.657 m during the loss, over the 0.5 m target (0.10 m on the "
+                   "catenary; issue 33)")
+def test_the_tether_fix_holds_a_gnss_loss(results):
+    """hover-gnss-loss (3 m/s of light turbulence, GNSS lost 20-80 s, the winch's tether
+    fix): the truth within 0.5 m of the hold point horizontally throughout the loss, the
+    tether never taut."""
+    m = results["hover-gnss-loss"].metrics
+    assert m["min_tether_slack_m"] > 0.0
+    assert m["gnss_loss_horizontal_error_max_m"] <= 0.5
 
 
 def test_the_tight_tether_fusion_holds_a_gnss_loss_in_the_wind(results):
@@ -398,15 +444,16 @@ def test_a_run_that_never_flies_has_metrics():
     assert m["motor_saturation_fraction"] == 0.0
 
 
-def test_the_slack_floor_keeps_a_dynamic_line_off_the_ground():
+def test_the_slack_floor_keeps_a_dynamic_line_off_the_ground(results):
     """The winch's slack floor (docs/control.md §3) reads the winder's own fix from the
     tension low-passed as its trim does: on the lumped (dynamic) line in the windy circle
     the load cell sees axial waves and snaps, and a floor fed the raw tension (paying out
     fast, taking back slowly) ratcheted the line out onto the ground (98 % of the run).
     Truth: the plant's lumped line, its nodes against the ground."""
-    sc = load_scenario("circle-windy").with_tether_model("lumped").replace(duration_s=40.0)
+    sc = results["circle-windy"].scenario
+    assert sc.plant.tether.model == "lumped"
     assert sc.winder_control.law == "paper"            # the floor is the length law's
-    m = run_scenario(sc, None, progress=None).metrics
+    m = results["circle-windy"].metrics
     assert m["tether_ground_contact_fraction"] == 0.0
     assert m["min_tether_slack_m"] > 0.0
     assert m["position_rmse_m"] < 0.05

@@ -17,7 +17,7 @@ from scipy.stats import binomtest
 from tuav_sitl import sweep as sw
 from tuav_sitl.cli import main
 from tuav_sitl.offline import run_scenario
-from tuav_sitl.scenario import load_scenario
+from tuav_sitl.scenario import ScenarioParams, load_scenario
 from tuavdefs.paramspec import ParameterError
 
 SMALL = """\
@@ -162,7 +162,7 @@ def test_the_truths_line_model_is_drawn_and_the_controllers_keep_theirs():
     """tether_model sets the truth's line model only (the plant's [tether]); the
     controllers' model, and robustness-gnss's scenario file, stay as they are; the shipped
     robustness-gnss flies the lumped line whatever the default truth."""
-    sc = load_scenario("circle")                  # the paper's: pinned to the catenary
+    sc = ScenarioParams.from_dict({"tether": {"model": "catenary"}})   # a file's pin
     assert sc.plant.tether.model == "catenary"
     lumped = sw.apply(sc, None, {"tether_model": "lumped"})
     assert lumped.plant.tether.model == "lumped"
