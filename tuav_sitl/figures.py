@@ -67,7 +67,8 @@ FIGURE_CAPTIONS: dict[str, str] = {
         "the filter (dotted)."),
     "path_3d": (
         "3-D path of the UAV (solid) against the reference path (dashed), with the winder at "
-        "the origin, the ground plane z = 0 and the catenary tether drawn at a few instants; "
+        "the origin, the ground plane z = 0 and the tether drawn at a few instants (the "
+        "lumped line's nodes as the run recorded them, the catenary on the catenary truth); "
         "equal scale on all three axes."),
     "tether_length": (
         "Tether length tracking: the desired length L-bar, the paid-out length L, the "
@@ -75,8 +76,9 @@ FIGURE_CAPTIONS: dict[str, str] = {
         "stay above the distance, which stays above the altitude."),
     "snapshots": (
         "Snapshots of the flight at four instants: the quadrotor (drawn enlarged, with its "
-        "attitude; red arms at the front), the catenary tether from the winder, the path flown "
-        "so far (trail), and the goal, waypoints (filled once reached) or circle to track."),
+        "attitude; red arms at the front), the tether from the winder (the lumped line's "
+        "recorded nodes, the catenary on the catenary truth), the path flown so far "
+        "(trail), and the goal, waypoints (filled once reached) or circle to track."),
     "lyapunov": (
         "Lyapunov functions of the position loop, the attitude loop (both in the compensated "
         "errors of command-filtered backstepping) and the winder loop on a logarithmic scale "
