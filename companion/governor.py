@@ -24,13 +24,12 @@ What a paused plan is, and how it resumes, is the plan's (:mod:`companion.plan`)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from enum import Enum, IntEnum
-from typing import Protocol
+from enum import IntEnum
+from typing import NamedTuple, Protocol
 
 from companion.reference import RefSample, _new
 from companion.statustext import Notice, TextKind
-from tuavdefs.jit import njit
+from tuavdefs.jit import Signature, entry_point, njit, vec
 
 Vec3 = tuple[float, float, float]
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
@@ -232,6 +231,7 @@ class BrakeRef:
                          self.yaw, 0.0)
 
 
+@njit
 def brake_distance_m(speed_m_s: float, acc_along_m_s2: float, acc_m_s2: float,
                      jerk_m_s3: float) -> float:
     """An upper bound of the distance [m] a :class:`BrakeRef` runs from ``speed_m_s``
@@ -255,21 +255,138 @@ TENSION_REPEAT_S = 2.0
 WIND_IN_LEAD_S = 0.15
 
 
-class Verdict(Enum):
-    """The governor's decision on a period's reference (:meth:`TetherGovernor.check`)."""
+class Verdict(IntEnum):
+    """The governor's decision on a period's reference (:meth:`TetherGovernor.check`; the
+    code :func:`check_kernel` returns)."""
 
-    FLY = "fly"              # fly it as it is
-    AT_REST = "at rest"      # at rest: a paused plan may resume, or the vehicle move in
-    BRAKE = "brake"          # its stopping point passes the limit: brake now
+    FLY = 0          # fly it as it is
+    AT_REST = 1      # at rest: a paused plan may resume, or the vehicle move in
+    BRAKE = 2        # its stopping point passes the limit: brake now
 
 
-@dataclass(frozen=True)
-class Decision:
+#: the verdicts by code (a look-up, cheaper than the enum's call every period), and the
+#: codes as the kernels return them
+_VERDICTS = tuple(Verdict)
+_FLY, _AT_REST, _BRAKE = int(Verdict.FLY), int(Verdict.AT_REST), int(Verdict.BRAKE)
+
+
+class Decision(NamedTuple):
     """:meth:`TetherGovernor.check`'s answer: the verdict and the limit [m] it tested
     against (with the estimate's margin when moving outward)."""
 
     verdict: Verdict
     limit_m: float
+
+
+#: :func:`slow_clock_kernel`'s and :func:`check_kernel`'s period inputs (a tuple of
+#: floats), by index: the reference's (or a leg's nominal sample's) position [m],
+#: velocity [m/s] and acceleration [m/s^2], the vehicle's estimated position [m] and
+#: velocity [m/s], the estimate's position standard deviation [m], the leg clock's rate
+#: and its rate of change [1/s], the period [s].
+(GP_POS, GP_VEL, GP_ACC, GP_EST_POS, GP_EST_VEL, GP_SIGMA, GP_S, GP_SD, GP_DT,
+ N_GP) = (0, 3, 6, 9, 12, 15, 16, 17, 18, 19)
+#: The governor's room (a tuple of floats, made again only when the winch reports or the
+#: parameters change), by index: :attr:`TetherGovernor.limit_m` [m], ``tether_sigma_k``
+#: [1], ``tether_latency_s`` [s], ``tether_brake_acc_m_s2`` [m/s^2], the look-ahead's
+#: line speed (:meth:`TetherGovernor.lookahead_winch_speed_m_s`) [m/s].
+GR_LIMIT, GR_SIGMA_K, GR_LATENCY, GR_BRAKE_ACC, GR_WINCH_SPEED, N_GR = range(6)
+#: The kernels' arguments, declared once.
+GOVERNOR_SIGNATURE = Signature(vec(N_GP), vec(N_GR))
+
+
+@njit
+def slow_rate_kernel(period: tuple[float, ...], room: tuple[float, ...]) -> tuple[float, float]:
+    """The rate in [0, 1] the slowing asks of a leg's clock for its sample in ``period``
+    (:data:`GP_*`: the velocity there is the one counted, the leg's now or ahead) within
+    the ``room`` (:data:`GR_*`), and the leg's speed [m/s]: :func:`slow_target` with the
+    margin ``GOVERNOR_SLOW_MARGIN_M`` plus ``tether_sigma_k`` standard deviations, the
+    latency ``tether_latency_s`` + :data:`GOVERNOR_SLOW_RAMP_S`; 1 for a leg not
+    moving."""
+    v = (period[GP_VEL], period[GP_VEL + 1], period[GP_VEL + 2])
+    speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if not speed > 1e-3:
+        return 1.0, speed
+    return slow_target(
+        v, (period[GP_POS], period[GP_POS + 1], period[GP_POS + 2]),
+        (period[GP_ACC], period[GP_ACC + 1], period[GP_ACC + 2]),
+        (period[GP_EST_POS], period[GP_EST_POS + 1], period[GP_EST_POS + 2]),
+        (period[GP_EST_VEL], period[GP_EST_VEL + 1], period[GP_EST_VEL + 2]),
+        period[GP_S], room[GR_LIMIT],
+        GOVERNOR_SLOW_MARGIN_M + room[GR_SIGMA_K] * period[GP_SIGMA],
+        room[GR_LATENCY] + GOVERNOR_SLOW_RAMP_S, room[GR_BRAKE_ACC],
+        room[GR_WINCH_SPEED]), speed
+
+
+@njit
+def slow_clock_kernel(period: tuple[float, ...], room: tuple[float, ...]
+                      ) -> tuple[float, float, float, float]:
+    """One period (``period[GP_DT]`` [s]) of the leg clock's slowing
+    (:meth:`TetherGovernor.slow_clock`) from its rate s and rate of change sd in
+    ``period``: s follows :func:`slow_rate_kernel`'s target critically damped
+    (:data:`GOVERNOR_CLOCK_OMEGA`), its effect on the reference limited to
+    :data:`GOVERNOR_SLOW_JERK_M_S3` and :data:`GOVERNOR_SLOW_ACC_M_S2` (giving speed back
+    at :data:`GOVERNOR_RESUME_ACC_M_S2`). Returns (s, sd after it, the target, the time
+    [s] the clock fell behind the vehicle's in it)."""
+    s, sd, dt = period[GP_S], period[GP_SD], period[GP_DT]
+    target, speed = slow_rate_kernel(period, room)
+    vs = max(speed, 0.1)
+    w = GOVERNOR_CLOCK_OMEGA
+    jm = GOVERNOR_SLOW_JERK_M_S3 / vs
+    sdd = max(-jm, min(jm, w * w * (target - s) - 2.0 * w * sd))
+    sd_new = max(-GOVERNOR_SLOW_ACC_M_S2 / vs,
+                 min(GOVERNOR_RESUME_ACC_M_S2 / vs, sd + sdd * dt))
+    s_new = s + 0.5 * (sd + sd_new) * dt
+    if s_new >= 1.0:
+        s_new, sd_new = 1.0, 0.0
+    elif s_new <= 0.0:
+        s_new, sd_new = 0.0, 0.0
+    return s_new, sd_new, target, (1.0 - 0.5 * (s + s_new)) * dt
+
+
+@njit
+def check_kernel(period: tuple[float, ...], room: tuple[float, ...]) -> tuple[int, float]:
+    """The brake decision (:meth:`TetherGovernor.check`) on the reference and the vehicle's
+    estimate in ``period`` (:data:`GP_*`; the clock's entries unused) within the ``room``
+    (:data:`GR_*`): (the :class:`Verdict`'s code, the limit [m] tested against)."""
+    p = (period[GP_POS], period[GP_POS + 1], period[GP_POS + 2])
+    v = (period[GP_VEL], period[GP_VEL + 1], period[GP_VEL + 2])
+    a = (period[GP_ACC], period[GP_ACC + 1], period[GP_ACC + 2])
+    lim = room[GR_LIMIT]
+    d_ref = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+    speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if speed < 1e-3:
+        return _AT_REST, lim
+    if v[2] < 0.0 and v[0] * p[0] + v[1] * p[1] + v[2] * p[2] <= 0.0:
+        # a descent coming closer to the winder: the line only gets shorter
+        return _FLY, lim
+    u = (v[0] / speed, v[1] / speed, v[2] / speed)
+    ab, jerk = room[GR_BRAKE_ACC], TETHER_BRAKE_JERK_M_S3
+    run = brake_distance_m(speed, a[0] * u[0] + a[1] * u[1] + a[2] * u[2], ab, jerk)
+    sx, sy, sz = p[0] + u[0] * run, p[1] + u[1] * run, p[2] + u[2] * run
+    stop = math.sqrt(sx * sx + sy * sy + sz * sz)
+    if stop <= d_ref + 1e-4:          # not outward: nothing to govern
+        return _FLY, lim
+    v_out = (v[0] * p[0] + v[1] * p[1] + v[2] * p[2]) / d_ref if d_ref > 0 else speed
+    pe = (period[GP_EST_POS], period[GP_EST_POS + 1], period[GP_EST_POS + 2])
+    ve = (period[GP_EST_VEL], period[GP_EST_VEL + 1], period[GP_EST_VEL + 2])
+    se = math.sqrt(ve[0] * ve[0] + ve[1] * ve[1] + ve[2] * ve[2])
+    d_e = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
+    if se > 1e-6:       # the vehicle's own stopping point, if it is outward too
+        run_e = se * room[GR_LATENCY] + se * se / (2.0 * ab)
+        sx = pe[0] + ve[0] / se * run_e
+        sy = pe[1] + ve[1] / se * run_e
+        sz = pe[2] + ve[2] / se * run_e
+        stop = max(stop, math.sqrt(sx * sx + sy * sy + sz * sz))
+        if d_e > 0:
+            v_out = max(v_out, (ve[0] * pe[0] + ve[1] * pe[1] + ve[2] * pe[2]) / d_e)
+    # the estimate's uncertainty as margin, in full from an outward speed of
+    # GOVERNOR_SIGMA_SPEED_M_S (at rest a margin beyond the winder's least slack
+    # would forbid every move outward)
+    lim -= (room[GR_SIGMA_K] * period[GP_SIGMA]
+            * min(1.0, max(v_out, 0.0) / GOVERNOR_SIGMA_SPEED_M_S))
+    if stop <= lim:
+        return _FLY, lim
+    return _BRAKE, lim
 
 
 def towards_winder(pos: Vec3, keep_m: float, floor_m: float) -> Vec3:
@@ -308,6 +425,33 @@ class TetherGovernor:
         self._tension_move_t = -math.inf            # the last over-tension move [s]
         self._mode_of: object = None                # the parameters self._mode is of
         self._mode = GovernorMode.OFF
+        self._room: tuple[float, ...] | None = None  # the kernels' room (GR_*), or stale
+        # the compiled decisions, called without numba's dispatch
+        self._slow_clock = entry_point(slow_clock_kernel, GOVERNOR_SIGNATURE)
+        self._slow_rate = entry_point(slow_rate_kernel, GOVERNOR_SIGNATURE)
+        self._check = entry_point(check_kernel, GOVERNOR_SIGNATURE)
+
+    @property
+    def p(self) -> GovernorSettings:
+        """The parameters."""
+        return self._p
+
+    @p.setter
+    def p(self, params: GovernorSettings) -> None:
+        self._p = params
+        self._room = None
+
+    @property
+    def room(self) -> tuple[float, ...]:
+        """The kernels' room (:data:`GR_*`): the limit and the parameters they read, made
+        again after a report of the winch or new parameters."""
+        room = self._room
+        if room is None:
+            p = self._p
+            room = self._room = (
+                float(self.limit_m), float(p.tether_sigma_k), float(p.tether_latency_s),
+                float(p.tether_brake_acc_m_s2), float(self.lookahead_winch_speed_m_s()))
+        return room
 
     @property
     def enabled(self) -> bool:
@@ -333,6 +477,7 @@ class TetherGovernor:
             self.winch_length_m = float(length_m)
         if speed_m_s is not None and math.isfinite(speed_m_s):
             self.winch_speed_m_s = float(speed_m_s)
+        self._room = None
 
     def over_tension(self, t: float, tension_n: float | None, may_move: bool,
                      ref_pos: Vec3) -> Vec3 | None:
@@ -405,23 +550,17 @@ class TetherGovernor:
         ``pos`` [m] moving at ``vel`` [m/s] (its estimate, of position standard deviation
         ``sigma_m`` [m]), and the speed [m/s] it counted: the leg's now, or the larger of
         the leg's plan :data:`GOVERNOR_LOOKAHEAD_S` on, ``ahead_vel`` [m/s] (None:
-        unknown)."""
+        unknown) (:func:`slow_rate_kernel`)."""
         if nom is None:
             return 1.0, 0.0
         v = nom.vel_m_s
-        speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
         if ahead_vel is not None:
-            sa = math.sqrt(ahead_vel[0] * ahead_vel[0] + ahead_vel[1] * ahead_vel[1]
-                           + ahead_vel[2] * ahead_vel[2])
-            if sa > speed:
-                v, speed = ahead_vel, sa
-        if not speed > 1e-3:
-            return 1.0, speed
-        return slow_target(
-            _f3(v), _f3(nom.pos_m), _f3(nom.acc_m_s2), _f3(pos), _f3(vel), s, self.limit_m,
-            GOVERNOR_SLOW_MARGIN_M + self.p.tether_sigma_k * sigma_m,
-            self.p.tether_latency_s + GOVERNOR_SLOW_RAMP_S,
-            self.p.tether_brake_acc_m_s2, self.lookahead_winch_speed_m_s()), speed
+            sa2 = (ahead_vel[0] * ahead_vel[0] + ahead_vel[1] * ahead_vel[1]
+                   + ahead_vel[2] * ahead_vel[2])
+            if math.sqrt(sa2) > math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]):
+                v = ahead_vel
+        return self._slow_rate((*nom.pos_m, *v, *nom.acc_m_s2, *pos, *vel, sigma_m, s,
+                                0.0, 0.0), self.room)
 
     def slow_clock(self, nom: RefSample | None, pos: Vec3, vel: Vec3, sigma_m: float,
                    dt: float) -> Notice | None:
@@ -432,28 +571,20 @@ class TetherGovernor:
         :func:`governed_speed_m_s` of the room the tether leaves, from the reference's and
         the vehicle's positions (latency ``tether_latency_s`` +
         :data:`GOVERNOR_SLOW_RAMP_S`, deceleration ``tether_brake_acc_m_s2``, the limit
-        :attr:`limit_m` less ``tether_sigma_k`` position standard deviations). Returns
-        the notice to say when a slowing begins."""
-        s, sd = self.s, self.sd
-        target, speed = self.slow_rate(nom, s, None, pos, vel, sigma_m)
-        vs = max(speed, 0.1)
-        w = GOVERNOR_CLOCK_OMEGA
-        jm = GOVERNOR_SLOW_JERK_M_S3 / vs
-        sdd = max(-jm, min(jm, w * w * (target - s) - 2.0 * w * sd))
-        sd_new = max(-GOVERNOR_SLOW_ACC_M_S2 / vs,
-                     min(GOVERNOR_RESUME_ACC_M_S2 / vs, sd + sdd * dt))
-        s_new = s + 0.5 * (sd + sd_new) * dt
-        if s_new >= 1.0:
-            s_new, sd_new = 1.0, 0.0
-        elif s_new <= 0.0:
-            s_new, sd_new = 0.0, 0.0
+        :attr:`limit_m` less ``tether_sigma_k`` position standard deviations):
+        :func:`slow_clock_kernel`. Returns the notice to say when a slowing begins."""
+        if nom is None:         # (a leg not moving: its rate 1)
+            nom = _AT_REST_SAMPLE
+        s_new, sd_new, target, lag = self._slow_clock(
+            (*nom.pos_m, *nom.vel_m_s, *nom.acc_m_s2, *pos, *vel, sigma_m, self.s, self.sd,
+             dt), self.room)
         notice = None
         if target < GOVERNOR_SLOWING_SAID_BELOW and not self.slowed:
             self.slowed = True
             notice = _SLOWING
         elif min(target, s_new) >= GOVERNOR_SLOWING_OVER_ABOVE:
             self.slowed = False
-        self.clock_lag += (1.0 - 0.5 * (s + s_new)) * dt
+        self.clock_lag += lag
         self.s, self.sd = s_new, sd_new
         return notice
 
@@ -516,43 +647,10 @@ class TetherGovernor:
         ``tether_brake_acc_m_s2``, would pass :attr:`limit_m` (less ``tether_sigma_k``
         standard deviations, in full from an outward speed of
         :data:`GOVERNOR_SIGMA_SPEED_M_S`), BRAKE; a reference at rest, AT_REST; else
-        FLY."""
-        p, v, a = ref.pos_m, ref.vel_m_s, ref.acc_m_s2
-        lim = self.limit_m
-        d_ref = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
-        speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-        if speed < 1e-3:
-            return Decision(Verdict.AT_REST, lim)
-        if v[2] < 0.0 and v[0] * p[0] + v[1] * p[1] + v[2] * p[2] <= 0.0:
-            # a descent coming closer to the winder: the line only gets shorter
-            return Decision(Verdict.FLY, lim)
-        u = (v[0] / speed, v[1] / speed, v[2] / speed)
-        ab, jerk = self.p.tether_brake_acc_m_s2, TETHER_BRAKE_JERK_M_S3
-        run = brake_distance_m(speed, a[0] * u[0] + a[1] * u[1] + a[2] * u[2], ab, jerk)
-        sx, sy, sz = p[0] + u[0] * run, p[1] + u[1] * run, p[2] + u[2] * run
-        stop = math.sqrt(sx ** 2 + sy ** 2 + sz ** 2)
-        if stop <= d_ref + 1e-4:          # not outward: nothing to govern
-            return Decision(Verdict.FLY, lim)
-        v_out = (v[0] * p[0] + v[1] * p[1] + v[2] * p[2]) / d_ref if d_ref > 0 else speed
-        pe, ve = pos, vel
-        se = math.sqrt(ve[0] * ve[0] + ve[1] * ve[1] + ve[2] * ve[2])
-        d_e = math.sqrt(pe[0] * pe[0] + pe[1] * pe[1] + pe[2] * pe[2])
-        if se > 1e-6:       # the vehicle's own stopping point, if it is outward too
-            run_e = se * self.p.tether_latency_s + se * se / (2.0 * ab)
-            sx = pe[0] + ve[0] / se * run_e
-            sy = pe[1] + ve[1] / se * run_e
-            sz = pe[2] + ve[2] / se * run_e
-            stop = max(stop, math.sqrt(sx ** 2 + sy ** 2 + sz ** 2))
-            if d_e > 0:
-                v_out = max(v_out, (ve[0] * pe[0] + ve[1] * pe[1] + ve[2] * pe[2]) / d_e)
-        # the estimate's uncertainty as margin, in full from an outward speed of
-        # GOVERNOR_SIGMA_SPEED_M_S (at rest a margin beyond the winder's least slack
-        # would forbid every move outward)
-        lim -= (self.p.tether_sigma_k * sigma_m
-                * min(1.0, max(v_out, 0.0) / GOVERNOR_SIGMA_SPEED_M_S))
-        if stop <= lim:
-            return Decision(Verdict.FLY, lim)
-        return Decision(Verdict.BRAKE, lim)
+        FLY (:func:`check_kernel`)."""
+        code, lim = self._check((*ref.pos_m, *ref.vel_m_s, *ref.acc_m_s2, *pos, *vel,
+                                 sigma_m, 1.0, 0.0, 0.0), self.room)
+        return _new(Decision, (_VERDICTS[code], lim))
 
     def start_brake(self, ref: RefSample, dt: float) -> RefSample:
         """Brake the reference ``ref`` from now on; the first period's [s] sample."""
@@ -593,9 +691,6 @@ class TetherGovernor:
         return towards_winder(p, limit_m - TETHER_RESUME_ROOM_M, self.gear_height_m + 1.0)
 
 
-def _f3(x: Vec3) -> Vec3:
-    """``x`` as a tuple of three floats (one compiled kernel for every caller's type)."""
-    return (float(x[0]), float(x[1]), float(x[2]))
-
-
 _SLOWING = Notice(TextKind.TETHER_SLOWING, "Tether: slowing to the room the line gives")
+#: the sample the slowing takes for a leg with none yet: at rest (its rate 1)
+_AT_REST_SAMPLE = RefSample(_ZERO3, _ZERO3, _ZERO3, _ZERO3, 0.0, 0.0)
