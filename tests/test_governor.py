@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from companion.governor import (
@@ -23,7 +24,9 @@ from companion.governor import (
     TetherGovernor,
     Verdict,
     brake_distance_m,
+    check_kernel,
     governed_speed_m_s,
+    slow_clock_kernel,
 )
 from companion.navigation import NavigationParams
 from companion.reference import RefSample
@@ -245,3 +248,30 @@ def test_each_slowing_of_the_clock_is_said_once() -> None:
         if nom is back:
             assert GOVERNOR_SLOWING_OVER_ABOVE <= gov.s < 1.0
     assert said == [1, 0, 1]
+
+
+def test_the_compiled_decisions_are_their_python_to_the_bit() -> None:
+    """The governor's compiled period (companion.governor.slow_clock_kernel, check_kernel)
+    gives the same bits as its own Python source interpreted, over references and vehicles
+    moving every way near and far from the limit, with and without a margin, a clock
+    slowed or not; each verdict is seen, the clock's rate stays in [0, 1]."""
+    rng = np.random.default_rng(11)
+    kernels = (slow_clock_kernel, check_kernel)
+    verdicts: set[int] = set()
+    for _ in range(3000):
+        p = rng.normal(0.0, 10.0, 3)
+        p[2] = abs(p[2]) + 0.5
+        d = float(np.linalg.norm(p))
+        period = tuple(float(x) for x in (
+            *p, *rng.normal(0.0, 2.0, 3), *rng.normal(0.0, 1.0, 3),
+            *(p + rng.normal(0.0, 0.2, 3)), *rng.normal(0.0, 1.0, 3),
+            rng.uniform(0.0, 0.3), rng.uniform(0.0, 1.0), rng.uniform(-1.0, 1.0), 0.004))
+        if rng.uniform() < 0.1:      # at rest
+            period = period[:3] + ZERO + period[6:]
+        room = (d + float(rng.uniform(-0.2, 2.0)), 3.0, 0.4, 3.0, float(rng.uniform(-1, 1)))
+        for kernel in kernels:
+            got, want = kernel(period, room), getattr(kernel, "py_func", kernel)(period, room)
+            assert np.array(got, float).tobytes() == np.array(want, float).tobytes()
+        verdicts.add(check_kernel(period, room)[0])
+        assert 0.0 <= slow_clock_kernel(period, room)[0] <= 1.0
+    assert verdicts == {int(v) for v in Verdict}
