@@ -268,8 +268,149 @@ def end_differences(x: np.ndarray, step: np.ndarray, ea_n: float, reference_heig
     return _end_at(x, ea_n, reference_height_m, shear_exponent, min_height_m, steps)
 
 
-#: The relative step of :func:`end_slopes`' forward differences (about the square root of
-#: the float's resolution, times each input's scale).
+#: The sensitivities integrated in :func:`line_sensitivities`' one pass: with respect to
+#: the tension at the exit, the elevation, the wind's two components and the weight (the
+#: others follow from the line's symmetries, :func:`end_slopes`).
+_N_SENS = 5
+
+
+@njit
+def _slope_sensitivity(z: float, tx: float, ty: float, tz: float, w: float, c: float,
+                       ux: float, uy: float, zr: float, shear: float, zmin: float,
+                       stretch: float, stage: int, step: float, Sin: np.ndarray,
+                       S: np.ndarray, Sk: np.ndarray, acc: np.ndarray, D: np.ndarray
+                       ) -> tuple[float, float, float, float, float, float]:
+    """:func:`_slope` at one Runge-Kutta stage and that stage's share of the sensitivities'
+    step: the variational equation's right-hand side ``dS/ds = (d slope / d state) S + d
+    slope / d inputs`` at the stage's sensitivities ``Sin`` (6 x 7: the rows p, T; the
+    columns the tension at the exit, the two angles, the wind's two components, the
+    weight, the drag), taken into the step's sum ``acc`` and the next stage's ``Sk = S +
+    step dS`` (``stage`` 0 to 2: ``acc`` set, or added twice), or at the last stage (3)
+    ``S += step (acc + dS)``. Column by column, so ``Sin`` may be ``Sk``. With ``t =
+    T/|T|``, ``P = I - t t'``, the wind across ``n = P W``, ``a = t.W``, the drag ``D = -c
+    |n| n``:
+
+        d(dp/ds)/dT = g I - t t'/|T|                (g = 1/|T| + 1/EA)
+        dn/dT = -(a P + t n')/|T|,   dn/dW = P,     dD/dn = -c (|n| I + n n'/|n|)
+        dW/dU = k(z) I_2,  dW/dz = U dk/dz,         d(dT/ds)/dw = e_z,  d(dT/ds)/dc = -|n| n
+    """
+    tn = math.sqrt(tx * tx + ty * ty + tz * tz)
+    tn = max(tn, 1e-12)
+    k = (max(z, zmin) / zr) ** shear if shear != 0.0 else 1.0
+    wx, wy = ux * k, uy * k
+    along = (wx * tx + wy * ty) / (tn * tn)
+    nx, ny, nz = wx - along * tx, wy - along * ty, -along * tz
+    nm = math.sqrt(nx * nx + ny * ny + nz * nz)
+    q = c * nm
+    g = 1.0 / tn + stretch
+    inv = 1.0 / tn
+    t0, t1, t2 = tx * inv, ty * inv, tz * inv
+    a = along * tn                                           # t.W
+    # d(dT/ds)/dT s = (dD/dn)(dn/dT) s = al s + t (be n.s - al t.s) + ga n n.s (n.t = 0)
+    al = q * a * inv
+    be = q * inv
+    ga = c * a * inv / nm if nm > 0.0 else 0.0
+    # d(dT/ds)/dz = (dD/dn) P dW/dz = (dk/dz / k) (dD/dn) n = -2 c |n| n shear / z
+    zf = -2.0 * q * shear / z if shear != 0.0 and z > zmin else 0.0
+    # the columns side by side, without branches
+    for j in range(_N_SENS):
+        s3, s4, s5, sz = Sin[3, j], Sin[4, j], Sin[5, j], Sin[2, j]
+        ts = t0 * s3 + t1 * s4 + t2 * s5
+        ns = nx * s3 + ny * s4 + nz * s5
+        u = ts * inv
+        D[0, j] = g * s3 - t0 * u
+        D[1, j] = g * s4 - t1 * u
+        D[2, j] = g * s5 - t2 * u
+        v = be * ns - al * ts
+        r = ga * ns + zf * sz
+        D[3, j] = al * s3 + t0 * v + nx * r
+        D[4, j] = al * s4 + t1 * v + ny * r
+        D[5, j] = al * s5 + t2 * v + nz * r
+    # the inputs' own terms: the wind's components (dD/dn) P k e_x, e_y, the weight e_z
+    qk = -q * k
+    hx = -c * k * nx / nm if nm > 0.0 else 0.0
+    hy = -c * k * ny / nm if nm > 0.0 else 0.0
+    D[3, 2] += qk * (1.0 - t0 * t0) + hx * nx
+    D[4, 2] += -qk * t1 * t0 + hx * ny
+    D[5, 2] += -qk * t2 * t0 + hx * nz
+    D[3, 3] += -qk * t0 * t1 + hy * nx
+    D[4, 3] += qk * (1.0 - t1 * t1) + hy * ny
+    D[5, 3] += -qk * t2 * t1 + hy * nz
+    D[5, 4] += 1.0
+    if stage == 3:
+        for i in range(6):
+            for j in range(_N_SENS):
+                S[i, j] += step * (acc[i, j] + D[i, j])
+    elif stage == 0:
+        for i in range(6):
+            for j in range(_N_SENS):
+                acc[i, j] = D[i, j]
+                Sk[i, j] = S[i, j] + step * D[i, j]
+    else:
+        for i in range(6):
+            for j in range(_N_SENS):
+                acc[i, j] += 2.0 * D[i, j]
+                Sk[i, j] = S[i, j] + step * D[i, j]
+    return (g * tx, g * ty, g * tz, -q * nx, -q * ny, w - q * nz)
+
+
+@njit
+def line_sensitivities(length_m: float, t0_n: float, azimuth_rad: float,
+                       elevation_rad: float, w_n_m: float, drag_n_s2_m3: float,
+                       wind_x_m_s: float, wind_y_m_s: float, ea_n: float,
+                       reference_height_m: float, shear_exponent: float, min_height_m: float,
+                       steps: int, S: np.ndarray
+                       ) -> tuple[float, float, float, float, float, float]:
+    """:func:`line_top` integrated with drag (``steps`` RK4 steps, the same arithmetic) and,
+    alongside it in the same pass, its variational equation (:func:`_slope_sensitivity`):
+    into ``S`` (6 x 7) the derivatives of the end (rows 0-2) and of the tension there (rows
+    3-5) with respect to the tension at the exit, the two angles, the wind's two components,
+    the weight and the drag (:class:`Column` TENSION to DRAG). RK4 applied to the state and
+    its variational equation together is the exact derivative of RK4's map of the state:
+    the Jacobian of the very end the filter uses, at the cost of about three integrations
+    instead of one per column."""
+    L = max(length_m, 0.0)
+    t0 = max(t0_n, 1e-9)
+    ce, se = math.cos(elevation_rad), math.sin(elevation_rad)
+    ca, sa = math.cos(azimuth_rad), math.sin(azimuth_rad)
+    tx, ty, tz = t0 * ce * ca, t0 * ce * sa, t0 * se
+    for i in range(6):
+        for j in range(_N_SENS):
+            S[i, j] = 0.0
+    S[3, 0], S[4, 0], S[5, 0] = ce * ca, ce * sa, se            # d T(0) / d T0
+    S[3, 1], S[4, 1], S[5, 1] = -t0 * se * ca, -t0 * se * sa, t0 * ce   # ... / d eps
+    stretch = 1.0 / ea_n if ea_n > 0.0 and math.isfinite(ea_n) else 0.0
+    w, c, ux, uy = w_n_m, drag_n_s2_m3, wind_x_m_s, wind_y_m_s
+    zr, sh, zm = reference_height_m, shear_exponent, min_height_m
+    Sk = np.empty((6, _N_SENS))
+    acc = np.empty((6, _N_SENS))
+    D = np.empty((6, _N_SENS))
+    px = py = pz = 0.0
+    h = L / steps
+    hh = 0.5 * h
+    k = h / 6.0
+    for _ in range(steps):
+        a = _slope_sensitivity(pz, tx, ty, tz, w, c, ux, uy, zr, sh, zm, stretch, 0, hh, S,
+                               S, Sk, acc, D)
+        b = _slope_sensitivity(pz + 0.5 * h * a[2], tx + 0.5 * h * a[3],
+                               ty + 0.5 * h * a[4], tz + 0.5 * h * a[5], w, c, ux, uy, zr,
+                               sh, zm, stretch, 1, hh, Sk, S, Sk, acc, D)
+        d = _slope_sensitivity(pz + 0.5 * h * b[2], tx + 0.5 * h * b[3],
+                               ty + 0.5 * h * b[4], tz + 0.5 * h * b[5], w, c, ux, uy, zr,
+                               sh, zm, stretch, 2, h, Sk, S, Sk, acc, D)
+        e = _slope_sensitivity(pz + h * d[2], tx + h * d[3], ty + h * d[4], tz + h * d[5],
+                               w, c, ux, uy, zr, sh, zm, stretch, 3, k, Sk, S, Sk, acc, D)
+        px += k * (a[0] + 2.0 * b[0] + 2.0 * d[0] + e[0])
+        py += k * (a[1] + 2.0 * b[1] + 2.0 * d[1] + e[1])
+        pz += k * (a[2] + 2.0 * b[2] + 2.0 * d[2] + e[2])
+        tx += k * (a[3] + 2.0 * b[3] + 2.0 * d[3] + e[3])
+        ty += k * (a[4] + 2.0 * b[4] + 2.0 * d[4] + e[4])
+        tz += k * (a[5] + 2.0 * b[5] + 2.0 * d[5] + e[5])
+    return (px, py, pz, tx, ty, tz)
+
+
+#: The relative step of :func:`end_slopes`' forward differences in calm air (about the
+#: square root of the float's resolution, times each input's scale).
 SLOPE_STEP = 2e-8
 
 
@@ -279,47 +420,59 @@ def end_slopes(x: np.ndarray, ea_n: float, reference_height_m: float, shear_expo
                ) -> tuple[float, float, float, float, float, float]:
     """(the end [m], the tension there [N]: :func:`line_top`) at the inputs ``x``
     (:class:`Column` order), and in ``out`` (3 x :data:`N_COLUMNS`) the Jacobian of the
-    end with respect to every input, for a filter to linearise with at the cost of eight
-    integrations: the length's column is the line's tangent at the end, ``dp/ds = (1/|T| +
-    1/EA) T(L)``; the biases' are the angles' negated; the others forward differences of
-    :data:`SLOPE_STEP` times the input's scale (the tension, the wind's speed, the weight,
-    the drag; 1 rad for the angles). Without drag (no wind, or none per metre) the wind's
-    and the drag's columns are 0: the quadratic drag has no slope at calm air."""
+    end with respect to every input, for a filter to linearise with: the length's column
+    is the line's tangent at the end, ``dp/ds = (1/|T| + 1/EA) T(L)``; the biases' are the
+    angles' negated; the others, in a wind, the sensitivities integrated with the line in
+    one pass (:func:`line_sensitivities`), in calm air forward differences of the closed
+    form of :data:`SLOPE_STEP` times the input's scale (the tension, the weight; 1 rad for
+    the angles), the wind's and the drag's columns 0 (the quadratic drag has no slope at
+    calm air)."""
     L, t0 = max(x[0], 0.0), x[1]
     az, el = x[2] - x[8], x[3] - x[9]
     w, c = max(x[6], 0.0), max(x[7], 0.0)
     ux, uy = x[4], x[5]
-    base = line_top(L, t0, az, el, w, c, ux, uy, ea_n, reference_height_m, shear_exponent,
-                    min_height_m, steps)
+    calm = c <= 0.0 or (ux == 0.0 and uy == 0.0)
+    if calm:
+        base = line_top(L, t0, az, el, w, c, ux, uy, ea_n, reference_height_m,
+                        shear_exponent, min_height_m, steps)
+        for k in range(1, 8):
+            if k == 4 or k == 5 or k == 7:
+                out[0, k] = out[1, k] = out[2, k] = 0.0
+                continue
+            if k == 1:
+                h = SLOPE_STEP * max(abs(t0), 1.0)
+            elif k == 6:
+                h = SLOPE_STEP * max(w, 1e-3)
+            else:
+                h = SLOPE_STEP
+            e = line_top(L, t0 + h if k == 1 else t0, az + h if k == 2 else az,
+                         el + h if k == 3 else el, w + h if k == 6 else w, c, ux, uy, ea_n,
+                         reference_height_m, shear_exponent, min_height_m, steps)
+            out[0, k] = (e[0] - base[0]) / h
+            out[1, k] = (e[1] - base[1]) / h
+            out[2, k] = (e[2] - base[2]) / h
+    else:
+        S = np.empty((6, _N_SENS))
+        base = line_sensitivities(L, t0, az, el, w, c, ux, uy, ea_n, reference_height_m,
+                                  shear_exponent, min_height_m, steps, S)
+        for i in range(3):
+            out[i, 1] = S[i, 0]
+            out[i, 3] = S[i, 1]
+            out[i, 4] = S[i, 2]
+            out[i, 5] = S[i, 3]
+            out[i, 6] = S[i, 4]
+            # turning the exit and the wind together about the vertical turns the line:
+            # p(psi + d, U) = Rz(d) p(psi, Rz(-d) U)
+            out[i, 2] = uy * S[i, 2] - ux * S[i, 3]
+            # the drag c |U_n| U_n: the wind times l is the drag times l^2
+            out[i, 7] = (ux * S[i, 2] + uy * S[i, 3]) / (2.0 * c)
+        out[0, 2] -= base[1]
+        out[1, 2] += base[0]
     tx, ty, tz = base[3], base[4], base[5]
     tn = math.sqrt(tx * tx + ty * ty + tz * tz)
     g = (1.0 / tn if tn > 0.0 else 0.0) + (1.0 / ea_n if ea_n > 0.0 and math.isfinite(ea_n)
                                            else 0.0)
     out[0, 0], out[1, 0], out[2, 0] = g * tx, g * ty, g * tz
-    calm = c <= 0.0 or (ux == 0.0 and uy == 0.0)
-    wind = math.hypot(ux, uy)
-    for k in range(1, 8):
-        if calm and (k == 4 or k == 5 or k == 7):
-            out[0, k] = out[1, k] = out[2, k] = 0.0
-            continue
-        if k == 1:
-            h = SLOPE_STEP * max(abs(t0), 1.0)
-        elif k == 2 or k == 3:
-            h = SLOPE_STEP
-        elif k == 4 or k == 5:
-            h = SLOPE_STEP * max(wind, 1.0)
-        elif k == 6:
-            h = SLOPE_STEP * max(w, 1e-3)
-        else:
-            h = SLOPE_STEP * max(c, 1e-4)
-        e = line_top(L, t0 + h if k == 1 else t0, az + h if k == 2 else az,
-                     el + h if k == 3 else el, w + h if k == 6 else w,
-                     c + h if k == 7 else c, ux + h if k == 4 else ux,
-                     uy + h if k == 5 else uy, ea_n, reference_height_m, shear_exponent,
-                     min_height_m, steps)
-        out[0, k] = (e[0] - base[0]) / h
-        out[1, k] = (e[1] - base[1]) / h
-        out[2, k] = (e[2] - base[2]) / h
     for i in range(3):
         out[i, 8] = -out[i, 2]
         out[i, 9] = -out[i, 3]
