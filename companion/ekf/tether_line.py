@@ -75,10 +75,8 @@ from companion.ekf.output import OutputPredictor, take_up
 from companion.ekf.params import EstimatorParams
 from companion.ekf.update import (
     delayed_state,
-    dot,
     gate3,
     inject,
-    mat_vec,
     row_update,
     whitening3,
 )
@@ -91,6 +89,10 @@ _LINE = int(AidSourceKind.TETHER_LINE)
 FACTOR_BOUNDS = (0.2, 5.0)
 #: The wind profile's floor [m] (the ground station's and the drag fusion's).
 _MIN_HEIGHT_M = 1.0
+#: The error states a reading's Jacobian rows can be non-zero in (:func:`line_rows`).
+_COLS = np.array([IDX_P, IDX_P + 1, IDX_P + 2, IDX_TH, IDX_TH + 1, IDX_TH + 2, IDX_W,
+                  IDX_W + 1, IDX_LINE + LINE_KC, IDX_LINE + LINE_KW, IDX_LINE + LINE_BPSI,
+                  IDX_LINE + LINE_BEPS], dtype=np.int64)
 
 
 @njit
@@ -161,9 +163,23 @@ def _fuse_line(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
                            elevation_rad, h, r)
     if not (math.isfinite(y0) and math.isfinite(y1) and math.isfinite(y2)):
         return NUMERIC
-    p0, p1, p2 = mat_vec(P, h[0]), mat_vec(P, h[1]), mat_vec(P, h[2])
-    s00, s01, s02 = dot(h[0], p0) + r[0, 0], dot(h[0], p1) + r[0, 1], dot(h[0], p2) + r[0, 2]
-    s11, s12, s22 = dot(h[1], p1) + r[1, 1], dot(h[1], p2) + r[1, 2], dot(h[2], p2) + r[2, 2]
+    # S = H P H' + R over the columns H can be non-zero in
+    s00, s01, s02 = r[0, 0], r[0, 1], r[0, 2]
+    s11, s12, s22 = r[1, 1], r[1, 2], r[2, 2]
+    for a in _COLS:
+        q0 = q1 = q2 = 0.0
+        for b in _COLS:
+            pab = P[a, b]
+            q0 += pab * h[0, b]
+            q1 += pab * h[1, b]
+            q2 += pab * h[2, b]
+        h0, h1, h2 = h[0, a], h[1, a], h[2, a]
+        s00 += h0 * q0
+        s01 += h0 * q1
+        s02 += h0 * q2
+        s11 += h1 * q1
+        s12 += h1 * q2
+        s22 += h2 * q2
     res = gate3(w, _LINE, y0, y1, y2, s00, s01, s02, s11, s12, s22, prm[PRM_LINE_GATE])
     if res != FUSED:
         return res
