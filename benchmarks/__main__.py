@@ -314,7 +314,8 @@ def bench_estimator(quick: bool) -> list[Row]:
     return [Row("onboard EKF predict + tether reading fused tightly", line_us, "us",
                 note="median per step; the raw reading (length, tension, exit angles) "
                      "against the line's model in 6 m/s of wind states: its end and "
-                     "Jacobian (8 integrations of 16 Runge-Kutta steps), gated, three "
+                     "Jacobian (one pass of 16 Runge-Kutta steps with the line's "
+                     "sensitivities), gated, three "
                      "whitened row updates with the line's states",
                 goal=f"<= 20 us: {'met' if line_us <= 20.0 else 'NOT met'}"),
             Row("onboard EKF predict + tether fix fusion", pt, "us",

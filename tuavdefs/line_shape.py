@@ -282,17 +282,17 @@ def _slope_sensitivity(z: float, tx: float, ty: float, tz: float, w: float, c: f
                        ) -> tuple[float, float, float, float, float, float]:
     """:func:`_slope` at one Runge-Kutta stage and that stage's share of the sensitivities'
     step: the variational equation's right-hand side ``dS/ds = (d slope / d state) S + d
-    slope / d inputs`` at the stage's sensitivities ``Sin`` (6 x 7: the rows p, T; the
-    columns the tension at the exit, the two angles, the wind's two components, the
-    weight, the drag), taken into the step's sum ``acc`` and the next stage's ``Sk = S +
-    step dS`` (``stage`` 0 to 2: ``acc`` set, or added twice), or at the last stage (3)
-    ``S += step (acc + dS)``. Column by column, so ``Sin`` may be ``Sk``. With ``t =
-    T/|T|``, ``P = I - t t'``, the wind across ``n = P W``, ``a = t.W``, the drag ``D = -c
-    |n| n``:
+    slope / d inputs`` at the stage's sensitivities ``Sin`` (6 x 5: the rows p, T; the
+    columns the tension at the exit, the elevation, the wind's two components, the
+    weight), taken into the step's sum ``acc`` and the next stage's ``Sk = S + step dS``
+    (``stage`` 0 to 2: ``acc`` set, or added twice), or at the last stage (3) ``S += step
+    (acc + dS)``; ``D`` (3 x 5) is scratch for the inputs' own terms. Column by column, so
+    ``Sin`` may be ``Sk``. With ``t = T/|T|``, ``P = I - t t'``, the wind across ``n = P
+    W``, ``a = t.W``, the drag ``D = -c |n| n`` (``n.t = 0``):
 
         d(dp/ds)/dT = g I - t t'/|T|                (g = 1/|T| + 1/EA)
         dn/dT = -(a P + t n')/|T|,   dn/dW = P,     dD/dn = -c (|n| I + n n'/|n|)
-        dW/dU = k(z) I_2,  dW/dz = U dk/dz,         d(dT/ds)/dw = e_z,  d(dT/ds)/dc = -|n| n
+        dW/dU = k(z) I_2,  dW/dz = U dk/dz,         d(dT/ds)/dw = e_z
     """
     tn = math.sqrt(tx * tx + ty * ty + tz * tz)
     tn = max(tn, 1e-12)
@@ -312,45 +312,53 @@ def _slope_sensitivity(z: float, tx: float, ty: float, tz: float, w: float, c: f
     ga = c * a * inv / nm if nm > 0.0 else 0.0
     # d(dT/ds)/dz = (dD/dn) P dW/dz = (dk/dz / k) (dD/dn) n = -2 c |n| n shear / z
     zf = -2.0 * q * shear / z if shear != 0.0 and z > zmin else 0.0
-    # the columns side by side, without branches
+    # the inputs' own terms: the wind's components (dD/dn) P k e_x, e_y, the weight e_z
+    qk = -q * k
+    hx = -c * k * nx / nm if nm > 0.0 else 0.0
+    hy = -c * k * ny / nm if nm > 0.0 else 0.0
+    D[0, 2] = qk * (1.0 - t0 * t0) + hx * nx
+    D[1, 2] = -qk * t1 * t0 + hx * ny
+    D[2, 2] = -qk * t2 * t0 + hx * nz
+    D[0, 3] = -qk * t0 * t1 + hy * nx
+    D[1, 3] = qk * (1.0 - t1 * t1) + hy * ny
+    D[2, 3] = -qk * t2 * t1 + hy * nz
+    D[2, 4] = 1.0
+    keep = 0.0 if stage == 0 else 1.0
+    twice = 1.0 if stage == 0 else 2.0
+    last = stage == 3
     for j in range(_N_SENS):
         s3, s4, s5, sz = Sin[3, j], Sin[4, j], Sin[5, j], Sin[2, j]
         ts = t0 * s3 + t1 * s4 + t2 * s5
         ns = nx * s3 + ny * s4 + nz * s5
         u = ts * inv
-        D[0, j] = g * s3 - t0 * u
-        D[1, j] = g * s4 - t1 * u
-        D[2, j] = g * s5 - t2 * u
         v = be * ns - al * ts
         r = ga * ns + zf * sz
-        D[3, j] = al * s3 + t0 * v + nx * r
-        D[4, j] = al * s4 + t1 * v + ny * r
-        D[5, j] = al * s5 + t2 * v + nz * r
-    # the inputs' own terms: the wind's components (dD/dn) P k e_x, e_y, the weight e_z
-    qk = -q * k
-    hx = -c * k * nx / nm if nm > 0.0 else 0.0
-    hy = -c * k * ny / nm if nm > 0.0 else 0.0
-    D[3, 2] += qk * (1.0 - t0 * t0) + hx * nx
-    D[4, 2] += -qk * t1 * t0 + hx * ny
-    D[5, 2] += -qk * t2 * t0 + hx * nz
-    D[3, 3] += -qk * t0 * t1 + hy * nx
-    D[4, 3] += qk * (1.0 - t1 * t1) + hy * ny
-    D[5, 3] += -qk * t2 * t1 + hy * nz
-    D[5, 4] += 1.0
-    if stage == 3:
-        for i in range(6):
-            for j in range(_N_SENS):
-                S[i, j] += step * (acc[i, j] + D[i, j])
-    elif stage == 0:
-        for i in range(6):
-            for j in range(_N_SENS):
-                acc[i, j] = D[i, j]
-                Sk[i, j] = S[i, j] + step * D[i, j]
-    else:
-        for i in range(6):
-            for j in range(_N_SENS):
-                acc[i, j] += 2.0 * D[i, j]
-                Sk[i, j] = S[i, j] + step * D[i, j]
+        d0 = g * s3 - t0 * u
+        d1 = g * s4 - t1 * u
+        d2 = g * s5 - t2 * u
+        d3 = al * s3 + t0 * v + nx * r + D[0, j]
+        d4 = al * s4 + t1 * v + ny * r + D[1, j]
+        d5 = al * s5 + t2 * v + nz * r + D[2, j]
+        if last:
+            S[0, j] += step * (acc[0, j] + d0)
+            S[1, j] += step * (acc[1, j] + d1)
+            S[2, j] += step * (acc[2, j] + d2)
+            S[3, j] += step * (acc[3, j] + d3)
+            S[4, j] += step * (acc[4, j] + d4)
+            S[5, j] += step * (acc[5, j] + d5)
+        else:
+            acc[0, j] = keep * acc[0, j] + twice * d0
+            acc[1, j] = keep * acc[1, j] + twice * d1
+            acc[2, j] = keep * acc[2, j] + twice * d2
+            acc[3, j] = keep * acc[3, j] + twice * d3
+            acc[4, j] = keep * acc[4, j] + twice * d4
+            acc[5, j] = keep * acc[5, j] + twice * d5
+            Sk[0, j] = S[0, j] + step * d0
+            Sk[1, j] = S[1, j] + step * d1
+            Sk[2, j] = S[2, j] + step * d2
+            Sk[3, j] = S[3, j] + step * d3
+            Sk[4, j] = S[4, j] + step * d4
+            Sk[5, j] = S[5, j] + step * d5
     return (g * tx, g * ty, g * tz, -q * nx, -q * ny, w - q * nz)
 
 
@@ -363,12 +371,12 @@ def line_sensitivities(length_m: float, t0_n: float, azimuth_rad: float,
                        ) -> tuple[float, float, float, float, float, float]:
     """:func:`line_top` integrated with drag (``steps`` RK4 steps, the same arithmetic) and,
     alongside it in the same pass, its variational equation (:func:`_slope_sensitivity`):
-    into ``S`` (6 x 7) the derivatives of the end (rows 0-2) and of the tension there (rows
-    3-5) with respect to the tension at the exit, the two angles, the wind's two components,
-    the weight and the drag (:class:`Column` TENSION to DRAG). RK4 applied to the state and
-    its variational equation together is the exact derivative of RK4's map of the state:
-    the Jacobian of the very end the filter uses, at the cost of about three integrations
-    instead of one per column."""
+    into ``S`` (6 x 5) the derivatives of the end (rows 0-2) and of the tension there (rows
+    3-5) with respect to the tension at the exit, the elevation, the wind's two components
+    and the weight (:func:`end_slopes` has the azimuth's and the drag's from them). RK4
+    applied to the state and its variational equation together is the exact derivative of
+    RK4's map of the state: the Jacobian of the very end the filter uses, at the cost of
+    about two and a half integrations instead of one per column."""
     L = max(length_m, 0.0)
     t0 = max(t0_n, 1e-9)
     ce, se = math.cos(elevation_rad), math.sin(elevation_rad)
@@ -383,8 +391,8 @@ def line_sensitivities(length_m: float, t0_n: float, azimuth_rad: float,
     w, c, ux, uy = w_n_m, drag_n_s2_m3, wind_x_m_s, wind_y_m_s
     zr, sh, zm = reference_height_m, shear_exponent, min_height_m
     Sk = np.empty((6, _N_SENS))
-    acc = np.empty((6, _N_SENS))
-    D = np.empty((6, _N_SENS))
+    acc = np.zeros((6, _N_SENS))
+    D = np.zeros((3, _N_SENS))       # the inputs' own terms of a stage
     px = py = pz = 0.0
     h = L / steps
     hh = 0.5 * h
