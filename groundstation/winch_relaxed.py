@@ -119,9 +119,11 @@ class Relaxed(ModeLogic):
             return w.track(self.hold_m, 0.0)
         pos, vel = uav
         gap, closing = self._join_step(w)
-        step = w.host.update(w.length_m, w.omega_rad_s, w.law_tension_n(), pos, vel,
-                             w.exit_elevation_rad(), w.measured_position_m(), -gap,
-                             closing)
+        host = w.host
+        # (the winder's own fix is the length law's slack floor: the tension law has none)
+        fix_m = w.measured_position_m() if host.takes_fix else None
+        step = host.update(w.length_m, w.omega_rad_s, w.law_tension_n(), pos, vel,
+                           w.exit_elevation_rad(), fix_m, -gap, closing)
         w.ref_m, w.ref_rate_m_s = step.lbar_m, step.lbar_rate_m_s
         if gap > 0.0:       # what the step left of it (less, where L-bar fell into it)
             self._join_gap_m = w.host.lbar.join_gap_m

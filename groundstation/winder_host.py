@@ -150,6 +150,13 @@ class WinderHost:
         if ctl.law is WinderLaw.TENSION:
             self._tension = entry_point(tension_step, *self._tension_records())
 
+    @property
+    def takes_fix(self) -> bool:
+        """Whether :meth:`update` takes the winder's own tether fix (``fix_m``) and a
+        join's gap: the length law's step does; the tension law's does not (a caller need
+        not compute them for it)."""
+        return self._tension is None
+
     def _records(self) -> StepRecords:
         """The step's arguments now (the controller's packed gains as they stand)."""
         lb, ctl = self.lbar, self.controller
