@@ -64,6 +64,7 @@ from groundstation.tension_law import (
     tension_setpoint_n,
 )
 from groundstation.winder_control import (
+    S_STARTED,
     WinderCommand,
     WinderController,
     WinderControlParams,
@@ -145,10 +146,14 @@ class WinderHost:
         self._fix = np.zeros(N_FIX)
         # load (or compile) the step's machine code now, not at the first encoder frame,
         # and call it without numba's dispatch (the arguments' types never change)
-        self._step = entry_point(winder_step, *self._records())
+        self._rec: StepRecords | None = None
+        self._step = entry_point(winder_step, *self._args())
         self._tension = None
+        #: the tension law's step's arguments as last built (again when the controller
+        #: repacks its gains: :meth:`_tension_args`)
+        self._tension_rec: TensionRecords | None = None
         if ctl.law is WinderLaw.TENSION:
-            self._tension = entry_point(tension_step, *self._tension_records())
+            self._tension = entry_point(tension_step, *self._tension_args())
 
     @property
     def takes_fix(self) -> bool:
@@ -169,6 +174,24 @@ class WinderHost:
         return TensionRecords(self._uav, self._measured, lb.packed, lb.state,
                               ctl.tension_params(), ctl.tension_state, lb.trim_params,
                               lb.trim_state, self.dt_s)
+
+    def _args(self) -> StepRecords:
+        """:meth:`_records`, built again only when the controller has repacked its
+        gains."""
+        p = self.controller.params()
+        rec = self._rec
+        if rec is None or rec.law_p is not p:
+            rec = self._rec = self._records()
+        return rec
+
+    def _tension_args(self) -> TensionRecords:
+        """:meth:`_tension_records`, built again only when the controller's packed
+        parameters are no longer the ones they hold (a gain replaced: it repacks)."""
+        q = self.controller.tension_params()
+        rec = self._tension_rec
+        if rec is None or rec.law_p is not q:
+            rec = self._tension_rec = self._tension_records()
+        return rec
 
     def update(self, length_m: float, omega_rad_s: float, drum_tension_n: float,
                uav_pos_m: tuple[float, float, float],
@@ -194,8 +217,9 @@ class WinderHost:
         if self._tension is not None:
             # the tension law: the join's gap, the trim, the lead and the fix's floor are
             # the length law's; the paper's law's filter starts afresh when it next runs
-            ctl.state[:] = 0.0
-            ref_m, rate, cmd = self._tension(*self._tension_records())
+            if ctl.state[S_STARTED]:     # (a filter not started is all zeros)
+                ctl.state[:] = 0.0
+            ref_m, rate, cmd = self._tension(*self._tension_args())
             return WinderStep(cmd[0], ref_m, rate, _command(cmd))
         ctl.tension_state[Z_STARTED] = 0.0
         f = self._fix
@@ -204,7 +228,7 @@ class WinderHost:
         else:
             f[F_X], f[F_Y], f[F_Z] = fix_m
         f[F_JOIN], f[F_JOIN_RATE] = join_m, join_rate_m_s
-        lbar_m, rate, cmd = self._step(*self._records())
+        lbar_m, rate, cmd = self._step(*self._args())
         return WinderStep(cmd[0], lbar_m, rate, _command(cmd))
 
 
