@@ -73,7 +73,8 @@ __all__ = [
 
 
 def _check_len(name: str, data: bytes, min_len: int) -> bytes:
-    data = bytes(data)
+    if type(data) is not bytes:         # (bytes itself as it is: every frame goes here)
+        data = bytes(data)
     if not min_len <= len(data) <= MAX_DLC:
         raise CanFrameError(
             f"{name}: payload of {len(data)} bytes, expected {min_len}..{MAX_DLC}")
