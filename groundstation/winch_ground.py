@@ -61,9 +61,10 @@ class GroundPretension:
             # straight line (the UAV low and far: L-bar's horizontal tension a w far above
             # its target, which only an exact position keeps off taut): by L-bar's length
             # law, and by any law near the winder
-            climb_hold = (w.host.controller.law.holds_ground_tension_in_climb
-                          or math.hypot(pos[0], pos[1]) <= p.ground_hold_near_m)
-            flat = (climb_hold and self.holding and self._low
+            # (in the air, neither holding nor low, none of it asked)
+            flat = (self.holding and self._low
+                    and (w.host.controller.law.holds_ground_tension_in_climb
+                         or math.hypot(pos[0], pos[1]) <= p.ground_hold_near_m)
                     and w.host.lbar.length(pos)[1]
                     > p.ground_lbar_tension_ratio * w.host.lbar.a_target)
             ground = low or flat
