@@ -275,25 +275,28 @@ _N_SENS = 5
 
 
 @njit
-def _slope_sensitivity(z: float, tx: float, ty: float, tz: float, w: float, c: float,
-                       ux: float, uy: float, zr: float, shear: float, zmin: float,
-                       stretch: float, stage: int, step: float, Sin: np.ndarray,
-                       S: np.ndarray, Sk: np.ndarray, acc: np.ndarray, D: np.ndarray
+def _slope_sensitivity(z: float, tx: float, ty: float, tz: float,
+                       line: tuple[float, float, float, float, float, float, float, float],
+                       stage: int, step: float, Sin: np.ndarray, S: np.ndarray,
+                       Sk: np.ndarray, acc: np.ndarray, D: np.ndarray
                        ) -> tuple[float, float, float, float, float, float]:
-    """:func:`_slope` at one Runge-Kutta stage and that stage's share of the sensitivities'
-    step: the variational equation's right-hand side ``dS/ds = (d slope / d state) S + d
-    slope / d inputs`` at the stage's sensitivities ``Sin`` (6 x 5: the rows p, T; the
-    columns the tension at the exit, the elevation, the wind's two components, the
-    weight), taken into the step's sum ``acc`` and the next stage's ``Sk = S + step dS``
-    (``stage`` 0 to 2: ``acc`` set, or added twice), or at the last stage (3) ``S += step
-    (acc + dS)``; ``D`` (3 x 5) is scratch for the inputs' own terms. Column by column, so
-    ``Sin`` may be ``Sk``. With ``t = T/|T|``, ``P = I - t t'``, the wind across ``n = P
-    W``, ``a = t.W``, the drag ``D = -c |n| n`` (``n.t = 0``):
+    """:func:`_slope` at one Runge-Kutta stage (``line``: the weight ``w``, the drag ``c``,
+    the wind ``ux``, ``uy``, its reference height ``zr``, shear exponent and least height
+    ``zmin``, and the line's ``1/EA``, as :func:`line_sensitivities` packs them) and that
+    stage's share of the sensitivities' step: the variational equation's right-hand side
+    ``dS/ds = (d slope / d state) S + d slope / d inputs`` at the stage's sensitivities
+    ``Sin`` (6 x 5: the rows p, T; the columns the tension at the exit, the elevation, the
+    wind's two components, the weight), taken into the step's sum ``acc`` and the next
+    stage's ``Sk = S + step dS`` (``stage`` 0 to 2: ``acc`` set, or added twice), or at the
+    last stage (3) ``S += step (acc + dS)``; ``D`` (3 x 5) is scratch for the inputs' own
+    terms. Column by column, so ``Sin`` may be ``Sk``. With ``t = T/|T|``, ``P = I - t
+    t'``, the wind across ``n = P W``, ``a = t.W``, the drag ``D = -c |n| n`` (``n.t = 0``):
 
         d(dp/ds)/dT = g I - t t'/|T|                (g = 1/|T| + 1/EA)
         dn/dT = -(a P + t n')/|T|,   dn/dW = P,     dD/dn = -c (|n| I + n n'/|n|)
         dW/dU = k(z) I_2,  dW/dz = U dk/dz,         d(dT/ds)/dw = e_z
     """
+    w, c, ux, uy, zr, shear, zmin, stretch = line
     tn = math.sqrt(tx * tx + ty * ty + tz * tz)
     tn = max(tn, 1e-12)
     k = (max(z, zmin) / zr) ** shear if shear != 0.0 else 1.0
@@ -388,8 +391,8 @@ def line_sensitivities(length_m: float, t0_n: float, azimuth_rad: float,
     S[3, 0], S[4, 0], S[5, 0] = ce * ca, ce * sa, se            # d T(0) / d T0
     S[3, 1], S[4, 1], S[5, 1] = -t0 * se * ca, -t0 * se * sa, t0 * ce   # ... / d eps
     stretch = 1.0 / ea_n if ea_n > 0.0 and math.isfinite(ea_n) else 0.0
-    w, c, ux, uy = w_n_m, drag_n_s2_m3, wind_x_m_s, wind_y_m_s
-    zr, sh, zm = reference_height_m, shear_exponent, min_height_m
+    line = (w_n_m, drag_n_s2_m3, wind_x_m_s, wind_y_m_s, reference_height_m,
+            shear_exponent, min_height_m, stretch)
     Sk = np.empty((6, _N_SENS))
     acc = np.zeros((6, _N_SENS))
     D = np.zeros((3, _N_SENS))       # the inputs' own terms of a stage
@@ -398,16 +401,15 @@ def line_sensitivities(length_m: float, t0_n: float, azimuth_rad: float,
     hh = 0.5 * h
     k = h / 6.0
     for _ in range(steps):
-        a = _slope_sensitivity(pz, tx, ty, tz, w, c, ux, uy, zr, sh, zm, stretch, 0, hh, S,
-                               S, Sk, acc, D)
+        a = _slope_sensitivity(pz, tx, ty, tz, line, 0, hh, S, S, Sk, acc, D)
         b = _slope_sensitivity(pz + 0.5 * h * a[2], tx + 0.5 * h * a[3],
-                               ty + 0.5 * h * a[4], tz + 0.5 * h * a[5], w, c, ux, uy, zr,
-                               sh, zm, stretch, 1, hh, Sk, S, Sk, acc, D)
+                               ty + 0.5 * h * a[4], tz + 0.5 * h * a[5], line, 1, hh, Sk, S,
+                               Sk, acc, D)
         d = _slope_sensitivity(pz + 0.5 * h * b[2], tx + 0.5 * h * b[3],
-                               ty + 0.5 * h * b[4], tz + 0.5 * h * b[5], w, c, ux, uy, zr,
-                               sh, zm, stretch, 2, h, Sk, S, Sk, acc, D)
+                               ty + 0.5 * h * b[4], tz + 0.5 * h * b[5], line, 2, h, Sk, S,
+                               Sk, acc, D)
         e = _slope_sensitivity(pz + h * d[2], tx + h * d[3], ty + h * d[4], tz + h * d[5],
-                               w, c, ux, uy, zr, sh, zm, stretch, 3, k, Sk, S, Sk, acc, D)
+                               line, 3, k, Sk, S, Sk, acc, D)
         px += k * (a[0] + 2.0 * b[0] + 2.0 * d[0] + e[0])
         py += k * (a[1] + 2.0 * b[1] + 2.0 * d[1] + e[1])
         pz += k * (a[2] + 2.0 * b[2] + 2.0 * d[2] + e[2])
