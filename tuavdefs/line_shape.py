@@ -172,6 +172,23 @@ def _slope(z: float, tx: float, ty: float, tz: float, w: float, c: float, ux: fl
 
 
 @njit
+def _rk4_sum(y: tuple[float, float, float, float, float, float],
+             a: tuple[float, float, float, float, float, float],
+             b: tuple[float, float, float, float, float, float],
+             d: tuple[float, float, float, float, float, float],
+             e: tuple[float, float, float, float, float, float], k: float
+             ) -> tuple[float, float, float, float, float, float]:
+    """The line's state (p [m], T [N]) ``y`` after a classical Runge-Kutta step of its
+    four stages' slopes ``a``, ``b``, ``d``, ``e``, ``k`` a sixth of the step [m]."""
+    return (y[0] + k * (a[0] + 2.0 * b[0] + 2.0 * d[0] + e[0]),
+            y[1] + k * (a[1] + 2.0 * b[1] + 2.0 * d[1] + e[1]),
+            y[2] + k * (a[2] + 2.0 * b[2] + 2.0 * d[2] + e[2]),
+            y[3] + k * (a[3] + 2.0 * b[3] + 2.0 * d[3] + e[3]),
+            y[4] + k * (a[4] + 2.0 * b[4] + 2.0 * d[4] + e[4]),
+            y[5] + k * (a[5] + 2.0 * b[5] + 2.0 * d[5] + e[5]))
+
+
+@njit
 def line_top(length_m: float, t0_n: float, azimuth_rad: float, elevation_rad: float,
              w_n_m: float, drag_n_s2_m3: float, wind_x_m_s: float, wind_y_m_s: float,
              ea_n: float, reference_height_m: float, shear_exponent: float,
@@ -205,12 +222,7 @@ def line_top(length_m: float, t0_n: float, azimuth_rad: float, elevation_rad: fl
         e = _slope(pz + h * d[2], tx + h * d[3], ty + h * d[4], tz + h * d[5], w_n_m, c,
                    ux, uy, zr, sh, zm, stretch)
         k = h / 6.0
-        px += k * (a[0] + 2.0 * b[0] + 2.0 * d[0] + e[0])
-        py += k * (a[1] + 2.0 * b[1] + 2.0 * d[1] + e[1])
-        pz += k * (a[2] + 2.0 * b[2] + 2.0 * d[2] + e[2])
-        tx += k * (a[3] + 2.0 * b[3] + 2.0 * d[3] + e[3])
-        ty += k * (a[4] + 2.0 * b[4] + 2.0 * d[4] + e[4])
-        tz += k * (a[5] + 2.0 * b[5] + 2.0 * d[5] + e[5])
+        px, py, pz, tx, ty, tz = _rk4_sum((px, py, pz, tx, ty, tz), a, b, d, e, k)
     return (px, py, pz, tx, ty, tz)
 
 
@@ -410,12 +422,7 @@ def line_sensitivities(length_m: float, t0_n: float, azimuth_rad: float,
                                Sk, acc, D)
         e = _slope_sensitivity(pz + h * d[2], tx + h * d[3], ty + h * d[4], tz + h * d[5],
                                line, 3, k, Sk, S, Sk, acc, D)
-        px += k * (a[0] + 2.0 * b[0] + 2.0 * d[0] + e[0])
-        py += k * (a[1] + 2.0 * b[1] + 2.0 * d[1] + e[1])
-        pz += k * (a[2] + 2.0 * b[2] + 2.0 * d[2] + e[2])
-        tx += k * (a[3] + 2.0 * b[3] + 2.0 * d[3] + e[3])
-        ty += k * (a[4] + 2.0 * b[4] + 2.0 * d[4] + e[4])
-        tz += k * (a[5] + 2.0 * b[5] + 2.0 * d[5] + e[5])
+        px, py, pz, tx, ty, tz = _rk4_sum((px, py, pz, tx, ty, tz), a, b, d, e, k)
     return (px, py, pz, tx, ty, tz)
 
 
