@@ -38,7 +38,6 @@ RHO = 1.225
 VEH = VehicleParams()
 MODEL = DragModel.from_vehicle(VEH, RHO)
 ON = DragFusionParams(enabled=True)
-OFF = DragFusionParams(enabled=False)
 
 
 def _prm() -> np.ndarray:
@@ -182,23 +181,10 @@ def test_wind_inhibited_on_the_ground_and_before_drag_fusion():
     assert f.covariance[IDX_W, IDX_W] == pytest.approx(params.drag.wind_sigma_m_s ** 2)
     f.fuse_drag(3.1, False, (0.0, 0.0, 0.0))
     assert not f.wind_estimated and not np.any(f.covariance[IDX_W:IDX_W + 2, :])
-    plain = NavFilter(EstimatorParams(drag=OFF), G, (0.2, 0.0, -0.4))
+    with pytest.raises(ValueError):
+        NavFilter(params, G, (0.2, 0.0, -0.4))          # drag fusion needs the model
+    plain = NavFilter(EstimatorParams(), G, (0.2, 0.0, -0.4))
     assert not plain.drag_fusion and plain.wind_m_s == (0.0, 0.0, 0.0)
-
-
-def test_drag_fusion_is_the_default():
-    """EstimatorParams() fuses the drag (EKF3's way: WIND is the filter's); a filter built
-    without a drag model takes the companion's default vehicle's (the controllers' model,
-    the position loop's quadratic drag area and linear drag) in the default air."""
-    assert EstimatorParams().drag.enabled
-    f = NavFilter(EstimatorParams(), G, (0.2, 0.0, -0.4))
-    assert f.drag_fusion
-    prm = f._mem.prm
-    area, lin, mass = VEH.drag_area_m2, VEH.drag_coeff_n_s_m, VEH.mass_kg
-    for i, (q, m) in enumerate(((PRM_DRAG_QX, PRM_DRAG_MX), (PRM_DRAG_QY, PRM_DRAG_MY))):
-        assert prm[q] == pytest.approx(0.5 * RHO * area[i] / mass, rel=1e-12)
-        assert prm[m] == pytest.approx(lin[i] / mass, rel=1e-12)
-    assert prm[PRM_MASS_INV] == pytest.approx(1.0 / mass, rel=1e-12)
 
 
 @pytest.mark.parametrize("wind,yaw", [((6.0, 0.0, 0.0), 0.3), ((-3.0, 7.0, 0.0), 2.0)])
@@ -232,19 +218,18 @@ def test_circle_learns_the_wind():
 
 def test_wind_reported_is_the_filters():
     """WIND's source (Companion.wind_estimate) is the filter's wind states with drag
-    fusion (the default), whatever the position loop's disturbance says; without it the
-    disturbance's."""
+    fusion, whatever the position loop's disturbance says."""
     from companion.gains import FlightControlParams
     from companion.navigation import NavigationParams
     from companion.onboard import Companion
     from tuavdefs.params import SystemParams
 
-    c = Companion(SystemParams(), FlightControlParams(), NavigationParams())
+    c = Companion(SystemParams(), FlightControlParams(), NavigationParams(),
+                  EstimatorParams(drag=ON))
     c.filter._mem.x[X_W:X_W + 2] = (3.0, -4.0)
     assert c.wind_estimate() == (3.0, -4.0, 0.0)
     plain = Companion(SystemParams(), FlightControlParams(), NavigationParams(),
-                      EstimatorParams(drag=OFF))
-    assert not plain.filter.drag_fusion
+                      EstimatorParams())
     assert plain.wind_estimate() == (0.0, 0.0, 0.0)      # on the ground
 
 

@@ -65,7 +65,6 @@ from companion.ekf.params import EstimatorParams
 from companion.ekf.update import dot, inject, mat_vec, row_update, set_aid_row
 from tuavdefs.frames import Vec3, quat_to_matrix_kernel
 from tuavdefs.jit import entry_point, njit
-from tuavdefs.params import EnvironmentParams, VehicleParams
 
 _DRAG = int(AidSourceKind.DRAG)
 
@@ -97,13 +96,6 @@ class DragModel(NamedTuple):
         return cls(m / area[0] if area[0] > 0 else math.inf,
                    m / area[1] if area[1] > 0 else math.inf,
                    float(lin[0]) / m, float(lin[1]) / m, m, float(air_density_kg_m3))
-
-    @classmethod
-    def default_vehicle(cls) -> DragModel:
-        """The companion's default vehicle model (``VehicleParams()``) in its default air
-        (``EnvironmentParams()``): what a companion built on default parameters gives its
-        filter, for a filter built without a drag model."""
-        return cls.from_vehicle(VehicleParams(), EnvironmentParams().air_density_kg_m3)
 
 
 @njit

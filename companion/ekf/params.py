@@ -110,7 +110,7 @@ class DragFusionParams(Params):
     (``[estimator.drag]``; docs/estimation.md §11)."""
 
     enabled: bool = quantity(
-        True, "", "fuse the accelerometer's body x and y against the vehicle's drag (its "
+        False, "", "fuse the accelerometer's body x and y against the vehicle's drag (its "
         "ballistic and momentum-drag coefficients from the companion's vehicle model, as "
         "EKF3's EK3_DRAG_BCOEF_X/Y and EK3_DRAG_MCOEF) and the tether's pull, and estimate "
         "the horizontal wind as two states (EKF3's drag fusion; docs/estimation.md §11): "
