@@ -362,6 +362,9 @@ def test_the_circle_flown_on_the_onboard_estimate(results, name, tracking_m, est
     assert m["position_rmse_m"] <= tracking_m
     assert m["estimate_position_rmse_m"] <= estimate_m
     assert m["estimate_velocity_rmse_m_s"] <= 0.1
+    # the attitude estimate within its 0.5 deg target (docs/results.md): a wind-state
+    # default once moved circle-gnss's from 0.0038 to 0.0095 rad with its position unmoved
+    assert m["estimate_attitude_rmse_rad"] <= math.radians(0.5)
     assert m["min_tether_slack_m"] > 0.0
     s = results[name].series
     est = np.isfinite(s["est_pos"]).all(axis=1)
