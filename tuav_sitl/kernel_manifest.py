@@ -5,8 +5,9 @@ Each process makes its kernels machine code for these types before it says it is
 (:func:`tuavdefs.jit.load_kernels`), and the cold-cache warm-up compiles them
 (:mod:`tuav_sitl.warmup`). They are recorded, not written by hand: every shipped scenario
 is flown from start to end by the offline runner (the onboard objects the processes run),
-on its own truth tether and on the catenary, each in a fresh interpreter with ``TUAV_JIT_RECORD`` set, which writes down every
-signature a kernel was asked for from Python (:mod:`tuavdefs.jit`). ``--from DIR`` adds
+on its own truth tether and on the catenary, each in a fresh interpreter with
+``TUAV_JIT_RECORD`` set, which writes down every signature a kernel was asked for from
+Python (:mod:`tuavdefs.jit`). ``--from DIR`` adds
 the records another run left in DIR (e.g. the processes of a ``tuav-sitl up`` flight run
 with ``TUAV_JIT_RECORD=DIR``). ``--check`` compares instead of writing (exit 1 if the file
 lacks a recorded signature). A test flies the processes on an empty cache and fails if
