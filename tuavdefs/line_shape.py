@@ -155,17 +155,27 @@ def line_end(length_m: float, t0_n: float, azimuth_rad: float, elevation_rad: fl
 
 
 @njit
-def _slope(z: float, tx: float, ty: float, tz: float, w: float, c: float, ux: float,
-           uy: float, zr: float, shear: float, zmin: float, stretch: float
-           ) -> tuple[float, float, float, float, float, float]:
-    """(dp/ds, dT/ds) of the line at height ``z`` [m] with tension (``tx``, ``ty``,
-    ``tz``) [N] (module docstring)."""
+def _across(z: float, tx: float, ty: float, tz: float, ux: float, uy: float, zr: float,
+            shear: float, zmin: float) -> tuple[float, float, float, float, float, float]:
+    """The wind across the line at height ``z`` [m] with tension (``tx``, ``ty``, ``tz``)
+    [N]: ``(|T|, k, a, nx, ny, nz)`` with ``|T|`` floored at 1e-12 N, the shear factor
+    ``k = (max(z, zmin)/zr)^shear``, ``a = W.T/|T|^2`` and the wind's component across the
+    line ``n = W - a T`` [m/s] for the wind ``W = k (ux, uy, 0)``."""
     tn = math.sqrt(tx * tx + ty * ty + tz * tz)
     tn = max(tn, 1e-12)
     k = (max(z, zmin) / zr) ** shear if shear != 0.0 else 1.0
     wx, wy = ux * k, uy * k
     along = (wx * tx + wy * ty) / (tn * tn)
-    nx, ny, nz = wx - along * tx, wy - along * ty, -along * tz
+    return tn, k, along, wx - along * tx, wy - along * ty, -along * tz
+
+
+@njit
+def _slope(z: float, tx: float, ty: float, tz: float, w: float, c: float, ux: float,
+           uy: float, zr: float, shear: float, zmin: float, stretch: float
+           ) -> tuple[float, float, float, float, float, float]:
+    """(dp/ds, dT/ds) of the line at height ``z`` [m] with tension (``tx``, ``ty``,
+    ``tz``) [N] (module docstring)."""
+    tn, k, along, nx, ny, nz = _across(z, tx, ty, tz, ux, uy, zr, shear, zmin)
     q = c * math.sqrt(nx * nx + ny * ny + nz * nz)
     g = 1.0 / tn + stretch
     return (g * tx, g * ty, g * tz, -q * nx, -q * ny, w - q * nz)
@@ -309,12 +319,7 @@ def _slope_sensitivity(z: float, tx: float, ty: float, tz: float,
         dW/dU = k(z) I_2,  dW/dz = U dk/dz,         d(dT/ds)/dw = e_z
     """
     w, c, ux, uy, zr, shear, zmin, stretch = line
-    tn = math.sqrt(tx * tx + ty * ty + tz * tz)
-    tn = max(tn, 1e-12)
-    k = (max(z, zmin) / zr) ** shear if shear != 0.0 else 1.0
-    wx, wy = ux * k, uy * k
-    along = (wx * tx + wy * ty) / (tn * tn)
-    nx, ny, nz = wx - along * tx, wy - along * ty, -along * tz
+    tn, k, along, nx, ny, nz = _across(z, tx, ty, tz, ux, uy, zr, shear, zmin)
     nm = math.sqrt(nx * nx + ny * ny + nz * nz)
     q = c * nm
     g = 1.0 / tn + stretch
