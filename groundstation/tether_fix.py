@@ -36,7 +36,9 @@ sigma: :func:`tuavdefs.line_shape.end_differences`), plus the wind's share (its 
 error through an eight-point rule; without a wind given, the design wind from the four
 directions along and across the line), plus a floor. It grows where the fix is weak: a long
 or slack line, the line near the vertical (the azimuth's lever vanishes, the elevation's
-does not), the line on the ground, strong or poorly known wind.
+does not), the line on the ground, strong or poorly known wind. What the static model cannot
+see, the line's sway, the winch adds from the fix's own recent scatter about the vehicle's
+reported position (:class:`FixScatter`).
 
 Pure arithmetic, no I/O; ``Winch`` calls :meth:`TetherFixer.position` at ``rate_hz``.
 """
@@ -44,6 +46,7 @@ Pure arithmetic, no I/O; ``Winch`` calls :meth:`TetherFixer.position` at ``rate_
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -138,6 +141,16 @@ class TetherFixParams(Params):
     max_age_s: float = quantity(
         0.1, "s", "no fix when the exit angle or the tension is older than this against "
         "the encoder (winch clock)", gt=0)
+    scatter_window_s: float = quantity(
+        5.0, "s", "the window of the fix's own recent scatter about the vehicle's reported "
+        "position (FixScatter: the line's sway and axial waves, which the static model "
+        "does not see)", gt=0)
+    scatter_gain: float = quantity(
+        4.0, "1", "the scatter's covariance is added this many times to a suspended fix's "
+        "(the sway's errors are correlated over 0.3-1.4 s while the fixes are fused at "
+        "rate_hz as white; 0: no scatter allowance)", ge=0)
+    scatter_min_fixes: int = quantity(
+        10, "1", "fixes in the window before their scatter is counted", ge=3)
 
 
 class TetherFix(NamedTuple):
@@ -149,6 +162,65 @@ class TetherFix(NamedTuple):
     cov_m2: Cov3
     sample_time_ms: int
     on_ground: bool
+
+
+class FixScatter:
+    """The fix's own recent scatter (docs/estimation.md §10, *The line's sway*): the
+    sample covariance [m^2] of the residuals ``fix - reported`` (the suspended fix less
+    the position the vehicle reports) over the last ``scatter_window_s``, about their mean,
+    added ``scatter_gain`` times to the fix's covariance. The static model takes the line
+    as still; a swaying line moves the exit's reading, and the fix with it, by far more
+    than the sensors' noise (in calm air on the lumped line 0.9 m across the line at
+    17.8 m, claimed 0.54 m). The window's mean is taken off, so a slow offset (the fix's
+    bias, the report's delay on a moving vehicle) does not count; the reported position
+    is the vehicle's smooth estimate, so what scatters is the fix."""
+
+    def __init__(self, params: TetherFixParams) -> None:
+        self.p = params
+        self._t: deque[float] = deque()
+        self._r: deque[tuple[float, float, float]] = deque()
+
+    def reset(self) -> None:
+        """Forget the window (a new flight, a reboot)."""
+        self._t.clear()
+        self._r.clear()
+
+    def add(self, t_s: float, pos_m: Vec3, reported_m: Vec3) -> None:
+        """A suspended fix ``pos_m`` [m] at ``t_s`` [s] against the position the vehicle
+        reports ``reported_m`` [m]; residuals older than the window leave it (a time
+        going back clears it)."""
+        if self._t and t_s < self._t[-1]:
+            self.reset()
+        self._t.append(t_s)
+        self._r.append(_sub(pos_m, reported_m))
+        start = t_s - self.p.scatter_window_s
+        while self._t[0] < start:
+            self._t.popleft()
+            self._r.popleft()
+
+    def covariance(self) -> np.ndarray | None:
+        """The residuals' sample covariance over the window [m^2] times ``scatter_gain``,
+        None with fewer than ``scatter_min_fixes`` of them or a zero gain."""
+        if self.p.scatter_gain <= 0.0 or len(self._r) < self.p.scatter_min_fixes:
+            return None
+        r = np.array(self._r)
+        return self.p.scatter_gain * np.cov(r, rowvar=False)
+
+    def widen(self, t_s: float, pos_m: Vec3, cov_m2: Cov3, reported_m: Vec3 | None,
+              on_ground: bool) -> Cov3:
+        """The covariance [m^2] of the fix ``pos_m`` [m] made at ``t_s`` [s] with the
+        scatter's share added (:meth:`covariance`); the fix joins the window when it is
+        of a suspended line and the vehicle reports a finite position ``reported_m`` [m]
+        (a fix on the ground is the reported position's own: not added, not widened)."""
+        if on_ground:
+            return cov_m2
+        if reported_m is not None and all(math.isfinite(v) for v in reported_m):
+            self.add(t_s, pos_m, reported_m)
+        extra = self.covariance()
+        if extra is None:
+            return cov_m2
+        out = np.array(cov_m2) + extra
+        return tuple(tuple(float(v) for v in row) for row in out)  # type: ignore[return-value]
 
 
 def _outer(a: Vec3, b: Vec3, k: float, acc: list[list[float]]) -> None:

@@ -20,7 +20,7 @@ import math
 from pymavlink.dialects.v20 import common as mavlink2
 
 from groundstation.lbar import LBarEstimator
-from groundstation.tether_fix import TetherFix, TetherFixer
+from groundstation.tether_fix import FixScatter, TetherFix, TetherFixer
 from groundstation.winch_current import CurrentTension
 from groundstation.winch_params import WinchParams
 from groundstation.winch_report import Notice, notice
@@ -50,6 +50,8 @@ class WinchSensors:
                  params: WinchParams) -> None:
         #: the tether fix (groundstation.tether_fix), on this station's own tether beliefs
         self.fixer = fixer
+        #: the fix's recent scatter, which widens its covariance (the line's sway)
+        self.scatter = FixScatter(fixer.p) if fixer is not None else None
         #: the tension from the motor's current (groundstation.winch_current)
         self.current = current
         self.p = params
@@ -221,10 +223,13 @@ class WinchSensors:
         az, el, stamp, _ = ea
         if not fixer.readable(self.load_cell_n, el):
             return None
+        t_ms = self._unwrap_ms(stamp, uav_time_ms)
         pos, cov, ground = fixer.position(length_m, self.load_cell_n, az, el, reported_m,
                                           lbar.weight_n_m())
         self.fixes += 1
-        return TetherFix(pos, cov, self._unwrap_ms(stamp, uav_time_ms), ground)
+        if self.scatter is not None:
+            cov = self.scatter.widen(t_ms * 1e-3, pos, cov, reported_m, ground)
+        return TetherFix(pos, cov, t_ms, ground)
 
     def _unwrap_ms(self, stamp_ms: int, uav_time_ms: int | None) -> int:
         """The winch's 16-bit clock [ms] as a full time: the nearest to the vehicle's
