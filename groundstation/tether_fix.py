@@ -6,7 +6,8 @@ exit ``T0`` [N] (the load cell) and the direction the tether leaves the fairlead
 ``psi`` and elevation ``eps`` [rad] (the guide arm's encoders); and what bends the line as
 the station is given it: the line's weight per metre (the winder's estimate, within a band
 of the belief: :meth:`TetherFixer.weight`) and the wind (an estimate with its covariance, or
-none: calm air, with the design wind in the covariance).
+none: calm air, with the design wind in the covariance; the winch gives it the vehicle's
+own estimate, low-passed, with ``wind_source = "vehicle"``: :class:`ReportedWind`).
 
 A line leaving the exit above the ground is the model of :mod:`tuavdefs.line_shape`: the
 static elastic line under its weight and the cross-flow drag of the wind (the closed-form
@@ -45,6 +46,7 @@ Pure arithmetic, no I/O; ``Winch`` calls :meth:`TetherFixer.position` at ``rate_
 
 from __future__ import annotations
 
+import enum
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -151,6 +153,17 @@ class TetherFixParams(Params):
         "rate_hz as white; 0: no scatter allowance)", ge=0)
     scatter_min_fixes: int = quantity(
         10, "1", "fixes in the window before their scatter is counted", ge=3)
+    wind_source: str = quantity(
+        "none", "1", "the wind the fix's model is given (WindSource): none (calm air, the "
+        "design wind in the covariance) or vehicle (the vehicle's own estimate, its WIND "
+        "message, low-passed: ReportedWind)", choices=("none", "vehicle"))
+    wind_filter_s: float = quantity(
+        20.0, "s", "the time constant of the low-pass on the vehicle's wind reports (its "
+        "estimate carries the position loop's and the turbulence's seconds-long swings)",
+        gt=0)
+    wind_max_age_s: float = quantity(
+        5.0, "s", "a vehicle wind not reported for this long is no longer given (WIND "
+        "comes at 1 Hz)", gt=0)
 
 
 class TetherFix(NamedTuple):
@@ -162,6 +175,59 @@ class TetherFix(NamedTuple):
     cov_m2: Cov3
     sample_time_ms: int
     on_ground: bool
+
+
+class WindSource(enum.Enum):
+    """Which wind the fix's model is given (``TetherFixParams.wind_source``)."""
+
+    NONE = "none"           #: calm air; the design wind in the covariance
+    VEHICLE = "vehicle"     #: the vehicle's own estimate (its WIND), low-passed
+
+
+class ReportedWind:
+    """The vehicle's wind estimate as the fix takes it (docs/estimation.md §10, *The
+    wind*): each report (the air's velocity at the vehicle [m/s], z-up, the vehicle's
+    reported height [m]) brought to ``wind_reference_height_m`` by the fix's own profile,
+    ``U_ref = U(z) (z_ref / max(z, z_min))^alpha``, and low-passed over ``wind_filter_s``
+    (first order, on the reports' own times). Nothing onboard is the truth: this is what
+    the vehicle says (ArduPilot's WIND), as a ground station would hear it."""
+
+    def __init__(self, params: TetherFixParams) -> None:
+        self.p = params
+        self._wind: tuple[float, float] | None = None
+        self._t_s = -math.inf
+
+    def reset(self) -> None:
+        """Forget the wind (a new flight, a reboot)."""
+        self._wind = None
+        self._t_s = -math.inf
+
+    def report(self, t_s: float, wind_m_s: Vec3, height_m: float | None) -> None:
+        """A report at ``t_s`` [s] of the wind ``wind_m_s`` [m/s] (z-up) at the vehicle's
+        height ``height_m`` [m] (None: taken at the reference height); not finite:
+        ignored; a time going back starts the filter again."""
+        wx, wy = float(wind_m_s[0]), float(wind_m_s[1])
+        if not (math.isfinite(wx) and math.isfinite(wy) and math.isfinite(t_s)):
+            return
+        p = self.p
+        if height_m is not None and math.isfinite(height_m):
+            z = max(height_m, p.wind_min_height_m)
+            k = (p.wind_reference_height_m / z) ** p.wind_shear_exponent
+            wx, wy = wx * k, wy * k
+        if self._wind is None or t_s < self._t_s:
+            self._wind = (wx, wy)
+        else:
+            a = 1.0 - math.exp(-(t_s - self._t_s) / p.wind_filter_s)
+            ox, oy = self._wind
+            self._wind = (ox + a * (wx - ox), oy + a * (wy - oy))
+        self._t_s = t_s
+
+    def wind_m_s(self, t_s: float) -> tuple[float, float] | None:
+        """The low-passed wind at the reference height [m/s] (horizontal), None without a
+        report within ``wind_max_age_s`` of ``t_s`` [s]."""
+        if self._wind is None or not 0.0 <= t_s - self._t_s <= self.p.wind_max_age_s:
+            return None
+        return self._wind
 
 
 class FixScatter:

@@ -20,7 +20,7 @@ import math
 from pymavlink.dialects.v20 import common as mavlink2
 
 from groundstation.lbar import LBarEstimator
-from groundstation.tether_fix import FixScatter, TetherFix, TetherFixer
+from groundstation.tether_fix import FixScatter, ReportedWind, TetherFix, TetherFixer, WindSource
 from groundstation.winch_current import CurrentTension
 from groundstation.winch_params import WinchParams
 from groundstation.winch_report import Notice, notice
@@ -52,6 +52,8 @@ class WinchSensors:
         self.fixer = fixer
         #: the fix's recent scatter, which widens its covariance (the line's sway)
         self.scatter = FixScatter(fixer.p) if fixer is not None else None
+        #: the vehicle's wind as the fix takes it (given it with wind_source = vehicle)
+        self.wind = ReportedWind(fixer.p) if fixer is not None else None
         #: the tension from the motor's current (groundstation.winch_current)
         self.current = current
         self.p = params
@@ -224,8 +226,11 @@ class WinchSensors:
         if not fixer.readable(self.load_cell_n, el):
             return None
         t_ms = self._unwrap_ms(stamp, uav_time_ms)
+        wind = None
+        if self.wind is not None and WindSource(fixer.p.wind_source) is WindSource.VEHICLE:
+            wind = self.wind.wind_m_s(t_ms * 1e-3)
         pos, cov, ground = fixer.position(length_m, self.load_cell_n, az, el, reported_m,
-                                          lbar.weight_n_m())
+                                          lbar.weight_n_m(), wind)
         self.fixes += 1
         if self.scatter is not None:
             cov = self.scatter.widen(t_ms * 1e-3, pos, cov, reported_m, ground)

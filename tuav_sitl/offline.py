@@ -36,7 +36,7 @@ from companion.mission_items import ItemRefused, nav_commands
 from companion.navigation import FlightMode, NavCommand, NavEvent, NavKind, Refusal
 from companion.onboard import Companion, OnboardInputs, OnboardOutputs
 from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
-from groundstation.tether_fix import TetherFix, TetherFixParams
+from groundstation.tether_fix import TetherFix, TetherFixParams, WindSource
 from groundstation.winch import Winch
 from groundstation.winder_host import WinderHost
 from sitl.exit_angle import ExitAngleSensor
@@ -226,6 +226,9 @@ class OfflineRunner:
         fix = TetherFixParams(enabled=sc.estimator.kind != "truth")
         self.ground = GroundStation(Winch(self.winder_host, model.winder, model.tether, g,
                                           sc.winch, fix_params=fix), self.links)
+        #: whether the winch's fix takes the vehicle's wind (its WIND on the component link)
+        self._wind_to_winch = (fix.enabled
+                               and WindSource(fix.wind_source) is WindSource.VEHICLE)
         start = tuple(sc.initial.position_m)
         gear = params.vehicle.gear_height_m
         self.plant = Plant(params, dt_s=self.dt)
@@ -470,8 +473,10 @@ class OfflineRunner:
         out = self.companion.finish(diagnostics=True)
         self._take_events(t)
         state = out.state
-        if state is not None:   # LOCAL_POSITION_NED on the component link
+        if state is not None:   # LOCAL_POSITION_NED on the component link, and WIND
             self.ground.uav_report(t, state.pos_m, state.vel_m_s)
+            if self._wind_to_winch:
+                self.ground.uav_wind(t, self.companion.wind_estimate)
         self._rotors = (out.rotor_commands, out.armed)
         return out
 

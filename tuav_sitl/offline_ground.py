@@ -4,6 +4,7 @@ would bring it (:class:`GroundStation`)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -47,6 +48,9 @@ class GroundStation:
         #: [m/s]), time_boot_ms), and when the next is due [s]
         self._report: tuple[tuple[tuple[float, ...], tuple[float, ...]], int] | None = None
         self._next_report_s = 0.0
+        #: the vehicle's last WIND not yet taken [m/s], and when the next is due [s]
+        self._wind: tuple[float, float, float] | None = None
+        self._next_wind_s = 0.0
 
     def uav_report(self, t_s: float, pos_m: tuple[float, float, float],
                    vel_m_s: tuple[float, float, float]) -> None:
@@ -60,6 +64,17 @@ class GroundStation:
             return
         self._next_report_s = max(self._next_report_s + 1.0 / cl.POSITION_RATE_HZ, t_s)
         self._report = self.links.local_position(t_s, pos_m, vel_m_s)
+
+    def uav_wind(self, t_s: float, estimate: Callable[[], tuple[float, float, float]]
+                 ) -> None:
+        """The vehicle's ``WIND`` at ``t_s`` [s] when one is due (at
+        ``component_link.WIND_RATE_HZ`` of simulated time, as the companion process sends
+        it): ``estimate()``, its wind estimate [m/s] (z-up), asked only then; the winch
+        takes it with its next winder period, after the position."""
+        if t_s < self._next_wind_s:
+            return
+        self._next_wind_s = max(self._next_wind_s + 1.0 / cl.WIND_RATE_HZ, t_s)
+        self._wind = estimate()
 
     def period(self, t_s: float, drum_angle_rad: float, drum_rate_rad_s: float,
                drum_tension_n: float,
@@ -75,6 +90,9 @@ class GroundStation:
         if self._report is not None:
             w.set_uav(*self._report)
             self._report = None
+        if self._wind is not None:
+            w.set_wind(self._wind)
+            self._wind = None
         stamp = round(t_s * 1000.0) & 0xFFFF
         if exit_angle is not None:
             w.handle_frame(t_s, self._exit_id, cp.encode_winch_exit_angle(

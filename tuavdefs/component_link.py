@@ -27,6 +27,8 @@ SYSTEM_ID = 1
 AUTOPILOT_COMPONENT_ID = 1
 WINCH_COMPONENT_ID = mavlink2.MAV_COMP_ID_WINCH          # 169
 POSITION_RATE_HZ = 100.0
+#: How often the companion sends the winch its wind estimate (``WIND``) [Hz, simulated].
+WIND_RATE_HZ = 1.0
 
 
 def winch_status_flags(brake_engaged: bool, moving: bool, healthy: bool = True) -> int:

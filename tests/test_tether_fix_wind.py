@@ -1,0 +1,96 @@
+"""The wind the tether fix may be given (groundstation.tether_fix.ReportedWind,
+docs/estimation.md §10, *The wind*): the vehicle's own estimate, brought to the fix's
+reference height by its profile and low-passed, against closed forms; and the fix made
+with it against the plant's lumped line settled in that wind (tests/lumped_util.py)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from lumped_util import settled_exit
+
+from groundstation.tether_fix import ReportedWind, TetherFixer, TetherFixParams
+from tuavdefs.params import TetherParams
+
+G = 9.81
+TP = TetherParams()
+
+
+def test_a_report_is_brought_to_the_reference_height_and_low_passed():
+    """A steady report of 4 m/s at 15 m is the profile's 4 (10/15)^(1/7) m/s at 10 m; a
+    step to another wind is followed as a first-order lag of ``wind_filter_s`` (1 - 1/e
+    of the step after one time constant, on 1 Hz reports); below ``wind_min_height_m``
+    the profile's value there is used."""
+    p = TetherFixParams()
+    rw = ReportedWind(p)
+    rw.report(0.0, (4.0, 0.0, 0.0), 15.0)
+    ref = 4.0 * (10.0 / 15.0) ** (1.0 / 7.0)
+    assert rw.wind_m_s(0.5) == pytest.approx((ref, 0.0))
+    for k in range(1, round(p.wind_filter_s) + 1):
+        rw.report(float(k), (0.0, 4.0, 0.0), 15.0)
+    wx, wy = rw.wind_m_s(p.wind_filter_s)
+    assert wx == pytest.approx(ref * math.exp(-1.0), rel=1e-9)
+    assert wy == pytest.approx(ref * (1.0 - math.exp(-1.0)), rel=1e-9)
+    low = ReportedWind(p)
+    low.report(0.0, (2.0, 0.0, 0.0), 0.2)
+    assert low.wind_m_s(0.0)[0] == pytest.approx(
+        2.0 * (10.0 / p.wind_min_height_m) ** p.wind_shear_exponent)
+
+
+def test_no_wind_without_a_fresh_report():
+    """None before a report, or once the last is older than ``wind_max_age_s``; a report
+    that is not finite is ignored; a time going back starts the filter again."""
+    p = TetherFixParams()
+    rw = ReportedWind(p)
+    assert rw.wind_m_s(0.0) is None
+    rw.report(10.0, (3.0, 1.0, 0.0), None)
+    assert rw.wind_m_s(10.0 + p.wind_max_age_s) == (3.0, 1.0)
+    assert rw.wind_m_s(10.1 + p.wind_max_age_s) is None
+    rw.report(11.0, (math.nan, 0.0, 0.0), 10.0)
+    assert rw.wind_m_s(11.0) == (3.0, 1.0)
+    rw.report(2.0, (-1.0, 0.0, 0.0), None)
+    assert rw.wind_m_s(2.0) == (-1.0, 0.0)
+
+
+def test_the_reported_wind_takes_the_drag_out_of_the_fix():
+    """hover-gnss-loss's hover (8, 4, 15) m on the plant's lumped line settled in a
+    uniform 3 m/s from the west: the calm fix is 0.3 m or more off, downwind; given the
+    wind as the vehicle reports it (the fix's profile set uniform, as the settled line's
+    wind is) the fix is within 0.1 m, inside its covariance."""
+    top = (8.0, 4.0, 15.0)
+    length = math.dist(top, (0.0, 0.0, 0.0)) + 0.34
+    t0, az, el, _, _ = settled_exit(top, length, (3.0, 0.0))
+    p = TetherFixParams(wind_shear_exponent=0.0)
+    fixer = TetherFixer(p, TP.linear_density_kg_m * G, TP.axial_stiffness_n, TP.diameter_m)
+    calm, _, _ = fixer.position(length, t0, az, el)
+    assert np.subtract(calm, top)[0] > 0.3
+    rw = ReportedWind(p)
+    rw.report(0.0, (3.0, 0.0, 0.0), top[2])
+    pos, cov, _ = fixer.position(length, t0, az, el, wind_m_s=rw.wind_m_s(0.0))
+    e = np.subtract(pos, top)
+    assert np.linalg.norm(e) < 0.1
+    assert e @ np.linalg.solve(np.array(cov), e) < 3.0
+
+
+def test_the_winch_takes_the_vehicles_wind_at_its_reported_time_and_height():
+    """``Winch.set_wind``: ignored before a reported position with its time; then taken at
+    that time and height (the report at 12 m brought to 10 m by the profile)."""
+    from groundstation.lbar import LBarParams
+    from groundstation.winch import Winch
+    from groundstation.winder_control import WinderControlParams
+    from groundstation.winder_host import WinderHost
+    from tuavdefs.params import SystemParams
+
+    sp = SystemParams()
+    host = WinderHost(WinderControlParams(), LBarParams(), sp.winder, sp.tether, G)
+    winch = Winch(host, sp.winder, sp.tether, G)
+    winch.set_wind((4.0, 0.0, 0.0))
+    assert winch.sensors.wind.wind_m_s(0.0) is None
+    winch.set_uav(((3.0, 4.0, 12.0), (0.0, 0.0, 0.0)), 7000)
+    winch.set_wind((4.0, 0.0, 0.0))
+    p = winch.fixer.p
+    wx, wy = winch.sensors.wind.wind_m_s(7.0)
+    assert wx == pytest.approx(4.0 * (10.0 / 12.0) ** p.wind_shear_exponent)
+    assert wy == 0.0
