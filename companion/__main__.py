@@ -362,6 +362,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             was_armed = nav.armed
             if components is not None:
                 components.send_position(t, state.pos_m, state.vel_m_s)
+                components.send_wind(t, onboard.wind_estimate)
     except ConnectionError:
         pass
     finally:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import socket
 import struct
+from collections.abc import Callable
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink2
@@ -47,6 +48,7 @@ class ComponentServer:
         if signing is not None:     # the link's signing state (companion.signing)
             self.mav.signing = signing
         self._next_position_s = 0.0
+        self._next_wind_s = 0.0
         self._pending = bytearray()
         self.bad_frames = 0
 
@@ -93,6 +95,16 @@ class ComponentServer:
         # NED: (north, east, down) = (y, x, -z) of ENU
         self.send_bytes(self.pack_position(int(t_s * 1000), pos_enu[1], pos_enu[0],
                                            -pos_enu[2], vel_enu[1], vel_enu[0], -vel_enu[2]))
+
+    def send_wind(self, t_s: float, estimate: Callable[[], Vec3]) -> None:
+        """``WIND_COV`` at ``component_link.WIND_RATE_HZ`` of simulated time: the onboard
+        wind estimate ``estimate()`` (z-up [m/s], asked only when one is due) as NED,
+        its variances, altitude and accuracies NaN (unknown); the winch's tether fix may
+        take it (groundstation.tether_fix.ReportedWind)."""
+        if self.conn is None or t_s < self._next_wind_s:
+            return
+        self._next_wind_s = max(self._next_wind_s + 1.0 / cl.WIND_RATE_HZ, t_s)
+        self.send(cl.wind_message(int(t_s * 1e6), estimate()))
 
     def pack_position(self, time_boot_ms: int, x: float, y: float, z: float, vx: float,
                       vy: float, vz: float) -> bytes:

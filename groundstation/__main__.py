@@ -139,6 +139,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         now_s = time.monotonic
     was_lost = False
     positions_seen = 0
+    winds_seen = 0
     # the start-up's objects (numpy, numba, pymavlink and their modules: most of the heap)
     # move to the collector's permanent generation, so its full collections during the
     # run no longer walk them: about a tenth of the loop's CPU (docs/performance.md)
@@ -175,6 +176,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                             f"winch: {host.controller.law.value} law")]))
                     positions_seen = mav.positions_received
                     winch.set_uav(mav.uav_state(), mav.uav_state_time_ms())
+                if mav.winds_received != winds_seen:    # the vehicle's wind, after its position
+                    winds_seen = mav.winds_received
+                    wind = mav.uav_wind()
+                    if wind is not None:
+                        winch.set_wind(wind)
                 if mav.commands_waiting:
                     for req in mav.take_commands():
                         reply = winch.command(req, now_s())

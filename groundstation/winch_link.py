@@ -1,17 +1,18 @@
 """The winch component's end of the companion's component link (a TCP client).
 
-In: the UAV's ``LOCAL_POSITION_NED``, and ``COMMAND_LONG``/``COMMAND_INT`` (the companion
-forwards ground stations' commands as they were sent, so their sender ids are the ground
-station's). Out, as system 1 component 169: ``HEARTBEAT`` (1 Hz of wall time, from
-:meth:`WinchLinkClient.poll`), ``WINCH_STATUS``, the tether fix as ``ODOMETRY``,
-``COMMAND_ACK`` and ``STATUSTEXT``. The
-client connects, and reconnects after a drop, on its own; sends while unconnected are lost.
+In: the UAV's ``LOCAL_POSITION_NED`` and wind estimate (``WIND_COV``), and
+``COMMAND_LONG``/``COMMAND_INT`` (the companion forwards ground stations' commands as they
+were sent, so their sender ids are the ground station's). Out, as system 1 component 169:
+``HEARTBEAT`` (1 Hz of wall time, from :meth:`WinchLinkClient.poll`), ``WINCH_STATUS``,
+the tether fix as ``ODOMETRY``, ``COMMAND_ACK`` and ``STATUSTEXT``. The client connects,
+and reconnects after a drop, on its own; sends while unconnected are lost.
 With a signing key (given at start, or by the vehicle's ``SETUP_SIGNING`` from component 1)
 everything sent is signed and only correctly signed frames are taken (``tuavdefs.signing``).
 """
 
 from __future__ import annotations
 
+import math
 import socket
 import time
 from collections.abc import Callable
@@ -57,6 +58,9 @@ class WinchLinkClient:
         self._state_ms: int | None = None
         self.positions_received = 0
         """LOCAL_POSITION_NED messages received (the state is new when this changes)."""
+        self._wind: Vec3 | None = None
+        self.winds_received = 0
+        """WIND_COV messages received (:meth:`uav_wind` is new when this changes)."""
         self._last_heartbeat = 0.0
         self._commands: list[CommandRequest] = []
         self.bad_frames = 0
@@ -132,6 +136,11 @@ class WinchLinkClient:
             if kind == "LOCAL_POSITION_NED":
                 self._set_state(m.time_boot_ms, m.x, m.y, m.z, m.vx, m.vy, m.vz)
                 self.positions_received += 1
+            elif kind == "WIND_COV":
+                wind = cl.wind_of(m)
+                if all(math.isfinite(v) for v in wind):
+                    self._wind = wind
+                    self.winds_received += 1
             elif kind in ("COMMAND_LONG", "COMMAND_INT"):
                 self._commands.append(CommandRequest(
                     m.command, m.target_system, m.target_component, m.get_srcSystem(),
@@ -160,6 +169,10 @@ class WinchLinkClient:
     def uav_state_time_ms(self) -> int | None:
         """The vehicle's time [ms] (time_boot_ms: simulated time) of :meth:`uav_state`."""
         return self._state_ms
+
+    def uav_wind(self) -> Vec3 | None:
+        """The vehicle's latest wind estimate [m/s], z-up (its WIND_COV), or None."""
+        return self._wind
 
     def uav_state(self) -> tuple[Vec3, Vec3] | None:
         """The latest (position [m], velocity [m/s]) of the UAV, z-up frame, or None."""

@@ -94,3 +94,39 @@ def test_the_winch_takes_the_vehicles_wind_at_its_reported_time_and_height():
     wx, wy = winch.sensors.wind.wind_m_s(7.0)
     assert wx == pytest.approx(4.0 * (10.0 / 12.0) ** p.wind_shear_exponent)
     assert wy == 0.0
+
+
+class _Chunks:
+    """A socket handing out pre-cut chunks to ``WinchLinkClient.poll``."""
+
+    def __init__(self, chunks: list[bytes]) -> None:
+        self.chunks = chunks
+
+    def recv(self, size: int) -> bytes:
+        return self.chunks.pop(0)
+
+    def sendall(self, data: bytes) -> None:
+        pass
+
+
+def test_the_component_link_carries_the_vehicles_wind():
+    """The companion's ``WIND_COV`` (NED, as pymavlink packs it) reaches the winch's link
+    as the z-up wind it was made of (to float32), beside a position; a wind that is not
+    finite is not taken."""
+    from groundstation.winch_link import WinchLinkClient
+    from tuavdefs import component_link as cl
+
+    vehicle = cl.new_mavlink(cl.AUTOPILOT_COMPONENT_ID)
+    wind = (3.25, -1.5, 0.125)                       # east, north, up [m/s]
+    frames = [cl.wind_message(7_000_000, wind).pack(vehicle),
+              cl.wind_message(8_000_000, (math.nan, 0.0, 0.0)).pack(vehicle)]
+    m = cl.wind_message(0, wind)
+    assert (m.wind_x, m.wind_y, m.wind_z) == (-1.5, 3.25, -0.125)      # NED
+    client = WinchLinkClient("127.0.0.1:9")
+    client.sock, client._last_heartbeat = _Chunks(list(frames)), 1e18
+    assert client.uav_wind() is None
+    client.poll()
+    assert client.winds_received == 1
+    assert client.uav_wind() == pytest.approx(wind, abs=1e-6)
+    client.poll()
+    assert client.winds_received == 1 and client.uav_wind() == pytest.approx(wind, abs=1e-6)

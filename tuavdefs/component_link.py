@@ -189,3 +189,18 @@ def tether_reading(msg: mavlink2.MAVLink_debug_float_array_message) -> TetherRea
     if not all(math.isfinite(v) for v in vals):
         return None
     return TetherReading(msg.time_usec * 1e-6, *vals, line_weight_n_m(float(msg.data[4])))
+
+
+def wind_message(time_usec: int, wind_m_s: tuple[float, float, float]
+                 ) -> mavlink2.MAVLink_wind_cov_message:
+    """``WIND_COV`` of the vehicle's wind estimate ``wind_m_s`` [m/s] (the air's velocity,
+    z-up, converted here to NED) at ``time_usec`` [us] (its time since boot); the
+    variances, altitude and accuracies NaN (unknown)."""
+    nan = math.nan
+    return mavlink2.MAVLink_wind_cov_message(time_usec, wind_m_s[1], wind_m_s[0], -wind_m_s[2],
+                                             nan, nan, nan, nan, nan)
+
+
+def wind_of(m: mavlink2.MAVLink_wind_cov_message) -> tuple[float, float, float]:
+    """The wind [m/s], z-up, of a ``WIND_COV`` (:func:`wind_message`)."""
+    return (float(m.wind_y), float(m.wind_x), -float(m.wind_z))
