@@ -180,7 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     winds_seen = mav.winds_received
                     wind = mav.uav_wind()
                     if wind is not None:
-                        winch.set_wind(wind)
+                        winch.sensors.set_wind(wind, winch.uav, winch.uav_time_ms)
                 if mav.commands_waiting:
                     for req in mav.take_commands():
                         reply = winch.command(req, now_s())

@@ -350,16 +350,6 @@ class Winch:
             self.uav = ((px, py, pz), (vx, vy, vz))
             self.uav_time_ms = time_ms
 
-    def set_wind(self, wind_m_s: tuple[float, float, float]) -> None:
-        """The vehicle's wind estimate [m/s] (z-up; its WIND message), taken at the time
-        and height of its last reported position (WIND carries neither): the tether fix's
-        wind with ``wind_source = "vehicle"`` (groundstation.tether_fix.ReportedWind);
-        ignored before a position with its time."""
-        wind = self.sensors.wind
-        if wind is None or self.uav is None or self.uav_time_ms is None:
-            return
-        wind.report(self.uav_time_ms * 1e-3, wind_m_s, self.uav[0][2])
-
     def uav_now(self) -> UavState | None:
         """The UAV's state carried forward by its velocity to the winch's sample time
         (Winch_Tension's Sample_Time, the same clock as the vehicle's time_boot_ms in the

@@ -75,8 +75,9 @@ def test_the_reported_wind_takes_the_drag_out_of_the_fix():
 
 
 def test_the_winch_takes_the_vehicles_wind_at_its_reported_time_and_height():
-    """``Winch.set_wind``: ignored before a reported position with its time; then taken at
-    that time and height (the report at 12 m brought to 10 m by the profile)."""
+    """``WinchSensors.set_wind`` with the winch's reported position: ignored before a
+    position with its time; then taken at that time and height (the report at 12 m
+    brought to 10 m by the profile)."""
     from groundstation.lbar import LBarParams
     from groundstation.winch import Winch
     from groundstation.winder_control import WinderControlParams
@@ -86,10 +87,10 @@ def test_the_winch_takes_the_vehicles_wind_at_its_reported_time_and_height():
     sp = SystemParams()
     host = WinderHost(WinderControlParams(), LBarParams(), sp.winder, sp.tether, G)
     winch = Winch(host, sp.winder, sp.tether, G)
-    winch.set_wind((4.0, 0.0, 0.0))
+    winch.sensors.set_wind((4.0, 0.0, 0.0), winch.uav, winch.uav_time_ms)
     assert winch.sensors.wind.wind_m_s(0.0) is None
     winch.set_uav(((3.0, 4.0, 12.0), (0.0, 0.0, 0.0)), 7000)
-    winch.set_wind((4.0, 0.0, 0.0))
+    winch.sensors.set_wind((4.0, 0.0, 0.0), winch.uav, winch.uav_time_ms)
     p = winch.fixer.p
     wx, wy = winch.sensors.wind.wind_m_s(7.0)
     assert wx == pytest.approx(4.0 * (10.0 / 12.0) ** p.wind_shear_exponent)

@@ -91,7 +91,7 @@ class GroundStation:
             w.set_uav(*self._report)
             self._report = None
         if self._wind is not None:
-            w.set_wind(self._wind)
+            w.sensors.set_wind(self._wind, w.uav, w.uav_time_ms)
             self._wind = None
         stamp = round(t_s * 1000.0) & 0xFFFF
         if exit_angle is not None:
