@@ -217,12 +217,12 @@ class WinchSensors:
                  uav_time_ms: int | None) -> None:
         """The vehicle's wind estimate [m/s] (z-up; its WIND_COV), taken at the time [ms]
         and height of its last reported (position [m], velocity [m/s]) ``uav`` (the
-        message carries neither): the tether fix's wind with ``wind_source = "vehicle"``
-        (groundstation.tether_fix.ReportedWind); ignored before a position with its
-        time, or without a fix."""
+        message carries neither), gated by its horizontal speed: the tether fix's wind
+        with ``wind_source = "vehicle"`` (groundstation.tether_fix.ReportedWind); ignored
+        before a position with its time, or without a fix."""
         if self.wind is None or uav is None or uav_time_ms is None:
             return
-        self.wind.report(uav_time_ms * 1e-3, wind_m_s, uav[0][2])
+        self.wind.report(uav_time_ms * 1e-3, wind_m_s, uav[0][2], math.hypot(*uav[1][:2]))
 
     def tether_fix(self, length_m: float, reported_m: Vec3 | None,
                    uav_time_ms: int | None, lbar: LBarEstimator) -> TetherFix | None:

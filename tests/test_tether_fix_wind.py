@@ -41,7 +41,8 @@ def test_a_report_is_brought_to_the_reference_height_and_low_passed():
 
 def test_no_wind_without_a_fresh_report():
     """None before a report, or once the last is older than ``wind_max_age_s``; a report
-    that is not finite is ignored; a time going back starts the filter again."""
+    that is not finite is ignored; a time going back starts the filter again; a report
+    made while the vehicle moves faster than ``wind_max_speed_m_s`` is not taken."""
     p = TetherFixParams()
     rw = ReportedWind(p)
     assert rw.wind_m_s(0.0) is None
@@ -52,6 +53,9 @@ def test_no_wind_without_a_fresh_report():
     assert rw.wind_m_s(11.0) == (3.0, 1.0)
     rw.report(2.0, (-1.0, 0.0, 0.0), None)
     assert rw.wind_m_s(2.0) == (-1.0, 0.0)
+    rw.report(3.0, (5.0, 0.0, 0.0), None, speed_m_s=1.5 * p.wind_max_speed_m_s)
+    assert rw.wind_m_s(3.0) == (-1.0, 0.0)                 # a manoeuvring vehicle's: not taken
+    assert rw.wind_m_s(2.1 + p.wind_max_age_s) is None
 
 
 def test_the_reported_wind_takes_the_drag_out_of_the_fix():
