@@ -50,8 +50,8 @@ from tuavdefs.jit import njit
 (Q_R_W, Q_BETA, Q_TAU_MAX, Q_V_MAX, Q_M_BAR, Q_RHO, Q_L_T, Q_R2, Q_I_ROTOR, Q_FILTER,
  Q_SP_FILTER, Q_GAIN, Q_CEIL, Q_CEIL_GAIN, Q_ACC_MAX, Q_CMD_FILTER, Q_K_W, Q_K_BOUND,
  Q_STIFFNESS, Q_FLOOR, Q_SP_MAX, Q_MARGIN, Q_BOUND_M, Q_LAG_S, Q_RECOVER, Q_LIFT_GAIN,
- Q_LIFT_MAX, Q_LIFT_LAG, Q_APPROACH, Q_LAY_HEIGHT) = range(30)
-N_TENSION_PARAMS = 30
+ Q_LIFT_MAX, Q_LIFT_LAG, Q_APPROACH, Q_LAY_HEIGHT, Q_HEAVY_MAX) = range(31)
+N_TENSION_PARAMS = 31
 # indices of its state (Z_LIFT: the exit-elevation loop's raise of the set-point [N];
 # Z_LAID: the lower length bound's slack laid down and not yet given back [m],
 # groundstation.winder_host.tension_step)
@@ -103,15 +103,28 @@ def taut_line_stiffness_n_m(tension_n: float, w_n_m: float, h_m: float, v_m: flo
 
 @njit
 def tension_speed(p: np.ndarray, tension_n: float, setpoint_n: float,
-                  ff_rate_m_s: float, scale: float = 1.0) -> float:
+                  ff_rate_m_s: float, scale: float = 1.0, heavy: float = 1.0) -> float:
     """The force loops' line speed [m/s] (positive paying out): the feed-forward
     ``ff_rate_m_s`` plus ``sigma(T)`` (the set-point loop, its gain ``g_T`` times
-    ``scale``, and the snap ceiling's steeper pay-out above ``T_ceil``)."""
+    ``scale``, and the snap ceiling's steeper pay-out above ``T_ceil`` times ``heavy``,
+    :func:`heavy_scale`)."""
     sigma = scale * p[Q_GAIN] * (tension_n - setpoint_n)
-    over = tension_n - p[Q_CEIL]
+    over = tension_n - heavy * p[Q_CEIL]
     if over > 0.0:
         sigma += p[Q_CEIL_GAIN] * over
     return ff_rate_m_s + sigma
+
+
+@njit
+def heavy_scale(p: np.ndarray, w_n_m: float, w_model_n_m: float) -> float:
+    """How much the set-point's cap and the snap ceiling are raised [1] for a line
+    weighing ``w_n_m`` [N/m] (the weight estimate) against the model's ``w_model_n_m``:
+    their ratio, at least 1 and at most ``p[Q_HEAVY_MAX]``. A line k times as heavy hangs
+    the same shape at k times the tension, so the caps set for the model's line would
+    hold a heavier one on the ground (docs/control.md §8.4)."""
+    if not (w_n_m > 0.0 and w_model_n_m > 0.0):
+        return 1.0
+    return min(max(w_n_m / w_model_n_m, 1.0), max(p[Q_HEAVY_MAX], 1.0))
 
 
 @njit
@@ -146,7 +159,7 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
                 omega_rad_s: float, tension_n: float, setpoint_n: float,
                 ff_rate_m_s: float, low_m: float, low_rate_m_s: float, high_m: float,
                 recover_m: float, elevation_rad: float = math.nan,
-                exit_min_rad: float = 0.0, share: float = 1.0
+                exit_min_rad: float = 0.0, share: float = 1.0, heavy: float = 1.0
                 ) -> tuple[float, float, float, float, float, bool]:
     """One step of the tension law (module docstring) on the packed parameters ``p``,
     its state ``s`` advanced in place: the load cell's ``tension_n`` [N] low-passed; the
@@ -154,7 +167,8 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     the guide arm's ``elevation_rad`` [rad], NaN: no reading, held at ``exit_min_rad``
     [rad] or above, the raise times ``share``, :func:`lay_down_share`) and low-passed;
     the force loops' speed bounded by the length bounds ``low_m`` (moving at
-    ``low_rate_m_s``) and ``high_m`` [m] and by the ceiling;
+    ``low_rate_m_s``) and ``high_m`` [m] and by the ceiling (times ``heavy``,
+    :func:`heavy_scale`);
     a slack line (below the floor) wound in towards ``recover_m`` [m] (NaN: none) at up to
     the recovery speed (once the line has flown, ``s[Z_LIFTED]``: within it no faster than
     the slack approach, the torque on the measured tension),
@@ -189,9 +203,9 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     exit_lift(p, s, dt_s, elevation_rad, exit_min_rad, s[Z_LAG])
     # the raise enters the force loop's set-point, not the torque's: the drum renders from
     # the line's own set-point, and tracks the speed the raise asks
-    v0 = tension_speed(p, t_f, min(t_sp + share * s[Z_LIFT], max(p[Q_CEIL], t_sp)),
-                       ff_rate_m_s,
-                       gain_scale(p, s[Z_STIFFNESS]))
+    ceil = heavy * p[Q_CEIL]
+    v0 = tension_speed(p, t_f, min(t_sp + share * s[Z_LIFT], max(ceil, t_sp)),
+                       ff_rate_m_s, gain_scale(p, s[Z_STIFFNESS]), heavy)
     k_b = p[Q_K_BOUND]
     # the slack floor's recovery: a line pulling less than the floor says nothing of how
     # much of it hangs slack; the length the UAV's position asks does, and is wound in
@@ -228,7 +242,7 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     free = v
     v = max(v, low_rate_m_s - k_b * (length_m - low_m))
     v = min(v, ff_rate_m_s + k_b * (high_m - length_m))
-    if t_f > p[Q_CEIL]:
+    if t_f > ceil:
         v = max(v, free)
     # anti-windup: while a bound holds the line, the tension the torque holds is the one
     # the line has (else the set-point's torque drives the drum against its speed loop);
@@ -342,17 +356,19 @@ def lay_down_share(p: np.ndarray, exit_min_rad: float, h_m: float, v_m: float) -
 
 @njit
 def tension_setpoint_n(p: np.ndarray, a_m: float, h_m: float, v_m: float,
-                       w_n_m: float, min_slack_m: float, share: float = 1.0) -> float:
+                       w_n_m: float, min_slack_m: float, share: float = 1.0,
+                       heavy: float = 1.0) -> float:
     """The tension set-point [N]: the exit tension of L-bar's catenary (parameter ``a_m``
     [m], spanning ``h_m`` across and ``v_m`` up, weighing ``w_n_m`` [N/m]) times the
     margin, at most the tension at which the line keeps ``min_slack_m`` [m] of slack
     (:func:`slack_tension_n`: near the vertical L-bar's catenary asks tens of newtons of
-    a nearly straight line), between the slack floor and the set-point's cap (the floor
-    where that catenary is degenerate: the UAV above the winder, or low and far), the
-    part above the floor times ``share`` (:func:`lay_down_share`)."""
+    a nearly straight line), between the slack floor and the set-point's cap times
+    ``heavy`` (:func:`heavy_scale`; the floor where that catenary is degenerate: the UAV
+    above the winder, or low and far), the part above the floor times ``share``
+    (:func:`lay_down_share`)."""
     t_hat = expected_drum_tension_n(a_m, h_m, v_m, w_n_m)
     if not math.isfinite(t_hat):
         return p[Q_FLOOR]
     t_sp = min(p[Q_MARGIN] * t_hat, slack_tension_n(w_n_m, h_m, v_m, min_slack_m))
-    t_sp = min(max(t_sp, p[Q_FLOOR]), p[Q_SP_MAX])
+    t_sp = min(max(t_sp, p[Q_FLOOR]), heavy * p[Q_SP_MAX])
     return p[Q_FLOOR] + share * (t_sp - p[Q_FLOOR])

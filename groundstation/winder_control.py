@@ -76,6 +76,10 @@ class WinderControlParams(Params):
     tension_setpoint_max_n: float = quantity(
         8.0, "N", "tension law: the most the set-point may ask (near the vertical L-bar's "
         "catenary asks for tens of newtons; the length bound holds the line there)", gt=0)
+    tension_heavy_max: float = quantity(
+        2.0, "1", "tension law: the set-point's cap and the snap ceiling follow the line's "
+        "weight estimate above the model's weight (the same shape hangs at proportionally "
+        "more tension), up to this many times (1: never; docs/control.md §8.4)", ge=1)
     tension_margin: float = quantity(
         1.2, "1", "tension law: the set-point over the exit tension of L-bar's catenary "
         "(which leaves the winder at min_exit_angle_rad at least)", ge=1)
@@ -227,6 +231,7 @@ class WinderController:
             q[tl.Q_LIFT_LAG] = g.exit_lift_lag_m
             q[tl.Q_APPROACH] = g.slack_approach_gain_1_s
             q[tl.Q_LAY_HEIGHT] = g.lay_down_height_m
+            q[tl.Q_HEAVY_MAX] = g.tension_heavy_max
             self._q = q
             self._tension_from = self._packed_from
         return self._q

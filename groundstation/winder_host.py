@@ -57,6 +57,7 @@ from groundstation.tension_law import (
     Z_SPEED,
     Z_STARTED,
     Z_STIFFNESS,
+    heavy_scale,
     lay_down_share,
     string_slack_m,
     taut_line_stiffness_n_m,
@@ -334,7 +335,8 @@ def tension_step(uav: np.ndarray, measured: np.ndarray, lbar_p: np.ndarray,
     h = math.hypot(px, py)
     v = max(pz, 0.0)
     share = lay_down_share(law_p, math.atan(lbar_p[LB_TAN_MIN]), h, v)
-    setpoint = tension_setpoint_n(law_p, a, h, v, w, min_slack, share)
+    heavy = heavy_scale(law_p, w, lbar_p[LB_W])
+    setpoint = tension_setpoint_n(law_p, a, h, v, w, min_slack, share, heavy)
     dist = math.sqrt(px * px + py * py + pz * pz)
     radial = (px * vx + py * vy + pz * vz) / dist if dist > 1e-6 else 0.0
     # no stopping distance in the lower bound: the drum renders to the pull, so the
@@ -374,5 +376,5 @@ def tension_step(uav: np.ndarray, measured: np.ndarray, lbar_p: np.ndarray,
     # (both times the lay-down share: low and far the line is let down, not held up)
     exit_min = share * min(math.atan(lbar_p[LB_TAN_MIN]), 0.5 * math.atan2(v, h))
     cmd = tension_law(law_p, law_s, dt_s, length_m, omega_rad_s, drum_tension_n, setpoint,
-                      rate, low, radial, high, lbar_m, elevation_rad, exit_min, share)
+                      rate, low, radial, high, lbar_m, elevation_rad, exit_min, share, heavy)
     return length_m + law_s[Z_LAG], law_s[Z_SPEED], cmd
