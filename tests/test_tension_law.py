@@ -25,7 +25,7 @@ from companion.governor import (
 from companion.navigation import NavigationParams
 from companion.reference import RefSample
 from groundstation import tension_law as tl
-from groundstation.lbar import LBarParams
+from groundstation.lbar import LBarParams, lbar_kernel
 from groundstation.winch import Winch
 from groundstation.winder_control import WinderController, WinderControlParams, WinderLaw
 from groundstation.winder_host import WinderHost
@@ -530,3 +530,35 @@ def test_a_landing_low_and_far_lays_the_line_down(tmp_path):
     assert mean[band].max() < 3.0
     assert np.abs(s["euler"][band, :2]).max() < 0.1
     assert res.metrics["min_tether_slack_m"] > 0.0
+
+
+@pytest.mark.skipif(moorpy_catenary is None, reason="MoorPy is not installed")
+@pytest.mark.parametrize("ratio", [1.0, 1.5, 2.0])
+def test_the_set_point_holds_a_heavier_line_off_the_ground(ratio):
+    """A line ``ratio`` times as heavy as the model's, its weight estimated right, with the
+    UAV at the far side of the robustness circle (22, 0, 20) m: MoorPy's catenary through
+    the UAV that pulls the law's set-point at the exit leaves the winder at L-bar's least
+    exit angle or above (the cap and the ceiling follow the weight: at the model's 8 N a
+    2x line lay on the ground)."""
+    q = WinderController(WinderControlParams(law="tension"), WinderParams(),
+                         TetherParams()).tension_params()
+    lbar = LBarParams()
+    w_model = TetherParams().weight_per_length_n_m(9.81)
+    w = ratio * w_model
+    x, z = 22.0, 20.0
+    _, _, a, _ = lbar_kernel(x, 0.0, z, 0.0, 0.0, 0.0, lbar.target_horizontal_tension_n
+                             / w_model, math.tan(lbar.min_exit_angle_rad),
+                             lbar.min_slack_m, math.nan)
+    heavy = tl.heavy_scale(q, w, w_model)
+    setpoint = tl.tension_setpoint_n(q, a, x, z, w, lbar.min_slack_m, 1.0, heavy)
+    assert setpoint <= 2.0 * q[tl.Q_SP_MAX] + 1e-9
+    ea = TetherParams().axial_stiffness_n
+
+    def exit_tension(length):
+        f = moorpy_catenary(x, z, length, ea, w, CB=0)
+        return math.hypot(f[0], f[1]) - setpoint
+
+    chord = math.hypot(x, z)
+    length = brentq(exit_tension, chord * 1.0001, chord * 1.5)
+    f = moorpy_catenary(x, z, length, ea, w, CB=0)
+    assert math.atan2(f[1], f[0]) >= lbar.min_exit_angle_rad
