@@ -40,8 +40,10 @@ from companion.ekf.layout import (
     NUMERIC,
     NX,
     PRM_DRAG_GATE,
+    PRM_DRAG_MODEL_FRAC,
     PRM_DRAG_MX,
     PRM_DRAG_MY,
+    PRM_DRAG_PULL_FRAC,
     PRM_DRAG_QX,
     PRM_DRAG_QY,
     PRM_DRAG_R,
@@ -60,9 +62,8 @@ from companion.ekf.layout import (
     AidSourceKind,
 )
 from companion.ekf.memory import FilterMemory
-from companion.ekf.output import take_up
 from companion.ekf.params import EstimatorParams
-from companion.ekf.update import dot, inject, mat_vec, row_update, set_aid_row
+from companion.ekf.update import dot, mat_vec, row_update_only, set_aid_row
 from tuavdefs.frames import Vec3, quat_to_matrix_kernel
 from tuavdefs.jit import entry_point, njit
 
@@ -154,13 +155,35 @@ def drag_prediction(x: np.ndarray, prm: np.ndarray, tfx: float, tfy: float, tfz:
 
 
 @njit
+def drag_noise_var(x: np.ndarray, prm: np.ndarray, tfx: float, tfy: float, tfz: float,
+                   px: float, py: float) -> tuple[float, float]:
+    """The variance [m^2/s^4] of the specific force's body x and y against the model whose
+    prediction is ``p*`` with the tether pulling ``tf*`` [N] (inertial): the noise's, plus
+    the drag's share times its model error (``PRM_DRAG_MODEL_FRAC``: the coefficients and
+    the mass are the companion's vehicle's, not the air's) and the pull's times its own
+    (``PRM_DRAG_PULL_FRAC``: the line's model, the mass), as standard deviations."""
+    (r00, r01, _), (r10, r11, _), (r20, r21, _) = quat_to_matrix_kernel(
+        (x[X_Q], x[X_Q + 1], x[X_Q + 2], x[X_Q + 3]))
+    minv = prm[PRM_MASS_INV]
+    ux = (r00 * tfx + r10 * tfy + r20 * tfz) * minv
+    uy = (r01 * tfx + r11 * tfy + r21 * tfz) * minv
+    fd, fp = prm[PRM_DRAG_MODEL_FRAC], prm[PRM_DRAG_PULL_FRAC]
+    r = prm[PRM_DRAG_R]
+    return (r + (fd * (px - ux)) ** 2 + (fp * ux) ** 2,
+            r + (fd * (py - uy)) ** 2 + (fp * uy) ** 2)
+
+
+@njit
 def fuse_drag_kernel(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
                      tfx: float, tfy: float, tfz: float) -> int:
     """The specific force's body x and y averaged since the last call (the prediction's
     sums, reset here) against the drag model with the tether pulling ``tf*`` [N]
     (inertial), at the current state. Gated as one (the larger axis's test ratio);
-    fused as two scalars, the correction taken up by the output. Returns FUSED,
-    REJECTED or NUMERIC (no sample summed, or numerically)."""
+    fused as two scalars into the wind states alone: every other state is considered
+    (its uncertainty in the innovation's variance, its estimate and covariance left as
+    they are), as EKF3 fuses drag into the wind only, so that where the model is off
+    (the truth's mass, the line's pull) it moves the wind, never the attitude or the
+    position. Returns FUSED, REJECTED or NUMERIC (no sample summed, or numerically)."""
     x = w[W_X:W_X + NX]
     prm = w[W_PRM:]
     sums = w[W_DRAG_SUM:W_DRAG_SUM + 3]
@@ -171,25 +194,27 @@ def fuse_drag_kernel(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.nda
     sums[0] = sums[1] = sums[2] = 0.0
     h = np.zeros((2, N_ERR))
     px, py = drag_prediction(x, prm, tfx, tfy, tfz, h)
-    r, gate = prm[PRM_DRAG_R], prm[PRM_DRAG_GATE]
+    r0, r1 = drag_noise_var(x, prm, tfx, tfy, tfz, px, py)
+    gate = prm[PRM_DRAG_GATE]
     y0, y1 = fx - px, fy - py
-    s0 = dot(h[0], mat_vec(P, h[0])) + r
-    s1 = dot(h[1], mat_vec(P, h[1])) + r
+    s0 = dot(h[0], mat_vec(P, h[0])) + r0
+    s1 = dot(h[1], mat_vec(P, h[1])) + r1
     ratio = max(y0 * y0 / (gate * gate * s0), y1 * y1 / (gate * gate * s1))
     set_aid_row(w, _DRAG, y0, y1, 0.0, s0, s1, 0.0, ratio)
     if ratio > 1.0:
         return REJECTED
-    before = w[W_X:W_X + 6].copy()
     dx = w[W_DX:W_DX + N_ERR]
     var_min = prm[PRM_VAR_MIN]
     res = FUSED
-    # the second axis's innovation against the state before the batch: row_update
+    # the second axis's innovation against the state before the batch: row_update_only
     # subtracts h dx (the first axis's correction)
-    for i, y in ((0, y0), (1, y1)):
-        if not row_update(P, dx, var_min, y, r, h[i], 0, 0):
+    for i, y, r in ((0, y0, r0), (1, y1, r1)):
+        if not row_update_only(P, dx, var_min, y, r, h[i], IDX_W, IDX_W + 2):
             res = NUMERIC
-    inject(x, dx, buf, meta)
-    take_up(w, before)
+    # only the wind moved: the rest of the state (and the output) untouched, to the bit
+    x[X_W] += dx[IDX_W]
+    x[X_W + 1] += dx[IDX_W + 1]
+    dx[IDX_W] = dx[IDX_W + 1] = 0.0
     return res
 
 
@@ -212,6 +237,8 @@ class DragControl:
         prm[PRM_DRAG_MY] = model.mcoef_y_1_s
         prm[PRM_MASS_INV] = 1.0 / model.mass_kg
         prm[PRM_DRAG_R] = params.drag.noise_m_s2 ** 2
+        prm[PRM_DRAG_MODEL_FRAC] = params.drag.model_error_fraction
+        prm[PRM_DRAG_PULL_FRAC] = params.drag.pull_error_fraction
         prm[PRM_DRAG_GATE] = status.policy.gate_sigma
         prm[PRM_WIND_HGT_SCALE] = params.drag.wind_walk_height_rate_scale
         #: whether the wind states are estimated (not inhibited)

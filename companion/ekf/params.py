@@ -119,6 +119,15 @@ class DragFusionParams(Params):
         0.5, "m/s^2", "drag fusion: noise of the specific force's body x and y against the "
         "drag model (vibration, gusts, the model's and the tether pull's error; EKF3's "
         "EK3_DRAG_M_NSE)", gt=0)
+    model_error_fraction: float = quantity(
+        0.2, "1", "drag fusion: the drag model's error as a fraction of the drag it "
+        "predicts (one standard deviation, added to the noise): its coefficients and mass "
+        "are the companion's vehicle's, a real vehicle's differ (its mass +-20 % in "
+        "robustness-gnss)", ge=0)
+    pull_error_fraction: float = quantity(
+        0.2, "1", "drag fusion: the tether pull's error as a fraction of the pull the "
+        "line's model gives (one standard deviation, added to the noise): the line's "
+        "weight and shape, the vehicle's mass it is divided by", ge=0)
     interval_s: float = quantity(
         0.1, "s", "drag fusion: the specific force averaged over this long, fused once per "
         "interval", gt=0, le=1.0)

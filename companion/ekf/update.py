@@ -176,6 +176,34 @@ def row_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: float
 
 
 @njit
+def row_update_only(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: float,
+                    h: np.ndarray, e0: int, e1: int) -> bool:
+    """:func:`row_update` with only the error states ``e0`` to ``e1 - 1`` estimated and
+    every other *considered* (Schmidt's update: their gain is zero, their uncertainty
+    enters the innovation's variance, their correlations with the estimated states are
+    kept right; their own covariance block is left as it is, to the bit)."""
+    n = P.shape[0]
+    pht = mat_vec(P, h)
+    yy = y - dot(h, dx)
+    s = dot(h, pht) + r
+    if not (s > 0.0) or not math.isfinite(s):
+        return False
+    inv = 1.0 / s
+    for k in range(e0, e1):
+        if pht[k] != 0.0 and P[k, k] - pht[k] * pht[k] * inv < var_min:
+            return False
+    for k in range(e0, e1):
+        dx[k] += pht[k] * inv * yy
+    for a in range(n):
+        ka = pht[a] * inv
+        ea = e0 <= a < e1
+        for b in range(n):
+            if ea or e0 <= b < e1:
+                P[a, b] -= ka * pht[b]
+    return True
+
+
+@njit
 def inject(x: np.ndarray, dx: np.ndarray, buf: np.ndarray, meta: np.ndarray) -> None:
     """Add the error-state correction ``dx`` to the nominal state (the attitude as
     ``q <- Exp(dtheta) q``), and its position and velocity to the buffered past states;
