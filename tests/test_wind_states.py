@@ -20,24 +20,27 @@ from companion.ekf.layout import (
     N_ERR,
     N_PRM,
     NX,
+    PRM_DRAG_ALL,
     PRM_DRAG_MX,
     PRM_DRAG_MY,
     PRM_DRAG_QX,
     PRM_DRAG_QY,
     PRM_MASS_INV,
+    W_DRAG_SUM,
     X_Q,
     X_V,
     X_W,
 )
 from sitl.sensors import SensorSuite, specific_force_flu
 from tests.ekf_harness import IMU_HZ, G, _attitude, _quat, circle, params_for, rtk_noise
-from tuavdefs.frames import euler_to_quat, quat_multiply, quat_to_euler
+from tuavdefs.frames import euler_to_quat, quat_multiply, quat_to_euler, quat_to_matrix
 from tuavdefs.params import VehicleParams
 
 RHO = 1.225
 VEH = VehicleParams()
 MODEL = DragModel.from_vehicle(VEH, RHO)
 ON = DragFusionParams(enabled=True)
+OFF = DragFusionParams(enabled=False)
 
 
 def _prm() -> np.ndarray:
@@ -181,10 +184,72 @@ def test_wind_inhibited_on_the_ground_and_before_drag_fusion():
     assert f.covariance[IDX_W, IDX_W] == pytest.approx(params.drag.wind_sigma_m_s ** 2)
     f.fuse_drag(3.1, False, (0.0, 0.0, 0.0))
     assert not f.wind_estimated and not np.any(f.covariance[IDX_W:IDX_W + 2, :])
-    with pytest.raises(ValueError):
-        NavFilter(params, G, (0.2, 0.0, -0.4))          # drag fusion needs the model
-    plain = NavFilter(EstimatorParams(), G, (0.2, 0.0, -0.4))
+    plain = NavFilter(EstimatorParams(drag=OFF), G, (0.2, 0.0, -0.4))
     assert not plain.drag_fusion and plain.wind_m_s == (0.0, 0.0, 0.0)
+
+
+def test_drag_fusion_is_the_default():
+    """EstimatorParams() fuses the drag (EKF3's way: WIND is the filter's); a filter built
+    without a drag model takes the companion's default vehicle's (the controllers' model,
+    the position loop's quadratic drag area and linear drag) in the default air."""
+    assert EstimatorParams().drag.enabled
+    f = NavFilter(EstimatorParams(), G, (0.2, 0.0, -0.4))
+    assert f.drag_fusion
+    prm = f._mem.prm
+    area, lin, mass = VEH.drag_area_m2, VEH.drag_coeff_n_s_m, VEH.mass_kg
+    for i, (q, m) in enumerate(((PRM_DRAG_QX, PRM_DRAG_MX), (PRM_DRAG_QY, PRM_DRAG_MY))):
+        assert prm[q] == pytest.approx(0.5 * RHO * area[i] / mass, rel=1e-12)
+        assert prm[m] == pytest.approx(lin[i] / mass, rel=1e-12)
+    assert prm[PRM_MASS_INV] == pytest.approx(1.0 / mass, rel=1e-12)
+
+
+def test_drag_fusion_moves_the_wind_alone():
+    """A drag fusion whose model is far off (the tether pulling 6 N sideways that the
+    model is told is 0): only the wind states and their covariance rows move; every other
+    state, its covariance block and the output stay as they were, to the bit (Schmidt's
+    update: the drag's model error never reaches the attitude or the position). The
+    innovation's variance holds the model's and the pull's error as fractions of what
+    they predict."""
+    params = params_for(rtk_noise(3), gnss_delay_s=0.0, drag=ON)
+    f, _ = _fly(lambda t: ((0.0, 0.0, 20.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.3),
+                (4.0, 0.0, 0.0), 6.0, params)
+    assert f.wind_estimated
+    mem = f._mem
+    for _ in range(10):     # the IMU's sums for the next fusion
+        mem.w[W_DRAG_SUM:W_DRAG_SUM + 3] += (0.3, -0.4, 1.0)
+    x0, P0, out0 = mem.x.copy(), mem.P.copy(), f.state()
+    t = 6.0 + params.drag.interval_s
+    pull = (0.0, 6.0, 0.0)
+    assert f.fuse_drag(t, True, pull)
+    rest = np.r_[0:IDX_W, IDX_W + 2:N_ERR]
+    xrest = np.r_[0:X_W, X_W + 2:NX]
+    assert np.array_equal(mem.x[xrest], x0[xrest])
+    assert np.array_equal(mem.P[np.ix_(rest, rest)], P0[np.ix_(rest, rest)])
+    assert f.state() == out0
+    assert not np.array_equal(mem.x[X_W:X_W + 2], x0[X_W:X_W + 2])
+    assert np.all(np.diag(mem.P)[IDX_W:IDX_W + 2] < np.diag(P0)[IDX_W:IDX_W + 2])
+    np.testing.assert_allclose(mem.P, mem.P.T, atol=0.0)
+    # the innovation's variance: H P H' + noise^2 + (f_d drag)^2 + (f_p pull)^2 per axis
+    h = np.zeros((2, N_ERR))
+    px, py = drag_prediction(x0, mem.prm, *pull, h)
+    R = quat_to_matrix(tuple(x0[X_Q:X_Q + 4]))
+    ub = np.asarray(R).T @ np.asarray(pull) / MODEL.mass_kg
+    dp = params.drag
+    row = f.aid_sources.drag
+    for i, pred in enumerate((px, py)):
+        noise = (dp.noise_m_s2 ** 2 + (dp.model_error_fraction * (pred - ub[i])) ** 2
+                 + (dp.pull_error_fraction * ub[i]) ** 2)
+        assert row.innovation_variance[i] == pytest.approx(h[i] @ P0 @ h[i] + noise,
+                                                           rel=1e-9)
+    # correct_navigation: the same measurement moves the velocity and the attitude too
+    mem.x[:], mem.P[:] = x0, P0
+    mem.prm[PRM_DRAG_ALL] = 1.0
+    for _ in range(10):
+        mem.w[W_DRAG_SUM:W_DRAG_SUM + 3] += (0.3, -0.4, 1.0)
+    assert f.fuse_drag(t + 0.5, True, pull)
+    assert not np.array_equal(mem.x[X_V:X_V + 3], x0[X_V:X_V + 3])
+    assert not np.array_equal(mem.x[X_Q:X_Q + 4], x0[X_Q:X_Q + 4])
+    assert EstimatorParams(drag=ON.replace(correct_navigation=True)).drag.correct_navigation
 
 
 @pytest.mark.parametrize("wind,yaw", [((6.0, 0.0, 0.0), 0.3), ((-3.0, 7.0, 0.0), 2.0)])
@@ -195,6 +260,27 @@ def test_hover_learns_the_wind(wind, yaw):
     _, w = _fly(lambda t: ((5.0, 3.0, 20.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), yaw), wind,
                 25.0, params)
     late = w[w[:, 0] > 18.0, 1:3]
+    err = late - np.asarray(wind[:2])
+    assert np.sqrt((err ** 2).sum(axis=1).mean()) < 0.3
+
+
+def test_a_wind_far_off_is_reset_to():
+    """A hover in 14 m/s: at the start (the wind states at 0) the model's slope is the
+    linear drag's alone, the innovation beyond the gate, so without a reset the wind is
+    never learnt; rejected for ``drag.reset_s`` the states are set to the wind the drag
+    model inverted says (once), and fusion then holds them to it."""
+    wind = (14.0, 0.0, 0.0)
+
+    def hover(t):
+        return (5.0, 3.0, 20.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.3
+
+    never = params_for(rtk_noise(3), gnss_delay_s=0.0, drag=ON.replace(reset_s=1e9))
+    f, w = _fly(hover, wind, 8.0, never)
+    assert f.aid_sources.drag.resets == 0 and np.all(w[:, 1:3] == 0.0)
+    params = params_for(rtk_noise(3), gnss_delay_s=0.0, drag=ON)
+    f, w = _fly(hover, wind, 12.0, params)
+    assert f.aid_sources.drag.resets == 1
+    late = w[w[:, 0] > 6.0, 1:3]
     err = late - np.asarray(wind[:2])
     assert np.sqrt((err ** 2).sum(axis=1).mean()) < 0.3
 
@@ -218,18 +304,19 @@ def test_circle_learns_the_wind():
 
 def test_wind_reported_is_the_filters():
     """WIND's source (Companion.wind_estimate) is the filter's wind states with drag
-    fusion, whatever the position loop's disturbance says."""
+    fusion (the default), whatever the position loop's disturbance says; without it the
+    disturbance's (0 on the ground)."""
     from companion.gains import FlightControlParams
     from companion.navigation import NavigationParams
     from companion.onboard import Companion
     from tuavdefs.params import SystemParams
 
-    c = Companion(SystemParams(), FlightControlParams(), NavigationParams(),
-                  EstimatorParams(drag=ON))
+    c = Companion(SystemParams(), FlightControlParams(), NavigationParams())
     c.filter._mem.x[X_W:X_W + 2] = (3.0, -4.0)
     assert c.wind_estimate() == (3.0, -4.0, 0.0)
     plain = Companion(SystemParams(), FlightControlParams(), NavigationParams(),
-                      EstimatorParams())
+                      EstimatorParams(drag=OFF))
+    assert not plain.filter.drag_fusion
     assert plain.wind_estimate() == (0.0, 0.0, 0.0)      # on the ground
 
 

@@ -98,7 +98,7 @@ def policies(p: EstimatorParams) -> dict[AidSourceKind, AidSourcePolicy]:
         k.CONST_POS: AidSourcePolicy(math.inf, math.inf, min_interval_s=CONST_POS_INTERVAL_S,
                                      interval_from=IntervalFrom.ATTEMPT),
         k.DRAG: AidSourcePolicy(p.drag.gate_sigma, 10.0 * p.drag.interval_s,
-                                min_interval_s=p.drag.interval_s,
+                                reset_s=p.drag.reset_s, min_interval_s=p.drag.interval_s,
                                 interval_from=IntervalFrom.ATTEMPT),
         k.TETHER_LINE: AidSourcePolicy(p.drag.tether_line.gate_sigma, p.tether_timeout_s,
                                        fail, p.tether_reset_s),

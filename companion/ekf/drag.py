@@ -39,6 +39,7 @@ from companion.ekf.layout import (
     N_ERR,
     NUMERIC,
     NX,
+    PRM_DRAG_ALL,
     PRM_DRAG_GATE,
     PRM_DRAG_MODEL_FRAC,
     PRM_DRAG_MX,
@@ -47,9 +48,11 @@ from companion.ekf.layout import (
     PRM_DRAG_QX,
     PRM_DRAG_QY,
     PRM_DRAG_R,
+    PRM_DRAG_RESET,
     PRM_MASS_INV,
     PRM_VAR_MIN,
     PRM_WIND_HGT_SCALE,
+    PRM_WIND_VAR0,
     PRM_WIND_WALK,
     REJECTED,
     W_DRAG_SUM,
@@ -62,10 +65,12 @@ from companion.ekf.layout import (
     AidSourceKind,
 )
 from companion.ekf.memory import FilterMemory
+from companion.ekf.output import take_up
 from companion.ekf.params import EstimatorParams
-from companion.ekf.update import dot, mat_vec, row_update_only, set_aid_row
+from companion.ekf.update import dot, inject, mat_vec, row_update, row_update_only, set_aid_row
 from tuavdefs.frames import Vec3, quat_to_matrix_kernel
 from tuavdefs.jit import entry_point, njit
+from tuavdefs.params import EnvironmentParams, VehicleParams
 
 _DRAG = int(AidSourceKind.DRAG)
 
@@ -97,6 +102,13 @@ class DragModel(NamedTuple):
         return cls(m / area[0] if area[0] > 0 else math.inf,
                    m / area[1] if area[1] > 0 else math.inf,
                    float(lin[0]) / m, float(lin[1]) / m, m, float(air_density_kg_m3))
+
+    @classmethod
+    def default_vehicle(cls) -> DragModel:
+        """The companion's default vehicle model (``VehicleParams()``) in its default air
+        (``EnvironmentParams()``): what a companion built on default parameters gives its
+        filter, for a filter built without a drag model."""
+        return cls.from_vehicle(VehicleParams(), EnvironmentParams().air_density_kg_m3)
 
 
 @njit
@@ -174,6 +186,43 @@ def drag_noise_var(x: np.ndarray, prm: np.ndarray, tfx: float, tfy: float, tfz: 
 
 
 @njit
+def wind_reset(x: np.ndarray, prm: np.ndarray, tfx: float, tfy: float, tfz: float,
+               fx: float, fy: float, P: np.ndarray) -> bool:
+    """The wind states set to the wind under which the drag model with the tether pulling
+    ``tf*`` [N] (inertial) predicts the specific force ``fx``, ``fy`` [m/s^2] (body x,
+    y) at the current attitude and velocity (Newton's method on the model's wind columns,
+    from the current wind), their covariance the prior's (``PRM_WIND_VAR0``, uncorrelated).
+    Returns False (nothing changed) if it does not converge to a finite wind."""
+    xx = x.copy()
+    h = np.zeros((2, N_ERR))
+    for _ in range(12):
+        px, py = drag_prediction(xx, prm, tfx, tfy, tfz, h)
+        e0, e1 = fx - px, fy - py
+        a, b, c, d = h[0, IDX_W], h[0, IDX_W + 1], h[1, IDX_W], h[1, IDX_W + 1]
+        det = a * d - b * c
+        if not abs(det) > 1e-9:
+            return False
+        du0, du1 = (d * e0 - b * e1) / det, (a * e1 - c * e0) / det
+        # a step at most 5 m/s: the model's curvature at low airspeed
+        step = math.sqrt(du0 * du0 + du1 * du1)
+        if step > 5.0:
+            du0, du1 = du0 * 5.0 / step, du1 * 5.0 / step
+        xx[X_W] += du0
+        xx[X_W + 1] += du1
+        if step < 1e-3:
+            break
+    px, py = drag_prediction(xx, prm, tfx, tfy, tfz, h)
+    if not (math.isfinite(xx[X_W]) and math.isfinite(xx[X_W + 1])
+            and abs(fx - px) < 0.05 and abs(fy - py) < 0.05):
+        return False
+    x[X_W], x[X_W + 1] = xx[X_W], xx[X_W + 1]
+    P[IDX_W:IDX_W + 2, :] = 0.0
+    P[:, IDX_W:IDX_W + 2] = 0.0
+    P[IDX_W, IDX_W] = P[IDX_W + 1, IDX_W + 1] = prm[PRM_WIND_VAR0]
+    return True
+
+
+@njit
 def fuse_drag_kernel(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.ndarray,
                      tfx: float, tfy: float, tfz: float) -> int:
     """The specific force's body x and y averaged since the last call (the prediction's
@@ -202,10 +251,22 @@ def fuse_drag_kernel(w: np.ndarray, P: np.ndarray, buf: np.ndarray, meta: np.nda
     ratio = max(y0 * y0 / (gate * gate * s0), y1 * y1 / (gate * gate * s1))
     set_aid_row(w, _DRAG, y0, y1, 0.0, s0, s1, 0.0, ratio)
     if ratio > 1.0:
+        if prm[PRM_DRAG_RESET] > 0.0 and wind_reset(x, prm, tfx, tfy, tfz, fx, fy, P):
+            prm[PRM_DRAG_RESET] = 0.0        # done (the caller records the reset)
+            set_aid_row(w, _DRAG, y0, y1, 0.0, s0, s1, 0.0, ratio)
+            return FUSED
         return REJECTED
     dx = w[W_DX:W_DX + N_ERR]
     var_min = prm[PRM_VAR_MIN]
     res = FUSED
+    if prm[PRM_DRAG_ALL] > 0.0:       # every state its Jacobian has (correct_navigation)
+        before = w[W_X:W_X + 6].copy()
+        for i, y, r in ((0, y0, r0), (1, y1, r1)):
+            if not row_update(P, dx, var_min, y, r, h[i], 0, 0):
+                res = NUMERIC
+        inject(x, dx, buf, meta)
+        take_up(w, before)
+        return res
     # the second axis's innovation against the state before the batch: row_update_only
     # subtracts h dx (the first axis's correction)
     for i, y, r in ((0, y0, r0), (1, y1, r1)):
@@ -241,6 +302,9 @@ class DragControl:
         prm[PRM_DRAG_PULL_FRAC] = params.drag.pull_error_fraction
         prm[PRM_DRAG_GATE] = status.policy.gate_sigma
         prm[PRM_WIND_HGT_SCALE] = params.drag.wind_walk_height_rate_scale
+        prm[PRM_WIND_VAR0] = params.drag.wind_sigma_m_s ** 2
+        prm[PRM_DRAG_RESET] = 0.0
+        prm[PRM_DRAG_ALL] = 1.0 if params.drag.correct_navigation else 0.0
         #: whether the wind states are estimated (not inhibited)
         self.active = False
         self._k = entry_point(fuse_drag_kernel, mem.w, mem.P, mem.buf, mem.meta, 0.0, 0.0,
@@ -263,7 +327,14 @@ class DragControl:
             return False
         st.time_last_attempt = t_s
         tx, ty, tz = tether_pull_n
+        # rejected for reset_s: the kernel resets the wind to the measurement if this one
+        # is rejected too
+        due = t_s - st.fail_since >= st.policy.reset_s
+        m.prm[PRM_DRAG_RESET] = 1.0 if due else 0.0
         res = self._k(m.w, m.P, m.buf, m.meta, float(tx), float(ty), float(tz))
+        if due and m.prm[PRM_DRAG_RESET] == 0.0:      # the kernel reset the wind
+            st.reset_done(t_s)
+            return True
         st.record(t_s, res)
         return res == FUSED
 

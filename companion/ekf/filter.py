@@ -80,9 +80,10 @@ class NavFilter:
     magnetic field it assumes [gauss] in the inertial frame (east, north, up: the
     declination and inclination are in it). Times are the companion's [s], monotonic.
     ``drag`` is the vehicle's drag model (the controllers' vehicle's), which drag fusion
-    (``params.drag.enabled``) needs; ``line`` the tether as the companion believes it and
-    ``attachment_m`` where it is attached [m] (body FLU), which the raw reading's fusion
-    (``params.drag.tether_line.enabled``) needs.
+    (``params.drag.enabled``, the default) uses (None: the companion's default vehicle's,
+    :meth:`~companion.ekf.drag.DragModel.default_vehicle`); ``line`` the tether as the
+    companion believes it and ``attachment_m`` where it is attached [m] (body FLU), which
+    the raw reading's fusion (``params.drag.tether_line.enabled``) needs.
     """
 
     #: The state the vehicle flies on (:meth:`companion.ekf.output.OutputPredictor.state`):
@@ -128,7 +129,7 @@ class NavFilter:
                              if p.tether_aid and p.tether_fix.gnss_check.enabled else None)
         self._zero_vel = ZeroVelocityControl(p, mem, src.zero_vel)
         if p.drag.enabled and drag is None:
-            raise ValueError("drag.enabled: the filter needs the vehicle's drag model")
+            drag = DragModel.default_vehicle()
         self._drag = (DragControl(p, mem, src.drag, drag) if p.drag.enabled else None)
         lp = p.drag.tether_line
         if lp.enabled and (line is None or not p.drag.enabled):

@@ -86,8 +86,9 @@ BUF_COLS = 7
  PRM_DRAG_GATE, PRM_LINE_GATE, PRM_LINE_W, PRM_LINE_C, PRM_LINE_EA, PRM_LINE_SHEAR,
  PRM_LINE_STEPS, PRM_ATTACH_X, PRM_ATTACH_Y, PRM_ATTACH_Z, PRM_LINE_SIG_L, PRM_LINE_SIG_T,
  PRM_LINE_SIG_T_FRAC, PRM_LINE_SIG_ANG, PRM_LINE_SIG_MIN, PRM_LINE_SIG_GUST,
- PRM_DRAG_MODEL_FRAC, PRM_DRAG_PULL_FRAC) = range(58)
-N_PRM = 58
+ PRM_DRAG_MODEL_FRAC, PRM_DRAG_PULL_FRAC, PRM_DRAG_RESET, PRM_WIND_VAR0, PRM_DRAG_ALL
+ ) = range(61)
+N_PRM = 61
 
 # ----- one aid source's status row (the AID block: a row per AidSourceKind)
 #: innovation (up to 3 axes; measurement - predicted), its variance, the gate's test ratio

@@ -110,11 +110,11 @@ class DragFusionParams(Params):
     (``[estimator.drag]``; docs/estimation.md §11)."""
 
     enabled: bool = quantity(
-        False, "", "fuse the accelerometer's body x and y against the vehicle's drag (its "
+        True, "", "fuse the accelerometer's body x and y against the vehicle's drag (its "
         "ballistic and momentum-drag coefficients from the companion's vehicle model, as "
         "EKF3's EK3_DRAG_BCOEF_X/Y and EK3_DRAG_MCOEF) and the tether's pull, and estimate "
-        "the horizontal wind as two states (EKF3's drag fusion; docs/estimation.md §11): "
-        "WIND is then the filter's")
+        "the horizontal wind as two states (EKF3's drag fusion; docs/estimation.md §11), "
+        "fused into those states alone (nothing else moves): WIND is then the filter's")
     noise_m_s2: float = quantity(
         0.5, "m/s^2", "drag fusion: noise of the specific force's body x and y against the "
         "drag model (vibration, gusts, the model's and the tether pull's error; EKF3's "
@@ -134,6 +134,18 @@ class DragFusionParams(Params):
     gate_sigma: float = quantity(
         5.0, "1", "drag fusion: innovation gate [standard deviations] (the two axes as one)",
         gt=0)
+    correct_navigation: bool = quantity(
+        False, "", "drag fusion: correct the velocity, attitude and accelerometer bias too "
+        "(every column of its Jacobian) instead of the wind states alone: the drag is then "
+        "a velocity aid in dead reckoning (hover-gnss-loss-windy's tight fusion holds its "
+        "GNSS loss with it), but where the model is off (the truth's mass, the line's pull) "
+        "it pulls the attitude (circle-gnss 0.0038 -> 0.0095 rad)")
+    reset_s: float = quantity(
+        1.0, "s", "drag fusion: rejected without a break this long, the wind states are "
+        "reset to the wind the measurement says (the drag model inverted at the current "
+        "attitude, velocity and pull; their prior's variance): the linearisation at a wind "
+        "far off (0 at the start in 10 m/s) makes the innovation's variance too small to "
+        "pass the gate", gt=0)
     wind_walk_m_s_sqrt_s: float = quantity(
         0.1, "m/s/sqrt(s)", "random walk of each horizontal wind state (the mean wind's "
         "drift; EKF3's EK3_WIND_P_NSE, as a density)", gt=0)
