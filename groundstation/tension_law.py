@@ -30,7 +30,8 @@ the set-point's: the drum renders to the line's true pull by itself). Lyapunov f
 While a length bound holds the line, the torque's ``T*`` follows the measured tension
 (anti-windup); below the slack floor the line is wound in towards L-bar (the slack
 floor's recovery; once the line has flown, within L-bar its slack is taken no faster
-than the slack approach, and the torque holds the tension the line has). The
+than the slack approach, the line paid out no faster than the slack pay-out, and the
+torque holds the tension the line has). The
 exit-elevation loop (:func:`exit_lift`) raises the force loop's
 set-point ``T* + dT`` while the guide arm reads the line leaving below L-bar's least exit
 angle and the drum follows its speed set-point: the windless catenary's ``T*``
@@ -50,8 +51,8 @@ from tuavdefs.jit import njit
 (Q_R_W, Q_BETA, Q_TAU_MAX, Q_V_MAX, Q_M_BAR, Q_RHO, Q_L_T, Q_R2, Q_I_ROTOR, Q_FILTER,
  Q_SP_FILTER, Q_GAIN, Q_CEIL, Q_CEIL_GAIN, Q_ACC_MAX, Q_CMD_FILTER, Q_K_W, Q_K_BOUND,
  Q_STIFFNESS, Q_FLOOR, Q_SP_MAX, Q_MARGIN, Q_BOUND_M, Q_LAG_S, Q_RECOVER, Q_LIFT_GAIN,
- Q_LIFT_MAX, Q_LIFT_LAG, Q_APPROACH, Q_LAY_HEIGHT, Q_HEAVY_MAX) = range(31)
-N_TENSION_PARAMS = 31
+ Q_LIFT_MAX, Q_LIFT_LAG, Q_APPROACH, Q_LAY_HEIGHT, Q_HEAVY_MAX, Q_PAYOUT) = range(32)
+N_TENSION_PARAMS = 32
 # indices of its state (Z_LIFT: the exit-elevation loop's raise of the set-point [N];
 # Z_LAID: the lower length bound's slack laid down and not yet given back [m],
 # groundstation.winder_host.tension_step)
@@ -171,7 +172,8 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     :func:`heavy_scale`);
     a slack line (below the floor) wound in towards ``recover_m`` [m] (NaN: none) at up to
     the recovery speed (once the line has flown, ``s[Z_LIFTED]``: within it no faster than
-    the slack approach, the torque on the measured tension),
+    the slack approach and paid out no faster than the slack pay-out, both towards
+    ``low_m``, the torque on the measured tension),
     the speed set-point filtered with its acceleration limit, then the backstepping
     torque. Returns the fields of a :class:`~groundstation.winder_control.WinderCommand`
     (torque [N m], tension error [N] in the length error's place, e_w [rad/s], the drum
@@ -213,14 +215,19 @@ def tension_law(p: np.ndarray, s: np.ndarray, dt_s: float, length_m: float,
     # (once the line has flown, within L-bar the force loop's wind-in on at most the slack
     # approach's rate towards the lower bound: a line that pulls nothing at the exit yet is
     # no longer than L-bar may be held up by the wind, its lowest segment loose over the
-    # winder, and the force loop's wind-in snapped it straight: 115 N; and the torque holds
-    # the tension the line has. Not before it has flown: on the take-off the set-point's
-    # torque pulls the line on the ground straight, which the winder's tether fix counts on)
+    # winder, and the force loop's wind-in snapped it straight: 115 N; and no pay-out beyond
+    # the slack pay-out's rate towards it, nor any while the UAV comes in: line paid out
+    # into a line that pulls nothing at the exit piles up in its loose lowest segment, and
+    # the node above it, dragged out by the line above, caught it taut: 53 N at 0.75 m of
+    # it; and the torque holds the tension the line has. Not before it has flown: on the
+    # take-off the set-point's torque pulls the line on the ground straight, which the
+    # winder's tether fix counts on)
     slack = (p[Q_FLOOR] - t_f) / p[Q_FLOOR]
     recovering = 0.0
     if slack > 0.0 and p[Q_RECOVER] > 0.0 and recover_m == recover_m:
         if s[Z_LIFTED] > 0.0 and length_m <= recover_m:
             v_rec = max(v0, low_rate_m_s - p[Q_APPROACH] * (length_m - low_m))
+            v_rec = min(v_rec, max(low_rate_m_s - p[Q_PAYOUT] * (length_m - low_m), 0.0))
             recovering = min(slack, 1.0)
             v0 += recovering * (v_rec - v0)
         else:

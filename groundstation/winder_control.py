@@ -114,6 +114,12 @@ class WinderControlParams(Params):
         "flown, its slack above the lower length bound is taken in at most this fast "
         "(relative to the UAV's radial speed): a line that pulls nothing at the exit may be "
         "held up by the wind, and its slack is all that keeps it from a snap", gt=0)
+    slack_payout_gain_1_s: float = quantity(
+        2.0, "1/s", "tension law: below the slack floor and within L-bar, once the line has "
+        "flown, the line is paid out no faster than the lower length bound moves less this "
+        "gain times the slack above it, and not at all while that is negative: line paid "
+        "out into a line that pulls nothing at the exit piles up in its lowest part, which "
+        "is caught taut (docs/control.md §8.2)", gt=0)
     lay_down_height_m: float = quantity(
         1.5, "m", "tension law: low and far (the chord under twice L-bar's least exit "
         "angle) and below twice this height the line is laid down towards the ground, "
@@ -230,6 +236,7 @@ class WinderController:
             q[tl.Q_LIFT_GAIN], q[tl.Q_LIFT_MAX] = g.exit_lift_gain_n_s_rad, g.exit_lift_max_n
             q[tl.Q_LIFT_LAG] = g.exit_lift_lag_m
             q[tl.Q_APPROACH] = g.slack_approach_gain_1_s
+            q[tl.Q_PAYOUT] = g.slack_payout_gain_1_s
             q[tl.Q_LAY_HEIGHT] = g.lay_down_height_m
             q[tl.Q_HEAVY_MAX] = g.tension_heavy_max
             self._q = q

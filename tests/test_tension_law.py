@@ -491,6 +491,53 @@ def test_the_exit_elevation_loop_waits_for_a_flown_line_and_a_following_drum():
     assert s[tl.Z_LIFT] == pytest.approx(gains.exit_lift_gain_n_s_rad * ref, rel=1e-9)
 
 
+def test_a_line_that_reads_slack_is_not_paid_out_into():
+    """Below the slack floor, once flown and within L-bar (docs/control.md §8.2): the drum
+    pays out no faster than the length law ``L_lo' - k_p s`` on the slack ``s`` above the
+    lower bound and never winds in for it while the vehicle goes away, so the slack the
+    vehicle takes at 1 m/s is not paid out again at L-bar's rate (the sweep's run 186: the
+    exit at 0 N, the drum at L-bar's 0.83 m/s, 0.74 m piled up in the exit segment).
+    The truth: the ideal law's slack on a drum that follows its speed set-point,
+    ``s' = -L_lo'`` down to ``L_lo'/k_p``, then ``-k_p s``, within the command filter's
+    lag."""
+    gains = WinderControlParams(law="tension")
+    wp, tp = WinderParams(), TetherParams()
+    p = WinderController(gains, wp, tp).tension_params()
+    r, dt, radial, ff = wp.drum_radius_m, 0.01, 1.0, 0.83
+    s = np.zeros(tl.N_TENSION_STATE)
+    length, low, lbar = 26.0, 25.0, 26.01
+    speeds, slacks = [], []
+    for k in range(400):
+        tl.tension_law(p, s, dt, length, ff / r if k == 0 else speeds[-1] / r, 0.0, 5.0,
+                       ff, low, radial, lbar + 3.0, lbar)
+        s[tl.Z_LIFTED] = 1.0                          # the line has flown
+        speeds.append(s[tl.Z_SPEED])
+        length += dt * s[tl.Z_SPEED]
+        low += dt * radial
+        lbar += dt * ff
+        slacks.append(length - low)
+    speeds, slacks = np.array(speeds), np.array(slacks)
+    assert speeds.min() >= 0.0                        # never wound in
+    assert np.all(np.diff(slacks) <= 1e-12)           # the slack only falls
+    t = dt * np.arange(1, 401)
+    k_p = gains.slack_payout_gain_1_s
+    knee = (1.0 - radial / k_p) / radial              # the ideal law's slack reaches L_lo'/k_p
+    ideal = np.where(t < knee, 1.0 - radial * t,
+                     radial / k_p * np.exp(-k_p * (t - knee)))
+    # the command filter pays out its 0.3 s lag at the start: 0.83 m/s * 0.3 s at most
+    assert np.all(slacks - ideal <= ff * gains.speed_filter_s)
+    assert slacks[-1] < 0.05
+    # without the bound (the law before), L-bar's rate is paid out into the slack line
+    p_old = p.copy()
+    p_old[tl.Q_PAYOUT] = 1e-9
+    s = np.zeros(tl.N_TENSION_STATE)
+    tl.tension_law(p_old, s, dt, 26.0, ff / r, 0.0, 5.0, ff, 25.0, radial, 29.0, 26.01)
+    s[tl.Z_LIFTED] = 1.0
+    for _ in range(100):
+        tl.tension_law(p_old, s, dt, 26.0, ff / r, 0.0, 5.0, ff, 25.0, radial, 29.0, 26.01)
+    assert s[tl.Z_SPEED] > 0.8
+
+
 # ---------------------------------------------------------------- low and far
 def test_the_string_slack_inverts_the_slack_tension():
     """:func:`string_slack_m` is :func:`slack_tension_n`'s inverse, and the lay-down share
