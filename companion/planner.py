@@ -49,6 +49,8 @@ import numpy as np
 from numpy.polynomial import polynomial as npoly
 from scipy.linalg.lapack import dgeev as _dgeev
 
+from tuavdefs.jit import F64, Signature, array, entry_point, njit
+
 QUINTIC_PEAK_SPEED = 15.0 / 8.0
 """Peak of ds/du for the quintic smoothstep s(u) = 10u^3 - 15u^4 + 6u^5."""
 QUINTIC_PEAK_ACC = 10.0 / math.sqrt(3.0)
@@ -104,6 +106,49 @@ def smoothstep5(x: float) -> float:
     return x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
 
 
+#: A one-dimensional piecewise polynomial's times and ends, as :func:`piecewise1_kernel`
+#: takes them (one float array), by index: its start and end [s], its value and three
+#: derivatives before the start, and after the end, then from PB_STARTS on the pieces'
+#: start times [s].
+PB_T0, PB_END, PB_FIRST, PB_FINAL, PB_STARTS = 0, 1, 2, 6, 10
+#: :func:`piecewise1_kernel`'s arguments, declared once: the time [s], the times and ends
+#: (PB_*), the pieces' coefficients by power, highest first (n, m, 4: the value's and its
+#: three derivatives', led by zeros to one length).
+PIECEWISE1_SIGNATURE = Signature(F64, array(), array(3))
+
+
+@njit
+def piece1_kernel(cols: np.ndarray, i: int, tau: float) -> tuple[float, float, float, float]:
+    """Piece ``i`` of a one-dimensional piecewise polynomial (coefficients ``cols`` as
+    :data:`PIECEWISE1_SIGNATURE` says) ``tau`` [s] after its start: the value and its
+    three derivatives, by Horner's steps (the zeros leading a shorter piece's leave the sum
+    at +0.0 for any finite ``tau``)."""
+    p = v = a = j = 0.0
+    for k in range(cols.shape[1]):
+        p = p * tau + cols[i, k, 0]
+        v = v * tau + cols[i, k, 1]
+        a = a * tau + cols[i, k, 2]
+        j = j * tau + cols[i, k, 3]
+    return p, v, a, j
+
+
+@njit
+def piecewise1_kernel(t: float, times: np.ndarray, cols: np.ndarray
+                      ) -> tuple[float, float, float, float]:
+    """A one-dimensional :class:`Piecewise` at absolute time ``t`` [s] (its arrays as
+    :data:`PIECEWISE1_SIGNATURE` says): the value and its three derivatives; held at the
+    final ones from the end on, the first ones up to the start."""
+    if t >= times[PB_END]:
+        return (times[PB_FINAL], times[PB_FINAL + 1], times[PB_FINAL + 2],
+                times[PB_FINAL + 3])
+    if t <= times[PB_T0]:
+        return (times[PB_FIRST], times[PB_FIRST + 1], times[PB_FIRST + 2],
+                times[PB_FIRST + 3])
+    starts = times[PB_STARTS:]
+    i = np.searchsorted(starts, t, side="right") - 1
+    return piece1_kernel(cols, i, t - starts[i])
+
+
 Piece = tuple[float, np.ndarray]
 """One polynomial piece: (duration [s], ascending coefficients (ndim, degree + 1) in local
 time [s] from the piece's start)."""
@@ -115,7 +160,9 @@ class Piecewise:
     ``final_pos`` (default: where the last piece ends) after its end ``end`` [s]."""
 
     __slots__ = ("t0", "end", "ndim", "_starts", "_durs", "_p", "_v", "_a", "_j", "_cols3",
-                 "_cols1", "_first", "_final")
+                 "_first", "_final", "times1", "cols1")
+    #: piecewise1_kernel's entry point (on the class: an instance still pickles)
+    _eval1: Callable[..., tuple[float, float, float, float]] | None = None
 
     def __init__(self, t0: float, pieces: list[Piece], final_pos: tuple[float, ...] | None,
                  ndim: int) -> None:
@@ -144,26 +191,32 @@ class Piecewise:
                               (self._p, self._v, self._a, self._j)])
                        for i in range(len(self._starts))] if ndim == 3 else []
         # in one dimension, the four derivatives' coefficients by power (the shorter ones
-        # led by zeros, whose steps leave the sum at +0.0, as it starts) for one loop
-        self._cols1 = [list(zip(*(_lead_zeros(store[i][0], len(self._p[i][0]))
-                                  for store in (self._p, self._v, self._a, self._j)),
-                                strict=True))
-                       for i in range(len(self._starts))] if ndim == 1 else []
+        # led by zeros, whose steps leave the sum at +0.0, as it starts) for
+        # piecewise1_kernel: (n, m, 4), the pieces led by zeros to the longest's length
+        self.times1 = self.cols1 = None
+        if ndim == 1 and self._starts:
+            m = max(len(self._p[i][0]) for i in range(len(self._starts)))
+            self.cols1 = np.ascontiguousarray(np.array(
+                [list(zip(*(_lead_zeros(store[i][0], m)
+                            for store in (self._p, self._v, self._a, self._j)), strict=True))
+                 for i in range(len(self._starts))], dtype=float).reshape(-1, m, 4))
+            if Piecewise._eval1 is None:
+                Piecewise._eval1 = staticmethod(  # type: ignore[assignment]
+                    entry_point(piecewise1_kernel, PIECEWISE1_SIGNATURE))
         self.end = t
         zeros = (0.0,) * ndim
         if final_pos is None:
             final_pos = self._eval_piece(len(pieces) - 1, self._durs[-1])[0] if pieces else zeros
         self._final = (tuple(final_pos), zeros, zeros, zeros)
         self._first = self._eval_piece(0, 0.0) if pieces else self._final
+        if self.cols1 is not None:
+            #: the times and ends as piecewise1_kernel takes them (PB_*), in one dimension
+            self.times1 = np.array([self.t0, self.end, *(x for (x,) in self._first),
+                                    *(x for (x,) in self._final), *self._starts], dtype=float)
 
     def _eval_piece(self, i: int, tau: float) -> tuple[tuple[float, ...], ...]:
         if self.ndim == 1:  # the common scalar case (arc length): _horner's steps, at once
-            p = v = a = j = 0.0
-            for cp, cv, ca, cj in self._cols1[i]:
-                p = p * tau + cp
-                v = v * tau + cv
-                a = a * tau + ca
-                j = j * tau + cj
+            p, v, a, j = piece1_kernel(self.cols1, i, tau)
             return ((p,), (v,), (a,), (j,))
         if self.ndim == 3:  # positions: the three axes together
             p, v, a, j = self._cols3[i]
@@ -175,12 +228,23 @@ class Piecewise:
 
     def eval(self, t: float) -> tuple[tuple[float, ...], ...]:
         """(position, velocity, acceleration, jerk) at absolute time t."""
+        if self.cols1 is not None:
+            p, v, a, j = self._eval1(t, self.times1, self.cols1)
+            return ((p,), (v,), (a,), (j,))
         if t >= self.end:
             return self._final
         if t <= self.t0:
             return self._first
         i = bisect.bisect_right(self._starts, t) - 1
         return self._eval_piece(i, t - self._starts[i])
+
+    def eval1(self, t: float) -> tuple[float, float, float, float]:
+        """In one dimension: (value, its first, second and third derivative) at absolute
+        time t, flat."""
+        if self.cols1 is None:
+            (p,), (v,), (a,), (j,) = self._final
+            return p, v, a, j
+        return self._eval1(t, self.times1, self.cols1)
 
     def knots(self) -> list[float]:
         """Absolute times [s] at which the pieces join, start and end included."""

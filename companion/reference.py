@@ -32,7 +32,7 @@ from __future__ import annotations
 import bisect
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import NamedTuple
 
 import numpy as np
@@ -45,10 +45,13 @@ from companion.planner import (
     Piece,
     Piecewise,
     pieces_peaks,
+    piecewise1_kernel,
     plan_to_rest,
     smoothstep5,
 )
+from tuavdefs import jit
 from tuavdefs.frames import wrap_pi
+from tuavdefs.jit import entry_point, njit
 
 Vec3 = tuple[float, float, float]
 """A point or vector in the inertial frame (x east, y north, z up)."""
@@ -233,8 +236,8 @@ class Transition(Trajectory):
 
     def _sample(self, t_s: float) -> RefSample:
         p, v, a, j = self._pos.eval(t_s)
-        y, yr, _, _ = self._yaw.eval(t_s)
-        return _new(RefSample, (p, v, a, j, wrap_pi(y[0]), yr[0]))
+        y, yr, _, _ = self._yaw.eval1(t_s)
+        return _new(RefSample, (p, v, a, j, wrap_pi(y), yr))
 
     def yaw_acc_rad_s2(self, t_s: float) -> float:
         return self._yaw.eval(t_s)[2][0]
@@ -311,6 +314,36 @@ class Line(Trajectory):
         return _new(RefSample, (p, v, a, j, self.final_yaw_rad, 0.0))
 
 
+#: A circle's geometry as :func:`circle_kernel` takes it (a tuple of floats), by index: the
+#: start angle [rad], the turn per metre of arc (+-1 / radius) [rad/m], the radius [m],
+#: the centre's x and y [m].
+CG_THETA0, CG_K, CG_R, CG_CX, CG_CY, N_CG = range(6)
+#: :func:`circle_kernel`'s arguments, declared once: the time [s], the arc's piecewise
+#: polynomial (:data:`companion.planner.PIECEWISE1_SIGNATURE`'s arrays), the geometry
+#: (CG_*).
+CIRCLE_SIGNATURE = jit.Signature(jit.F64, jit.array(), jit.array(3), jit.vec(N_CG))
+
+
+@njit
+def circle_kernel(t_s: float, times: np.ndarray, cols: np.ndarray,
+                  geometry: tuple[float, ...]) -> tuple[float, ...]:
+    """:class:`Circle`'s sample at ``t_s`` [s] in the plane (module docstring): the
+    position's, velocity's, acceleration's and jerk's x and y [m, m/s, m/s^2, m/s^3], the
+    angle on the circle [rad] and its rate [rad/s]."""
+    s, sd, sdd, sddd = piecewise1_kernel(t_s, times, cols)
+    r, k = geometry[CG_R], geometry[CG_K]
+    th = geometry[CG_THETA0] + k * s
+    w, al, ze = k * sd, k * sdd, k * sddd
+    c, sn = math.cos(th), math.sin(th)
+    rw2 = r * w * w
+    tj = r * (ze - w * w * w)
+    rj = 3.0 * r * w * al
+    return (geometry[CG_CX] + r * c, geometry[CG_CY] + r * sn,
+            -r * w * sn, r * w * c,
+            -r * al * sn - rw2 * c, r * al * c - rw2 * sn,
+            -tj * sn - rj * c, tj * c - rj * sn, th, w)
+
+
 class Circle(Trajectory):
     """The circular trajectory: radius ``radius_m`` [m] about ``centre_xy`` [m] at
     ``altitude_m`` [m], starting at rest at ``start_angle_rad`` (from +x toward +y) at
@@ -327,6 +360,9 @@ class Circle(Trajectory):
     ``max_acc_m_s2`` [m/s^2]: either ``speed^2 / radius`` itself, or its sum with the
     lead-in's tangential acceleration (the message gives the shortest lead-in that works).
     """
+
+    #: circle_kernel's entry point (on the class: an instance still pickles)
+    _sample: Callable[..., tuple[float, ...]] | None = None
 
     def __init__(self, centre_xy: Iterable[float], radius_m: float, altitude_m: float,
                  speed_m_s: float, t0: float, lead_in_s: float = 5.0,
@@ -379,6 +415,10 @@ class Circle(Trajectory):
             pieces.append(_ramp_pieces(V, Tr, arc_len - 0.5 * V * Tr, up=False))
             final = (arc_len,)
         self._arc = Piecewise(t0, pieces, final, 1)
+        self._geometry = (self._theta0, self._sgn / r, r, *self.centre_xy_m)
+        if Circle._sample is None:
+            Circle._sample = staticmethod(  # type: ignore[assignment]
+                entry_point(circle_kernel, CIRCLE_SIGNATURE))
         self.start_s = t0
         self.end_s = self._arc.end
         self.knots_s = tuple(k for k in self._arc.knots() if math.isfinite(k))
@@ -442,24 +482,15 @@ class Circle(Trajectory):
         return hi
 
     def sample(self, t_s: float) -> RefSample:
-        (s,), (sd,), (sdd,), (sddd,) = self._arc.eval(t_s)
-        r, k = self.radius_m, self._sgn / self.radius_m
-        th = self._theta0 + k * s
-        w, al, ze = k * sd, k * sdd, k * sddd
-        c, sn = math.cos(th), math.sin(th)
-        cx, cy = self.centre_xy_m
-        rw2 = r * w * w
-        tj = r * (ze - w * w * w)
-        rj = 3.0 * r * w * al
+        arc = self._arc
+        x, y, vx, vy, ax, ay, jx, jy, th, w = self._sample(t_s, arc.times1, arc.cols1,
+                                                           self._geometry)
         if self.face_travel:
             yaw, yaw_rate = wrap_pi(th + self._sgn * 0.5 * math.pi), w
         else:
             yaw, yaw_rate = self._yaw, 0.0
-        return _new(RefSample, ((cx + r * c, cy + r * sn, self.altitude_m),
-                                (-r * w * sn, r * w * c, 0.0),
-                                (-r * al * sn - rw2 * c, r * al * c - rw2 * sn, 0.0),
-                                (-tj * sn - rj * c, tj * c - rj * sn, 0.0),
-                                yaw, yaw_rate))
+        return _new(RefSample, ((x, y, self.altitude_m), (vx, vy, 0.0), (ax, ay, 0.0),
+                                (jx, jy, 0.0), yaw, yaw_rate))
 
     def yaw_acc_rad_s2(self, t_s: float) -> float:
         if not self.face_travel:
