@@ -87,8 +87,8 @@ class WinderStep(NamedTuple):
 
 _command = WinderCommand._make
 
-# Named indices of the step's input records (one record a concern, float64 arrays the host
-# owns and fills before each call)
+# Named indices of the step's input records (one record a concern: tuples of floats built
+# for each call)
 #: the UAV as the vehicle reports it: position [m], velocity [m/s], z-up from the exit
 U_PX, U_PY, U_PZ, U_VX, U_VY, U_VZ = range(6)
 N_UAV = 6
@@ -103,12 +103,10 @@ N_FIX = 5
 
 
 class StepRecords(NamedTuple):
-    """:func:`winder_step`'s arguments, in its order: the one declared signature its entry
-    point is compiled for and every call passes (the arrays filled in place)."""
+    """:func:`winder_step`'s arguments after its three per-call records (the UAV, the
+    measurements, the fix: tuples of floats), in its order: the arrays it reads and
+    advances in place."""
 
-    uav: np.ndarray             #: U_* (N_UAV)
-    measured: np.ndarray        #: M_* (N_MEASURED)
-    fix: np.ndarray             #: F_* (N_FIX)
     lbar_p: np.ndarray          #: L-bar's parameters, groundstation.lbar.LB_*
     lbar_s: np.ndarray          #: L-bar's state, groundstation.lbar.LS_* (advanced)
     law_p: np.ndarray           #: the length law's packed gains and drum model
@@ -119,10 +117,9 @@ class StepRecords(NamedTuple):
 
 
 class TensionRecords(NamedTuple):
-    """:func:`tension_step`'s arguments, in its order (the arrays filled in place)."""
+    """:func:`tension_step`'s arguments after its two per-call records (the UAV, the
+    measurements), in its order (the arrays advanced in place)."""
 
-    uav: np.ndarray             #: U_* (N_UAV)
-    measured: np.ndarray        #: M_* (N_MEASURED)
     lbar_p: np.ndarray          #: L-bar's parameters, groundstation.lbar.LB_*
     lbar_s: np.ndarray          #: L-bar's state, groundstation.lbar.LS_* (advanced)
     law_p: np.ndarray           #: the tension law's packed parameters (tension_law.Q_*)
@@ -142,19 +139,18 @@ class WinderHost:
         self.lbar = LBarEstimator(lbar, tether.weight_per_length_n_m(gravity_m_s2))
         self.controller = WinderController(gains, winder, tether)
         ctl = self.controller
-        self._uav = np.zeros(N_UAV)
-        self._measured = np.zeros(N_MEASURED)
-        self._fix = np.zeros(N_FIX)
         # load (or compile) the step's machine code now, not at the first encoder frame,
         # and call it without numba's dispatch (the arguments' types never change)
         self._rec: StepRecords | None = None
-        self._step = entry_point(winder_step, *self._args())
+        self._step = entry_point(winder_step, (0.0,) * N_UAV, (0.0,) * N_MEASURED,
+                                 (0.0,) * N_FIX, *self._args())
         self._tension = None
         #: the tension law's step's arguments as last built (again when the controller
         #: repacks its gains: :meth:`_tension_args`)
         self._tension_rec: TensionRecords | None = None
         if ctl.law is WinderLaw.TENSION:
-            self._tension = entry_point(tension_step, *self._tension_args())
+            self._tension = entry_point(tension_step, (0.0,) * N_UAV, (0.0,) * N_MEASURED,
+                                        *self._tension_args())
 
     @property
     def takes_fix(self) -> bool:
@@ -166,15 +162,14 @@ class WinderHost:
     def _records(self) -> StepRecords:
         """The step's arguments now (the controller's packed gains as they stand)."""
         lb, ctl = self.lbar, self.controller
-        return StepRecords(self._uav, self._measured, self._fix, lb.packed, lb.state,
-                           ctl.params(), ctl.state, lb.trim_params, lb.trim_state, self.dt_s)
+        return StepRecords(lb.packed, lb.state, ctl.params(), ctl.state, lb.trim_params,
+                           lb.trim_state, self.dt_s)
 
     def _tension_records(self) -> TensionRecords:
         """The tension law's step's arguments now."""
         lb, ctl = self.lbar, self.controller
-        return TensionRecords(self._uav, self._measured, lb.packed, lb.state,
-                              ctl.tension_params(), ctl.tension_state, lb.trim_params,
-                              lb.trim_state, self.dt_s)
+        return TensionRecords(lb.packed, lb.state, ctl.tension_params(), ctl.tension_state,
+                              lb.trim_params, lb.trim_state, self.dt_s)
 
     def _args(self) -> StepRecords:
         """:meth:`_records`, built again only when the controller has repacked its
@@ -210,31 +205,28 @@ class WinderHost:
         floor or join; the step's length is the measured one plus the drum's lag behind
         its speed set-point, its rate that set-point."""
         ctl = self.controller
-        u, m = self._uav, self._measured
-        u[U_PX], u[U_PY], u[U_PZ] = uav_pos_m
-        u[U_VX], u[U_VY], u[U_VZ] = uav_vel_m_s
-        m[M_LENGTH], m[M_OMEGA], m[M_TENSION] = length_m, omega_rad_s, drum_tension_n
-        m[M_ELEVATION] = exit_elevation_rad
+        px, py, pz = uav_pos_m
+        vx, vy, vz = uav_vel_m_s
+        u = (px, py, pz, vx, vy, vz)
+        m = (length_m, omega_rad_s, drum_tension_n, exit_elevation_rad)
         if self._tension is not None:
             # the tension law: the join's gap, the trim, the lead and the fix's floor are
             # the length law's; the paper's law's filter starts afresh when it next runs
             if ctl.state[S_STARTED]:     # (a filter not started is all zeros)
                 ctl.state[:] = 0.0
-            ref_m, rate, cmd = self._tension(*self._tension_args())
+            ref_m, rate, cmd = self._tension(u, m, *self._tension_args())
             return WinderStep(cmd[0], ref_m, rate, _command(cmd))
         ctl.tension_state[Z_STARTED] = 0.0
-        f = self._fix
-        if fix_m is None:
-            f[F_X] = f[F_Y] = f[F_Z] = math.nan
-        else:
-            f[F_X], f[F_Y], f[F_Z] = fix_m
-        f[F_JOIN], f[F_JOIN_RATE] = join_m, join_rate_m_s
-        lbar_m, rate, cmd = self._step(*self._args())
+        nan = math.nan
+        fx, fy, fz = (nan, nan, nan) if fix_m is None else fix_m
+        lbar_m, rate, cmd = self._step(u, m, (fx, fy, fz, join_m, join_rate_m_s),
+                                       *self._args())
         return WinderStep(cmd[0], lbar_m, rate, _command(cmd))
 
 
 @njit
-def winder_step(uav: np.ndarray, measured: np.ndarray, fix: np.ndarray, lbar_p: np.ndarray,
+def winder_step(uav: tuple[float, ...], measured: tuple[float, ...], fix: tuple[float, ...],
+                lbar_p: np.ndarray,
                 lbar_s: np.ndarray, law_p: np.ndarray, law_s: np.ndarray,
                 trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float
                 ) -> tuple[float, float, tuple[float, float, float, float, float, bool]]:
@@ -298,7 +290,7 @@ def winder_step(uav: np.ndarray, measured: np.ndarray, fix: np.ndarray, lbar_p: 
 
 
 @njit
-def tension_step(uav: np.ndarray, measured: np.ndarray, lbar_p: np.ndarray,
+def tension_step(uav: tuple[float, ...], measured: tuple[float, ...], lbar_p: np.ndarray,
                  lbar_s: np.ndarray, law_p: np.ndarray, law_s: np.ndarray,
                  trim_p: np.ndarray, trim_s: np.ndarray, dt_s: float
                  ) -> tuple[float, float, tuple[float, float, float, float, float, bool]]:
