@@ -74,6 +74,15 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
     'companion.governor.slow_rate_kernel': [
         ('UniTuple(float64, 19)', 'UniTuple(float64, 5)',),
     ],
+    'companion.planner.piece1_kernel': [
+        ('float64[:, :, ::1]', 'int64', 'float64',),
+    ],
+    'companion.planner.piecewise1_kernel': [
+        ('float64', 'float64[::1]', 'float64[:, :, ::1]',),
+    ],
+    'companion.reference.circle_kernel': [
+        ('float64', 'float64[::1]', 'float64[:, :, ::1]', 'UniTuple(float64, 5)',),
+    ],
     'companion.tether_model.estimate_kernel': [
         ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'bool', 'float64',),
     ],
@@ -85,12 +94,13 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
         'float64',),
     ],
     'groundstation.winder_host.tension_step': [
-        ('float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]',
-        'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64',),
+        ('UniTuple(float64, 6)', 'UniTuple(float64, 4)', 'float64[::1]', 'float64[::1]',
+        'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64',),
     ],
     'groundstation.winder_host.winder_step': [
-        ('float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]',
-        'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64',),
+        ('UniTuple(float64, 6)', 'UniTuple(float64, 4)', 'UniTuple(float64, 5)', 'float64[::1]',
+        'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]', 'float64[::1]',
+        'float64',),
     ],
     'sitl.batch.batch_kernel': [
         ('uint8[::1]', 'Tuple((int64, bool, float64, float64, int64, int64, int64, ))',
