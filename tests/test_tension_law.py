@@ -120,6 +120,20 @@ law = "{law}"
 """
 
 
+def _moorpy_at_exit_tension(h: float, z: float, ea: float, w: float, tension_n: float,
+                            upper: float) -> tuple[float, tuple[float, ...]]:
+    """MoorPy's catenary from the exit to (``h``, ``z``) [m] of the length [m] whose tension
+    at the exit is ``tension_n`` [N] (between 1.0001 and ``upper`` times the chord): that
+    length and the end forces ``moorpy_catenary`` returns for it."""
+    def exit_tension(length: float) -> float:
+        f = moorpy_catenary(h, z, length, ea, w, CB=0)
+        return math.hypot(f[0], f[1]) - tension_n
+
+    chord = math.hypot(h, z)
+    length = brentq(exit_tension, chord * 1.0001, chord * upper)
+    return length, moorpy_catenary(h, z, length, ea, w, CB=0)
+
+
 def _radial(start, goal, speed, acc, duration, extra=""):
     return f"""name = "snap"
 description = "a snap case"
@@ -317,14 +331,7 @@ def test_steady_hover_holds_the_set_point_and_moorpy_agrees_on_the_exit_angle():
     h = math.hypot(x, y)
     ea = TetherParams().axial_stiffness_n
     w = TetherParams().weight_per_length_n_m(sc.model().environment.gravity_m_s2)
-
-    def exit_tension(length):
-        f = moorpy_catenary(h, z, length, ea, w, CB=0)
-        return math.hypot(f[0], f[1]) - setpoint
-
-    chord = math.hypot(h, z)
-    length = brentq(exit_tension, chord * 1.0001, chord * 1.2)
-    f = moorpy_catenary(h, z, length, ea, w, CB=0)
+    length, f = _moorpy_at_exit_tension(h, z, ea, w, setpoint, 1.2)
     elevation = math.atan2(f[1], f[0])
     measured = winch.exit_angle[1]
     assert measured == pytest.approx(elevation, abs=0.01)   # the arm's bias is 2 mrad (1 sigma)
@@ -600,12 +607,5 @@ def test_the_set_point_holds_a_heavier_line_off_the_ground(ratio):
     setpoint = tl.tension_setpoint_n(q, a, x, z, w, lbar.min_slack_m, 1.0, heavy)
     assert setpoint <= 2.0 * q[tl.Q_SP_MAX] + 1e-9
     ea = TetherParams().axial_stiffness_n
-
-    def exit_tension(length):
-        f = moorpy_catenary(x, z, length, ea, w, CB=0)
-        return math.hypot(f[0], f[1]) - setpoint
-
-    chord = math.hypot(x, z)
-    length = brentq(exit_tension, chord * 1.0001, chord * 1.5)
-    f = moorpy_catenary(x, z, length, ea, w, CB=0)
+    _, f = _moorpy_at_exit_tension(x, z, ea, w, setpoint, 1.5)
     assert math.atan2(f[1], f[0]) >= lbar.min_exit_angle_rad

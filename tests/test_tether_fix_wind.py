@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from chunk_socket import ChunkSocket
 from lumped_util import settled_exit
 
 from groundstation.tether_fix import ReportedWind, TetherFixer, TetherFixParams
@@ -101,19 +102,6 @@ def test_the_winch_takes_the_vehicles_wind_at_its_reported_time_and_height():
     assert wy == 0.0
 
 
-class _Chunks:
-    """A socket handing out pre-cut chunks to ``WinchLinkClient.poll``."""
-
-    def __init__(self, chunks: list[bytes]) -> None:
-        self.chunks = chunks
-
-    def recv(self, size: int) -> bytes:
-        return self.chunks.pop(0)
-
-    def sendall(self, data: bytes) -> None:
-        pass
-
-
 def test_the_component_link_carries_the_vehicles_wind():
     """The companion's ``WIND_COV`` (NED, as pymavlink packs it) reaches the winch's link
     as the z-up wind it was made of (to float32), beside a position; a wind that is not
@@ -128,7 +116,7 @@ def test_the_component_link_carries_the_vehicles_wind():
     m = cl.wind_message(0, wind)
     assert (m.wind_x, m.wind_y, m.wind_z) == (-1.5, 3.25, -0.125)      # NED
     client = WinchLinkClient("127.0.0.1:9")
-    client.sock, client._last_heartbeat = _Chunks(list(frames)), 1e18
+    client.sock, client._last_heartbeat = ChunkSocket(list(frames)), 1e18
     assert client.uav_wind() is None
     client.poll()
     assert client.winds_received == 1

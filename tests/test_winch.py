@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from chunk_socket import ChunkSocket
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink2
@@ -824,19 +825,6 @@ def test_local_positions_is_pymavlinks_decoding_or_declines():
         assert local_positions(declined) is None
 
 
-class _FakeSocket:
-    """Hands out pre-cut chunks of a stream to :meth:`WinchLinkClient.poll`."""
-
-    def __init__(self, chunks: list[bytes]) -> None:
-        self.chunks = chunks
-
-    def recv(self, size: int) -> bytes:
-        return self.chunks.pop(0)
-
-    def sendall(self, data: bytes) -> None:
-        pass
-
-
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.integers(0, 5), min_size=1, max_size=14), st.data())
 def test_the_client_reads_the_same_with_and_without_the_fast_path(order, data):
@@ -851,7 +839,7 @@ def test_the_client_reads_the_same_with_and_without_the_fast_path(order, data):
     clients = []
     for fast in (True, False):
         c = WinchLinkClient("127.0.0.1:9")
-        c.sock, c._last_heartbeat = _FakeSocket(list(chunks)), 1e18
+        c.sock, c._last_heartbeat = ChunkSocket(list(chunks)), 1e18
         seen = []
         for _ in chunks:
             if fast:

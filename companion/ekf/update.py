@@ -146,6 +146,20 @@ def dot(a: np.ndarray, b: np.ndarray) -> float:
 
 
 @njit
+def _row_innovation(P: np.ndarray, dx: np.ndarray, y: float, r: float, h: np.ndarray
+                    ) -> tuple[np.ndarray, float, float]:
+    """For a scalar reading ``y`` with noise variance ``r`` and Jacobian row ``h``: ``P h'``,
+    the innovation ``y - h dx`` and ``1/s`` for its variance ``s = h P h' + r`` (0 where
+    ``s`` is not positive and finite: the reading is not fused)."""
+    pht = mat_vec(P, h)
+    yy = y - dot(h, dx)
+    s = dot(h, pht) + r
+    if not (s > 0.0) or not math.isfinite(s):
+        return pht, yy, 0.0
+    return pht, yy, 1.0 / s
+
+
+@njit
 def row_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: float,
                h: np.ndarray, c0: int, c1: int) -> bool:
     """:func:`scalar_update` with a dense Jacobian row ``h``; the error states ``c0`` to
@@ -153,12 +167,9 @@ def row_update(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: float
     uncertainty still enters the innovation's variance and their correlations are kept
     right)."""
     n = P.shape[0]
-    pht = mat_vec(P, h)
-    yy = y - dot(h, dx)
-    s = dot(h, pht) + r
-    if not (s > 0.0) or not math.isfinite(s):
+    pht, yy, inv = _row_innovation(P, dx, y, r, h)
+    if inv == 0.0:
         return False
-    inv = 1.0 / s
     for k in range(n):
         if (pht[k] != 0.0 and not c0 <= k < c1
                 and P[k, k] - pht[k] * pht[k] * inv < var_min):
@@ -183,12 +194,9 @@ def row_update_only(P: np.ndarray, dx: np.ndarray, var_min: float, y: float, r: 
     enters the innovation's variance, their correlations with the estimated states are
     kept right; their own covariance block is left as it is, to the bit)."""
     n = P.shape[0]
-    pht = mat_vec(P, h)
-    yy = y - dot(h, dx)
-    s = dot(h, pht) + r
-    if not (s > 0.0) or not math.isfinite(s):
+    pht, yy, inv = _row_innovation(P, dx, y, r, h)
+    if inv == 0.0:
         return False
-    inv = 1.0 / s
     for k in range(e0, e1):
         if pht[k] != 0.0 and P[k, k] - pht[k] * pht[k] * inv < var_min:
             return False
