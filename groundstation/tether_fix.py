@@ -94,7 +94,7 @@ class TetherFixParams(Params):
         "beyond this fraction off the belief (within it the belief, which is exact when "
         "the line is as designed, holds)", ge=0)
     weight_height_sigma_m: float = quantity(
-        1.0, "m", "the error of the vehicle's reported height that the winder's weight "
+        0.3, "m", "the error of the vehicle's reported height that the winder's weight "
         "estimate inherits (its bias: the estimate's low-pass takes out the noise); the "
         "band widens to the weight error this makes (weight_spread)", ge=0)
     design_wind_m_s: float = quantity(
