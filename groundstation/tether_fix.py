@@ -68,6 +68,13 @@ Cov3 = tuple[tuple[float, float, float], tuple[float, float, float],
 _GROUND_NODES = (0.0, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875, 1.0)
 
 
+class WindSource(enum.Enum):
+    """Which wind the fix's model is given (``TetherFixParams.wind_source``)."""
+
+    NONE = "none"           #: calm air; the design wind in the covariance
+    VEHICLE = "vehicle"     #: the vehicle's own estimate (its WIND), low-passed
+
+
 @dataclass(frozen=True)
 class TetherFixParams(Params):
     """The ground station's belief about its tether sensors and how to report the fix."""
@@ -156,7 +163,8 @@ class TetherFixParams(Params):
     wind_source: str = quantity(
         "none", "1", "the wind the fix's model is given (WindSource): none (calm air, the "
         "design wind in the covariance) or vehicle (the vehicle's own estimate, its WIND "
-        "message, low-passed: ReportedWind)", choices=("none", "vehicle"))
+        "message, low-passed: ReportedWind)",
+        choices=tuple(m.value for m in WindSource))
     wind_filter_s: float = quantity(
         20.0, "s", "the time constant of the low-pass on the vehicle's wind reports (its "
         "estimate carries the position loop's and the turbulence's seconds-long swings)",
@@ -181,13 +189,6 @@ class TetherFix(NamedTuple):
     cov_m2: Cov3
     sample_time_ms: int
     on_ground: bool
-
-
-class WindSource(enum.Enum):
-    """Which wind the fix's model is given (``TetherFixParams.wind_source``)."""
-
-    NONE = "none"           #: calm air; the design wind in the covariance
-    VEHICLE = "vehicle"     #: the vehicle's own estimate (its WIND), low-passed
 
 
 class ReportedWind:
