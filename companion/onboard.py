@@ -54,6 +54,8 @@ HEALTH_CHECK_S = 0.2
 #: A line leaving the exit below this elevation lies on the ground there [rad] (the ground
 #: station's ground_elevation_rad): its pull is not the suspended line's.
 _LINE_OFF_GROUND_RAD = 0.03
+#: No raw reading fused tightly this period (a period without readings allocates none).
+_NONE_TAKEN: frozenset[float] = frozenset()
 
 
 class OnboardInputs(NamedTuple):
@@ -259,7 +261,7 @@ class Companion:
                        max(pos_m[2], 1.0), est.drag.tether_wind_shear, 1.0, m.steps)
         return (-top[3], -top[4], -top[5])
 
-    def _fuse_readings(self, t_s: float) -> set[float]:
+    def _fuse_readings(self, t_s: float) -> set[float] | frozenset[float]:
         """The raw tether readings into the filter's tight fusion; the sample times of
         those it took (their ground station's fixes are then not fused as well)."""
         f = self.filter
@@ -274,7 +276,7 @@ class Companion:
                 taken.add(round(r.t_s, 3))
         return taken
 
-    def _fuse_external(self, t_s: float, taken: set[float]) -> None:
+    def _fuse_external(self, t_s: float, taken: set[float] | frozenset[float]) -> None:
         f = self.filter
         fixes, self._external = self._external, []
         if f is None:
@@ -407,7 +409,7 @@ class Companion:
         if self.started and self.nav.landed and not self.nav.armed:
             # at rest on its gear: no drift without GNSS, and the gear's height
             f.fuse_stationary(t, self.params.vehicle.gear_height_m)
-        taken = self._fuse_readings(t) if self._readings else set()
+        taken = self._fuse_readings(t) if self._readings else _NONE_TAKEN
         if self._external:
             self._fuse_external(t, taken)
         if f.drag_due(t):

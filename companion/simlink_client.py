@@ -15,7 +15,7 @@ import socket
 import time
 from collections import deque
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from tuavdefs import simlink as sl
 from tuavdefs.frames import Quat, Vec3
@@ -128,15 +128,8 @@ class BatchDecoder:
     def absorb(self, item: tuple[int, tuple]) -> SimState | None:
         """Take one message; the step's :class:`SimState` when it is the HIL_SENSOR."""
         mid, v = item
-        # the records are built as the tuples they are (tuple.__new__), without their
-        # Python-level constructors
         if mid == _SENSOR:
-            t = int(v[0])
-            state = _new(SimState, (t, t * 1e-6, self._truth,
-                                    _new(ImuSample, (t, *sl.imu_from_wire(v), int(v[14]))),
-                                    self._gps, self._gps_new))
-            self._gps_new = False
-            return state
+            return self.sensor_state(v)
         if mid == _TRUTH:
             if self._decode_truth:
                 self._truth = _new(TruthState,
@@ -150,6 +143,18 @@ class BatchDecoder:
             name, value = v
             self.sim_params[name] = value
         return None
+
+    def sensor_state(self, v: Sequence[Any]) -> SimState:
+        """Take a HIL_SENSOR, its field values ``v`` in wire order: the step's
+        :class:`SimState` (with the latest truth and fix)."""
+        # the records are built as the tuples they are (tuple.__new__), without their
+        # Python-level constructors
+        t = int(v[0])
+        state = _new(SimState, (t, t * 1e-6, self._truth,
+                                _new(ImuSample, (t, *sl.imu_from_wire(v), int(v[14]))),
+                                self._gps, self._gps_new))
+        self._gps_new = False
+        return state
 
     def feed(self, data: bytes) -> list[SimState]:
         """The steps whose HIL_SENSOR is in ``data`` (with the latest truth and fix)."""

@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -432,6 +432,10 @@ class Plant:
         # speed set-points, the wind model's packed state
         self._wind = np.zeros(6)   # at the UAV, then the part the same at every height
         self._wind[:3] = self.wind_m_s
+        #: the kernel's air record (:data:`AIR_RECORD`), made again for a new wind or a new
+        #: block of its draws (``kernel_args`` renewed)
+        self._air: tuple[Any, ...] = (self._wind, not self.wind.constant,
+                                      self.wind.kernel_args)
         self._n_sub = substeps(dt_s, self.model.lp)
         if self.model.lumped and self._n_sub > MAX_LUMPED_SUBSTEPS:
             # (an extremely light or stiff line: its sub-steps would stall the plant)
@@ -487,7 +491,10 @@ class Plant:
             c0, c1, c2, c3 = c0 * gains[0], c1 * gains[1], c2 * gains[2], c3 * gains[3]
         enabled = winder_enabled
         wind = self.wind
-        varies = not wind.constant
+        air = self._air
+        if air[2] is not wind.kernel_args:   # a new wind, or a new block of its draws
+            air = self._air = (self._wind, not wind.constant, wind.kernel_args)
+        varies = air[1]
         x = self.x
         if x is not self._owned:
             # a state set from outside: the kernel takes a float64 array of its own (the
@@ -499,13 +506,13 @@ class Plant:
         inputs = (c0, c1, c2, c3, bool(armed), winder_torque_n_m, bool(enabled))
         while True:
             done, why, t, omega_before = self._advance(
-                x, t, n, inputs, self._stepping, self._model_record,
-                (self._wind, varies, wind.kernel_args))
+                x, t, n, inputs, self._stepping, self._model_record, air)
             if why == ADVANCE_DONE:
                 break
             n -= done
             if why == ADVANCE_NOISE:
                 wind.refill()
+                air = self._air = (self._wind, varies, wind.kernel_args)
             else:
                 # the step ended at or below the gear: ground contact, then the drum
                 self._ground(x)

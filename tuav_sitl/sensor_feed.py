@@ -29,7 +29,6 @@ from sitl.sensors import SensorNoise, SensorSuite
 from tuavdefs import simlink as sl
 
 _GPS = sl.MSG_HIL_GPS
-_SENSOR = sl.MSG_HIL_SENSOR
 
 
 class SensorFeed:
@@ -58,6 +57,4 @@ class SensorFeed:
         packer = batches.packer
         if batches.last_gps:
             decoder.absorb((_GPS, packer.gps_values()))
-        state = decoder.absorb((_SENSOR, packer.sensor_values()))
-        assert state is not None, "a batch ends with its HIL_SENSOR"
-        return state
+        return decoder.sensor_state(packer.sensor_values())
