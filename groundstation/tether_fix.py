@@ -175,6 +175,15 @@ class TetherFixParams(Params):
         "position loop's disturbance read as drag, which a manoeuvre's unmodelled forces "
         "pollute: on circle-windy-gnss 0.98 -> 1.49 m without this gate, 0.95 m with it)",
         gt=0)
+    reported_wind_sigma_m_s: float = quantity(
+        2.0, "m/s", "the standard deviation of each horizontal component of the vehicle's "
+        "reported wind (ReportedWind) as the wind on the line, beside the reports' own "
+        "scatter: without the drag fusion it is the position loop's disturbance read as "
+        "drag, in which the tether's model error shows as wind (4.1 m/s reported in "
+        "hover-gnss-loss's 2.4 m/s); the gusts along the line, the profile (the tight "
+        "fusion's gust_sigma_m_s is 2 m/s for the same reasons). At 1 m/s a climb's fixes "
+        "on the lumped line were 0.5-0.8 m off at a NEES of 38, the calm fix's design-wind "
+        "allowance having held them", ge=0)
     wind_max_age_s: float = quantity(
         5.0, "s", "a vehicle wind not reported for this long is no longer given (WIND "
         "comes at 1 Hz)", gt=0)
@@ -202,11 +211,14 @@ class ReportedWind:
     def __init__(self, params: TetherFixParams) -> None:
         self.p = params
         self._wind: tuple[float, float] | None = None
+        #: the reports' low-passed scatter about the low-passed wind [m^2/s^2] (2 x 2)
+        self._scatter = np.zeros((2, 2))
         self._t_s = -math.inf
 
     def reset(self) -> None:
         """Forget the wind (a new flight, a reboot)."""
         self._wind = None
+        self._scatter = np.zeros((2, 2))
         self._t_s = -math.inf
 
     def report(self, t_s: float, wind_m_s: Vec3, height_m: float | None,
@@ -228,10 +240,14 @@ class ReportedWind:
             wx, wy = wx * k, wy * k
         if self._wind is None or t_s < self._t_s:
             self._wind = (wx, wy)
+            self._scatter = np.zeros((2, 2))
         else:
             a = 1.0 - math.exp(-(t_s - self._t_s) / p.wind_filter_s)
             ox, oy = self._wind
-            self._wind = (ox + a * (wx - ox), oy + a * (wy - oy))
+            d = np.array((wx - ox, wy - oy))
+            self._wind = (ox + a * d[0], oy + a * d[1])
+            # the exponentially weighted covariance of the reports about their mean
+            self._scatter = (1.0 - a) * (self._scatter + a * np.outer(d, d))
         self._t_s = t_s
 
     def wind_m_s(self, t_s: float) -> tuple[float, float] | None:
@@ -240,6 +256,15 @@ class ReportedWind:
         if self._wind is None or not 0.0 <= t_s - self._t_s <= self.p.wind_max_age_s:
             return None
         return self._wind
+
+    def covariance_m2_s2(self) -> np.ndarray:
+        """The 2 x 2 covariance [m^2/s^2] of the wind given (:meth:`wind_m_s`):
+        ``reported_wind_sigma_m_s`` on each component plus the reports' own scatter about
+        their low-passed mean (a vehicle estimate swinging by metres per second, as its
+        position loop's disturbance does while the line lifts off the ground or the
+        turbulence is strong, says its mean is not the wind on the line to better than
+        that)."""
+        return np.eye(2) * self.p.reported_wind_sigma_m_s ** 2 + self._scatter
 
 
 class FixScatter:
