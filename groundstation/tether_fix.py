@@ -54,6 +54,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from groundstation.lbar import line_weight_n_m
 from tuavdefs import line_shape
 from tuavdefs.component_link import TETHER_FIX_RATE_HZ
 from tuavdefs.line_shape import Column, LineModel, line_end
@@ -170,11 +171,22 @@ class TetherFixParams(Params):
         "estimate carries the position loop's and the turbulence's seconds-long swings)",
         gt=0)
     wind_max_speed_m_s: float = quantity(
-        1.0, "m/s", "a vehicle wind reported while the vehicle's reported horizontal speed is "
+        3.0, "m/s", "a vehicle wind reported while the vehicle's reported horizontal speed is "
         "above this is not taken (without the drag fusion the vehicle's estimate is its "
         "position loop's disturbance read as drag, which a manoeuvre's unmodelled forces "
-        "pollute: on circle-windy-gnss 0.98 -> 1.49 m without this gate, 0.95 m with it)",
+        "pollute; the shipped circles fly at 2 m/s: with the wind's covariance and the "
+        "weight's drag bias taken off, circle-windy-gnss's estimate is 0.45 m off given "
+        "the wind while circling, 0.95 m with a 1 m/s gate, which ages the wind out)",
         gt=0)
+    reported_wind_sigma_m_s: float = quantity(
+        2.0, "m/s", "the standard deviation of each horizontal component of the vehicle's "
+        "reported wind (ReportedWind) as the wind on the line, beside the reports' own "
+        "scatter: without the drag fusion it is the position loop's disturbance read as "
+        "drag, in which the tether's model error shows as wind (4.1 m/s reported in "
+        "hover-gnss-loss's 2.4 m/s); the gusts along the line, the profile (the tight "
+        "fusion's gust_sigma_m_s is 2 m/s for the same reasons). At 1 m/s a climb's fixes "
+        "on the lumped line were 0.5-0.8 m off at a NEES of 38, the calm fix's design-wind "
+        "allowance having held them", ge=0)
     wind_max_age_s: float = quantity(
         5.0, "s", "a vehicle wind not reported for this long is no longer given (WIND "
         "comes at 1 Hz)", gt=0)
@@ -196,17 +208,25 @@ class ReportedWind:
     wind*): each report (the air's velocity at the vehicle [m/s], z-up, the vehicle's
     reported height [m]) brought to ``wind_reference_height_m`` by the fix's own profile,
     ``U_ref = U(z) (z_ref / max(z, z_min))^alpha``, and low-passed over ``wind_filter_s``
-    (first order, on the reports' own times). Nothing onboard is the truth: this is what
+    (first order, on the reports' own times, its first reports weighted equally: their
+    mean), their scatter about it kept beside it for the wind's covariance
+    (:meth:`covariance_m2_s2`). Nothing onboard is the truth: this is what
     the vehicle says (ArduPilot's WIND), as a ground station would hear it."""
 
     def __init__(self, params: TetherFixParams) -> None:
         self.p = params
         self._wind: tuple[float, float] | None = None
+        #: the reports' low-passed scatter about the low-passed wind [m^2/s^2] (2 x 2)
+        self._scatter = np.zeros((2, 2))
+        #: reports taken since the filter (re)started
+        self._n = 0
         self._t_s = -math.inf
 
     def reset(self) -> None:
         """Forget the wind (a new flight, a reboot)."""
         self._wind = None
+        self._scatter = np.zeros((2, 2))
+        self._n = 0
         self._t_s = -math.inf
 
     def report(self, t_s: float, wind_m_s: Vec3, height_m: float | None,
@@ -228,10 +248,20 @@ class ReportedWind:
             wx, wy = wx * k, wy * k
         if self._wind is None or t_s < self._t_s:
             self._wind = (wx, wy)
+            self._scatter = np.zeros((2, 2))
+            self._n = 1
         else:
-            a = 1.0 - math.exp(-(t_s - self._t_s) / p.wind_filter_s)
+            # equal weights over the first reports (their mean and variance, Welford's),
+            # then the first-order lag: a first report is not the whole past (a vehicle's
+            # disturbance estimate starts from zero; weighted as a 20 s history it held the
+            # wind given at 1.4 of 7.6 m/s for the first 5 s of a 9 m/s hover)
+            self._n += 1
+            a = max(1.0 - math.exp(-(t_s - self._t_s) / p.wind_filter_s), 1.0 / self._n)
             ox, oy = self._wind
-            self._wind = (ox + a * (wx - ox), oy + a * (wy - oy))
+            d = np.array((wx - ox, wy - oy))
+            self._wind = (ox + a * d[0], oy + a * d[1])
+            # the exponentially weighted covariance of the reports about their mean
+            self._scatter = (1.0 - a) * (self._scatter + a * np.outer(d, d))
         self._t_s = t_s
 
     def wind_m_s(self, t_s: float) -> tuple[float, float] | None:
@@ -240,6 +270,15 @@ class ReportedWind:
         if self._wind is None or not 0.0 <= t_s - self._t_s <= self.p.wind_max_age_s:
             return None
         return self._wind
+
+    def covariance_m2_s2(self) -> np.ndarray:
+        """The 2 x 2 covariance [m^2/s^2] of the wind given (:meth:`wind_m_s`):
+        ``reported_wind_sigma_m_s`` on each component plus the reports' own scatter about
+        their low-passed mean (a vehicle estimate swinging by metres per second, as its
+        position loop's disturbance does while the line lifts off the ground or the
+        turbulence is strong, says its mean is not the wind on the line to better than
+        that)."""
+        return np.eye(2) * self.p.reported_wind_sigma_m_s ** 2 + self._scatter
 
 
 class FixScatter:
@@ -413,6 +452,23 @@ class TetherFixer:
         # the central differences take w -+ sigma: kept to half the weight
         return w, min(math.hypot(frac * w, w - float(w_n_m)), 0.5 * w)
 
+    def weight_drag_bias(self, length_m: float, tension_n: float, azimuth_rad: float,
+                         elevation_rad: float, wind_m_s: tuple[float, float]) -> float:
+        """How far [N/m] the winder's weight estimate reads off the belief on a line bent
+        by the wind ``wind_m_s`` [m/s] (at ``wind_reference_height_m``): the estimate
+        (``groundstation.lbar.line_weight_n_m``) is a calm line's, and the drag changes
+        the height the line reaches from the exit's tension and elevation, which it takes
+        for weight. The model's line of the belief's weight in that wind, read by the same
+        estimate, less the belief (0 where it says nothing). A fix given the wind takes
+        this off the winder's estimate, or it would count the drag twice (in 5 m/s along
+        a 29 m line the estimate read 0.40-0.54 N/m on a line of 0.33)."""
+        model = self.model
+        x = line_shape.inputs(max(length_m, 0.0), max(tension_n, 1e-3), azimuth_rad,
+                              max(elevation_rad, 0.0), model, wind_m_s)
+        top = line_shape.end(model, x)
+        w = line_weight_n_m(max(tension_n, 1e-3), elevation_rad, length_m, top[2])
+        return w - self.w if math.isfinite(w) else 0.0
+
     def weight_n_m(self, w_n_m: float | None) -> float:
         """The weight per metre [N/m] the fix uses (:meth:`weight`'s first value)."""
         return self.weight(w_n_m)[0]
@@ -461,9 +517,11 @@ class TetherFixer:
         p = self.p
         L = max(length_m, 0.0)
         T = max(tension_n, 1e-3)
-        w, sigma_w = self.weight(w_n_m, self.weight_spread(L, T, uav_height_m))
         az, el = azimuth_rad, elevation_rad
         ground = self.on_ground(el)
+        if wind_m_s is not None and not ground and w_n_m is not None:
+            w_n_m = w_n_m - self.weight_drag_bias(L, T, az, el, wind_m_s)
+        w, sigma_w = self.weight(w_n_m, self.weight_spread(L, T, uav_height_m))
         if not ground:
             mean, cov = self._suspended(L, T, az, el, w, sigma_w, wind_m_s, wind_cov_m2_s2)
             return mean, cov, False

@@ -237,11 +237,12 @@ class WinchSensors:
         if not fixer.readable(self.load_cell_n, el):
             return None
         t_ms = self._unwrap_ms(stamp, uav_time_ms)
-        wind = None
+        wind = wind_cov = None
         if self.wind is not None and WindSource(fixer.p.wind_source) is WindSource.VEHICLE:
             wind = self.wind.wind_m_s(t_ms * 1e-3)
+            wind_cov = self.wind.covariance_m2_s2()
         pos, cov, ground = fixer.position(length_m, self.load_cell_n, az, el, reported_m,
-                                          lbar.weight_n_m(), wind)
+                                          lbar.weight_n_m(), wind, wind_cov)
         self.fixes += 1
         if self.scatter is not None:
             cov = self.scatter.widen(t_ms * 1e-3, pos, cov, reported_m, ground)
