@@ -98,7 +98,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     g = params.environment.gravity_m_s2
     host = WinderHost(station.winder_control, station.lbar, params.winder, params.tether, g)
-    winch = Winch(host, params.winder, params.tether, g, station.winch, axis_node_id=args.node)
+    winch = Winch(host, params.winder, params.tether, g, station.winch, axis_node_id=args.node,
+                  fix_params=station.tether_fix)
     mav = None if args.mavlink == "none" else WinchLinkClient(args.mavlink, signing_key=key)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

@@ -2,8 +2,8 @@
 tuned, apart from the system's (``tuavdefs.params.SystemParams``: the winder, the tether).
 
 One TOML file, its tables named as a scenario's (``[winder_control]``, ``[lbar]``,
-``[winch]``), each field checked at load time: ``python -m groundstation --control FILE``,
-and ``tuav-sitl up --ground-params FILE``, which writes the run's copy
+``[winch]``, ``[tether_fix]``), each field checked at load time: ``python -m groundstation
+--control FILE``, and ``tuav-sitl up --ground-params FILE``, which writes the run's copy
 (``groundstation.toml`` in the run folder) and hands it to the process, as it hands the
 companion its ``estimator.toml``. A table not given keeps its defaults.
 """
@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from groundstation.lbar import LBarParams
+from groundstation.tether_fix import TetherFixParams
 from groundstation.winch import WinchParams
 from groundstation.winder_control import WinderControlParams
 from tuavdefs.paramspec import Params, quantity
@@ -27,3 +28,6 @@ class GroundStationParams(Params):
         "gains")
     lbar: LBarParams = quantity(LBarParams(), "", "the L-bar estimator")
     winch: WinchParams = quantity(WinchParams(), "", "the winch component")
+    tether_fix: TetherFixParams = quantity(
+        TetherFixParams(), "", "the winch's tether fix: its model of the line and the wind "
+        "it is given")

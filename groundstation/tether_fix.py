@@ -162,9 +162,11 @@ class TetherFixParams(Params):
     scatter_min_fixes: int = quantity(
         10, "1", "fixes in the window before their scatter is counted", ge=3)
     wind_source: str = quantity(
-        "none", "1", "the wind the fix's model is given (WindSource): none (calm air, the "
-        "design wind in the covariance) or vehicle (the vehicle's own estimate, its WIND "
-        "message, low-passed: ReportedWind)",
+        "vehicle", "1", "the wind the fix's model is given (WindSource): vehicle (the "
+        "vehicle's own estimate, its WIND_COV on the component link, low-passed, with its "
+        "covariance: ReportedWind; a real line feels the wind's drag) or none (calm air, the "
+        "design wind in the covariance: right only where the line feels no drag, as the "
+        "plant's catenary truth)",
         choices=tuple(m.value for m in WindSource))
     wind_filter_s: float = quantity(
         20.0, "s", "the time constant of the low-pass on the vehicle's wind reports (its "

@@ -343,12 +343,7 @@ def test_a_mission_s_do_winch_reaches_the_winch_offline():
 
 @pytest.mark.parametrize(("name", "tracking_m", "estimate_m", "inside_3_sigma"), [
     ("circle-rtk", 0.05, 0.03, 0.9), ("circle-gnss", 1.0, 1.0, 0.7),
-    pytest.param("circle-windy-gnss", 1.5, 1.0, 0.7, marks=pytest.mark.xfail(
-        strict=True, reason="on the lumped line in the wind the tether fix the filter "
-        "fuses is biased by the line's drag: the estimate 0.98 m off the truth (target "
-        "1 m; 0.05 m on the catenary), overconfident: within 3 sigma 64 % of the time "
-        "(target 70 %; issue 33); tracking 0.99 m, within its 1.5 m (given the vehicle's "
-        "wind, not the default: 0.45 m, 95 %; docs/estimation.md §10)"))])
+    ("circle-windy-gnss", 1.5, 1.0, 0.7)])
 def test_the_circle_flown_on_the_onboard_estimate(results, name, tracking_m, estimate_m,
                                                   inside_3_sigma):
     """The circle on the companion's EKF (RTK-grade and consumer-grade GNSS, calm and in
@@ -389,12 +384,6 @@ def test_the_tether_fix_holds_a_gnss_loss_in_calm_air(results):
     assert m["tether_ground_contact_fraction"] == 0.0
 
 
-@pytest.mark.xfail(strict=True, reason="on the lumped line the ground's tether fix holds the "
-                   "hover to 0.662 m during the loss, over the 0.5 m target: the line's "
-                   "drag biases the calm fix 0.25 m downwind (0.10 m on the catenary; 0.436 m "
-                   "given the vehicle's wind, not the default: on the catenary truth, whose "
-                   "line feels no drag, the hover variants then hold 0.9-4.3 m; "
-                   "docs/estimation.md §10; issue 33)")
 def test_the_tether_fix_holds_a_gnss_loss(results):
     """hover-gnss-loss (3 m/s of light turbulence, GNSS lost 20-80 s, the winch's tether
     fix): the truth within 0.5 m of the hold point horizontally throughout the loss, the

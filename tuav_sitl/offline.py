@@ -36,7 +36,7 @@ from companion.mission_items import ItemRefused, nav_commands
 from companion.navigation import FlightMode, NavCommand, NavEvent, NavKind, Refusal
 from companion.onboard import Companion, OnboardInputs, OnboardOutputs
 from companion.reference import Hold, RefSample, Sequence, SequenceBuilder
-from groundstation.tether_fix import TetherFix, TetherFixParams, WindSource
+from groundstation.tether_fix import TetherFix, WindSource
 from groundstation.winch import Winch
 from groundstation.winder_host import WinderHost
 from sitl.exit_angle import ExitAngleSensor
@@ -223,7 +223,8 @@ class OfflineRunner:
         # the winch's tether fix only for a vehicle that fuses it: one flying on the
         # truth drops every fix (Companion.external_position), so it is not computed (it
         # changes nothing else the winch does)
-        fix = TetherFixParams(enabled=sc.estimator.kind != "truth")
+        fix = sc.tether_fix.replace(enabled=sc.tether_fix.enabled
+                                    and sc.estimator.kind != "truth")
         self.ground = GroundStation(Winch(self.winder_host, model.winder, model.tether, g,
                                           sc.winch, fix_params=fix), self.links)
         #: whether the winch's fix takes the vehicle's wind (its WIND on the component link)

@@ -36,6 +36,7 @@ from companion.gains import FlightControlParams
 from companion.mission_protocol import MissionItem, degrees_to_e7, home_item
 from companion.navigation import NavigationParams, air_start_too_low_m
 from groundstation.lbar import LBarParams
+from groundstation.tether_fix import TetherFixParams
 from groundstation.winch import WinchParams
 from groundstation.winder_control import WinderControlParams
 from sitl.faults import FaultParams
@@ -236,6 +237,10 @@ class ScenarioParams(Params):
                                           "state")
     winch: WinchParams = quantity(WinchParams(), "", "the winch component (its WINCH_STATUS "
                                   "rate: what the companion's tether model hears)")
+    tether_fix: TetherFixParams = quantity(
+        TetherFixParams(), "", "the winch's tether fix (the ground station's model of the "
+        "line it fixes the UAV with, and the wind it is given); computed only for a vehicle "
+        "that fuses it (not one flying on the truth)")
     faults: tuple[FaultParams, ...] = quantity(
         (), "", "faults the plant injects (sitl/faults.py: gnss_loss, wind, motor, "
         "winder_motor over start_s..end_s)")
