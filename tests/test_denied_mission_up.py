@@ -2,7 +2,12 @@
 the winder on the CAN bus) flying the mission-gnss-denied mission with no GNSS at all,
 from the ground, driven by a pymavlink ground station (in a private network namespace, as
 root): armed once the filter is healthy on the tether fix, every item reached within 1 m
-of the truth, landed and disarmed, the tether never taut."""
+of the truth, landed and disarmed, the tether never taut.
+
+The flight's phase is the vehicle time at which the arm is first accepted, which the wall
+clock sets; a failure prints it, and ``python -m tests.netns.denied_mission_session DIR
+ARM_S`` (in a private network namespace, as ``netns_util.run_session`` runs it) flies that
+phase again."""
 
 import bisect
 import math
