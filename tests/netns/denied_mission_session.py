@@ -4,7 +4,12 @@ filter's horizontal position (EKF_STATUS_REPORT), asks to arm until the vehicle 
 takes off in GUIDED, uploads the mission-gnss-denied mission (take-off, a loiter circle,
 three waypoints, land) and flies it in AUTO to the disarm, then stops the stack. Prints one
 JSON line: the arming answers, STATUSTEXTs, the items reached with the vehicle's time, the
-EKF flags, and the plant's truth.csv. Run inside a private network namespace."""
+EKF flags, and the plant's truth.csv. Run inside a private network namespace.
+
+The flight's phase depends on when the arm is first accepted, which the wall clock sets
+(``--speedup max``: 0.5 s of wall time between asks is seconds of the vehicle's). An
+optional second argument, a vehicle time [s], asks first at that time and then every
+20 ms of wall time, to fly a given phase again (a CI run's, from its arm time)."""
 
 import json
 import math
@@ -70,6 +75,9 @@ def main() -> int:
     origin_lon = gp.lon * 1e-7 - math.degrees(
         lp.y / (6378137.0 * math.cos(math.radians(origin_lat))))
     f.set_mode("GUIDED")
+    arm_at_s = float(sys.argv[2]) if len(sys.argv) > 2 else None
+    if arm_at_s is not None:
+        f.wait("GLOBAL_POSITION_INT", lambda g: g.time_boot_ms >= arm_at_s * 1000, 120.0)
     # as a ground station waits for "EKF OK": arming asked again while it is refused
     end = time.monotonic() + 120.0
     while time.monotonic() < end:
@@ -77,7 +85,7 @@ def main() -> int:
         out["arm"].append([vehicle_ms() * 1e-3, result])
         if result == M.MAV_RESULT_ACCEPTED:
             break
-        time.sleep(0.5)
+        time.sleep(0.5 if arm_at_s is None else 0.02)
     out["armed"] = out["arm"][-1][1] == M.MAV_RESULT_ACCEPTED
     if out["armed"]:
         f.command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, TAKEOFF_M)
