@@ -15,6 +15,8 @@ import math
 import pytest
 from netns_util import netns_available, run_session
 
+from tuavdefs.params import TetherParams
+
 pytestmark = pytest.mark.skipif(not netns_available(),
                                 reason="needs root (unshare) for a private network namespace")
 
@@ -22,6 +24,9 @@ POS_HORIZ_ABS = 16
 ACCEPTED = 0
 #: the mission's waypoints (items 3, 4, 5), x east, y north, height [m]
 WAYPOINTS = {3: (10.0, 0.0, 12.0), 4: (6.0, 8.0, 10.0), 5: (-2.0, 6.0, 8.0)}
+#: the plant's lumped line (the defaults `up` flies) is one straight segment while shorter
+#: than two of its nominal segments [m]
+ONE_SEGMENT_M = 2.0 * TetherParams().segment_length_m
 
 
 @pytest.fixture(scope="module")
@@ -51,16 +56,19 @@ def test_the_stack_flies_a_mission_without_gnss_on_the_tether_fix(session):
             r = truth[min(bisect.bisect_left(times, t), len(truth) - 1)]
             assert math.dist(r[1:4], WAYPOINTS[seq]) <= 1.0, (seq, t, r)
     assert "disarmed_s" in s
-    # landed: on its gear at the end, and the tether never taut in flight (armed); before
-    # the arm the winch's ground pre-tension may pull the short lumped line straight once,
-    # the only way to a fix on the ground without GNSS (a line under two nominal segments
-    # is one segment, which pulls nothing until straight: docs/estimation.md §10), so
-    # there it may stretch by under a millimetre, as tests/test_scenarios.py allows
+    # landed: on its gear at the end, and the tether never taut in flight (armed) where the
+    # plant's line can sag. A line under two nominal segments is one straight segment,
+    # which pulls nothing until straight and is stretched by any pull: before the arm the
+    # winch's ground pre-tension pulls it straight once, the only way to a fix on the
+    # ground without GNSS (docs/estimation.md §10), and in the first metres of the climb
+    # the set-point's 2.7-2.9 N stretch it by 0.1-0.3 mm where a real 3.8 m line would
+    # sag 9 mm (docs/model.md: the line's resolution); there, as on the ground, it may
+    # stretch by under a millimetre, as tests/test_scenarios.py allows
     end = [r for r in truth if r[0] >= s["disarmed_s"]]
     assert end and all(r[3] <= 0.3 for r in end)
     slack = [(r[0], r[4] - math.dist(r[1:4], (0.0, 0.0, 0.0))) for r in truth]
     taut = [_sample(r, sl) for r, (t, sl) in zip(truth, slack, strict=True)
-            if t_arm <= t <= s["disarmed_s"] and not sl > 0.0]
+            if t_arm <= t <= s["disarmed_s"] and r[4] >= ONE_SEGMENT_M and not sl > 0.0]
     assert not taut, (f"taut in flight (armed {t_arm:.3f} s, disarmed "
                       f"{s['disarmed_s']:.3f} s), {len(taut)} samples: {taut[:20]}")
     stretched = [_sample(r, sl) for r, (_, sl) in zip(truth, slack, strict=True)
