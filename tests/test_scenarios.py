@@ -343,11 +343,7 @@ def test_a_mission_s_do_winch_reaches_the_winch_offline():
 
 @pytest.mark.parametrize(("name", "tracking_m", "estimate_m", "inside_3_sigma"), [
     ("circle-rtk", 0.05, 0.03, 0.9), ("circle-gnss", 1.0, 1.0, 0.7),
-    pytest.param("circle-windy-gnss", 1.5, 1.0, 0.7, marks=pytest.mark.xfail(
-        strict=True, reason="on the lumped line in the wind the tether fix the filter "
-        "fuses is biased by the line's drag: the estimate 0.98 m off the truth (target "
-        "1 m; 0.05 m on the catenary), overconfident: within 3 sigma 64 % of the time "
-        "(target 70 %; issue 33); tracking 0.99 m, within its 1.5 m"))])
+    ("circle-windy-gnss", 1.5, 1.0, 0.7)])
 def test_the_circle_flown_on_the_onboard_estimate(results, name, tracking_m, estimate_m,
                                                   inside_3_sigma):
     """The circle on the companion's EKF (RTK-grade and consumer-grade GNSS, calm and in
