@@ -125,7 +125,8 @@ class NavFilter:
         self._tether = (TetherControl(p, mem, src, out, cp.leave) if p.tether_aid
                         else None)
         #: the tether fix checked against the GNSS (None: not checked)
-        self.tether_check = (TetherFixCheck(p.tether_fix.gnss_check)
+        self.tether_check = (TetherFixCheck(p.tether_fix.gnss_check, p.gnss_pos_tau_s,
+                                            p.gnss_pos_correlated_fraction)
                              if p.tether_aid and p.tether_fix.gnss_check.enabled else None)
         self._zero_vel = ZeroVelocityControl(p, mem, src.zero_vel)
         if p.drag.enabled and drag is None:

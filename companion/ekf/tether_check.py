@@ -43,6 +43,22 @@ Cov6 = tuple[float, float, float, float, float, float]
 _Gnss = tuple[float, np.ndarray, np.ndarray, float, float]
 
 
+def mean_variance(var_m2: float, tau_s: float, fraction: float, window_s: float,
+                  interval_s: float) -> float:
+    """The variance [m^2] of the mean over ``window_s`` [s] of a receiver's error whose
+    variance ``var_m2`` [m^2] is the share ``fraction`` a first-order Gauss-Markov process
+    of time constant ``tau_s`` [s] (none if ``tau_s`` is 0) and the rest white, sampled
+    every ``interval_s`` [s]: ``σ_c² g(W/τ) + σ_w² Δt/W``, ``g(x) = 2(x − 1 + e^−x)/x²``
+    (1 at W = 0, 2τ/W for W ≫ τ)."""
+    w = max(window_s, interval_s, 1e-9)
+    white = var_m2 * min(interval_s / w, 1.0)
+    if not tau_s > 0.0:
+        return white
+    x = w / tau_s
+    g = 1.0 - x / 3.0 if x < 1e-4 else 2.0 * (x - 1.0 + math.exp(-x)) / (x * x)
+    return fraction * var_m2 * g + (1.0 - fraction) * white
+
+
 def smooth_weight(s: float, d2: float) -> float:
     """0 up to ``s = d2``, 1 from ``s = 4 d2``, a smoothstep in between."""
     u = min(max((s - d2) / (3.0 * d2), 0.0), 1.0)
@@ -54,10 +70,17 @@ class TetherFixCheck:
     reveal, with its covariance (module docstring)."""
 
     __slots__ = ("_p", "_gnss", "_mean", "_count", "_t_last_fix", "_t_last_compared",
-                 "_interval_s", "_weight", "_spread", "last_ratio")
+                 "_interval_s", "_weight", "_spread", "last_ratio", "_tau_s", "_fraction",
+                 "_t_first_compared")
 
-    def __init__(self, params: TetherCheckParams) -> None:
+    def __init__(self, params: TetherCheckParams, wander_tau_s: float = 0.0,
+                 wander_fraction: float = 0.0) -> None:
         self._p = params
+        #: the receiver's error model (``gnss_pos_tau_s`` [s], ``gnss_pos_correlated_fraction``)
+        #: the mean difference is judged against
+        self._tau_s = wander_tau_s
+        self._fraction = wander_fraction
+        self._t_first_compared = math.nan
         self._gnss: deque[_Gnss] = deque(maxlen=8)
         self._mean = np.zeros(3)
         self._count = 0
@@ -83,6 +106,13 @@ class TetherFixCheck:
         (inertial ENU), its claimed horizontal and vertical accuracies [m]."""
         self._gnss.append((t_meas_s, np.array(pos_m, dtype=float),
                            np.array(vel_m_s, dtype=float), eph_m * eph_m, epv_m * epv_m))
+
+    def _gnss_interval_s(self) -> float:
+        """The receiver's fix interval [s], from the fixes kept (0.2 s before two)."""
+        g = self._gnss
+        if len(g) < 2:
+            return 0.2
+        return max((g[-1][0] - g[0][0]) / (len(g) - 1), 1e-3)
 
     def _nearest(self, t_s: float) -> _Gnss | None:
         best = min(self._gnss, key=lambda g: abs(g[0] - t_s), default=None)
@@ -127,12 +157,26 @@ class TetherFixCheck:
         alpha = max(1.0 / self._count, step / p.bias_tau_s)
         self._mean += alpha * (e - self._mean)
         self._t_last_compared = t_meas_s
+        if not math.isfinite(self._t_first_compared):
+            self._t_first_compared = t_meas_s
         c00, c01, c02, c11, c12, c22 = cov
         lag = gv * dt
-        v = np.array(((c00 + var_h, c01, c02), (c01, c11 + var_h, c12),
-                      (c02, c12, c22 + var_v))) + np.outer(lag, lag)
+        fix_cov = np.array(((c00, c01, c02), (c01, c11, c12), (c02, c12, c22)))
+        lag_cov = np.outer(lag, lag)
+        v = fix_cov + np.diag((var_h, var_h, var_v)) + lag_cov
+        # the mean is judged against its own spread: the receiver's share from its wander
+        # model over the mean's window (an exponential mean of time constant T averages
+        # as a window of 2 T), the fix's and the lag's as white; the fix's claimed
+        # covariance is not a spread the mean may have, for an error within it that stays
+        # is what the filter, fusing the fixes as white, would lock onto
+        window = min(t_meas_s - self._t_first_compared, 2.0 * p.bias_tau_s)
+        n_fix = min(self._interval_s / max(window, self._interval_s), 1.0)
+        gi = self._gnss_interval_s()
+        v_mean = (fix_cov + lag_cov) * n_fix + np.diag(
+            (mean_variance(var_h, self._tau_s, self._fraction, window, gi),) * 2
+            + (mean_variance(var_v, self._tau_s, self._fraction, window, gi),))
         m = self._mean
-        s = float(m @ np.linalg.solve(v, m))
+        s = float(m @ np.linalg.solve(v_mean, m))
         d2 = p.dead_band_sigma ** 2
         self.last_ratio = s / d2
         held = self._weight - step / p.release_s
