@@ -97,10 +97,13 @@ class WinderControlParams(Params):
         0.5, "s", "tension law: time constant of the low-pass on the set-point (it moves "
         "with the reported position)", gt=0)
     line_acc_max_m_s2: float = quantity(
-        12.0, "m/s^2", "tension law: the line speed set-point's acceleration limit: what "
-        "the drum's torque gives on the full drum against the snap ceiling (12.75 m/s^2; "
-        "lower, it cut the feed-forward of a vehicle accelerating at 8 m/s^2 and the line "
-        "snapped at the step's end, docs/control.md §8.2)", gt=0)
+        10.0, "m/s^2", "tension law: the line speed set-point's acceleration limit: above "
+        "the feed-forward's 9.4 m/s^2 for a vehicle accelerating at 8 m/s^2 (at 8 it cut "
+        "it and the line snapped at the step's end, docs/control.md §8.2), below what the "
+        "drum's torque gives on the full drum against the snap ceiling (12.75 m/s^2), so "
+        "that the speed loop keeps a fifth of the torque (at 12 it did not, and two lines "
+        "were pulled 0.5 and 2.9 mm past straight: an unhealthy filter's landing, a "
+        "consumer receiver's start)", gt=0)
     speed_filter_s: float = quantity(
         0.3, "s", "tension law: time constant of the command filter on the line speed "
         "set-point's feedback part (faster, its derivative's feed-forward shook the drum "

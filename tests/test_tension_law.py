@@ -184,7 +184,7 @@ def _peak_ratio(series, from_s):
 #: exit segment lying on the ground and caught taut with no node change; 1.18x with 1 m
 #: segments). Asserted on 1 m segments; on 2 m known to fail (strict: a mended line or
 #: law makes it pass, and then this mark goes). (The step out, 3.03x here with the
-#: set-point's acceleration limit at 8 m/s^2, passes since it is 12: docs/control.md §8.2.)
+#: set-point's acceleration limit at 8 m/s^2, passes since it is 10: 1.37x; docs/control.md §8.2.)
 _LINE_RESOLUTION = pytest.mark.xfail(strict=True, reason="the line's 2 m segments: "
                                      "docs/control.md §8.5")
 #: (case, the vehicle's governor, the line's segments over its 50 m: 25 is the shipped
