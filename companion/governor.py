@@ -423,8 +423,6 @@ class TetherGovernor:
         self.brake: BrakeRef | None = None          # the stop under way
         self._over_t: float | None = None           # since when over the tension limit [s]
         self._tension_move_t = -math.inf            # the last over-tension move [s]
-        self._mode_of: object = None                # the parameters self._mode is of
-        self._mode = GovernorMode.OFF
         self._room: tuple[float, ...] | None = None  # the kernels' room (GR_*), or stale
         # the compiled decisions, called without numba's dispatch
         self._slow_clock = entry_point(slow_clock_kernel, GOVERNOR_SIGNATURE)
@@ -440,6 +438,11 @@ class TetherGovernor:
     def p(self, params: GovernorSettings) -> None:
         self._p = params
         self._room = None
+        #: what the governor counts on from the winder (``tether_governor``); made once
+        #: per parameter set (they are frozen), read every period
+        self.mode = GovernorMode(params.tether_governor)
+        #: whether the governor is on (``tether_governor`` not OFF)
+        self.enabled = self.mode is not GovernorMode.OFF
 
     @property
     def room(self) -> tuple[float, ...]:
@@ -452,19 +455,6 @@ class TetherGovernor:
                 float(self.limit_m), float(p.tether_sigma_k), float(p.tether_latency_s),
                 float(p.tether_brake_acc_m_s2), float(self.lookahead_winch_speed_m_s()))
         return room
-
-    @property
-    def enabled(self) -> bool:
-        """Whether the governor is on (``tether_governor``)."""
-        return self.mode is not GovernorMode.OFF
-
-    @property
-    def mode(self) -> GovernorMode:
-        """What the governor counts on from the winder (``tether_governor``)."""
-        p = self.p
-        if p is not self._mode_of:      # made once per parameter set, not per call
-            self._mode_of, self._mode = p, GovernorMode(p.tether_governor)
-        return self._mode
 
     # ----- what the winch reports
 
@@ -560,7 +550,7 @@ class TetherGovernor:
             if math.sqrt(sa2) > math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]):
                 v = ahead_vel
         return self._slow_rate((*nom.pos_m, *v, *nom.acc_m_s2, *pos, *vel, sigma_m, s,
-                                0.0, 0.0), self.room)
+                                0.0, 0.0), self._room or self.room)
 
     def slow_clock(self, nom: RefSample | None, pos: Vec3, vel: Vec3, sigma_m: float,
                    dt: float) -> Notice | None:
@@ -577,7 +567,7 @@ class TetherGovernor:
             nom = _AT_REST_SAMPLE
         s_new, sd_new, target, lag = self._slow_clock(
             (*nom.pos_m, *nom.vel_m_s, *nom.acc_m_s2, *pos, *vel, sigma_m, self.s, self.sd,
-             dt), self.room)
+             dt), self._room or self.room)
         notice = None
         if target < GOVERNOR_SLOWING_SAID_BELOW and not self.slowed:
             self.slowed = True
@@ -649,7 +639,7 @@ class TetherGovernor:
         :data:`GOVERNOR_SIGMA_SPEED_M_S`), BRAKE; a reference at rest, AT_REST; else
         FLY (:func:`check_kernel`)."""
         code, lim = self._check((*ref.pos_m, *ref.vel_m_s, *ref.acc_m_s2, *pos, *vel,
-                                 sigma_m, 1.0, 0.0, 0.0), self.room)
+                                 sigma_m, 1.0, 0.0, 0.0), self._room or self.room)
         return _new(Decision, (_VERDICTS[code], lim))
 
     def start_brake(self, ref: RefSample, dt: float) -> RefSample:

@@ -121,8 +121,9 @@ class Navigator:
         #: the speed of planned moves set by DO_CHANGE_SPEED or a guided target [m/s]
         #: (None: ``speed_m_s``'s)
         self.speed_override_m_s: float | None = None
-        self._pos: Vec3 = _ZERO3
-        self._vel_now: Vec3 = _ZERO3
+        #: The vehicle's position [m] and velocity [m/s] at the last step (its estimate).
+        self.position_m: Vec3 = _ZERO3
+        self.velocity_m_s: Vec3 = _ZERO3
         self._quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
         #: The estimate's position standard deviation [m] (largest axis; 0 on the
         #: truth), which the tether governor keeps as margin (set by the onboard step).
@@ -162,6 +163,7 @@ class Navigator:
     def p(self, params: NavigationParams) -> None:
         self._p = params
         self.governor.p = params
+        self._reach_m: float | None = None     # reach_m, or stale
 
     @property
     def _yaw(self) -> float:
@@ -174,16 +176,6 @@ class Navigator:
         return self._yaw
 
     @property
-    def position_m(self) -> Vec3:
-        """The vehicle's position at the last step [m] (its estimate)."""
-        return self._pos
-
-    @property
-    def velocity_m_s(self) -> Vec3:
-        """The vehicle's velocity at the last step [m/s] (its estimate)."""
-        return self._vel_now
-
-    @property
     def flying(self) -> bool:
         """Armed and off the ground."""
         return self.armed and not self.landed
@@ -193,7 +185,12 @@ class Navigator:
         """Largest straight-line distance [m] from the winder a target may have: of the
         whole tether, or of the length paid out while the winch's drum is braked
         (LOCK, HOLD, a lost winder: it pays out no more)."""
-        return self.p.reach_fraction * self.governor.reach_length_m - self.p.reach_slack_m
+        reach = self._reach_m
+        if reach is None:   # made again after new parameters or a report of the winch
+            p = self._p
+            reach = self._reach_m = (p.reach_fraction * self.governor.reach_length_m
+                                     - p.reach_slack_m)
+        return reach
 
     @property
     def tether_limit_m(self) -> float:
@@ -211,6 +208,7 @@ class Navigator:
         ``tension_time_s`` moves the vehicle towards the winder, ``tension_step_m`` at a
         time (again every 2 s while it lasts), in GUIDED."""
         self.governor.report(length_m, braked, speed_m_s)
+        self._reach_m = None
         target = self.governor.over_tension(
             self._t, tension_n,
             # in flight, and not on the way in already
@@ -310,7 +308,7 @@ class Navigator:
         GUIDED, holding where it is, as when a simulation starts airborne). ``airborne``
         says which (the onboard step's decision, which knows the state's accuracy); None:
         in the air above :func:`air_start_threshold_m` of an exact state."""
-        self._t, self._pos, self._vel_now, self._quat = t, pos, vel, quat
+        self._t, self.position_m, self.velocity_m_s, self._quat = t, pos, vel, quat
         yaw = self._yaw
         self.landed = (not airborne if airborne is not None
                        else pos[2] <= air_start_threshold_m(self.gear_height_m))
@@ -335,7 +333,7 @@ class Navigator:
             return Refusal(Reason.MISSION_EMPTY, "Arm: mission is empty")
         self.armed = True
         if self.landed:
-            self.home_m = self._pos
+            self.home_m = self.position_m
             self._armed_on_ground_since = self._t
             if self.mode == FlightMode.AUTO:
                 self.auto_mode.takeoff_pending = True
@@ -438,7 +436,7 @@ class Navigator:
         """Advance to ``t`` [s] with the vehicle at ``pos`` [m], ``vel`` [m/s], attitude
         ``quat`` (body to inertial, w x y z). Returns (the reference, or None when not
         flying, and the motors' state)."""
-        self._t, self._pos, self._vel_now, self._quat = t, pos, vel, quat
+        self._t, self.position_m, self.velocity_m_s, self._quat = t, pos, vel, quat
         if not self.armed:
             self.plan.ref = None
             if not self.landed and pos[2] <= self.gear_height_m + 0.05:
@@ -463,7 +461,7 @@ class Navigator:
             self.mission_running = False
             self.plan.leg, self.plan.legs, self.plan.vel = None, [], None
             self.plan.hold()
-            ref = self.plan.leg.follower.update(self.plan.leg_clock, self._pos)
+            ref = self.plan.leg.follower.update(self.plan.leg_clock, self.position_m)
         self.plan.ref = ref
         self.land_mode.detect(t, pos, vel)
         if not self.armed:
@@ -474,7 +472,7 @@ class Navigator:
         """Climb from the ground to ``target`` [m] (for mission item ``seq``)."""
         self.landed = False
         self._armed_on_ground_since = None
-        self.plan.ref = RefSample(self._pos, _ZERO3, _ZERO3, _ZERO3, self._yaw, 0.0)
+        self.plan.ref = RefSample(self.position_m, _ZERO3, _ZERO3, _ZERO3, self._yaw, 0.0)
         tag = LegTag.MISSION if seq is not None else LegTag.TAKEOFF
         self.plan.queue([Leg(self.plan.follower(self.p.speed_up_m_s, self.p.takeoff_accept_m),
                              GotoItem(target, None), seq=seq, tag=tag, takeoff=True)])

@@ -275,3 +275,23 @@ def test_the_compiled_decisions_are_their_python_to_the_bit() -> None:
         verdicts.add(check_kernel(period, room)[0])
         assert 0.0 <= slow_clock_kernel(period, room)[0] <= 1.0
     assert verdicts == {int(v) for v in Verdict}
+
+
+def test_the_reach_and_the_mode_follow_each_report_and_parameter_set() -> None:
+    """The navigator's reach (``reach_fraction`` x the length targets may use, less
+    ``reach_slack_m``) and the governor's mode, read every period, are those of the last
+    winch report and the last parameters, read before and after each change."""
+    from companion.navigation import Navigator
+
+    nav = Navigator(NavigationParams(tether_governor=1), GEAR_M, FULL_M)
+    assert nav.reach_m == pytest.approx(0.95 * FULL_M - 0.5)
+    assert nav.governor.enabled
+    nav.winch_report(15.0, 5.0, True)                              # braked at 15 m
+    assert nav.reach_m == pytest.approx(0.95 * 15.0 - 0.5)
+    nav.winch_report(15.0, 5.0, False)                             # released
+    assert nav.reach_m == pytest.approx(0.95 * FULL_M - 0.5)
+    nav.p = NavigationParams(tether_governor=0, reach_fraction=0.8, reach_slack_m=1.0)
+    assert nav.reach_m == pytest.approx(0.8 * FULL_M - 1.0)
+    assert not nav.governor.enabled
+    nav.p = NavigationParams(tether_governor=2)
+    assert nav.governor.enabled and nav.governor.mode == 2

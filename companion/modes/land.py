@@ -62,10 +62,13 @@ class Land:
         descent."""
         nav = self.nav
         leg = nav.plan.leg
+        if leg is None or not leg.landing:     # not on a final descent (most periods)
+            self._still_since = None
+            return
         ref = nav.plan.ref
         down = (pos[2] <= nav.gear_height_m + 0.05
                 or (ref is not None and ref.pos_m[2] <= pos[2] - nav.p.land_stall_m))
-        if (leg is not None and leg.landing and down
+        if (down
                 and math.sqrt(vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2]) < 0.3):
             if self._still_since is None:
                 self._still_since = t
