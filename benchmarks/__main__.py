@@ -218,6 +218,36 @@ OFFLINE_SHARES = {
 }
 
 
+def _median_step_us(step, t_s: float, steps: int, what: str) -> float:
+    """Median [us] of ``step(t)`` over ``steps`` filter steps 4 ms apart from ``t_s`` [s];
+    ``step`` says whether its fusion was made, and fewer than half made is an error
+    (``what`` names it)."""
+    clock = time.perf_counter
+    out = []
+    made = 0
+    for _ in range(steps):
+        t_s += 0.004
+        t0 = clock()
+        made += step(t_s)
+        out.append((clock() - t0) * 1e6)
+    if made < steps // 2:
+        raise RuntimeError(f"{what}: {made} of {steps}")
+    return statistics.median(out)
+
+
+def _align_still(f, g: float) -> float:
+    """Align the navigation filter ``f`` on a still vehicle at (8, 4, 15) m: 1.6 s of IMU
+    samples at 250 Hz, the field, a GNSS fix every 0.1 s; returns the time reached [s]."""
+    t = 0.0
+    for k in range(400):
+        t = k / 250.0
+        f.predict(t, (0.0, 0.0, 0.0), (0.0, 0.0, g))
+        f.fuse_mag(t, (0.2, 0.0, -0.45))
+        if k % 25 == 0:
+            f.fuse_gnss(t, (8.0, 4.0, 15.0), (0.0, 0.0, 0.0), 0.5, 0.8)
+    return t
+
+
 def _bench_tether_line(steps: int) -> float:
     """Median [us] of an IMU predict with a tight fusion of a raw tether reading, the
     filter aligned on a still vehicle at (8, 4, 15) m in a hover, its wind states at
@@ -236,13 +266,7 @@ def _bench_tether_line(steps: int) -> float:
         enabled=True, tether_line=TetherLineParams(enabled=True)))
     f = NavFilter(est, g, (0.0, 0.2, -0.45), DragModel.from_vehicle(VehicleParams(), 1.225),
                   LineModel.from_tether(TetherParams(), g, 1.225))
-    t = 0.0
-    for k in range(400):
-        t = k / 250.0
-        f.predict(t, (0.0, 0.0, 0.0), (0.0, 0.0, g))
-        f.fuse_mag(t, (0.2, 0.0, -0.45))
-        if k % 25 == 0:
-            f.fuse_gnss(t, (8.0, 4.0, 15.0), (0.0, 0.0, 0.0), 0.5, 0.8)
+    t = _align_still(f, g)
     f.fuse_drag(t, True, (0.0, 0.0, 0.0))            # the wind states start
     x = f._mem.x
     x[23:25] = (6.0, 0.0)                             # X_W: a wind to integrate the line in
@@ -251,18 +275,12 @@ def _bench_tether_line(steps: int) -> float:
     line = LineModel.from_tether(TetherParams(), g, 1.225, reference_height_m=15.0,
                                  shear_exponent=1.0 / 7.0, steps=16)
     x[0:3] = line_end_at(line, 18.3, 1.9, 0.46, 0.9, (6.0, 0.0))   # the reading agrees
-    clock = time.perf_counter
-    out = []
-    fused = 0
-    for _ in range(steps):
-        t += 0.004
-        t0 = clock()
+
+    def step(t: float) -> bool:
         f.predict(t, (1e-3, 0.0, 0.0), (0.0, 0.0, g))
-        fused += bool(f.fuse_tether_reading(t, t - 0.02, 18.3, 1.9, 0.46, 0.9, True))
-        out.append((clock() - t0) * 1e6)
-    if fused < steps // 2:
-        raise RuntimeError(f"tight tether fusion bench: {fused} of {steps} readings fused")
-    return statistics.median(out)
+        return bool(f.fuse_tether_reading(t, t - 0.02, 18.3, 1.9, 0.46, 0.9, True))
+
+    return _median_step_us(step, t, steps, "tight tether fusion bench: readings fused")
 
 
 def _bench_default_step(steps: int) -> float:
@@ -277,28 +295,17 @@ def _bench_default_step(steps: int) -> float:
     g = 9.80665
     est = EstimatorParams(drag=DragFusionParams(interval_s=0.004))
     f = NavFilter(est, g, (0.0, 0.2, -0.45), DragModel.from_vehicle(VehicleParams(), 1.225))
-    t = 0.0
-    for k in range(400):
-        t = k / 250.0
-        f.predict(t, (0.0, 0.0, 0.0), (0.0, 0.0, g))
-        f.fuse_mag(t, (0.2, 0.0, -0.45))
-        if k % 25 == 0:
-            f.fuse_gnss(t, (8.0, 4.0, 15.0), (0.0, 0.0, 0.0), 0.5, 0.8)
+    t = _align_still(f, g)
     cov = ((0.25, 0.05, 0.02), (0.05, 0.3, 0.01), (0.02, 0.01, 0.09))
     pull = (-0.8, -0.4, -1.9)
-    clock = time.perf_counter
-    out = []
-    fused = 0
-    for _ in range(steps):
-        t += 0.004
-        t0 = clock()
+
+    def step(t: float) -> bool:
         f.predict(t, (1e-3, 0.0, 0.0), (0.0, 0.0, g))
-        fused += bool(f.fuse_drag(t, True, pull))
+        fused = bool(f.fuse_drag(t, True, pull))
         f.fuse_tether(t, t - 0.02, (8.0, 4.0, 15.0), cov)
-        out.append((clock() - t0) * 1e6)
-    if fused < steps // 2:
-        raise RuntimeError(f"default filter step bench: {fused} of {steps} drag fusions")
-    return statistics.median(out)
+        return fused
+
+    return _median_step_us(step, t, steps, "default filter step bench: drag fusions")
 
 
 def bench_estimator(quick: bool) -> list[Row]:
