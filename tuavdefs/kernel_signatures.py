@@ -89,6 +89,9 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
     'groundstation.lbar._length': [
         ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',),
     ],
+    'groundstation.lbar.line_weight_n_m': [
+        ('float64', 'float64', 'float64', 'float64',),
+    ],
     'groundstation.winder_control.winder_law': [
         ('float64[::1]', 'float64[::1]', 'float64', 'float64', 'float64', 'float64', 'float64',
         'float64',),
@@ -182,6 +185,9 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
     'tuavdefs.frames.wrap_pi': [
         ('float64',),
     ],
+    'tuavdefs.line_shape._end_at': [
+        ('float64[::1]', 'float64', 'float64', 'float64', 'float64', 'int64',),
+    ],
     'tuavdefs.line_shape.end_differences': [
         ('float64[::1]', 'float64[::1]', 'float64', 'float64', 'float64', 'float64', 'int64',
         'float64[:, ::1]',),
@@ -193,6 +199,10 @@ SIGNATURES: dict[str, list[tuple[str, ...]]] = {
     'tuavdefs.line_shape.uniform_end': [
         ('float64', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
         'float64',),
+    ],
+    'tuavdefs.line_shape.wind_covariance': [
+        ('float64[::1]', 'float64', 'float64', 'float64', 'float64', 'float64', 'float64',
+        'float64', 'int64', 'float64[:, ::1]',),
     ],
     'tuavdefs.line_shape.wind_speed_covariance': [
         ('float64[::1]', 'float64', 'float64', 'float64', 'float64', 'float64', 'int64',
