@@ -15,6 +15,7 @@ import math
 import pytest
 from netns_util import netns_available, run_session
 
+from sitl.lumped import SPLIT
 from tuavdefs.params import TetherParams
 
 pytestmark = pytest.mark.skipif(not netns_available(),
@@ -24,9 +25,9 @@ POS_HORIZ_ABS = 16
 ACCEPTED = 0
 #: the mission's waypoints (items 3, 4, 5), x east, y north, height [m]
 WAYPOINTS = {3: (10.0, 0.0, 12.0), 4: (6.0, 8.0, 10.0), 5: (-2.0, 6.0, 8.0)}
-#: the plant's lumped line (the defaults `up` flies) is one straight segment while shorter
-#: than two of its nominal segments [m]
-ONE_SEGMENT_M = 2.0 * TetherParams().segment_length_m
+#: the plant's lumped line (the defaults `up` flies) is one straight segment until its exit
+#: segment is first split, at SPLIT nominal segments [m]
+ONE_SEGMENT_M = SPLIT * TetherParams().segment_length_m
 
 
 @pytest.fixture(scope="module")

@@ -170,7 +170,7 @@ class TetherFixCheck:
         # covariance is not a spread the mean may have, for an error within it that stays
         # is what the filter, fusing the fixes as white, would lock onto
         window = min(t_meas_s - self._t_first_compared, 2.0 * p.bias_tau_s)
-        n_fix = min(self._interval_s / max(window, self._interval_s), 1.0)
+        n_fix = mean_variance(1.0, 0.0, 0.0, window, self._interval_s)   # white: the share
         gi = self._gnss_interval_s()
         v_mean = (fix_cov + lag_cov) * n_fix + np.diag(
             (mean_variance(var_h, self._tau_s, self._fraction, window, gi),) * 2
